@@ -1,0 +1,247 @@
+/*
+ * propid — in-flight identification of per-propeller thrust and drag
+ * coefficients from gyro and ESC rotor-speed telemetry.
+ *
+ * The one header an autopilot includes. C11, float32 only, no allocation:
+ * the caller owns a propid_filter_t (static or on its own stack) and feeds it
+ *
+ *   propid_push_rotor_speeds()  whenever ESC telemetry arrives (any rate),
+ *   propid_push_gyro()          for every gyro sample (any rate): the filter
+ *                               predicts to the gyro time with the latest
+ *                               rotor speeds, then fuses the three axes,
+ *
+ * and reads propid_get_estimate() whenever it wants the coefficients.
+ *
+ * Units are SI, body frame FLU (x forward, y left, z up), rotor speeds are
+ * positive magnitudes in rad/s, timestamps are microseconds of one monotonic
+ * clock shared by both streams.
+ *
+ * Every function returning propid_status_t leaves the filter bit-for-bit
+ * unchanged (core state and covariance) when it returns a negative status;
+ * only the rejection counters move.
+ */
+#ifndef PROPID_H
+#define PROPID_H
+
+#include <stdint.h>
+
+#include "propid/propid_config.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ------------------------------------------------------------------------ */
+/* Status codes: 0 accepted, > 0 accepted with a note, < 0 rejected.        */
+/* ------------------------------------------------------------------------ */
+typedef enum {
+    PROPID_OK = 0,
+    PROPID_OK_GATED = 1,              /* predicted; at least one axis' update was gated out */
+
+    PROPID_ERR_NULL = -1,             /* a pointer argument was NULL */
+    PROPID_ERR_NOT_INITIALISED = -2,  /* propid_init() has not succeeded on this filter */
+    PROPID_ERR_CONFIG = -3,           /* configuration rejected (see propid_config_check) */
+    PROPID_ERR_NOT_FINITE = -4,       /* NaN or Inf in an input sample */
+    PROPID_ERR_ROTOR_SPEED_NEGATIVE = -5,
+    PROPID_ERR_ROTOR_SPEED_RANGE = -6, /* above config.max_rotor_speed */
+    PROPID_ERR_ROTOR_COUNT = -7,      /* sample's rotor count differs from the configuration */
+    PROPID_ERR_ROTOR_INDEX = -8,      /* rotor index out of range */
+    PROPID_ERR_GYRO_RANGE = -9,       /* |gyro| beyond config.gyro_range (saturated sensor) */
+    PROPID_ERR_TIME_BACKWARDS = -10,  /* timestamp not after the previous one of its stream */
+    PROPID_ERR_TIME_JUMP = -11,       /* gyro gap longer than config.max_gyro_gap_us: call propid_resync() */
+    PROPID_ERR_NO_ROTOR_DATA = -12,   /* gyro sample before any rotor speeds were pushed */
+    PROPID_ERR_ROTOR_STALE = -13,     /* latest rotor speeds older than config.rotor_stale_us */
+    PROPID_ERR_NUMERIC = -14,         /* the step would have produced a non-finite state */
+} propid_status_t;
+
+/* Number of distinct rejection reasons; counters.rejected[] is indexed by -status. */
+#define PROPID_REJECT_SLOTS 15
+
+/* ------------------------------------------------------------------------ */
+/* Health flags (propid_estimate_t.health)                                  */
+/* ------------------------------------------------------------------------ */
+#define PROPID_HEALTH_NO_ROTOR_DATA   (1u << 0) /* no rotor speeds yet */
+#define PROPID_HEALTH_ROTOR_STALE     (1u << 1) /* last gyro sample found stale rotor data */
+#define PROPID_HEALTH_GATED           (1u << 2) /* last gyro sample had a gated axis */
+#define PROPID_HEALTH_COV_REPAIRED    (1u << 3) /* covariance repaired since last reset (sticky) */
+#define PROPID_HEALTH_STATE_CLAMPED   (1u << 4) /* a coefficient sat on its clamp after the last update */
+#define PROPID_HEALTH_GATE_REOPENED   (1u << 5) /* an axis was re-opened after too many gated samples (sticky) */
+#define PROPID_HEALTH_ALL_CONVERGED   (1u << 6) /* every kf and km has converged */
+#define PROPID_HEALTH_TIME_RESYNCED   (1u << 7) /* propid_resync() was used since last reset (sticky) */
+
+/* ------------------------------------------------------------------------ */
+/* Configuration                                                            */
+/* ------------------------------------------------------------------------ */
+typedef struct {
+    float position_m[3];          /* rotor hub in body FLU relative to the centre of mass [m] */
+    float yaw_sign;               /* +1 or -1: sign of the yaw torque its drag puts on the body */
+    float thrust_coeff_nominal;   /* kf prior mean [N/(rad/s)^2], > 0 */
+    float drag_coeff_nominal;     /* km prior mean [N m/(rad/s)^2], > 0 */
+} propid_rotor_config_t;
+
+typedef struct {
+    uint8_t rotor_count;                          /* 1..PROPID_MAX_ROTORS */
+    propid_rotor_config_t rotor[PROPID_MAX_ROTORS];
+    float inertia[3][3];                          /* body inertia [kg m^2], symmetric positive definite */
+
+    /* Prior standard deviations. Coefficients are relative to their nominal. */
+    float rate_std0;                  /* body rate [rad/s] */
+    float thrust_coeff_rel_std0;      /* e.g. 0.2 = 20 % of nominal */
+    float drag_coeff_rel_std0;
+    float gyro_bias_std0;             /* [rad/s] */
+
+    /* Noise. Per-sample gyro variance = gyro_noise_density^2 * gyro_sample_rate_hz. */
+    float gyro_noise_density;         /* [rad/s/sqrt(Hz)] */
+    float gyro_sample_rate_hz;        /* nominal gyro rate the density applies to [Hz] */
+    float rate_process_noise;         /* unmodelled angular acceleration [rad/s^2/sqrt(Hz)] */
+    float thrust_coeff_rel_walk;      /* random walk of kf/kf_nominal [1/sqrt(s)] */
+    float drag_coeff_rel_walk;        /* random walk of km/km_nominal [1/sqrt(s)] */
+    float gyro_bias_walk;             /* [rad/s/sqrt(s)] */
+
+    /* Guards. */
+    float gate_sigma;                 /* innovation gate in standard deviations; <= 0 disables */
+    uint16_t gate_max_consecutive;    /* gated samples in a row before an axis is re-opened */
+    float max_rotor_speed;            /* larger rotor speeds are absurd [rad/s] */
+    float gyro_range;                 /* larger |gyro| is a saturated sensor [rad/s] */
+    uint32_t rotor_stale_us;          /* rotor data older than this at a gyro sample is stale */
+    uint32_t max_gyro_gap_us;         /* longer gap between gyro samples is a time jump */
+    float coeff_rel_min;              /* clamp of kf/kf_nom and km/km_nom, e.g. 0.05 */
+    float coeff_rel_max;              /* e.g. 5 */
+    float converged_rel_std;          /* a coefficient is converged below this relative std */
+} propid_config_t;
+
+/* Fill every noise, prior and guard field with documented defaults (docs/design.md)
+ * and set rotor_count = 0: the caller then sets geometry, inertia and nominals. */
+void propid_config_default(propid_config_t *config);
+
+/* Place rotor_count rotors evenly on a circle of radius arm_m in the body xy-plane,
+ * rotor 0 at angle first_angle_rad from +x (0 = plus frame, pi/4 = X frame),
+ * counting counter-clockwise seen from above, yaw signs alternating starting with
+ * first_yaw_sign, all with the same nominal coefficients. */
+propid_status_t propid_config_set_symmetric(propid_config_t *config, uint8_t rotor_count,
+                                            float arm_m, float first_angle_rad,
+                                            float first_yaw_sign, float thrust_coeff_nominal,
+                                            float drag_coeff_nominal);
+
+/* Diagonal inertia convenience. */
+void propid_config_set_inertia_diag(propid_config_t *config, float jxx, float jyy, float jzz);
+
+/* PROPID_OK or PROPID_ERR_CONFIG; *bad_field (may be NULL) names the first bad field. */
+propid_status_t propid_config_check(const propid_config_t *config, const char **bad_field);
+
+/* ------------------------------------------------------------------------ */
+/* Filter object: allocate it yourself; touch it only through the API.      */
+/* ------------------------------------------------------------------------ */
+typedef struct {
+    /* Scaled state: body rate [rad/s], kf/kf_nominal, km/km_nominal, gyro bias [rad/s]. */
+    float state[PROPID_MAX_STATES];
+    float cov[PROPID_MAX_STATES][PROPID_MAX_STATES];  /* symmetric, kept in the scaled units */
+    float rotor_speed_sq[PROPID_MAX_ROTORS];          /* latest accepted rotor speeds squared */
+    uint64_t rotor_time_us;                           /* time of the latest accepted rotor speeds */
+    uint64_t time_us;                                 /* filter time = last accepted gyro time */
+    uint8_t has_rotor_data;
+    uint8_t has_time;
+    uint16_t gated_run[3];                            /* consecutive gated samples per axis */
+    uint32_t health;                                  /* PROPID_HEALTH_* */
+} propid_core_t;
+
+typedef struct {
+    uint32_t gyro_accepted;
+    uint32_t rotor_accepted;
+    uint32_t axis_gated[3];           /* scalar updates skipped by the gate, per axis */
+    uint32_t gate_reopened;
+    uint32_t cov_repairs;
+    uint32_t state_clamps;
+    uint32_t resyncs;
+    uint32_t rejected[PROPID_REJECT_SLOTS]; /* indexed by -status */
+} propid_counters_t;
+
+/* Quantities derived once from the configuration (so the step does no divisions). */
+typedef struct {
+    uint8_t state_count;                            /* 6 + 2 * rotor_count */
+    float inertia_inv[3][3];
+    float thrust_torque[PROPID_MAX_ROTORS][3];      /* J^-1 (r_i x z) kf_nominal_i */
+    float drag_torque[PROPID_MAX_ROTORS][3];        /* J^-1 z yaw_sign_i km_nominal_i */
+    float gyro_var;                                 /* per-sample measurement variance */
+} propid_derived_t;
+
+typedef struct {
+    propid_config_t config;
+    propid_derived_t derived;
+    propid_core_t core;
+    propid_counters_t counters;
+    uint32_t magic;                                 /* set by a successful propid_init() */
+} propid_filter_t;
+
+/* ------------------------------------------------------------------------ */
+/* Life cycle                                                               */
+/* ------------------------------------------------------------------------ */
+propid_status_t propid_init(propid_filter_t *filter, const propid_config_t *config);
+
+/* Back to the prior (nominal coefficients, prior covariance, no rotor data, no time);
+ * counters are kept. */
+propid_status_t propid_reset(propid_filter_t *filter);
+
+/* A propeller was swapped: rotor's kf and km back to nominal with prior variance,
+ * their cross-covariances zeroed; everything else kept. */
+propid_status_t propid_reset_rotor(propid_filter_t *filter, uint8_t rotor);
+
+/* Re-anchor the filter clock after a known gap (e.g. after PROPID_ERR_TIME_JUMP):
+ * filter time := time_us, body-rate variance back to its prior. Coefficients kept. */
+propid_status_t propid_resync(propid_filter_t *filter, uint64_t time_us);
+
+/* ------------------------------------------------------------------------ */
+/* Inputs                                                                   */
+/* ------------------------------------------------------------------------ */
+propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_us,
+                                         const float *rotor_speed_rad_s, uint8_t rotor_count);
+
+propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
+                                 const float gyro_rad_s[3]);
+
+/* ------------------------------------------------------------------------ */
+/* Outputs                                                                  */
+/* ------------------------------------------------------------------------ */
+typedef struct {
+    uint64_t time_us;
+    uint8_t rotor_count;
+    float body_rate[3];                               /* bias-free body rate [rad/s] */
+    float body_rate_std[3];
+    float thrust_coeff[PROPID_MAX_ROTORS];            /* kf [N/(rad/s)^2] */
+    float thrust_coeff_std[PROPID_MAX_ROTORS];
+    float drag_coeff[PROPID_MAX_ROTORS];              /* km [N m/(rad/s)^2] */
+    float drag_coeff_std[PROPID_MAX_ROTORS];
+    float gyro_bias[3];                               /* [rad/s] */
+    float gyro_bias_std[3];
+    float innovation[3];                              /* last gyro innovation [rad/s] */
+    float innovation_test_ratio[3];                   /* innovation^2 / (gate^2 * S) */
+    uint16_t thrust_coeff_converging;                 /* bit i: std below half its prior */
+    uint16_t thrust_coeff_converged;                  /* bit i: rel std < converged_rel_std */
+    uint16_t drag_coeff_converging;
+    uint16_t drag_coeff_converged;
+    uint32_t health;                                  /* PROPID_HEALTH_* */
+} propid_estimate_t;
+
+propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estimate_t *estimate);
+propid_status_t propid_get_counters(const propid_filter_t *filter, propid_counters_t *counters);
+
+/* Short constant name of a status code, e.g. "PROPID_ERR_TIME_JUMP". */
+const char *propid_status_name(propid_status_t status);
+
+/* State indices in the scaled state vector (for tests and future measurements). */
+static inline uint8_t propid_index_rate(uint8_t axis) { return axis; }
+static inline uint8_t propid_index_thrust_coeff(uint8_t rotor) { return (uint8_t)(3u + rotor); }
+static inline uint8_t propid_index_drag_coeff(const propid_filter_t *filter, uint8_t rotor)
+{
+    return (uint8_t)(3u + filter->config.rotor_count + rotor);
+}
+static inline uint8_t propid_index_gyro_bias(const propid_filter_t *filter, uint8_t axis)
+{
+    return (uint8_t)(3u + 2u * filter->config.rotor_count + axis);
+}
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* PROPID_H */

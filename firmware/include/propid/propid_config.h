@@ -1,0 +1,25 @@
+/*
+ * propid compile-time limits.
+ *
+ * Override any of these with -D on the compiler command line; they size every
+ * array in propid_filter_t, so the filter never allocates.
+ */
+#ifndef PROPID_CONFIG_H
+#define PROPID_CONFIG_H
+
+/* Largest rotor count the filter is built for (quad 4, hexa 6, octo 8). */
+#ifndef PROPID_MAX_ROTORS
+#define PROPID_MAX_ROTORS 8
+#endif
+
+/* State layout: body rate (3), thrust coefficient (N), drag coefficient (N),
+ * gyro bias (3). With PROPID_MAX_ROTORS = 8 the largest filter has 22 states. */
+#define PROPID_RATE_STATES 3
+#define PROPID_BIAS_STATES 3
+#define PROPID_MAX_STATES (PROPID_RATE_STATES + 2 * PROPID_MAX_ROTORS + PROPID_BIAS_STATES)
+
+#if PROPID_MAX_ROTORS < 1 || PROPID_MAX_ROTORS > 16
+#error "PROPID_MAX_ROTORS must be in 1..16"
+#endif
+
+#endif /* PROPID_CONFIG_H */
