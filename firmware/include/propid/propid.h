@@ -142,7 +142,12 @@ typedef struct {
     uint8_t has_rotor_data;
     uint8_t has_time;
     uint16_t gated_run[3];                            /* consecutive gated samples per axis */
-    uint32_t health;                                  /* PROPID_HEALTH_* */
+    uint32_t health;                                  /* PROPID_HEALTH_* (sticky and per-step bits) */
+    /* Private (not part of the API contract): */
+    float innovation[3];                              /* last gyro innovation per axis [rad/s] */
+    float innovation_test_ratio[3];                   /* last innovation^2 / (gate^2 * S) */
+    uint32_t stale_mark;                              /* counters.rejected[-ROTOR_STALE] at last accepted gyro */
+    uint8_t check_row;                                /* next covariance row of the round-robin integrity check */
 } propid_core_t;
 
 typedef struct {
@@ -163,6 +168,14 @@ typedef struct {
     float thrust_torque[PROPID_MAX_ROTORS][3];      /* J^-1 (r_i x z) kf_nominal_i */
     float drag_torque[PROPID_MAX_ROTORS][3];        /* J^-1 z yaw_sign_i km_nominal_i */
     float gyro_var;                                 /* per-sample measurement variance */
+    /* Private (not part of the API contract): */
+    float gate_sq;                                  /* gate_sigma^2, 0 when gating is off */
+    float inv_gate_sq;                              /* 1 / gate_sq (1 when gating is off) */
+    float converged_var;                            /* converged_rel_std^2 */
+    float process_psd[PROPID_MAX_STATES];           /* per-state Q rate: Q_ii = process_psd[i] * dt */
+    float prior_var[PROPID_MAX_STATES];             /* per-state prior variance */
+    float var_floor[PROPID_MAX_STATES];             /* per-state variance floor */
+    float var_ceiling[PROPID_MAX_STATES];           /* per-state variance ceiling */
 } propid_derived_t;
 
 typedef struct {

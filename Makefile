@@ -1,0 +1,143 @@
+# propid — every verb a developer or CI needs. `make` alone lists them.
+#
+# Set-up is driven from here (stamp files keep repeated calls fast):
+#   Debian packages -> .venv with pinned requirements -> Unity sources.
+# See docs/build.md.
+
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+
+REPO        := $(abspath $(dir $(lastword $(MAKEFILE_LIST))))
+PYTHON      ?= python3
+VENV        := $(REPO)/.venv
+VENV_PYTHON := $(VENV)/bin/python
+BUILD       := $(REPO)/build
+BUILD_HOST  := $(BUILD)/host
+BUILD_TARGET:= $(BUILD)/target
+BUILD_DEBUG := $(BUILD)/debug
+BUILD_ASAN  := $(BUILD)/asan
+DEPS        := $(BUILD)/_deps
+UNITY_DIR   := $(DEPS)/unity
+JOBS        ?= 2
+TOOLCHAIN   := $(REPO)/firmware/toolchain/arm-none-eabi-cortex-m4f.cmake
+BOOTSTRAP   := $(REPO)/host_tools/setup/bootstrap.sh
+
+APT_STAMP   := $(DEPS)/.apt.stamp
+VENV_STAMP  := $(VENV)/.propid-setup.stamp
+UNITY_STAMP := $(UNITY_DIR)/.stamp
+
+CMAKE_COMMON := -DPROPID_PYTHON=$(VENV_PYTHON) -DPROPID_UNITY_DIR=$(UNITY_DIR)
+
+export PYTHON
+MAKEFLAGS += --no-print-directory
+
+.PHONY: help setup host target test debug asan clean test-host test-target test-python \
+        configure-host configure-target
+
+help:
+	@echo "propid make verbs"
+	@echo "  make sitl     set up, build, fly the default closed-loop Lissajous with the filter in"
+	@echo "                the loop; writes a log and a plot under build/sitl"
+	@echo "  make test     set up, build host + target, run every test: Unity and SITL tests on"
+	@echo "                the host, Unity tests on Cortex-M4F under QEMU, forbidden-symbol check,"
+	@echo "                pytest of host_tools"
+	@echo "  make setup    Debian packages (when missing, as root), .venv with pinned requirements"
+	@echo "                + host_tools, Unity sources (hash checked)"
+	@echo "  make host     configure and build build/host (Release)"
+	@echo "  make target   cross-build build/target for Cortex-M4F; print flash/RAM, filter size,"
+	@echo "                worst stack frame"
+	@echo "  make table1   run the Table 1 campaign (see docs/results.md)"
+	@echo "  make debug    Debug host build in build/debug + host tests"
+	@echo "  make asan     AddressSanitizer + UBSan host build in build/asan + host tests"
+	@echo "  make clean    remove build/ (keeps .venv; rm -rf .venv to redo the venv)"
+	@echo "Then: source .venv/bin/activate; propid --help"
+
+# ---------------------------------------------------------------------------
+# Set-up
+# ---------------------------------------------------------------------------
+setup: $(APT_STAMP) $(VENV_STAMP) $(UNITY_STAMP)
+
+$(APT_STAMP): $(BOOTSTRAP)
+	@$(BOOTSTRAP) apt
+	@mkdir -p $(@D) && touch $@
+
+$(VENV_STAMP): $(APT_STAMP) host_tools/setup/requirements.txt host_tools/pyproject.toml $(BOOTSTRAP)
+	@$(BOOTSTRAP) venv
+	@touch $@
+
+$(UNITY_STAMP): $(APT_STAMP) $(BOOTSTRAP)
+	@$(BOOTSTRAP) unity
+	@touch $@
+
+# ---------------------------------------------------------------------------
+# Builds
+# ---------------------------------------------------------------------------
+configure-host: setup
+	@cmake -S $(REPO) -B $(BUILD_HOST) -DCMAKE_BUILD_TYPE=Release $(CMAKE_COMMON) >/dev/null
+
+host: configure-host
+	@cmake --build $(BUILD_HOST) -j$(JOBS)
+
+configure-target: setup
+	@cmake -S $(REPO) -B $(BUILD_TARGET) -DCMAKE_BUILD_TYPE=Release \
+	    -DCMAKE_TOOLCHAIN_FILE=$(TOOLCHAIN) $(CMAKE_COMMON) >/dev/null
+
+target: configure-target
+	@cmake --build $(BUILD_TARGET) -j$(JOBS)
+	@bash $(REPO)/firmware/toolchain/footprint.sh $(BUILD_TARGET)
+
+debug: setup
+	@cmake -S $(REPO) -B $(BUILD_DEBUG) -DCMAKE_BUILD_TYPE=Debug $(CMAKE_COMMON) >/dev/null
+	@cmake --build $(BUILD_DEBUG) -j$(JOBS)
+	@cd $(BUILD_DEBUG) && ctest -j$(JOBS) --output-on-failure
+
+asan: setup
+	@cmake -S $(REPO) -B $(BUILD_ASAN) -DCMAKE_BUILD_TYPE=Debug -DPROPID_SANITIZE=ON \
+	    $(CMAKE_COMMON) >/dev/null
+	@cmake --build $(BUILD_ASAN) -j$(JOBS)
+	@cd $(BUILD_ASAN) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 \
+	    UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 ctest -j$(JOBS) --output-on-failure
+
+# ---------------------------------------------------------------------------
+# Tests: every stage runs even when an earlier one failed, so one run shows
+# all failures; the verb fails if any stage failed.
+# ---------------------------------------------------------------------------
+test-host: configure-host
+	@cmake --build $(BUILD_HOST) -j$(JOBS)
+	@cd $(BUILD_HOST) && ctest -j$(JOBS) --output-on-failure
+
+test-target: configure-target
+	@cmake --build $(BUILD_TARGET) -j$(JOBS)
+	@cd $(BUILD_TARGET) && ctest -j$(JOBS) --output-on-failure
+
+# pytest exit 5 = "no tests collected": acceptable only when there is no test file.
+test-python: setup
+	@cd $(REPO) && status=0; \
+	PROPID_BUILD_DIR=$(BUILD_HOST) $(VENV_PYTHON) -m pytest -q tests/host_tools || status=$$?; \
+	if [ $$status -eq 5 ] && ! compgen -G "tests/host_tools/test_*.py" >/dev/null \
+	        && ! compgen -G "tests/host_tools/*_test.py" >/dev/null; then \
+	    echo "pytest: no Python test files in tests/host_tools"; status=0; \
+	fi; exit $$status
+
+test: setup
+	@start=$$(date +%s); failed=""; \
+	stage() { local name=$$1; shift; local t0=$$(date +%s); \
+	    echo; echo "=== make test: $$name"; \
+	    if "$$@"; then echo "=== $$name: ok ($$(( $$(date +%s) - t0 )) s)"; \
+	    else echo "=== $$name: FAILED ($$(( $$(date +%s) - t0 )) s)"; failed="$$failed $$name"; fi; }; \
+	stage host-build    $(MAKE) --no-print-directory host; \
+	stage host-tests    $(MAKE) --no-print-directory test-host; \
+	stage target-build  $(MAKE) --no-print-directory target; \
+	stage target-tests  $(MAKE) --no-print-directory test-target; \
+	stage python-tests  $(MAKE) --no-print-directory test-python; \
+	echo; echo "=== make test: $$(( $$(date +%s) - start )) s"; \
+	if [ -n "$$failed" ]; then echo "=== FAILED:$$failed"; exit 1; fi; \
+	echo "=== all stages passed"
+
+clean:
+	rm -rf $(BUILD)
+
+# Room verbs: `sitl` (S1) and `table1` (S2). They may use BUILD_HOST, VENV_PYTHON
+# and the `host` / `setup` verbs above.
+-include $(REPO)/sitl/sitl.mk
+-include $(REPO)/sitl/table1.mk

@@ -1,0 +1,338 @@
+/* Configuration: documented defaults, geometry helpers, validation, and the
+ * quantities derived once so that the filter step needs no division.
+ * Every default is explained in docs/design.md ("Defaults"). */
+#include <math.h>
+#include <stddef.h>
+#include <string.h>
+
+#include "propid_internal.h"
+
+#define PROPID_TWO_PI 6.28318530717958647692f
+
+void propid_config_default(propid_config_t *config)
+{
+    if (config == NULL) {
+        return;
+    }
+    memset(config, 0, sizeof(*config));
+    config->rotor_count = 0u;
+
+    config->rate_std0 = 1.0f;
+    config->thrust_coeff_rel_std0 = 0.3f;
+    config->drag_coeff_rel_std0 = 0.3f;
+    config->gyro_bias_std0 = 0.05f;
+
+    config->gyro_noise_density = 5.0e-4f;
+    config->gyro_sample_rate_hz = 500.0f;
+    config->rate_process_noise = 0.2f;
+    config->thrust_coeff_rel_walk = 0.02f;
+    config->drag_coeff_rel_walk = 0.02f;
+    config->gyro_bias_walk = 1.0e-4f;
+
+    config->gate_sigma = 5.0f;
+    config->gate_max_consecutive = 25u;
+    config->max_rotor_speed = 6000.0f;
+    config->gyro_range = 34.0f;
+    config->rotor_stale_us = 50000u;
+    config->max_gyro_gap_us = 50000u;
+    config->coeff_rel_min = 0.05f;
+    config->coeff_rel_max = 5.0f;
+    config->converged_rel_std = 0.05f;
+}
+
+propid_status_t propid_config_set_symmetric(propid_config_t *config, uint8_t rotor_count,
+                                            float arm_m, float first_angle_rad,
+                                            float first_yaw_sign, float thrust_coeff_nominal,
+                                            float drag_coeff_nominal)
+{
+    if (config == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    if (rotor_count < 1u || rotor_count > PROPID_MAX_ROTORS || !isfinite(arm_m) || !(arm_m > 0.0f) ||
+        !isfinite(first_angle_rad) || (first_yaw_sign != 1.0f && first_yaw_sign != -1.0f) ||
+        !isfinite(thrust_coeff_nominal) || !(thrust_coeff_nominal > 0.0f) ||
+        !isfinite(drag_coeff_nominal) || !(drag_coeff_nominal > 0.0f)) {
+        return PROPID_ERR_CONFIG;
+    }
+    config->rotor_count = rotor_count;
+    const float step = PROPID_TWO_PI / (float)rotor_count;
+    for (uint8_t i = 0; i < PROPID_MAX_ROTORS; ++i) {
+        propid_rotor_config_t *rotor = &config->rotor[i];
+        if (i >= rotor_count) {
+            memset(rotor, 0, sizeof(*rotor));
+            continue;
+        }
+        const float angle = first_angle_rad + step * (float)i;
+        rotor->position_m[0] = arm_m * cosf(angle);
+        rotor->position_m[1] = arm_m * sinf(angle);
+        rotor->position_m[2] = 0.0f;
+        rotor->yaw_sign = (i % 2u == 0u) ? first_yaw_sign : -first_yaw_sign;
+        rotor->thrust_coeff_nominal = thrust_coeff_nominal;
+        rotor->drag_coeff_nominal = drag_coeff_nominal;
+    }
+    return PROPID_OK;
+}
+
+void propid_config_set_inertia_diag(propid_config_t *config, float jxx, float jyy, float jzz)
+{
+    if (config == NULL) {
+        return;
+    }
+    memset(config->inertia, 0, sizeof(config->inertia));
+    config->inertia[0][0] = jxx;
+    config->inertia[1][1] = jyy;
+    config->inertia[2][2] = jzz;
+}
+
+static int positive_finite(float value)
+{
+    return isfinite(value) && value > 0.0f;
+}
+
+static int all_finite(const float *values, size_t count)
+{
+    for (size_t i = 0; i < count; ++i) {
+        if (!isfinite(values[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* Inverse of the symmetric positive definite inertia; 0 if it is not SPD. */
+static int inertia_inverse(const float inertia[3][3], float inverse[3][3])
+{
+    float j[3][3];
+    float scale = 0.0f;
+    for (uint8_t a = 0; a < 3u; ++a) {
+        for (uint8_t b = 0; b < 3u; ++b) {
+            j[a][b] = 0.5f * (inertia[a][b] + inertia[b][a]);
+            const float magnitude = fabsf(inertia[a][b]);
+            scale = magnitude > scale ? magnitude : scale;
+        }
+    }
+    for (uint8_t a = 0; a < 3u; ++a) {
+        for (uint8_t b = 0; b < 3u; ++b) {
+            if (fabsf(inertia[a][b] - inertia[b][a]) > 1.0e-5f * scale) {
+                return 0;
+            }
+        }
+    }
+    /* Sylvester: leading principal minors positive. For a positive definite
+     * matrix minor/(product of its diagonal) lies in (0, 1] (Hadamard); asking
+     * for > 1e-6 rejects singular and near-singular inertias robustly, whatever
+     * the rounding (FMA contraction on the MCU leaves residues of ~1e-7). */
+    const float minor2 = j[0][0] * j[1][1] - j[0][1] * j[1][0];
+    const float cof00 = j[1][1] * j[2][2] - j[1][2] * j[2][1];
+    const float cof01 = j[1][2] * j[2][0] - j[1][0] * j[2][2];
+    const float cof02 = j[1][0] * j[2][1] - j[1][1] * j[2][0];
+    const float det = j[0][0] * cof00 + j[0][1] * cof01 + j[0][2] * cof02;
+    const float diag01 = j[0][0] * j[1][1];
+    if (!(j[0][0] > 0.0f) || !(j[1][1] > 0.0f) || !(j[2][2] > 0.0f) ||
+        !(minor2 > 1.0e-6f * diag01) || !(det > 1.0e-6f * diag01 * j[2][2]) || !isfinite(det)) {
+        return 0;
+    }
+    const float inv_det = 1.0f / det;
+    inverse[0][0] = cof00 * inv_det;
+    inverse[0][1] = (j[0][2] * j[2][1] - j[0][1] * j[2][2]) * inv_det;
+    inverse[0][2] = (j[0][1] * j[1][2] - j[0][2] * j[1][1]) * inv_det;
+    inverse[1][0] = cof01 * inv_det;
+    inverse[1][1] = (j[0][0] * j[2][2] - j[0][2] * j[2][0]) * inv_det;
+    inverse[1][2] = (j[0][2] * j[1][0] - j[0][0] * j[1][2]) * inv_det;
+    inverse[2][0] = cof02 * inv_det;
+    inverse[2][1] = (j[0][1] * j[2][0] - j[0][0] * j[2][1]) * inv_det;
+    inverse[2][2] = minor2 * inv_det;
+    return all_finite(&inverse[0][0], 9u);
+}
+
+#define PROPID_BAD(name)                                                                           \
+    do {                                                                                           \
+        if (bad_field != NULL) {                                                                   \
+            *bad_field = (name);                                                                   \
+        }                                                                                          \
+        return PROPID_ERR_CONFIG;                                                                  \
+    } while (0)
+
+propid_status_t propid_config_derive(const propid_config_t *config, propid_derived_t *derived,
+                                     const char **bad_field)
+{
+    if (config == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    const uint8_t rotor_count = config->rotor_count;
+    if (rotor_count < 1u || rotor_count > PROPID_MAX_ROTORS) {
+        PROPID_BAD("rotor_count");
+    }
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const propid_rotor_config_t *rotor = &config->rotor[i];
+        if (!all_finite(rotor->position_m, 3u) || fabsf(rotor->position_m[0]) > 100.0f ||
+            fabsf(rotor->position_m[1]) > 100.0f || fabsf(rotor->position_m[2]) > 100.0f) {
+            PROPID_BAD("rotor.position_m");
+        }
+        if (rotor->yaw_sign != 1.0f && rotor->yaw_sign != -1.0f) {
+            PROPID_BAD("rotor.yaw_sign");
+        }
+        if (!positive_finite(rotor->thrust_coeff_nominal)) {
+            PROPID_BAD("rotor.thrust_coeff_nominal");
+        }
+        if (!positive_finite(rotor->drag_coeff_nominal)) {
+            PROPID_BAD("rotor.drag_coeff_nominal");
+        }
+    }
+    if (!all_finite(&config->inertia[0][0], 9u)) {
+        PROPID_BAD("inertia");
+    }
+    propid_derived_t out;
+    memset(&out, 0, sizeof(out));
+    if (!inertia_inverse(config->inertia, out.inertia_inv)) {
+        PROPID_BAD("inertia");
+    }
+    if (!positive_finite(config->rate_std0)) {
+        PROPID_BAD("rate_std0");
+    }
+    if (!positive_finite(config->thrust_coeff_rel_std0)) {
+        PROPID_BAD("thrust_coeff_rel_std0");
+    }
+    if (!positive_finite(config->drag_coeff_rel_std0)) {
+        PROPID_BAD("drag_coeff_rel_std0");
+    }
+    if (!positive_finite(config->gyro_bias_std0)) {
+        PROPID_BAD("gyro_bias_std0");
+    }
+    if (!positive_finite(config->gyro_noise_density)) {
+        PROPID_BAD("gyro_noise_density");
+    }
+    if (!positive_finite(config->gyro_sample_rate_hz)) {
+        PROPID_BAD("gyro_sample_rate_hz");
+    }
+    if (!positive_finite(config->rate_process_noise)) {
+        PROPID_BAD("rate_process_noise");
+    }
+    if (!isfinite(config->thrust_coeff_rel_walk) || config->thrust_coeff_rel_walk < 0.0f) {
+        PROPID_BAD("thrust_coeff_rel_walk");
+    }
+    if (!isfinite(config->drag_coeff_rel_walk) || config->drag_coeff_rel_walk < 0.0f) {
+        PROPID_BAD("drag_coeff_rel_walk");
+    }
+    if (!isfinite(config->gyro_bias_walk) || config->gyro_bias_walk < 0.0f) {
+        PROPID_BAD("gyro_bias_walk");
+    }
+    if (!isfinite(config->gate_sigma) || config->gate_sigma > 1.0e3f) {
+        PROPID_BAD("gate_sigma");
+    }
+    if (config->gate_max_consecutive < 1u) {
+        PROPID_BAD("gate_max_consecutive");
+    }
+    if (!positive_finite(config->max_rotor_speed) || config->max_rotor_speed > 1.0e5f) {
+        PROPID_BAD("max_rotor_speed");
+    }
+    if (!positive_finite(config->gyro_range) || config->gyro_range > 1.0e4f) {
+        PROPID_BAD("gyro_range");
+    }
+    if (config->rotor_stale_us < 1u) {
+        PROPID_BAD("rotor_stale_us");
+    }
+    if (config->max_gyro_gap_us < 1u || config->max_gyro_gap_us > 10000000u) {
+        PROPID_BAD("max_gyro_gap_us");
+    }
+    if (!positive_finite(config->coeff_rel_min) || !(config->coeff_rel_min < 1.0f)) {
+        PROPID_BAD("coeff_rel_min");
+    }
+    if (!isfinite(config->coeff_rel_max) || !(config->coeff_rel_max > 1.0f) ||
+        config->coeff_rel_max > 1.0e3f) {
+        PROPID_BAD("coeff_rel_max");
+    }
+    if (!positive_finite(config->converged_rel_std)) {
+        PROPID_BAD("converged_rel_std");
+    }
+
+    out.state_count = (uint8_t)(6u + 2u * rotor_count);
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const propid_rotor_config_t *rotor = &config->rotor[i];
+        /* r x z = (r_y, -r_x, 0) */
+        const float arm_torque[3] = {rotor->position_m[1], -rotor->position_m[0], 0.0f};
+        for (uint8_t a = 0; a < 3u; ++a) {
+            out.thrust_torque[i][a] =
+                (out.inertia_inv[a][0] * arm_torque[0] + out.inertia_inv[a][1] * arm_torque[1]) *
+                rotor->thrust_coeff_nominal;
+            out.drag_torque[i][a] =
+                out.inertia_inv[a][2] * rotor->yaw_sign * rotor->drag_coeff_nominal;
+        }
+    }
+    if (!all_finite(&out.thrust_torque[0][0], 3u * PROPID_MAX_ROTORS) ||
+        !all_finite(&out.drag_torque[0][0], 3u * PROPID_MAX_ROTORS)) {
+        PROPID_BAD("inertia");
+    }
+
+    out.gyro_var = config->gyro_noise_density * config->gyro_noise_density *
+                   config->gyro_sample_rate_hz;
+    if (!positive_finite(out.gyro_var) || out.gyro_var < 1.0e-20f) {
+        PROPID_BAD("gyro_noise_density");
+    }
+    if (config->gate_sigma > 0.0f) {
+        out.gate_sq = config->gate_sigma * config->gate_sigma;
+        out.inv_gate_sq = 1.0f / out.gate_sq;
+    } else {
+        out.gate_sq = 0.0f;
+        out.inv_gate_sq = 1.0f;
+    }
+    out.converged_var = config->converged_rel_std * config->converged_rel_std;
+
+    /* Per-state prior, process noise, floor and ceiling (reasons in docs/design.md). */
+    const uint8_t first_drag = propid_first_drag(rotor_count);
+    const uint8_t first_bias = propid_first_bias(rotor_count);
+    const float coeff_ceiling = config->coeff_rel_max * config->coeff_rel_max;
+    for (uint8_t k = 0; k < out.state_count; ++k) {
+        float prior;
+        float psd;
+        float floor_var;
+        float ceiling;
+        if (k < PROPID_RATE_STATES) {
+            prior = config->rate_std0 * config->rate_std0;
+            psd = config->rate_process_noise * config->rate_process_noise;
+            floor_var = 1.0e-12f;
+            ceiling = 4.0f * config->gyro_range * config->gyro_range;
+        } else if (k < first_drag) {
+            prior = config->thrust_coeff_rel_std0 * config->thrust_coeff_rel_std0;
+            psd = config->thrust_coeff_rel_walk * config->thrust_coeff_rel_walk;
+            floor_var = 1.0e-10f;
+            ceiling = coeff_ceiling;
+        } else if (k < first_bias) {
+            prior = config->drag_coeff_rel_std0 * config->drag_coeff_rel_std0;
+            psd = config->drag_coeff_rel_walk * config->drag_coeff_rel_walk;
+            floor_var = 1.0e-10f;
+            ceiling = coeff_ceiling;
+        } else {
+            prior = config->gyro_bias_std0 * config->gyro_bias_std0;
+            psd = config->gyro_bias_walk * config->gyro_bias_walk;
+            floor_var = 1.0e-14f;
+            ceiling = config->gyro_range * config->gyro_range;
+        }
+        if (ceiling < prior) {
+            ceiling = prior;
+        }
+        if (!positive_finite(prior) || prior < floor_var) {
+            PROPID_BAD(k < PROPID_RATE_STATES ? "rate_std0"
+                                              : (k < first_drag ? "thrust_coeff_rel_std0"
+                                                                : (k < first_bias ? "drag_coeff_rel_std0"
+                                                                                  : "gyro_bias_std0")));
+        }
+        out.prior_var[k] = prior;
+        out.process_psd[k] = psd;
+        out.var_floor[k] = floor_var;
+        out.var_ceiling[k] = ceiling;
+    }
+
+    if (derived != NULL) {
+        *derived = out;
+    }
+    return PROPID_OK;
+}
+
+propid_status_t propid_config_check(const propid_config_t *config, const char **bad_field)
+{
+    if (bad_field != NULL) {
+        *bad_field = NULL;
+    }
+    return propid_config_derive(config, NULL, bad_field);
+}

@@ -1,0 +1,111 @@
+/* Covariance housekeeping: prior, per-state variance bounds, integrity checks and
+ * repair. The filter keeps the full symmetric matrix; every writer updates both
+ * triangles, so P[i][j] == P[j][i] bit for bit. */
+#include <float.h>
+#include <math.h>
+#include <string.h>
+
+#include "propid_internal.h"
+
+void propid_cov_set_prior(const propid_derived_t *derived, uint8_t rotor_count, propid_core_t *core)
+{
+    const uint8_t n = derived->state_count;
+    memset(core->state, 0, sizeof(core->state));
+    memset(core->cov, 0, sizeof(core->cov));
+    const uint8_t first_bias = propid_first_bias(rotor_count);
+    for (uint8_t k = propid_first_thrust(); k < first_bias; ++k) {
+        core->state[k] = 1.0f; /* coefficients start at their nominal */
+    }
+    for (uint8_t k = 0; k < n; ++k) {
+        core->cov[k][k] = derived->prior_var[k];
+    }
+}
+
+void propid_cov_reset_state(const propid_derived_t *derived, propid_core_t *core, uint8_t index)
+{
+    const uint8_t n = derived->state_count;
+    for (uint8_t j = 0; j < n; ++j) {
+        core->cov[index][j] = 0.0f;
+        core->cov[j][index] = 0.0f;
+    }
+    core->cov[index][index] = derived->prior_var[index];
+}
+
+int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
+{
+    const uint8_t n = derived->state_count;
+    int changed = 0;
+    /* Bad variances: the state forgets its correlations and returns to its prior. */
+    for (uint8_t i = 0; i < n; ++i) {
+        const float p = core->cov[i][i];
+        if (!(p > 0.0f && p <= FLT_MAX)) {
+            propid_cov_reset_state(derived, core, i);
+            changed = 1;
+        }
+    }
+    /* Off-diagonals: finite, and correlation strictly inside [-1, 1]. */
+    for (uint8_t i = 0; i < n; ++i) {
+        for (uint8_t j = (uint8_t)(i + 1u); j < n; ++j) {
+            const float pij = core->cov[i][j];
+            const float limit_sq = core->cov[i][i] * core->cov[j][j];
+            float fixed = pij;
+            if (!isfinite(pij)) {
+                fixed = 0.0f;
+            } else if (pij * pij > limit_sq) {
+                /* Pull the correlation back to 0.99 (rare path: sqrtf is fine here). */
+                const float limit = 0.99f * sqrtf(limit_sq);
+                fixed = pij > 0.0f ? limit : -limit;
+            }
+            if (fixed != pij || core->cov[j][i] != pij) {
+                core->cov[i][j] = fixed;
+                core->cov[j][i] = fixed;
+                changed = 1;
+            }
+        }
+    }
+    return changed;
+}
+
+int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, uint8_t row)
+{
+    const uint8_t n = derived->state_count;
+    if (row >= n) {
+        return 0;
+    }
+    const float pii = core->cov[row][row];
+    int bad = !(pii > 0.0f && pii <= FLT_MAX);
+    for (uint8_t j = 0; j < n && !bad; ++j) {
+        const float pij = core->cov[row][j];
+        /* A NaN fails the comparison, so it is caught too. */
+        bad = !(pij * pij <= pii * core->cov[j][j]) || core->cov[j][row] != pij;
+    }
+    if (bad) {
+        return propid_cov_repair(derived, core);
+    }
+    return 0;
+}
+
+int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *core)
+{
+    const uint8_t n = derived->state_count;
+    int repaired = 0;
+    for (uint8_t i = 0; i < n; ++i) {
+        const float p = core->cov[i][i];
+        if (!(p > 0.0f && p <= FLT_MAX)) {
+            repaired |= propid_cov_repair(derived, core);
+        } else if (p < derived->var_floor[i]) {
+            /* Adding to a diagonal keeps P positive semi-definite. */
+            core->cov[i][i] = derived->var_floor[i];
+        } else if (p > derived->var_ceiling[i]) {
+            /* Scale row and column by c = ceiling / p and set the diagonal to the
+             * ceiling: D P D plus a non-negative diagonal term, still PSD. Rare. */
+            const float c = derived->var_ceiling[i] / p;
+            for (uint8_t j = 0; j < n; ++j) {
+                core->cov[i][j] *= c;
+                core->cov[j][i] = core->cov[i][j];
+            }
+            core->cov[i][i] = derived->var_ceiling[i];
+        }
+    }
+    return repaired;
+}

@@ -1,0 +1,92 @@
+/* Outputs: the scaled state converted to SI, standard deviations, flags.
+ * The only place with square roots (std), called at the reader's pace. */
+#include <math.h>
+#include <stddef.h>
+#include <string.h>
+
+#include "propid_internal.h"
+
+static float std_of(float variance)
+{
+    return variance > 0.0f ? sqrtf(variance) : 0.0f;
+}
+
+propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estimate_t *estimate)
+{
+    if (filter == NULL || estimate == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    if (filter->magic != PROPID_MAGIC) {
+        return PROPID_ERR_NOT_INITIALISED;
+    }
+    const propid_config_t *config = &filter->config;
+    const propid_derived_t *derived = &filter->derived;
+    const propid_core_t *core = &filter->core;
+    const uint8_t rotor_count = config->rotor_count;
+    const uint8_t first_drag = propid_first_drag(rotor_count);
+    const uint8_t first_bias = propid_first_bias(rotor_count);
+
+    memset(estimate, 0, sizeof(*estimate));
+    estimate->time_us = core->time_us;
+    estimate->rotor_count = rotor_count;
+    for (uint8_t a = 0; a < 3u; ++a) {
+        estimate->body_rate[a] = core->state[a];
+        estimate->body_rate_std[a] = std_of(core->cov[a][a]);
+        estimate->gyro_bias[a] = core->state[first_bias + a];
+        estimate->gyro_bias_std[a] = std_of(core->cov[first_bias + a][first_bias + a]);
+        estimate->innovation[a] = core->innovation[a];
+        estimate->innovation_test_ratio[a] = core->innovation_test_ratio[a];
+    }
+    uint16_t all_rotors = 0u;
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const uint8_t kf = (uint8_t)(propid_first_thrust() + i);
+        const uint8_t km = (uint8_t)(first_drag + i);
+        const float kf_nominal = config->rotor[i].thrust_coeff_nominal;
+        const float km_nominal = config->rotor[i].drag_coeff_nominal;
+        const float kf_var = core->cov[kf][kf];
+        const float km_var = core->cov[km][km];
+        const uint16_t bit = (uint16_t)(1u << i);
+        all_rotors |= bit;
+        estimate->thrust_coeff[i] = core->state[kf] * kf_nominal;
+        estimate->thrust_coeff_std[i] = std_of(kf_var) * kf_nominal;
+        estimate->drag_coeff[i] = core->state[km] * km_nominal;
+        estimate->drag_coeff_std[i] = std_of(km_var) * km_nominal;
+        /* "Converging": std below half its prior, i.e. variance below a quarter. */
+        if (kf_var < 0.25f * derived->prior_var[kf]) {
+            estimate->thrust_coeff_converging |= bit;
+        }
+        if (km_var < 0.25f * derived->prior_var[km]) {
+            estimate->drag_coeff_converging |= bit;
+        }
+        if (kf_var < derived->converged_var) {
+            estimate->thrust_coeff_converged |= bit;
+        }
+        if (km_var < derived->converged_var) {
+            estimate->drag_coeff_converged |= bit;
+        }
+    }
+    uint32_t health = core->health;
+    if (!core->has_rotor_data) {
+        health |= PROPID_HEALTH_NO_ROTOR_DATA;
+    }
+    if (filter->counters.rejected[-(int)PROPID_ERR_ROTOR_STALE] != core->stale_mark) {
+        health |= PROPID_HEALTH_ROTOR_STALE;
+    }
+    if (estimate->thrust_coeff_converged == all_rotors && estimate->drag_coeff_converged == all_rotors) {
+        health |= PROPID_HEALTH_ALL_CONVERGED;
+    }
+    estimate->health = health;
+    return PROPID_OK;
+}
+
+propid_status_t propid_get_counters(const propid_filter_t *filter, propid_counters_t *counters)
+{
+    if (filter == NULL || counters == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    if (filter->magic != PROPID_MAGIC) {
+        return PROPID_ERR_NOT_INITIALISED;
+    }
+    *counters = filter->counters;
+    return PROPID_OK;
+}

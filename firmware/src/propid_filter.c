@@ -1,0 +1,256 @@
+/* Life cycle and input guards. Every rejection is decided before the first write,
+ * so a negative status leaves config, derived and core bit-for-bit unchanged and
+ * only moves counters.rejected[-status]. */
+#include <math.h>
+#include <stddef.h>
+#include <string.h>
+
+#include "propid_internal.h"
+
+static int initialised(const propid_filter_t *filter)
+{
+    return filter->magic == PROPID_MAGIC;
+}
+
+static propid_status_t reject(propid_filter_t *filter, propid_status_t status)
+{
+    filter->counters.rejected[-(int)status]++;
+    return status;
+}
+
+static void core_to_prior(propid_filter_t *filter)
+{
+    propid_core_t *core = &filter->core;
+    memset(core, 0, sizeof(*core));
+    propid_cov_set_prior(&filter->derived, filter->config.rotor_count, core);
+    core->stale_mark = filter->counters.rejected[-(int)PROPID_ERR_ROTOR_STALE];
+}
+
+propid_status_t propid_init(propid_filter_t *filter, const propid_config_t *config)
+{
+    if (filter == NULL || config == NULL) {
+        if (filter != NULL && initialised(filter)) {
+            return reject(filter, PROPID_ERR_NULL);
+        }
+        return PROPID_ERR_NULL;
+    }
+    propid_derived_t derived;
+    if (propid_config_derive(config, &derived, NULL) != PROPID_OK) {
+        if (initialised(filter)) {
+            return reject(filter, PROPID_ERR_CONFIG);
+        }
+        return PROPID_ERR_CONFIG;
+    }
+    memset(filter, 0, sizeof(*filter));
+    filter->config = *config;
+    filter->derived = derived;
+    core_to_prior(filter);
+    filter->magic = PROPID_MAGIC;
+    return PROPID_OK;
+}
+
+propid_status_t propid_reset(propid_filter_t *filter)
+{
+    if (filter == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    if (!initialised(filter)) {
+        return PROPID_ERR_NOT_INITIALISED;
+    }
+    core_to_prior(filter);
+    return PROPID_OK;
+}
+
+propid_status_t propid_reset_rotor(propid_filter_t *filter, uint8_t rotor)
+{
+    if (filter == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    if (!initialised(filter)) {
+        return PROPID_ERR_NOT_INITIALISED;
+    }
+    const uint8_t rotor_count = filter->config.rotor_count;
+    if (rotor >= rotor_count) {
+        return reject(filter, PROPID_ERR_ROTOR_INDEX);
+    }
+    propid_core_t *core = &filter->core;
+    const uint8_t thrust = (uint8_t)(propid_first_thrust() + rotor);
+    const uint8_t drag = (uint8_t)(propid_first_drag(rotor_count) + rotor);
+    core->state[thrust] = 1.0f;
+    core->state[drag] = 1.0f;
+    propid_cov_reset_state(&filter->derived, core, thrust);
+    propid_cov_reset_state(&filter->derived, core, drag);
+    return PROPID_OK;
+}
+
+propid_status_t propid_resync(propid_filter_t *filter, uint64_t time_us)
+{
+    if (filter == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    if (!initialised(filter)) {
+        return PROPID_ERR_NOT_INITIALISED;
+    }
+    propid_core_t *core = &filter->core;
+    /* The rates drifted during the gap: forget their correlations, prior variance.
+     * The next gyro sample anchors the clock again. */
+    for (uint8_t a = 0; a < PROPID_RATE_STATES; ++a) {
+        propid_cov_reset_state(&filter->derived, core, a);
+        core->gated_run[a] = 0u;
+    }
+    core->time_us = time_us;
+    core->has_time = 0u;
+    core->health |= PROPID_HEALTH_TIME_RESYNCED;
+    filter->counters.resyncs++;
+    return PROPID_OK;
+}
+
+propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_us,
+                                         const float *rotor_speed_rad_s, uint8_t rotor_count)
+{
+    if (filter == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    if (!initialised(filter)) {
+        return PROPID_ERR_NOT_INITIALISED;
+    }
+    if (rotor_speed_rad_s == NULL) {
+        return reject(filter, PROPID_ERR_NULL);
+    }
+    const propid_config_t *config = &filter->config;
+    if (rotor_count != config->rotor_count) {
+        return reject(filter, PROPID_ERR_ROTOR_COUNT);
+    }
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const float speed = rotor_speed_rad_s[i];
+        if (!isfinite(speed)) {
+            return reject(filter, PROPID_ERR_NOT_FINITE);
+        }
+        if (speed < 0.0f) {
+            return reject(filter, PROPID_ERR_ROTOR_SPEED_NEGATIVE);
+        }
+        if (speed > config->max_rotor_speed) {
+            return reject(filter, PROPID_ERR_ROTOR_SPEED_RANGE);
+        }
+    }
+    propid_core_t *core = &filter->core;
+    if (core->has_rotor_data && time_us <= core->rotor_time_us) {
+        return reject(filter, PROPID_ERR_TIME_BACKWARDS);
+    }
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        core->rotor_speed_sq[i] = rotor_speed_rad_s[i] * rotor_speed_rad_s[i];
+    }
+    core->rotor_time_us = time_us;
+    core->has_rotor_data = 1u;
+    filter->counters.rotor_accepted++;
+    return PROPID_OK;
+}
+
+propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
+                                 const float gyro_rad_s[3])
+{
+    if (filter == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    if (!initialised(filter)) {
+        return PROPID_ERR_NOT_INITIALISED;
+    }
+    if (gyro_rad_s == NULL) {
+        return reject(filter, PROPID_ERR_NULL);
+    }
+    const propid_config_t *config = &filter->config;
+    for (uint8_t a = 0; a < 3u; ++a) {
+        if (!isfinite(gyro_rad_s[a])) {
+            return reject(filter, PROPID_ERR_NOT_FINITE);
+        }
+    }
+    for (uint8_t a = 0; a < 3u; ++a) {
+        if (fabsf(gyro_rad_s[a]) > config->gyro_range) {
+            return reject(filter, PROPID_ERR_GYRO_RANGE);
+        }
+    }
+    propid_core_t *core = &filter->core;
+    const int anchor = !core->has_time; /* first sample after init/reset/resync */
+    float dt = 0.0f;
+    if (anchor) {
+        /* After propid_resync(t) the anchoring sample may carry t itself (the
+         * sample that was rejected as a time jump), not an earlier time. */
+        if (time_us < core->time_us) {
+            return reject(filter, PROPID_ERR_TIME_BACKWARDS);
+        }
+    } else {
+        if (time_us <= core->time_us) {
+            return reject(filter, PROPID_ERR_TIME_BACKWARDS);
+        }
+        const uint64_t gap = time_us - core->time_us;
+        if (gap > (uint64_t)config->max_gyro_gap_us) {
+            return reject(filter, PROPID_ERR_TIME_JUMP);
+        }
+        dt = (float)(uint32_t)gap * 1.0e-6f;
+    }
+    if (!core->has_rotor_data) {
+        return reject(filter, PROPID_ERR_NO_ROTOR_DATA);
+    }
+    /* Rotor data stamped after the gyro sample is the freshest we have (ZOH). */
+    if (time_us > core->rotor_time_us &&
+        time_us - core->rotor_time_us > (uint64_t)config->rotor_stale_us) {
+        return reject(filter, PROPID_ERR_ROTOR_STALE);
+    }
+
+    float rate_next[3];
+    float rate_jacobian_dt[3][PROPID_MAX_STATES];
+    if (!anchor) {
+        if (propid_predict_stage(filter, dt, rate_next, rate_jacobian_dt) != PROPID_OK) {
+            return reject(filter, PROPID_ERR_NUMERIC);
+        }
+    } else {
+        float check = 0.0f;
+        for (uint8_t k = 0; k < filter->derived.state_count; ++k) {
+            check += core->state[k];
+        }
+        if (!isfinite(check)) {
+            return reject(filter, PROPID_ERR_NUMERIC);
+        }
+    }
+
+    /* Accepted: from here on the filter changes. */
+    const propid_derived_t *derived = &filter->derived;
+    uint32_t health = core->health & ~(PROPID_HEALTH_GATED | PROPID_HEALTH_STATE_CLAMPED);
+    core->health = health;
+
+    /* Round-robin integrity check: one covariance row per sample. */
+    if (propid_cov_check_row(derived, core, core->check_row)) {
+        core->health |= PROPID_HEALTH_COV_REPAIRED;
+        filter->counters.cov_repairs++;
+    }
+    core->check_row = (uint8_t)(core->check_row + 1u >= derived->state_count ? 0u : core->check_row + 1u);
+
+    if (!anchor) {
+        propid_predict_covariance(derived, core, dt, rate_jacobian_dt);
+        core->state[0] = rate_next[0];
+        core->state[1] = rate_next[1];
+        core->state[2] = rate_next[2];
+    }
+
+    int gated = 0;
+    for (uint8_t a = 0; a < 3u; ++a) {
+        gated |= propid_update_axis(filter, a, gyro_rad_s[a]);
+    }
+    const uint32_t clamped = propid_clamp_coefficients(config, core);
+    if (clamped != 0u) {
+        core->health |= PROPID_HEALTH_STATE_CLAMPED;
+        filter->counters.state_clamps += clamped;
+    }
+    if (propid_cov_enforce_bounds(derived, core)) {
+        core->health |= PROPID_HEALTH_COV_REPAIRED;
+        filter->counters.cov_repairs++;
+    }
+    if (gated) {
+        core->health |= PROPID_HEALTH_GATED;
+    }
+    core->time_us = time_us;
+    core->has_time = 1u;
+    core->stale_mark = filter->counters.rejected[-(int)PROPID_ERR_ROTOR_STALE];
+    filter->counters.gyro_accepted++;
+    return gated ? PROPID_OK_GATED : PROPID_OK;
+}

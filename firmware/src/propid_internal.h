@@ -1,0 +1,60 @@
+/*
+ * Internal declarations shared by the filter's source files. Not installed,
+ * not part of the API: tests may include it to reach the pieces directly.
+ */
+#ifndef PROPID_INTERNAL_H
+#define PROPID_INTERNAL_H
+
+#include "propid/propid.h"
+
+/* Marks a filter on which propid_init() succeeded ("PRID"). */
+#define PROPID_MAGIC 0x50524944u
+
+/* Index of the first thrust coefficient, first drag coefficient, first bias. */
+static inline uint8_t propid_first_thrust(void) { return PROPID_RATE_STATES; }
+static inline uint8_t propid_first_drag(uint8_t rotor_count)
+{
+    return (uint8_t)(PROPID_RATE_STATES + rotor_count);
+}
+static inline uint8_t propid_first_bias(uint8_t rotor_count)
+{
+    return (uint8_t)(PROPID_RATE_STATES + 2u * rotor_count);
+}
+
+/* propid_config.c: validate a configuration and compute its derived quantities.
+ * Writes *derived only when the configuration is valid. */
+propid_status_t propid_config_derive(const propid_config_t *config, propid_derived_t *derived,
+                                     const char **bad_field);
+
+/* propid_covariance.c */
+/* State to nominal, covariance to the diagonal prior. */
+void propid_cov_set_prior(const propid_derived_t *derived, uint8_t rotor_count, propid_core_t *core);
+/* Zero row and column `index`, put its prior variance on the diagonal. */
+void propid_cov_reset_state(const propid_derived_t *derived, propid_core_t *core, uint8_t index);
+/* Floors and ceilings on every variance; returns 1 if a diagonal was bad and the
+ * covariance had to be repaired. */
+int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *core);
+/* Integrity of one row (finite, |Pij| <= sqrt(Pii Pjj)); repairs the whole matrix
+ * and returns 1 when the row is bad. */
+int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, uint8_t row);
+/* Full repair: bad diagonals back to the prior (row/column zeroed), non-finite
+ * off-diagonals to 0, correlations above 1 pulled inside. Returns 1 if anything changed. */
+int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core);
+
+/* propid_predict.c */
+/* Euler step of the body rates into rate_next and dt * (Jacobian rows of the rate
+ * dynamics) into rate_jacobian_dt, without touching the filter. Returns
+ * PROPID_ERR_NUMERIC when either would be non-finite. */
+propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, float rate_next[3],
+                                     float rate_jacobian_dt[3][PROPID_MAX_STATES]);
+/* P := F P F^T + Q dt with F = I + rate_jacobian_dt (only the 3 rate rows differ from I). */
+void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
+                               const float rate_jacobian_dt[3][PROPID_MAX_STATES]);
+
+/* propid_update.c: fuse one gyro axis (scalar update, H = e_rate + e_bias).
+ * Returns 1 when the sample was gated out on this axis, 0 when it was fused. */
+int propid_update_axis(propid_filter_t *filter, uint8_t axis, float gyro);
+/* Clamp the coefficients to [coeff_rel_min, coeff_rel_max]; returns how many were clamped. */
+uint32_t propid_clamp_coefficients(const propid_config_t *config, propid_core_t *core);
+
+#endif /* PROPID_INTERNAL_H */

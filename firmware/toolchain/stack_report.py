@@ -1,0 +1,119 @@
+#!/usr/bin/env python3
+"""Worst-case stack depth of the firmware's call chains, from GCC's
+-fcallgraph-info=su files (.ci, one per object; the toolchain file turns them on).
+
+Each .ci file lists the functions of one object with their own frame size and
+the calls they make. Merging all files of the firmware libraries gives the call
+graph; the deepest chain from each public entry point is its worst-case stack
+(frames of library functions outside our objects, e.g. memset, are unknown and
+counted as 0: the report names them). A cycle in the graph is recursion, which
+the firmware rules forbid.
+
+    stack_report.py [--budget FUNCTION=BYTES]... DIR...
+
+Prints the worst chain of every public propid_* function; exits 1 on recursion,
+on a dynamically sized frame, or when a budget is exceeded.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import re
+import sys
+
+NODE = re.compile(r'node: \{ title: "([^"]+)" label: "([^"]*)"')
+EDGE = re.compile(r'edge: \{ sourcename: "([^"]+)" targetname: "([^"]+)"')
+FRAME = re.compile(r"\\n(\d+) bytes \((\w+)")
+
+
+def load(directories: list[str]) -> tuple[dict[str, int], dict[str, str], dict[str, set[str]]]:
+    frames: dict[str, int] = {}
+    kinds: dict[str, str] = {}
+    calls: dict[str, set[str]] = {}
+    files = sorted(p for d in directories for p in pathlib.Path(d).rglob("*.ci"))
+    if not files:
+        raise SystemExit(f"stack_report: no .ci files under {' '.join(directories)}")
+    for path in files:
+        for line in path.read_text().splitlines():
+            node = NODE.search(line)
+            if node:
+                frame = FRAME.search(node.group(2))
+                if frame:  # defined in this object (otherwise only declared)
+                    frames[node.group(1)] = int(frame.group(1))
+                    kinds[node.group(1)] = frame.group(2)
+                continue
+            edge = EDGE.search(line)
+            if edge:
+                calls.setdefault(edge.group(1), set()).add(edge.group(2))
+    return frames, kinds, calls
+
+
+def worst_chain(function: str, frames: dict[str, int], calls: dict[str, set[str]],
+                memo: dict[str, tuple[int, list[str]]], active: list[str]) -> tuple[int, list[str]]:
+    """Deepest (bytes, chain) below `function`; raises on recursion."""
+    if function in active:
+        cycle = active[active.index(function):] + [function]
+        raise RecursionError(" -> ".join(cycle))
+    if function in memo:
+        return memo[function]
+    active.append(function)
+    best_depth, best_chain = 0, []
+    for callee in sorted(calls.get(function, ())):
+        depth, chain = worst_chain(callee, frames, calls, memo, active)
+        if depth > best_depth or not best_chain:
+            best_depth, best_chain = depth, chain
+    active.pop()
+    result = (frames.get(function, 0) + best_depth, [function] + best_chain)
+    memo[function] = result
+    return result
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("directories", nargs="+", help="directories searched for .ci files")
+    parser.add_argument("--budget", action="append", default=[], metavar="FUNCTION=BYTES",
+                        help="fail if FUNCTION's worst chain needs more than BYTES")
+    args = parser.parse_args()
+
+    frames, kinds, calls = load(args.directories)
+    memo: dict[str, tuple[int, list[str]]] = {}
+    status = 0
+    dynamic = sorted(f for f, kind in kinds.items() if kind != "static")
+    if dynamic:
+        print(f"  dynamically sized frames (VLA/alloca): {', '.join(dynamic)}")
+        status = 1
+
+    public = sorted(f for f in frames if f.startswith("propid_") and not calls.get(f) is None
+                    or f.startswith("propid_"))
+    rows = []
+    for function in public:
+        try:
+            depth, chain = worst_chain(function, frames, calls, memo, [])
+        except RecursionError as cycle:
+            print(f"  RECURSION: {cycle}")
+            status = 1
+            continue
+        unknown = [f for f in chain if f not in frames]
+        rows.append((depth, function, chain, unknown))
+
+    for depth, function, chain, unknown in sorted(rows, key=lambda r: (-r[0], r[1]))[:8]:
+        note = f"  (+ {', '.join(unknown)})" if unknown else ""
+        print(f"  {depth:6d} bytes  {' -> '.join(chain)}{note}")
+
+    by_name = {function: depth for depth, function, _, _ in rows}
+    for budget in args.budget:
+        function, _, limit = budget.partition("=")
+        if function not in by_name:
+            print(f"  budget: {function} not found in the call graph")
+            status = 1
+        elif by_name[function] > int(limit):
+            print(f"  budget exceeded: {function} needs {by_name[function]} > {limit} bytes")
+            status = 1
+        else:
+            print(f"  budget ok: {function} needs {by_name[function]} <= {limit} bytes")
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

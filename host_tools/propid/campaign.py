@@ -1,0 +1,230 @@
+"""The paper's experiment: trajectories x controller modes x randomized trials of propid_sitl.
+
+Trial k of every (trajectory, mode) uses the seed ``base_seed + k``: the same true
+coefficients (nominal x U(1-s, 1+s) per rotor, drawn by the simulator from the seed)
+and the same gyro biases in the three modes, so the modes are compared on identical
+vehicles. The filter's prior and the Incorrect controller start from the nominal
+catalogue values (propid_sitl's ``--incorrect-source nominal``); the filter's prior
+standard deviations are those of the truth distribution, and its noise settings are
+the campaign's (CampaignConfig, documented in docs/results.md).
+
+Each flight is a propid_sitl subprocess writing a CSV log; a pool of workers (2 by
+default: this machine has two cores) runs them, computes the flight's metrics
+(propid.table1) and deletes the log unless asked to keep it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from propid import table1
+from propid.errors import UserError
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+EXIT_DIVERGED = 3  # propid_sitl's exit code for a flight it stopped
+
+
+def default_build_dir() -> Path:
+    return Path(os.environ.get("PROPID_BUILD_DIR", REPO_ROOT / "build" / "host"))
+
+
+def locate_sitl(explicit: str | None = None) -> Path:
+    """propid_sitl: explicit path, else $PROPID_BUILD_DIR/sitl/propid_sitl."""
+    path = Path(explicit) if explicit else default_build_dir() / "sitl" / "propid_sitl"
+    if not path.is_file() or not os.access(path, os.X_OK):
+        raise UserError(f"propid_sitl not found at {path} (build it with `make sitl`, "
+                        "or set PROPID_BUILD_DIR / --sitl)")
+    return path
+
+
+@dataclass
+class CampaignConfig:
+    out_dir: Path
+    sitl: Path
+    trajectories: tuple[str, ...] = table1.TRAJECTORIES
+    modes: tuple[str, ...] = table1.MODES
+    trials: int = 10
+    base_seed: int = 1
+    duration_s: float = 10.0
+    vehicle: str = "crazyflie-plus"
+    coeff_spread: float = 0.2        # truth = nominal x U(1 - s, 1 + s)
+    gyro_bias_max: float = 0.0174533  # truth bias per axis U(-b, b) [rad/s] (1 deg/s)
+    paper_sensors: bool = True        # --paper: 500 Hz gyro, exact rotor speeds
+    start_at_rest: bool = True        # the paper's simulator starts the vehicle at rest
+    # Filter configuration the SITL gives the EKF (docs/results.md): priors equal to
+    # the truth distribution's std, no random walks (the truth is constant, as in the
+    # paper's eq. 7), a small rate process noise (the simulated model is exact but
+    # for the Euler step over held rotor speeds).
+    filter_rate_noise: float | None = 0.002
+    filter_coeff_walk: float | None = 0.0
+    filter_bias_walk: float | None = 0.0
+    priors_from_truth: bool = True
+    extra_args: list[str] = field(default_factory=list)  # appended to every propid_sitl call
+    workers: int = 2
+    keep_logs: bool = False
+    max_position_error: float = 1.0   # stability bound [m]
+    timeout_s: float = 600.0
+
+
+@dataclass
+class Job:
+    trajectory: str
+    mode: str
+    trial: int
+    seed: int
+
+
+def sitl_command(config: CampaignConfig, job: Job, log_path: Path) -> list[str]:
+    cmd = [str(config.sitl)]
+    if config.paper_sensors:
+        cmd.append("--paper")
+    cmd += [
+        "--vehicle", config.vehicle,
+        "--trajectory", job.trajectory,
+        "--mode", job.mode,
+        "--seed", str(job.seed),
+        "--duration", repr(config.duration_s),
+        "--coeff-spread", repr(config.coeff_spread),
+        "--gyro-bias-max", repr(config.gyro_bias_max),
+        "--incorrect-source", "nominal",
+        "--log", str(log_path),
+        "--quiet",
+    ]
+    if config.start_at_rest:
+        cmd.append("--start-at-rest")
+    if config.priors_from_truth:
+        coeff_std = config.coeff_spread / math.sqrt(3.0)
+        cmd += ["--prior-kf-std", f"{coeff_std:.6g}", "--prior-km-std", f"{coeff_std:.6g}",
+                "--prior-bias-std", f"{config.gyro_bias_max / math.sqrt(3.0):.6g}"]
+    for option, value in (("--filter-rate-noise", config.filter_rate_noise),
+                          ("--filter-coeff-walk", config.filter_coeff_walk),
+                          ("--filter-bias-walk", config.filter_bias_walk)):
+        if value is not None:
+            cmd += [option, repr(value)]
+    return cmd + list(config.extra_args)
+
+
+def run_job(config: CampaignConfig, job: Job) -> dict:
+    """Fly one trial and return its metrics (runs in a worker process)."""
+    log_dir = config.out_dir / "logs"
+    log_dir.mkdir(parents=True, exist_ok=True)
+    log_path = log_dir / f"{job.trajectory}_{job.mode}_{job.trial:02d}.csv"
+    vehicle_path = log_path.with_suffix(".vehicle.json")
+    cmd = sitl_command(config, job, log_path)
+    record = {"trajectory": job.trajectory, "mode": job.mode, "trial": job.trial,
+              "seed": job.seed}
+    start = time.monotonic()
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=config.timeout_s,
+                              check=False)
+    except subprocess.TimeoutExpired:
+        record.update(stable=False, error=f"timed out after {config.timeout_s:g} s")
+        return record
+    record["wall_s"] = round(time.monotonic() - start, 3)
+    record["exit_code"] = proc.returncode
+    if proc.returncode not in (0, EXIT_DIVERGED) or not log_path.is_file():
+        tail = (proc.stderr or "").strip().splitlines()[-3:]
+        record.update(stable=False, error=f"propid_sitl exit {proc.returncode}: "
+                      + " | ".join(tail), command=" ".join(cmd))
+        return record
+    try:
+        columns = table1.read_log_columns(log_path)
+        kf_nom, km_nom = table1.read_nominal_coefficients(vehicle_path, table1.rotor_count(columns))
+        spec = table1.ConvergenceSpec.from_uniform_truth(config.coeff_spread, config.gyro_bias_max)
+        record.update(table1.trial_metrics(
+            columns, kf_nom, km_nom, spec, duration_s=config.duration_s,
+            diverged=proc.returncode == EXIT_DIVERGED,
+            max_position_error=config.max_position_error, where=str(log_path)))
+    except UserError as exc:
+        record.update(stable=False, error=str(exc))
+    finally:
+        if not config.keep_logs:
+            for path in (log_path, vehicle_path):
+                path.unlink(missing_ok=True)
+    return record
+
+
+def jobs_for(config: CampaignConfig) -> list[Job]:
+    return [Job(traj, mode, trial, config.base_seed + trial)
+            for trial in range(config.trials)
+            for traj in config.trajectories
+            for mode in config.modes]
+
+
+def run_campaign(config: CampaignConfig, progress: bool = True) -> dict:
+    """Run every flight, aggregate, write table1.json and table1.md into out_dir."""
+    from tqdm import tqdm
+
+    config.out_dir.mkdir(parents=True, exist_ok=True)
+    jobs = jobs_for(config)
+    records: list[dict] = []
+    bar = tqdm(total=len(jobs), desc="campaign", unit="flight", disable=not progress, mininterval=0.5,
+               file=sys.stderr)
+    pool = ProcessPoolExecutor(max_workers=max(1, config.workers))
+    try:
+        pending = {pool.submit(run_job, config, job) for job in jobs}
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                record = future.result()
+                records.append(record)
+                bar.set_postfix_str(f"{record['trajectory']}/{record['mode']}/{record['trial']}")
+                bar.update(1)
+    except KeyboardInterrupt:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    finally:
+        bar.close()
+    pool.shutdown(wait=True)
+
+    records.sort(key=lambda r: (r["trajectory"], r["mode"], r["trial"]))
+    table = build_table(config, records)
+    write_outputs(config.out_dir, table)
+    return table
+
+
+def build_table(config: CampaignConfig, records: list[dict]) -> dict:
+    table: dict = {}
+    for traj in config.trajectories:
+        for mode in config.modes:
+            trials = [r for r in records if r["trajectory"] == traj and r["mode"] == mode]
+            for r in trials:  # a flight that failed to produce metrics counts as unstable
+                r.setdefault("stable", False)
+            complete = [r for r in trials if "rmse_x" in r]
+            row = table1.aggregate(complete, config.duration_s)
+            row["trials"] = len(trials)
+            row["stable_pct"] = (100.0 * sum(1 for r in trials if r["stable"]) / len(trials)
+                                 if trials else 0.0)
+            row["per_trial"] = trials
+            table.setdefault(traj, {})[mode] = row
+    conditions = asdict(config)
+    conditions["out_dir"] = str(config.out_dir)
+    conditions["sitl"] = str(config.sitl)
+    spec = table1.ConvergenceSpec.from_uniform_truth(config.coeff_spread, config.gyro_bias_max)
+    conditions["coeff_threshold_rel"] = spec.coeff_threshold_rel
+    conditions["bias_threshold_rad_s"] = spec.bias_threshold
+    conditions["command_example"] = " ".join(
+        sitl_command(config, Job("lissajous", "filter", 0, config.base_seed), Path("X.csv")))
+    table["_conditions"] = conditions
+    return table
+
+
+def write_outputs(out_dir: Path, table: dict) -> None:
+    (out_dir / "table1.json").write_text(json.dumps(table, indent=1, default=str) + "\n",
+                                         encoding="utf-8")
+    conditions = table.get("_conditions", {})
+    header = ("# Table 1 (propid SITL campaign)\n\n"
+              f"Vehicle {conditions.get('vehicle')}, {conditions.get('trials')} trials per cell, "
+              f"seeds {conditions.get('base_seed')}..."
+              f"{conditions.get('base_seed', 0) + conditions.get('trials', 0) - 1}, "
+              f"{conditions.get('duration_s')} s flights.\n"
+              f"Example flight: `{conditions.get('command_example')}`\n\n")
+    (out_dir / "table1.md").write_text(header + table1.render_markdown(table), encoding="utf-8")

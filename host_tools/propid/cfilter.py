@@ -1,0 +1,567 @@
+"""ctypes binding of the C filter (build/host/firmware/libpropid_shared.so).
+
+The same C code that flies on the MCU, driven from Python::
+
+    from propid.cfilter import CFilter, FilterConfig
+    config = FilterConfig.from_vehicle(vehicle_dict, gyro_sample_rate_hz=500.0)
+    f = CFilter(config)
+    f.push_rotor_speeds(t_us, speeds_rad_s)      # -> status code (int)
+    status = f.push_gyro(t_us, gyro_rad_s)      # -> status code (int)
+    est = f.estimate()                          # Estimate, SI units, numpy arrays
+    if status < 0: print(CFilter.status_name(status))
+
+Where the library comes from (first that applies):
+  1. env PROPID_LIBRARY (full path of the .so),
+  2. $PROPID_BUILD_DIR/firmware/libpropid_shared.so,
+  3. <repo>/build/host/firmware/libpropid_shared.so.
+The library's struct sizes (propid_abi.c) are checked against this module's
+ctypes layout at load time, so a stale or differently configured build fails
+loudly instead of corrupting memory.
+
+FilterConfig is plain Python (no library needed) and is shared with the
+float64 reference filter (propid.reference_filter).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import os
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from propid.errors import UserError
+
+# Compile-time limit the layout below is built for (propid_config.h default).
+MAX_ROTORS = 8
+RATE_STATES = 3
+BIAS_STATES = 3
+MAX_STATES = RATE_STATES + 2 * MAX_ROTORS + BIAS_STATES
+REJECT_SLOTS = 15
+
+# propid_status_t (propid.h). Negative = rejected, filter state unchanged.
+STATUS = {
+    "PROPID_OK": 0,
+    "PROPID_OK_GATED": 1,
+    "PROPID_ERR_NULL": -1,
+    "PROPID_ERR_NOT_INITIALISED": -2,
+    "PROPID_ERR_CONFIG": -3,
+    "PROPID_ERR_NOT_FINITE": -4,
+    "PROPID_ERR_ROTOR_SPEED_NEGATIVE": -5,
+    "PROPID_ERR_ROTOR_SPEED_RANGE": -6,
+    "PROPID_ERR_ROTOR_COUNT": -7,
+    "PROPID_ERR_ROTOR_INDEX": -8,
+    "PROPID_ERR_GYRO_RANGE": -9,
+    "PROPID_ERR_TIME_BACKWARDS": -10,
+    "PROPID_ERR_TIME_JUMP": -11,
+    "PROPID_ERR_NO_ROTOR_DATA": -12,
+    "PROPID_ERR_ROTOR_STALE": -13,
+    "PROPID_ERR_NUMERIC": -14,
+}
+STATUS_NAME = {code: name for name, code in STATUS.items()}
+globals().update(STATUS)  # PROPID_OK, PROPID_ERR_TIME_JUMP, ... as module constants
+
+# Health flags (propid_estimate_t.health).
+HEALTH = {
+    "NO_ROTOR_DATA": 1 << 0,
+    "ROTOR_STALE": 1 << 1,
+    "GATED": 1 << 2,
+    "COV_REPAIRED": 1 << 3,
+    "STATE_CLAMPED": 1 << 4,
+    "GATE_REOPENED": 1 << 5,
+    "ALL_CONVERGED": 1 << 6,
+    "TIME_RESYNCED": 1 << 7,
+}
+
+
+def health_names(health: int) -> list[str]:
+    """Names of the flags set in a health word, e.g. ['GATED', 'COV_REPAIRED']."""
+    return [name for name, bit in HEALTH.items() if health & bit]
+
+
+# ---------------------------------------------------------------------------
+# ctypes mirrors of the public structs (propid.h). Keep in the same order.
+# ---------------------------------------------------------------------------
+class RotorConfigStruct(ctypes.Structure):
+    _fields_ = [
+        ("position_m", ctypes.c_float * 3),
+        ("yaw_sign", ctypes.c_float),
+        ("thrust_coeff_nominal", ctypes.c_float),
+        ("drag_coeff_nominal", ctypes.c_float),
+    ]
+
+
+# Tuning fields of propid_config_t after the geometry, in struct order, with their C type.
+_TUNING_FIELDS = [
+    ("rate_std0", ctypes.c_float),
+    ("thrust_coeff_rel_std0", ctypes.c_float),
+    ("drag_coeff_rel_std0", ctypes.c_float),
+    ("gyro_bias_std0", ctypes.c_float),
+    ("gyro_noise_density", ctypes.c_float),
+    ("gyro_sample_rate_hz", ctypes.c_float),
+    ("rate_process_noise", ctypes.c_float),
+    ("thrust_coeff_rel_walk", ctypes.c_float),
+    ("drag_coeff_rel_walk", ctypes.c_float),
+    ("gyro_bias_walk", ctypes.c_float),
+    ("gate_sigma", ctypes.c_float),
+    ("gate_max_consecutive", ctypes.c_uint16),
+    ("max_rotor_speed", ctypes.c_float),
+    ("gyro_range", ctypes.c_float),
+    ("rotor_stale_us", ctypes.c_uint32),
+    ("max_gyro_gap_us", ctypes.c_uint32),
+    ("coeff_rel_min", ctypes.c_float),
+    ("coeff_rel_max", ctypes.c_float),
+    ("converged_rel_std", ctypes.c_float),
+]
+
+
+class ConfigStruct(ctypes.Structure):
+    _fields_ = [
+        ("rotor_count", ctypes.c_uint8),
+        ("rotor", RotorConfigStruct * MAX_ROTORS),
+        ("inertia", (ctypes.c_float * 3) * 3),
+    ] + _TUNING_FIELDS
+
+
+class EstimateStruct(ctypes.Structure):
+    _fields_ = [
+        ("time_us", ctypes.c_uint64),
+        ("rotor_count", ctypes.c_uint8),
+        ("body_rate", ctypes.c_float * 3),
+        ("body_rate_std", ctypes.c_float * 3),
+        ("thrust_coeff", ctypes.c_float * MAX_ROTORS),
+        ("thrust_coeff_std", ctypes.c_float * MAX_ROTORS),
+        ("drag_coeff", ctypes.c_float * MAX_ROTORS),
+        ("drag_coeff_std", ctypes.c_float * MAX_ROTORS),
+        ("gyro_bias", ctypes.c_float * 3),
+        ("gyro_bias_std", ctypes.c_float * 3),
+        ("innovation", ctypes.c_float * 3),
+        ("innovation_test_ratio", ctypes.c_float * 3),
+        ("thrust_coeff_converging", ctypes.c_uint16),
+        ("thrust_coeff_converged", ctypes.c_uint16),
+        ("drag_coeff_converging", ctypes.c_uint16),
+        ("drag_coeff_converged", ctypes.c_uint16),
+        ("health", ctypes.c_uint32),
+    ]
+
+
+class CountersStruct(ctypes.Structure):
+    _fields_ = [
+        ("gyro_accepted", ctypes.c_uint32),
+        ("rotor_accepted", ctypes.c_uint32),
+        ("axis_gated", ctypes.c_uint32 * 3),
+        ("gate_reopened", ctypes.c_uint32),
+        ("cov_repairs", ctypes.c_uint32),
+        ("state_clamps", ctypes.c_uint32),
+        ("resyncs", ctypes.c_uint32),
+        ("rejected", ctypes.c_uint32 * REJECT_SLOTS),
+    ]
+
+
+# ---------------------------------------------------------------------------
+# Configuration (pure Python, shared with the reference filter)
+# ---------------------------------------------------------------------------
+# Mirror of propid_config_default() (firmware/src/propid_config.c; reasons in
+# docs/design.md). tests/host_tools/test_reference_vs_c.py checks they agree.
+DEFAULT_TUNING: dict[str, float | int] = {
+    "rate_std0": 1.0,
+    "thrust_coeff_rel_std0": 0.3,
+    "drag_coeff_rel_std0": 0.3,
+    "gyro_bias_std0": 0.05,
+    "gyro_noise_density": 5.0e-4,
+    "gyro_sample_rate_hz": 500.0,
+    "rate_process_noise": 0.2,
+    "thrust_coeff_rel_walk": 0.02,
+    "drag_coeff_rel_walk": 0.02,
+    "gyro_bias_walk": 1.0e-4,
+    "gate_sigma": 5.0,
+    "gate_max_consecutive": 25,
+    "max_rotor_speed": 6000.0,
+    "gyro_range": 34.0,
+    "rotor_stale_us": 50000,
+    "max_gyro_gap_us": 50000,
+    "coeff_rel_min": 0.05,
+    "coeff_rel_max": 5.0,
+    "converged_rel_std": 0.05,
+}
+
+
+@dataclass
+class FilterConfig:
+    """Everything propid_config_t holds, in SI units, for N rotors.
+
+    positions: N x 3 rotor hub positions in body FLU [m]; yaw_signs: N of +-1;
+    thrust_coeff_nominal / drag_coeff_nominal: N values; inertia: 3 x 3 [kg m^2].
+    The tuning fields have the C names and the C defaults (docs/design.md §8).
+    Set gyro_sample_rate_hz to the gyro rate of your data; for real vehicles set
+    rate_process_noise to 2-10 (the default 0.2 suits the simulator; §12).
+    """
+
+    positions: list
+    yaw_signs: list
+    thrust_coeff_nominal: list
+    drag_coeff_nominal: list
+    inertia: list
+    rate_std0: float = DEFAULT_TUNING["rate_std0"]
+    thrust_coeff_rel_std0: float = DEFAULT_TUNING["thrust_coeff_rel_std0"]
+    drag_coeff_rel_std0: float = DEFAULT_TUNING["drag_coeff_rel_std0"]
+    gyro_bias_std0: float = DEFAULT_TUNING["gyro_bias_std0"]
+    gyro_noise_density: float = DEFAULT_TUNING["gyro_noise_density"]
+    gyro_sample_rate_hz: float = DEFAULT_TUNING["gyro_sample_rate_hz"]
+    rate_process_noise: float = DEFAULT_TUNING["rate_process_noise"]
+    thrust_coeff_rel_walk: float = DEFAULT_TUNING["thrust_coeff_rel_walk"]
+    drag_coeff_rel_walk: float = DEFAULT_TUNING["drag_coeff_rel_walk"]
+    gyro_bias_walk: float = DEFAULT_TUNING["gyro_bias_walk"]
+    gate_sigma: float = DEFAULT_TUNING["gate_sigma"]
+    gate_max_consecutive: int = DEFAULT_TUNING["gate_max_consecutive"]
+    max_rotor_speed: float = DEFAULT_TUNING["max_rotor_speed"]
+    gyro_range: float = DEFAULT_TUNING["gyro_range"]
+    rotor_stale_us: int = DEFAULT_TUNING["rotor_stale_us"]
+    max_gyro_gap_us: int = DEFAULT_TUNING["max_gyro_gap_us"]
+    coeff_rel_min: float = DEFAULT_TUNING["coeff_rel_min"]
+    coeff_rel_max: float = DEFAULT_TUNING["coeff_rel_max"]
+    converged_rel_std: float = DEFAULT_TUNING["converged_rel_std"]
+
+    @property
+    def rotor_count(self) -> int:
+        return len(self.positions)
+
+    @property
+    def state_count(self) -> int:
+        return 6 + 2 * self.rotor_count
+
+    def with_overrides(self, **overrides: Any) -> "FilterConfig":
+        """A copy with some tuning fields changed (unknown names raise UserError)."""
+        names = {f.name for f in fields(self)}
+        unknown = sorted(set(overrides) - names)
+        if unknown:
+            raise UserError(f"unknown filter setting(s): {', '.join(unknown)}")
+        return replace(self, **overrides)
+
+    @classmethod
+    def symmetric(cls, rotor_count: int, arm_m: float, first_angle_rad: float,
+                  first_yaw_sign: float, thrust_coeff_nominal: float,
+                  drag_coeff_nominal: float, inertia: Sequence, **overrides: Any) -> "FilterConfig":
+        """Rotors evenly on a circle (same convention as propid_config_set_symmetric)."""
+        positions, yaw_signs = [], []
+        for i in range(rotor_count):
+            angle = first_angle_rad + 2.0 * math.pi * i / rotor_count
+            positions.append([arm_m * math.cos(angle), arm_m * math.sin(angle), 0.0])
+            yaw_signs.append(first_yaw_sign if i % 2 == 0 else -first_yaw_sign)
+        config = cls(positions, yaw_signs, [thrust_coeff_nominal] * rotor_count,
+                     [drag_coeff_nominal] * rotor_count, _inertia_matrix(inertia))
+        return config.with_overrides(**overrides)
+
+    @classmethod
+    def from_vehicle(cls, vehicle: dict, **overrides: Any) -> "FilterConfig":
+        """From a vehicle description as in spec/flightlog-v1.md (the parsed JSON dict)."""
+        name = vehicle.get("name", "vehicle")
+        rotors = vehicle.get("rotors")
+        if not isinstance(rotors, list) or not rotors:
+            raise UserError(f"{name}: 'rotors' must be a non-empty list")
+        if len(rotors) > MAX_ROTORS:
+            raise UserError(f"{name}: {len(rotors)} rotors, the filter is built for at most {MAX_ROTORS}")
+        positions, yaw_signs = [], []
+        for i, rotor in enumerate(rotors):
+            position = rotor.get("position") if isinstance(rotor, dict) else None
+            if not isinstance(position, (list, tuple)) or len(position) != 3:
+                raise UserError(f"{name}: rotor {i + 1} needs a 3-element 'position'")
+            yaw_sign = rotor.get("yaw_sign")
+            if yaw_sign not in (1, -1, 1.0, -1.0):
+                raise UserError(f"{name}: rotor {i + 1} 'yaw_sign' must be +1 or -1, got {yaw_sign!r}")
+            positions.append([float(v) for v in position])
+            yaw_signs.append(float(yaw_sign))
+        if vehicle.get("inertia") is None:
+            raise UserError(f"{name}: 'inertia' is null; the filter needs the body inertia")
+        inertia = _inertia_matrix(vehicle["inertia"], name)
+        kf = _per_rotor(vehicle, "kf_nominal", len(rotors), name)
+        km = _per_rotor(vehicle, "km_nominal", len(rotors), name)
+        return cls(positions, yaw_signs, kf, km, inertia).with_overrides(**overrides)
+
+    def to_struct(self) -> ConfigStruct:
+        if not 1 <= self.rotor_count <= MAX_ROTORS:
+            raise UserError(f"rotor count {self.rotor_count} outside 1..{MAX_ROTORS}")
+        s = ConfigStruct()
+        s.rotor_count = self.rotor_count
+        for i in range(self.rotor_count):
+            r = s.rotor[i]
+            for a in range(3):
+                r.position_m[a] = float(self.positions[i][a])
+            r.yaw_sign = float(self.yaw_signs[i])
+            r.thrust_coeff_nominal = float(self.thrust_coeff_nominal[i])
+            r.drag_coeff_nominal = float(self.drag_coeff_nominal[i])
+        for a in range(3):
+            for b in range(3):
+                s.inertia[a][b] = float(self.inertia[a][b])
+        for name, ctype in _TUNING_FIELDS:
+            value = getattr(self, name)
+            setattr(s, name, int(value) if ctype in (ctypes.c_uint16, ctypes.c_uint32) else float(value))
+        return s
+
+
+def _inertia_matrix(inertia: Any, name: str = "vehicle") -> list:
+    values = np.asarray(inertia, dtype=float)
+    if values.shape == (3,):
+        return np.diag(values).tolist()
+    if values.shape == (9,):
+        return values.reshape(3, 3).tolist()
+    if values.shape == (3, 3):
+        return values.tolist()
+    raise UserError(f"{name}: 'inertia' must be [Jxx, Jyy, Jzz] or a 3x3 matrix")
+
+
+def _per_rotor(vehicle: dict, key: str, count: int, name: str) -> list:
+    value = vehicle.get(key)
+    if value is None:
+        raise UserError(f"{name}: '{key}' is null; the filter needs a nominal value "
+                        f"(a catalogue or thrust-stand figure) to scale its estimate")
+    values = [float(value)] * count if isinstance(value, (int, float)) else [float(v) for v in value]
+    if len(values) != count:
+        raise UserError(f"{name}: '{key}' has {len(values)} values for {count} rotors")
+    if not all(math.isfinite(v) and v > 0.0 for v in values):
+        raise UserError(f"{name}: '{key}' must be positive")
+    return values
+
+
+# ---------------------------------------------------------------------------
+# Results
+# ---------------------------------------------------------------------------
+@dataclass
+class Estimate:
+    """propid_estimate_t in SI units (arrays sized to the rotor count)."""
+
+    time_us: int
+    body_rate: np.ndarray
+    body_rate_std: np.ndarray
+    thrust_coeff: np.ndarray
+    thrust_coeff_std: np.ndarray
+    drag_coeff: np.ndarray
+    drag_coeff_std: np.ndarray
+    gyro_bias: np.ndarray
+    gyro_bias_std: np.ndarray
+    innovation: np.ndarray
+    innovation_test_ratio: np.ndarray
+    thrust_coeff_converging: int
+    thrust_coeff_converged: int
+    drag_coeff_converging: int
+    drag_coeff_converged: int
+    health: int
+    health_flags: list = field(default_factory=list)
+
+
+# ---------------------------------------------------------------------------
+# Library loading
+# ---------------------------------------------------------------------------
+_LIBRARY_NAME = "libpropid_shared.so"
+
+
+def library_path() -> Path:
+    """Where the shared library is looked for (see the module docstring)."""
+    explicit = os.environ.get("PROPID_LIBRARY")
+    if explicit:
+        return Path(explicit)
+    build_dir = os.environ.get("PROPID_BUILD_DIR")
+    if build_dir:
+        return Path(build_dir) / "firmware" / _LIBRARY_NAME
+    repo = Path(__file__).resolve().parents[2]
+    return repo / "build" / "host" / "firmware" / _LIBRARY_NAME
+
+
+_loaded: dict[str, ctypes.CDLL] = {}
+
+
+def load_library(path: Optional[os.PathLike] = None) -> ctypes.CDLL:
+    """Load (once) and ABI-check the shared library; UserError if missing or mismatched."""
+    lib_path = Path(path) if path is not None else library_path()
+    key = str(lib_path.resolve()) if lib_path.exists() else str(lib_path)
+    if key in _loaded:
+        return _loaded[key]
+    if not lib_path.exists():
+        raise UserError(f"C filter library not found at {lib_path}: build it with `make` "
+                        f"(cmake target propid_shared) or set PROPID_LIBRARY / PROPID_BUILD_DIR")
+    try:
+        lib = ctypes.CDLL(str(lib_path))
+    except OSError as exc:
+        raise UserError(f"cannot load C filter library {lib_path}: {exc}") from exc
+    _declare(lib)
+    _check_abi(lib, lib_path)
+    _loaded[key] = lib
+    return lib
+
+
+def _declare(lib: ctypes.CDLL) -> None:
+    c_filter_p = ctypes.c_void_p
+    u32 = ctypes.c_uint32
+    for name in ("propid_abi_max_rotors", "propid_abi_sizeof_config", "propid_abi_sizeof_filter",
+                 "propid_abi_sizeof_estimate", "propid_abi_sizeof_counters",
+                 "propid_abi_offsetof_config_gate_sigma", "propid_abi_offsetof_config_converged_rel_std",
+                 "propid_abi_offsetof_estimate_health", "propid_abi_offsetof_counters_rejected"):
+        getattr(lib, name).restype = u32
+        getattr(lib, name).argtypes = []
+    lib.propid_config_default.restype = None
+    lib.propid_config_default.argtypes = [ctypes.POINTER(ConfigStruct)]
+    lib.propid_config_check.restype = ctypes.c_int
+    lib.propid_config_check.argtypes = [ctypes.POINTER(ConfigStruct), ctypes.POINTER(ctypes.c_char_p)]
+    lib.propid_init.restype = ctypes.c_int
+    lib.propid_init.argtypes = [c_filter_p, ctypes.POINTER(ConfigStruct)]
+    lib.propid_reset.restype = ctypes.c_int
+    lib.propid_reset.argtypes = [c_filter_p]
+    lib.propid_reset_rotor.restype = ctypes.c_int
+    lib.propid_reset_rotor.argtypes = [c_filter_p, ctypes.c_uint8]
+    lib.propid_resync.restype = ctypes.c_int
+    lib.propid_resync.argtypes = [c_filter_p, ctypes.c_uint64]
+    lib.propid_push_rotor_speeds.restype = ctypes.c_int
+    lib.propid_push_rotor_speeds.argtypes = [c_filter_p, ctypes.c_uint64,
+                                             ctypes.POINTER(ctypes.c_float), ctypes.c_uint8]
+    lib.propid_push_gyro.restype = ctypes.c_int
+    lib.propid_push_gyro.argtypes = [c_filter_p, ctypes.c_uint64, ctypes.POINTER(ctypes.c_float)]
+    lib.propid_get_estimate.restype = ctypes.c_int
+    lib.propid_get_estimate.argtypes = [c_filter_p, ctypes.POINTER(EstimateStruct)]
+    lib.propid_get_counters.restype = ctypes.c_int
+    lib.propid_get_counters.argtypes = [c_filter_p, ctypes.POINTER(CountersStruct)]
+    lib.propid_status_name.restype = ctypes.c_char_p
+    lib.propid_status_name.argtypes = [ctypes.c_int]
+    lib.propid_abi_copy_state.restype = None
+    lib.propid_abi_copy_state.argtypes = [c_filter_p, ctypes.POINTER(ctypes.c_float),
+                                          ctypes.POINTER(ctypes.c_float)]
+
+
+def _check_abi(lib: ctypes.CDLL, lib_path: Path) -> None:
+    expected = {
+        "max_rotors": (lib.propid_abi_max_rotors(), MAX_ROTORS),
+        "sizeof(propid_config_t)": (lib.propid_abi_sizeof_config(), ctypes.sizeof(ConfigStruct)),
+        "sizeof(propid_estimate_t)": (lib.propid_abi_sizeof_estimate(), ctypes.sizeof(EstimateStruct)),
+        "sizeof(propid_counters_t)": (lib.propid_abi_sizeof_counters(), ctypes.sizeof(CountersStruct)),
+        "offsetof(config.gate_sigma)": (lib.propid_abi_offsetof_config_gate_sigma(),
+                                        ConfigStruct.gate_sigma.offset),
+        "offsetof(config.converged_rel_std)": (lib.propid_abi_offsetof_config_converged_rel_std(),
+                                               ConfigStruct.converged_rel_std.offset),
+        "offsetof(estimate.health)": (lib.propid_abi_offsetof_estimate_health(),
+                                      EstimateStruct.health.offset),
+        "offsetof(counters.rejected)": (lib.propid_abi_offsetof_counters_rejected(),
+                                        CountersStruct.rejected.offset),
+    }
+    bad = [f"{what}: library {got}, binding {want}" for what, (got, want) in expected.items() if got != want]
+    if bad:
+        raise UserError(f"{lib_path} does not match propid.cfilter's struct layout ({'; '.join(bad)}); "
+                        f"rebuild the library or update cfilter.py")
+    for code, name in STATUS_NAME.items():
+        got = lib.propid_status_name(code).decode()
+        if got != name:
+            raise UserError(f"{lib_path}: status {code} is {got} in C but {name} in cfilter.py")
+
+
+def c_default_tuning(path: Optional[os.PathLike] = None) -> dict:
+    """propid_config_default() as the library has it (for checking DEFAULT_TUNING)."""
+    lib = load_library(path)
+    s = ConfigStruct()
+    lib.propid_config_default(ctypes.byref(s))
+    return {name: getattr(s, name) for name, _ in _TUNING_FIELDS}
+
+
+# ---------------------------------------------------------------------------
+# The filter
+# ---------------------------------------------------------------------------
+class CFilter:
+    """One propid_filter_t, owned by Python. Methods return the C status codes."""
+
+    def __init__(self, config: FilterConfig, library: Optional[os.PathLike] = None):
+        self._lib = load_library(library)
+        self.config = config
+        self._config_struct = config.to_struct()
+        bad_field = ctypes.c_char_p()
+        status = self._lib.propid_config_check(ctypes.byref(self._config_struct), ctypes.byref(bad_field))
+        if status != 0:
+            field_name = bad_field.value.decode() if bad_field.value else "?"
+            raise UserError(f"filter configuration rejected: bad {field_name}")
+        size = self._lib.propid_abi_sizeof_filter()
+        # ctypes buffers come from malloc: aligned for the uint64 fields inside.
+        self._buffer = (ctypes.c_uint64 * ((size + 7) // 8))()
+        self._handle = ctypes.cast(self._buffer, ctypes.c_void_p)
+        status = self._lib.propid_init(self._handle, ctypes.byref(self._config_struct))
+        if status != 0:
+            raise UserError(f"propid_init failed: {self.status_name(status)}")
+        self._rotor_count = config.rotor_count
+        self._speeds = (ctypes.c_float * MAX_ROTORS)()
+        self._gyro = (ctypes.c_float * 3)()
+
+    @staticmethod
+    def status_name(code: int) -> str:
+        return STATUS_NAME.get(int(code), f"PROPID_UNKNOWN_STATUS({int(code)})")
+
+    def push_rotor_speeds(self, t_us: int, speeds: Sequence[float]) -> int:
+        count = len(speeds)
+        if count > MAX_ROTORS:
+            # Never a valid count: C rejects it (and counts it) before reading the buffer.
+            return self._lib.propid_push_rotor_speeds(self._handle, int(t_us), self._speeds, 255)
+        for i in range(count):
+            self._speeds[i] = float(speeds[i])
+        return self._lib.propid_push_rotor_speeds(self._handle, int(t_us), self._speeds, count)
+
+    def push_gyro(self, t_us: int, gyro: Sequence[float]) -> int:
+        if len(gyro) != 3:
+            raise ValueError("gyro needs 3 components [rad/s]")
+        self._gyro[0], self._gyro[1], self._gyro[2] = float(gyro[0]), float(gyro[1]), float(gyro[2])
+        return self._lib.propid_push_gyro(self._handle, int(t_us), self._gyro)
+
+    def reset(self) -> int:
+        return self._lib.propid_reset(self._handle)
+
+    def reset_rotor(self, rotor: int) -> int:
+        if not 0 <= int(rotor) <= 255:
+            return STATUS["PROPID_ERR_ROTOR_INDEX"]
+        return self._lib.propid_reset_rotor(self._handle, int(rotor))
+
+    def resync(self, t_us: int) -> int:
+        return self._lib.propid_resync(self._handle, int(t_us))
+
+    def estimate(self) -> Estimate:
+        e = EstimateStruct()
+        status = self._lib.propid_get_estimate(self._handle, ctypes.byref(e))
+        if status != 0:
+            raise RuntimeError(f"propid_get_estimate: {self.status_name(status)}")
+        n = self._rotor_count
+
+        def arr(values, count):
+            return np.array(values[:count], dtype=float)
+
+        return Estimate(
+            time_us=int(e.time_us),
+            body_rate=arr(e.body_rate, 3), body_rate_std=arr(e.body_rate_std, 3),
+            thrust_coeff=arr(e.thrust_coeff, n), thrust_coeff_std=arr(e.thrust_coeff_std, n),
+            drag_coeff=arr(e.drag_coeff, n), drag_coeff_std=arr(e.drag_coeff_std, n),
+            gyro_bias=arr(e.gyro_bias, 3), gyro_bias_std=arr(e.gyro_bias_std, 3),
+            innovation=arr(e.innovation, 3), innovation_test_ratio=arr(e.innovation_test_ratio, 3),
+            thrust_coeff_converging=int(e.thrust_coeff_converging),
+            thrust_coeff_converged=int(e.thrust_coeff_converged),
+            drag_coeff_converging=int(e.drag_coeff_converging),
+            drag_coeff_converged=int(e.drag_coeff_converged),
+            health=int(e.health), health_flags=health_names(int(e.health)),
+        )
+
+    def counters(self) -> dict:
+        c = CountersStruct()
+        self._lib.propid_get_counters(self._handle, ctypes.byref(c))
+        rejected = {STATUS_NAME[-i]: int(c.rejected[i]) for i in range(1, REJECT_SLOTS) if c.rejected[i]}
+        return {
+            "gyro_accepted": int(c.gyro_accepted),
+            "rotor_accepted": int(c.rotor_accepted),
+            "axis_gated": [int(v) for v in c.axis_gated],
+            "gate_reopened": int(c.gate_reopened),
+            "cov_repairs": int(c.cov_repairs),
+            "state_clamps": int(c.state_clamps),
+            "resyncs": int(c.resyncs),
+            "rejected": rejected,
+        }
+
+    def scaled_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """(state, covariance) in the filter's scaled units, sized to the state count."""
+        state = (ctypes.c_float * MAX_STATES)()
+        cov = (ctypes.c_float * (MAX_STATES * MAX_STATES))()
+        self._lib.propid_abi_copy_state(self._handle, state, cov)
+        n = self.config.state_count
+        full = np.array(cov, dtype=float).reshape(MAX_STATES, MAX_STATES)
+        return np.array(state[:n], dtype=float), full[:n, :n].copy()

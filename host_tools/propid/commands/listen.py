@@ -1,0 +1,188 @@
+"""`propid listen`: live view of the propid estimates arriving over MAVLink."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from propid import mavlink_io
+from propid.errors import UserError
+
+NAME = "listen"
+HELP = "live view of kf/km (+-1 sigma) per rotor, gyro bias and health from MAVLink telemetry"
+
+REFRESH_S = 0.5
+PLOT_HISTORY_S = 120.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--connect", default="udp:0.0.0.0:14550",
+                        help="MAVLink link (default: listen on udp:0.0.0.0:14550)")
+    parser.add_argument("--plot", action="store_true",
+                        help="live matplotlib plot of the estimates (needs a display)")
+    parser.add_argument("--timeout", type=float, default=10.0, metavar="S",
+                        help="fail if no propid message arrives within S seconds (default 10)")
+    parser.add_argument("--duration", type=float, metavar="S",
+                        help="stop after S seconds (default: until Ctrl-C)")
+    parser.add_argument("--reset", type=int, metavar="ROTOR",
+                        help="first send MAV_CMD_PROPID_RESET (rotor index, -1 = all) and "
+                             "report the acknowledgement")
+
+
+def health_names(health: int) -> list[str]:
+    """Names of the set PROPID_HEALTH_FLAGS bits (without the prefix)."""
+    enum = mavlink_io.dialect().enums.get("PROPID_HEALTH_FLAGS", {})
+    names = []
+    for value, entry in sorted(enum.items()):
+        if value & health and not entry.name.endswith("_ENUM_END"):
+            names.append(entry.name.replace("PROPID_HEALTH_FLAGS_", ""))
+    return names
+
+
+def _mask_state(i: int, converging: int, converged: int) -> str:
+    if converged >> i & 1:
+        return "converged"
+    if converging >> i & 1:
+        return "converging"
+    return "-"
+
+
+def format_view(coeffs, gyro, status, frames: int, source: str) -> str:
+    """The text screen for the latest messages (any of them may be None)."""
+    lines = [f"propid listen  {source}  frames {frames}"]
+    if coeffs is None:
+        lines.append("waiting for PROPID_COEFFICIENTS ...")
+        return "\n".join(lines)
+    lines.append(f"filter time {coeffs.time_usec * 1e-6:10.3f} s   rotors {coeffs.rotor_count}")
+    lines.append(f"{'rotor':>5}  {'kf [N/(rad/s)^2]':>17} {'+-1sigma':>9} {'':10}"
+                 f"  {'km [N m/(rad/s)^2]':>18} {'+-1sigma':>9} {'':10}")
+    for i in range(min(int(coeffs.rotor_count), 8)):
+        kf, kf_std = coeffs.thrust_coeff[i], coeffs.thrust_coeff_std[i]
+        km, km_std = coeffs.drag_coeff[i], coeffs.drag_coeff_std[i]
+        kf_state = _mask_state(i, coeffs.thrust_coeff_converging, coeffs.thrust_coeff_converged)
+        km_state = _mask_state(i, coeffs.drag_coeff_converging, coeffs.drag_coeff_converged)
+        kf_rel = f"({100 * kf_std / kf:4.1f}%)" if kf > 0 else ""
+        km_rel = f"({100 * km_std / km:4.1f}%)" if km > 0 else ""
+        lines.append(f"{i + 1:>5}  {kf:17.4e} {kf_std:9.2e} {kf_rel:>8} {kf_state:<10}"
+                     f"  {km:18.4e} {km_std:9.2e} {km_rel:>8} {km_state:<10}")
+    if gyro is not None:
+        bias = mavlink_io.frd_to_flu(gyro.gyro_bias)
+        std = gyro.gyro_bias_std
+        lines.append("gyro bias FLU [rad/s]  " + "  ".join(
+            f"{a} {b:+.5f} +-{s:.5f}" for a, b, s in zip("xyz", bias, std)))
+        rate = mavlink_io.frd_to_flu(gyro.body_rate)
+        lines.append("body rate FLU [rad/s]  " + "  ".join(
+            f"{a} {w:+.4f}" for a, w in zip("xyz", rate)))
+        names = health_names(int(gyro.health))
+        lines.append(f"health 0x{int(gyro.health):02x}  {' '.join(names) or 'ok'}")
+    if status is not None:
+        lines.append(f"gyro accepted {status.gyro_accepted}  rotor accepted {status.rotor_accepted}"
+                     f"  gated {list(status.axis_gated)}  rejected {status.rejected_total}"
+                     f"  cov repairs {status.cov_repairs}")
+    return "\n".join(lines)
+
+
+class LivePlot:
+    """A rolling matplotlib window of kf and km per rotor with +-1 sigma bands."""
+
+    def __init__(self):
+        import matplotlib
+        import matplotlib.pyplot as plt
+
+        backend = matplotlib.get_backend().lower()
+        if backend in ("agg", "pdf", "svg", "ps", "cairo", "template") or "inline" in backend:
+            raise UserError("--plot needs a display (interactive matplotlib backend); "
+                            "record with `propid log` and draw with `propid plot` instead")
+        self.plt = plt
+        plt.ion()
+        self.fig, (self.ax_kf, self.ax_km) = plt.subplots(2, 1, sharex=True, figsize=(9, 6))
+        self.t: list[float] = []
+        self.kf: list[list[float]] = []
+        self.kf_std: list[list[float]] = []
+        self.km: list[list[float]] = []
+        self.km_std: list[list[float]] = []
+
+    def add(self, coeffs) -> None:
+        n = int(coeffs.rotor_count)
+        self.t.append(coeffs.time_usec * 1e-6)
+        self.kf.append(list(coeffs.thrust_coeff[:n]))
+        self.kf_std.append(list(coeffs.thrust_coeff_std[:n]))
+        self.km.append(list(coeffs.drag_coeff[:n]))
+        self.km_std.append(list(coeffs.drag_coeff_std[:n]))
+        while self.t and self.t[-1] - self.t[0] > PLOT_HISTORY_S:
+            for series in (self.t, self.kf, self.kf_std, self.km, self.km_std):
+                series.pop(0)
+
+    def draw(self) -> None:
+        import numpy as np
+
+        if not self.t:
+            return
+        t = np.asarray(self.t)
+        for ax, mean, std, label in ((self.ax_kf, self.kf, self.kf_std, "kf [N/(rad/s)^2]"),
+                                     (self.ax_km, self.km, self.km_std, "km [N m/(rad/s)^2]")):
+            ax.clear()
+            m, s = np.asarray(mean), np.asarray(std)
+            for i in range(m.shape[1]):
+                ax.plot(t, m[:, i], label=f"rotor {i + 1}")
+                ax.fill_between(t, m[:, i] - s[:, i], m[:, i] + s[:, i], alpha=0.2)
+            ax.set_ylabel(label)
+            ax.grid(True, alpha=0.3)
+            ax.legend(loc="upper right", fontsize=7)
+        self.ax_km.set_xlabel("filter time [s]")
+        self.plt.pause(0.001)
+
+
+def run(args: argparse.Namespace) -> int:
+    live_plot = LivePlot() if args.plot else None
+    conn = mavlink_io.connect(args.connect)
+    interactive = sys.stdout.isatty()
+    start = time.monotonic()
+    last_draw = 0.0
+    coeffs = gyro = status = None
+    frames = 0
+    got_propid = False
+    reset_pending = args.reset is not None
+    try:
+        while True:
+            now = time.monotonic()
+            if args.duration is not None and now - start >= args.duration:
+                break
+            if not got_propid and now - start >= args.timeout:
+                what = "MAVLink data" if frames == 0 else "propid messages (other MAVLink did arrive)"
+                raise UserError(f"no {what} on {args.connect} within {args.timeout:g} s")
+            msg = conn.recv_match(blocking=True, timeout=0.05)
+            if msg is not None and msg.get_type() != "BAD_DATA":
+                frames += 1
+                kind = msg.get_type()
+                if kind == mavlink_io.MSG_COEFFICIENTS:
+                    coeffs, got_propid = msg, True
+                    if live_plot is not None:
+                        live_plot.add(msg)
+                elif kind == mavlink_io.MSG_GYRO:
+                    gyro, got_propid = msg, True
+                elif kind == mavlink_io.MSG_STATUS:
+                    status, got_propid = msg, True
+                elif kind == "HEARTBEAT" and reset_pending:
+                    reset_pending = False
+                    result = mavlink_io.send_reset(conn, args.reset,
+                                                   target_system=msg.get_srcSystem(),
+                                                   target_component=msg.get_srcComponent())
+                    name = mavlink_io.dialect().enums["MAV_RESULT"][result].name
+                    print(f"MAV_CMD_PROPID_RESET rotor {args.reset}: {name}", flush=True)
+            if now - last_draw >= REFRESH_S:
+                last_draw = now
+                view = format_view(coeffs, gyro, status, frames, args.connect)
+                if interactive:
+                    print("\033[H\033[J" + view, flush=True)
+                else:
+                    print(view + "\n", flush=True)
+                if live_plot is not None:
+                    live_plot.draw()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        conn.close()
+    print(format_view(coeffs, gyro, status, frames, args.connect))
+    return 0

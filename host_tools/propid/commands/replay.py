@@ -1,0 +1,167 @@
+"""`propid replay`: run a flight log through the firmware filter (C library) and report."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+from propid.errors import UserError
+from propid.flightlog import read_flightlog, read_vehicle, vehicle_path_for
+
+NAME = "replay"
+HELP = "replay a flight-log v1 CSV through the firmware filter: per-rotor kf/km, gyro biases, JSON + plot"
+
+# propid_config_t fields a user may override from the command line (name, type, help).
+OVERRIDES = [
+    ("thrust_coeff_rel_std0", float, "prior std of kf relative to nominal (library default 0.3)"),
+    ("drag_coeff_rel_std0", float, "prior std of km relative to nominal"),
+    ("gyro_bias_std0", float, "prior std of the gyro biases [rad/s]"),
+    ("rate_std0", float, "prior std of the body rates [rad/s]"),
+    ("gyro_noise_density", float, "gyro white noise [rad/s/sqrt(Hz)] (default: measured on the log)"),
+    ("gyro_sample_rate_hz", float, "gyro rate the density applies to [Hz] (default: the log's rate)"),
+    ("rate_process_noise", float, "unmodelled angular acceleration [rad/s^2/sqrt(Hz)] (default: measured on the log)"),
+    ("thrust_coeff_rel_walk", float, "random walk of kf/kf_nominal [1/sqrt(s)]"),
+    ("drag_coeff_rel_walk", float, "random walk of km/km_nominal [1/sqrt(s)]"),
+    ("gyro_bias_walk", float, "random walk of the gyro biases [rad/s/sqrt(s)]"),
+    ("gate_sigma", float, "innovation gate [std]; <= 0 disables"),
+    ("gate_max_consecutive", int, "gated samples in a row before an axis is re-opened"),
+    ("gyro_range", float, "|gyro| above this is a saturated sensor [rad/s]"),
+    ("rotor_stale_us", int, "rotor data older than this at a gyro sample is stale [us]"),
+    ("max_gyro_gap_us", int, "a longer gap between gyro samples is a time jump (resync) [us]"),
+    ("converged_rel_std", float, "a coefficient is converged below this relative std"),
+]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--log", required=True, nargs="+", metavar="FLIGHT.csv",
+                        help="flight-log v1 CSV (see `propid convert`); several logs of one vehicle give a fleet "
+                             "summary (mean, run-to-run spread) as well")
+    parser.add_argument("--vehicle", metavar="V.json", help="vehicle file (default: FLIGHT.vehicle.json beside the log)")
+    parser.add_argument("--json", metavar="OUT.json", help="write the summary here (default: print it)")
+    parser.add_argument("--plot", metavar="PNG",
+                        help="one log: kf, km (+-1 sigma) and gyro biases over time; several logs: per-run kf "
+                             "relative to --reference-kf, beside the least-squares checks")
+    parser.add_argument("--table", metavar="OUT.md", help="several logs: write the per-run validation table (Markdown)")
+    parser.add_argument("--segment", choices=["all", "flying"], default="all",
+                        help="replay every row, or only flying rows (is_flying column, else every rotor above "
+                             "1/3 of the median spinning speed); gaps are bridged with propid_resync")
+    parser.add_argument("--streams", choices=["auto", "rows", "events"], default="auto",
+                        help="rows: every row is one gyro and one rotor sample; events: a row carries whichever "
+                             "stream is non-empty (ULog/tlog conversions); auto decides from the log")
+    parser.add_argument("--skip-repeats", action="store_true",
+                        help="treat a row whose gyro (or rotor speeds) exactly repeat the previous row as no new "
+                             "sample (logs resampled by sample-and-hold)")
+    parser.add_argument("--rotor-delay", type=float, default=0.0, metavar="S",
+                        help="push rotor speeds S seconds after their logged time (align streams)")
+    parser.add_argument("--unit-inertia", action="store_true",
+                        help="run with J = identity: estimates are kf/J and km/Jzz ratios (for vehicles without inertia)")
+    parser.add_argument("--kf-nominal", type=float, help="prior mean of kf (overrides the vehicle file)")
+    parser.add_argument("--km-nominal", type=float, help="prior mean of km (overrides the vehicle file)")
+    parser.add_argument("--noise", choices=["auto", "default"], default="auto",
+                        help="auto: gyro noise and unmodelled angular acceleration measured on the log; "
+                             "default: the library defaults (tuned for the SITL)")
+    parser.add_argument("--max-rotor-speed", type=float, metavar="RAD_S",
+                        help="reject larger rotor speeds (default: 2x the 99.9th percentile of the log's speeds)")
+    group = parser.add_argument_group("filter configuration overrides (propid_config_t fields)")
+    for name, kind, text in OVERRIDES:
+        group.add_argument(f"--{name.replace('_', '-')}", dest=f"cfg_{name}", type=kind, metavar="X", help=text)
+    parser.add_argument("--reference-kf", type=float, help="independent kf to draw on the plot and compare with")
+    parser.add_argument("--checks", action="store_true",
+                        help="also run the independent least-squares checks (thrust from acc_z vs torque fits per band)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _finite_json(value):
+    """JSON has no NaN: write null instead."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_json(v) for v in value]
+    return value
+
+
+def run(args: argparse.Namespace) -> int:
+    from propid.replay import ReplayOptions, fleet_summary, plot_fleet, plot_replay, replay, validation_table
+
+    log_paths = [Path(p) for p in args.log]
+    vehicle_path = Path(args.vehicle) if args.vehicle else vehicle_path_for(log_paths[0])
+    if not args.vehicle and not vehicle_path.is_file():
+        raise UserError(f"no --vehicle given and no {vehicle_path.name} beside the log")
+    vehicle = read_vehicle(vehicle_path)
+    overrides = {
+        name: getattr(args, f"cfg_{name}") for name, _, _ in OVERRIDES if getattr(args, f"cfg_{name}") is not None
+    }
+    options = ReplayOptions(
+        segment=args.segment,
+        streams=args.streams,
+        unit_inertia=args.unit_inertia,
+        kf_nominal=args.kf_nominal,
+        km_nominal=args.km_nominal,
+        noise=args.noise,
+        max_rotor_speed=args.max_rotor_speed,
+        overrides=overrides,
+        skip_repeats=args.skip_repeats,
+        rotor_delay_s=args.rotor_delay,
+        progress=not args.no_progress and len(log_paths) == 1,
+    )
+    runs = log_paths
+    if len(log_paths) > 1 and not args.no_progress:
+        from tqdm import tqdm
+
+        runs = tqdm(log_paths, desc="replay", unit="log")
+    results, summaries = [], []
+    for path in runs:
+        log = read_flightlog(path, vehicle)
+        result = replay(log, vehicle, options)
+        summary = result.summary
+        if args.reference_kf:
+            summary["reference_kf"] = args.reference_kf
+            summary["kf_mean_over_reference"] = sum(summary["kf_mean"]) / len(summary["kf_mean"]) / args.reference_kf
+        if args.checks:
+            from propid.realdata_checks import check_log, format_checks
+
+            summary["checks"] = check_log(log, vehicle, unit_inertia=args.unit_inertia)
+            if len(log_paths) == 1:
+                print(format_checks(summary["checks"]))
+        results.append(result)
+        summaries.append(summary)
+    mean = lambda xs: sum(xs) / len(xs)  # noqa: E731
+    for summary in summaries:
+        name = Path(summary["log"]).name if summary["log"] else "log"
+        print(
+            f"{name}: kf mean over rotors {mean(summary['kf_mean']):.4g}, km {mean(summary['km_mean']):.4g} "
+            f"({summary['units']['kf'].split(':')[0]}); converged kf {sum(summary['converged']['kf'])}/"
+            f"{len(summary['kf'])}, km {sum(summary['converged']['km'])}/{len(summary['km'])}; "
+            f"rejected {summary['rejected']}"
+        )
+    if len(summaries) == 1:
+        output = summaries[0]
+    else:
+        fleet = fleet_summary(summaries, args.reference_kf)
+        output = {"fleet": fleet, "runs": summaries}
+        text = f"fleet of {fleet['runs']}: kf mean {fleet['kf_fleet_mean']:.4g} (run-to-run CV {fleet['kf_run_cv']:.1%})"
+        if args.reference_kf:
+            text += f" = {fleet['kf_fleet_over_reference']:.3f} x reference {args.reference_kf:.4g}"
+        print(text + f"; km mean {fleet['km_fleet_mean']:.4g} (CV {fleet['km_run_cv']:.1%})")
+        if args.table:
+            Path(args.table).write_text(validation_table(summaries, args.reference_kf) + "\n", encoding="utf-8")
+            print(f"wrote {args.table}")
+    text = json.dumps(_finite_json(output), indent=2)
+    if args.json:
+        Path(args.json).write_text(text + "\n", encoding="utf-8")
+        print(f"wrote {args.json}")
+    elif len(summaries) == 1:
+        print(text)
+    if args.plot:
+        if len(results) == 1:
+            plot_replay(results[0], args.plot, title=log_paths[0].name, reference_kf=args.reference_kf)
+        else:
+            if not args.reference_kf:
+                raise UserError("--plot with several logs needs --reference-kf (the plot is relative to it)")
+            plot_fleet(summaries, args.plot, args.reference_kf)
+        print(f"wrote {args.plot}")
+    return 0

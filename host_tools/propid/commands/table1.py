@@ -1,0 +1,33 @@
+"""`propid table1`: render a campaign's table1.json as markdown (and a PNG), beside the paper's values."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from propid import table1
+
+NAME = "table1"
+HELP = "render Table 1 (table1.json from `propid campaign`) as markdown beside the paper's values"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("table", nargs="?", default="build/results/table1.json", metavar="TABLE1.json",
+                        help="campaign result (default build/results/table1.json)")
+    parser.add_argument("--png", metavar="OUT.png", help="also draw the table as a PNG figure")
+    parser.add_argument("--out", metavar="OUT.md", help="write the markdown here instead of stdout")
+    parser.add_argument("--no-paper", action="store_true", help="our values only")
+
+
+def run(args: argparse.Namespace) -> int:
+    table = table1.load_table(args.table)
+    text = table1.render_markdown(table, with_paper=not args.no_paper)
+    if args.out:
+        Path(args.out).write_text(text, encoding="utf-8")
+        print(f"wrote {args.out}")
+    else:
+        print(text, end="")
+    if args.png:
+        table1.render_png(table, args.png, with_paper=not args.no_paper)
+        print(f"wrote {args.png}")
+    return 0

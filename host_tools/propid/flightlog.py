@@ -1,0 +1,436 @@
+"""Flight-log interchange format v1: read, validate and write (CSV + vehicle JSON).
+
+The format is specified in shared/spec/flightlog-v1.md: a CSV of samples (SI units,
+body FLU, rotor speeds in rad/s) and a JSON description of the vehicle. Every
+importer produces a FlightLog, every analysis consumes one.
+
+Errors a user can fix (bad file, wrong units) raise propid.errors.UserError with
+the file, line and column named.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from propid.errors import UserError
+
+GYRO_COLUMNS = ("gyro_x", "gyro_y", "gyro_z")
+ACC_COLUMNS = ("acc_x", "acc_y", "acc_z")
+QUAT_COLUMNS = ("qw", "qx", "qy", "qz")
+VEL_COLUMNS = ("vx", "vy", "vz")
+POS_COLUMNS = ("px", "py", "pz")
+
+# Units sanity bounds. A gyro rarely measures more than 2000 deg/s = 34.9 rad/s; a
+# propeller's typical speed (median while spinning) is below ~6000 rad/s (57,000 rpm,
+# the fastest tiny brushless motors). Values beyond these mean the wrong unit.
+GYRO_DEG_S_SUSPECT = 40.0  # rad/s, 99th percentile of |gyro|
+ROTOR_RPM_SUSPECT = 8000.0  # rad/s, median of spinning rotor speeds
+TIME_US_SUSPECT = 1.0e5  # s: a log longer than ~28 h is more likely in us or ms
+
+_OMEGA_RE = re.compile(r"^omega_(\d+)$")
+_CMD_RE = re.compile(r"^cmd_(\d+)$")
+# An empty field: at the start of a line, between two commas, or at the end of a line.
+_EMPTY_FIELD_RE = re.compile(r"(?<=,)(?=,|\r?$)|^(?=,)", re.MULTILINE)
+_NAN_FIELD_RE = re.compile(r"(^|,)nan(?=,|$)", re.MULTILINE)
+
+
+# --------------------------------------------------------------------------- vehicle
+@dataclass
+class Rotor:
+    position: tuple[float, float, float]  # body FLU, relative to the centre of mass [m]
+    yaw_sign: int  # sign of the yaw torque its drag puts on the body
+
+
+@dataclass
+class Vehicle:
+    name: str
+    rotors: list[Rotor]
+    mass: float | None = None
+    inertia: np.ndarray | None = None  # 3x3 [kg m^2]
+    kf_nominal: list[float] | None = None  # per rotor [N/(rad/s)^2]
+    km_nominal: list[float] | None = None  # per rotor [N m/(rad/s)^2]
+    rotor_radius: float | None = None
+    rotor_inertia: float | None = None
+    notes: str = ""
+    path: Path | None = None
+
+    @property
+    def rotor_count(self) -> int:
+        return len(self.rotors)
+
+    @property
+    def positions(self) -> np.ndarray:
+        return np.array([r.position for r in self.rotors], dtype=float)
+
+    @property
+    def yaw_signs(self) -> np.ndarray:
+        return np.array([r.yaw_sign for r in self.rotors], dtype=float)
+
+    def to_json_dict(self) -> dict:
+        inertia = None
+        if self.inertia is not None:
+            j = np.asarray(self.inertia)
+            diagonal = np.allclose(j, np.diag(np.diag(j)))
+            inertia = np.diag(j).tolist() if diagonal else j.reshape(-1).tolist()
+
+        def per_rotor(values):
+            if values is None:
+                return None
+            return values[0] if all(v == values[0] for v in values) else list(values)
+
+        return {
+            "name": self.name,
+            "mass": self.mass,
+            "inertia": inertia,
+            "rotors": [{"position": list(r.position), "yaw_sign": r.yaw_sign} for r in self.rotors],
+            "kf_nominal": per_rotor(self.kf_nominal),
+            "km_nominal": per_rotor(self.km_nominal),
+            "rotor_radius": self.rotor_radius,
+            "rotor_inertia": self.rotor_inertia,
+            "notes": self.notes,
+        }
+
+
+def _positive_or_null(data: dict, key: str, where: str) -> float | None:
+    value = data.get(key)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise UserError(f"{where}: '{key}' must be a positive number or null, got {value!r}")
+    return float(value)
+
+
+def _per_rotor_coeff(data: dict, key: str, count: int, where: str) -> list[float] | None:
+    value = data.get(key)
+    if value is None:
+        return None
+    values = value if isinstance(value, list) else [value] * count
+    if len(values) != count:
+        raise UserError(f"{where}: '{key}' has {len(values)} values but the vehicle has {count} rotors")
+    for v in values:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            raise UserError(f"{where}: '{key}' values must be positive numbers, got {v!r}")
+    return [float(v) for v in values]
+
+
+def parse_vehicle(data: dict, where: str = "vehicle") -> Vehicle:
+    """Validate a vehicle description (already decoded JSON) and return a Vehicle."""
+    if not isinstance(data, dict):
+        raise UserError(f"{where}: the top level must be a JSON object")
+    rotors_raw = data.get("rotors")
+    if not isinstance(rotors_raw, list) or not rotors_raw:
+        raise UserError(f"{where}: 'rotors' must be a non-empty list")
+    rotors = []
+    for i, rotor in enumerate(rotors_raw, start=1):
+        if not isinstance(rotor, dict):
+            raise UserError(f"{where}: rotor {i} must be an object with 'position' and 'yaw_sign'")
+        pos = rotor.get("position")
+        if (
+            not isinstance(pos, list)
+            or len(pos) != 3
+            or not all(isinstance(p, (int, float)) and not isinstance(p, bool) and math.isfinite(p) for p in pos)
+        ):
+            raise UserError(f"{where}: rotor {i} 'position' must be 3 finite numbers [m], got {pos!r}")
+        sign = rotor.get("yaw_sign")
+        if sign not in (1, -1) or isinstance(sign, bool):
+            raise UserError(f"{where}: rotor {i} 'yaw_sign' must be +1 or -1, got {sign!r}")
+        rotors.append(Rotor(tuple(float(p) for p in pos), int(sign)))
+    inertia = data.get("inertia")
+    if inertia is not None:
+        flat = inertia if isinstance(inertia, list) else None
+        if flat and all(isinstance(r, list) for r in flat):
+            flat = [v for r in flat for v in r]
+        if not flat or len(flat) not in (3, 9) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in flat
+        ):
+            raise UserError(f"{where}: 'inertia' must be [Jxx, Jyy, Jzz] or a 3x3 list [kg m^2], got {inertia!r}")
+        j = np.diag(flat) if len(flat) == 3 else np.array(flat, dtype=float).reshape(3, 3)
+        j = np.asarray(j, dtype=float)
+        if not np.allclose(j, j.T) or np.any(np.linalg.eigvalsh(0.5 * (j + j.T)) <= 0):
+            raise UserError(f"{where}: 'inertia' must be symmetric positive definite, got {inertia!r}")
+        inertia = j
+    name = data.get("name", "")
+    return Vehicle(
+        name=str(name),
+        rotors=rotors,
+        mass=_positive_or_null(data, "mass", where),
+        inertia=inertia,
+        kf_nominal=_per_rotor_coeff(data, "kf_nominal", len(rotors), where),
+        km_nominal=_per_rotor_coeff(data, "km_nominal", len(rotors), where),
+        rotor_radius=_positive_or_null(data, "rotor_radius", where),
+        rotor_inertia=_positive_or_null(data, "rotor_inertia", where),
+        notes=str(data.get("notes", "") or ""),
+    )
+
+
+def read_vehicle(path: str | Path) -> Vehicle:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise UserError(f"cannot read vehicle file {path}: {exc.strerror or exc}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise UserError(f"{path} line {exc.lineno}, column {exc.colno}: not valid JSON: {exc.msg}") from None
+    vehicle = parse_vehicle(data, where=str(path))
+    vehicle.path = path
+    return vehicle
+
+
+def write_vehicle(path: str | Path, vehicle: Vehicle) -> None:
+    Path(path).write_text(json.dumps(vehicle.to_json_dict(), indent=2) + "\n", encoding="utf-8")
+
+
+def vehicle_path_for(log_path: str | Path) -> Path:
+    """The vehicle file that sits beside a log: X.csv -> X.vehicle.json."""
+    log_path = Path(log_path)
+    return log_path.with_name(log_path.stem + ".vehicle.json")
+
+
+# --------------------------------------------------------------------------- samples
+@dataclass
+class FlightLog:
+    """One flight in flight-log v1 units. Missing values are NaN."""
+
+    t: np.ndarray  # (n,) [s]
+    gyro: np.ndarray  # (n, 3) [rad/s], FLU, bias included
+    rotor_speed: np.ndarray  # (n, N) [rad/s], vehicle rotor order
+    extra: dict[str, np.ndarray] = field(default_factory=dict)  # every other column by name
+    path: Path | None = None
+
+    @property
+    def rotor_count(self) -> int:
+        return self.rotor_speed.shape[1]
+
+    def __len__(self) -> int:
+        return self.t.shape[0]
+
+    def group(self, names: tuple[str, ...]) -> np.ndarray | None:
+        """Columns `names` stacked as (n, k), or None if any is absent."""
+        if all(n in self.extra for n in names):
+            return np.column_stack([self.extra[n] for n in names])
+        return None
+
+    @property
+    def acc(self) -> np.ndarray | None:
+        return self.group(ACC_COLUMNS)
+
+    @property
+    def quat(self) -> np.ndarray | None:
+        return self.group(QUAT_COLUMNS)
+
+    def columns(self) -> dict[str, np.ndarray]:
+        cols = {"t": self.t}
+        for i, name in enumerate(GYRO_COLUMNS):
+            cols[name] = self.gyro[:, i]
+        for i in range(self.rotor_count):
+            cols[f"omega_{i + 1}"] = self.rotor_speed[:, i]
+        cols.update(self.extra)
+        return cols
+
+    def select(self, mask: np.ndarray) -> "FlightLog":
+        return FlightLog(
+            t=self.t[mask],
+            gyro=self.gyro[mask],
+            rotor_speed=self.rotor_speed[mask],
+            extra={k: v[mask] for k, v in self.extra.items()},
+            path=self.path,
+        )
+
+
+def _locate_bad_field(text: str, header: list[str], where: str) -> UserError:
+    """Slow path, only after the fast parser failed: find the first bad line/field."""
+    for lineno, line in enumerate(text.splitlines()[1:], start=2):
+        if not line.strip():
+            return UserError(f"{where} line {lineno}: empty line (every line after the header is one sample)")
+        fields = line.split(",")
+        if len(fields) != len(header):
+            return UserError(
+                f"{where} line {lineno}: {len(fields)} fields but the header names {len(header)} columns"
+            )
+        for name, value in zip(header, fields):
+            value = value.strip()
+            if value == "":
+                continue
+            try:
+                float(value)
+            except ValueError:
+                return UserError(f"{where} line {lineno}, column {name}: {value!r} is not a number")
+    return UserError(f"{where}: cannot parse the samples")
+
+
+def _parse_table(text: str, where: str) -> tuple[list[str], np.ndarray]:
+    lines = text.split("\n", 1)
+    header = [h.strip() for h in lines[0].strip().lstrip("\ufeff").split(",")]
+    if not header or header == [""]:
+        raise UserError(f"{where} line 1: empty header (the first line must name the columns)")
+    seen = set()
+    for col, name in enumerate(header, start=1):
+        if name == "":
+            raise UserError(f"{where} line 1: column {col} has no name")
+        if name in seen:
+            raise UserError(f"{where} line 1: column {name} appears twice")
+        seen.add(name)
+    body = lines[1] if len(lines) > 1 else ""
+    body = body.rstrip("\r\n")
+    if not body.strip():
+        return header, np.empty((0, len(header)))
+    # Fast path: empty fields become 'nan', then numpy's C parser reads everything.
+    filled = _EMPTY_FIELD_RE.sub("nan", body)
+    try:
+        data = np.loadtxt(io.StringIO(filled), delimiter=",", dtype=float, ndmin=2, comments=None)
+    except ValueError:
+        raise _locate_bad_field(text, header, where) from None
+    if data.shape[1] != len(header):
+        raise _locate_bad_field(text, header, where)
+    return header, data
+
+
+def _first_bad_row(mask: np.ndarray) -> int:
+    return int(np.flatnonzero(mask)[0])
+
+
+def validate_columns(
+    t: np.ndarray,
+    gyro: np.ndarray,
+    rotor_speed: np.ndarray,
+    extra: dict[str, np.ndarray],
+    where: str,
+    line_offset: int = 2,
+) -> None:
+    """Check v1 semantics; raise UserError naming the line (row + line_offset) and column."""
+    n = t.shape[0]
+    if n == 0:
+        raise UserError(f"{where}: no samples")
+    if not np.all(np.isfinite(t)):
+        row = _first_bad_row(~np.isfinite(t))
+        raise UserError(f"{where} line {row + line_offset}, column t: time is missing (t may never be empty)")
+    dt = np.diff(t)
+    if np.any(dt < 0):
+        row = _first_bad_row(dt < 0) + 1
+        raise UserError(
+            f"{where} line {row + line_offset}, column t: time goes backwards "
+            f"({t[row - 1]:.6g} s -> {t[row]:.6g} s); rows must be in time order"
+        )
+    if t[-1] - t[0] > TIME_US_SUSPECT:
+        raise UserError(
+            f"{where}, column t: the log spans {t[-1] - t[0]:.3g} 's': t looks like milli- or microseconds, "
+            "flight-log v1 wants seconds"
+        )
+    for i, name in enumerate(GYRO_COLUMNS):
+        bad = np.isinf(gyro[:, i])
+        if np.any(bad):
+            raise UserError(f"{where} line {_first_bad_row(bad) + line_offset}, column {name}: infinite value")
+    finite_gyro = np.abs(gyro[np.isfinite(gyro)])
+    if finite_gyro.size and np.percentile(finite_gyro, 99) > GYRO_DEG_S_SUSPECT:
+        row, col = np.unravel_index(np.nanargmax(np.abs(np.where(np.isfinite(gyro), gyro, 0))), gyro.shape)
+        raise UserError(
+            f"{where} line {row + line_offset}, column {GYRO_COLUMNS[col]}: body rates up to "
+            f"{gyro[row, col]:.4g} (99th percentile of |gyro| {np.percentile(finite_gyro, 99):.3g}) look like deg/s; "
+            "flight-log v1 wants rad/s (multiply by pi/180)"
+        )
+    for i in range(rotor_speed.shape[1]):
+        column = rotor_speed[:, i]
+        name = f"omega_{i + 1}"
+        bad = np.isinf(column)
+        if np.any(bad):
+            raise UserError(f"{where} line {_first_bad_row(bad) + line_offset}, column {name}: infinite value")
+        neg = column < 0
+        if np.any(neg):
+            raise UserError(
+                f"{where} line {_first_bad_row(neg) + line_offset}, column {name}: negative rotor speed "
+                f"{column[neg][0]:.6g}; rotor speeds are positive magnitudes in rad/s"
+            )
+    spinning = rotor_speed[np.isfinite(rotor_speed) & (rotor_speed > 0)]
+    if spinning.size and np.median(spinning) > ROTOR_RPM_SUSPECT:
+        raise UserError(
+            f"{where}, columns omega_*: median rotor speed {np.median(spinning):.6g} while spinning looks like "
+            "RPM or eRPM, flight-log v1 wants rad/s (rpm * 2*pi/60; eRPM / pole pairs first)"
+        )
+    acc = np.column_stack([extra[c] for c in ACC_COLUMNS]) if all(c in extra for c in ACC_COLUMNS) else None
+    if acc is not None:
+        norm = np.linalg.norm(acc, axis=1)
+        norm = norm[np.isfinite(norm)]
+        if norm.size:
+            med = float(np.median(norm))
+            if 0.3 < med < 3.0:
+                raise UserError(
+                    f"{where}, columns acc_*: median |acc| {med:.3g} looks like g, flight-log v1 wants m/s^2 (* 9.80665)"
+                )
+            if med > 200.0:
+                raise UserError(
+                    f"{where}, columns acc_*: median |acc| {med:.4g} looks like raw sensor counts, "
+                    "flight-log v1 wants m/s^2"
+                )
+
+
+def flightlog_from_columns(
+    columns: dict[str, np.ndarray],
+    where: str,
+    rotor_count: int | None = None,
+    line_offset: int = 2,
+) -> FlightLog:
+    """Build and validate a FlightLog from named columns (flight-log v1 names)."""
+    names = list(columns)
+    missing = [c for c in ("t",) + GYRO_COLUMNS if c not in columns]
+    if missing:
+        raise UserError(f"{where} line 1: required column(s) {', '.join(missing)} missing")
+    omega_idx = sorted(int(m.group(1)) for m in (_OMEGA_RE.match(n) for n in names) if m)
+    if not omega_idx:
+        raise UserError(f"{where} line 1: no rotor speed columns omega_1..omega_N")
+    count = max(omega_idx)
+    if omega_idx != list(range(1, count + 1)):
+        gaps = sorted(set(range(1, count + 1)) - set(omega_idx))
+        raise UserError(f"{where} line 1: rotor speed columns must be omega_1..omega_{count}; missing "
+                        + ", ".join(f"omega_{i}" for i in gaps))
+    if rotor_count is not None and count != rotor_count:
+        raise UserError(
+            f"{where} line 1: the log has {count} rotor speed columns (omega_1..omega_{count}) "
+            f"but the vehicle file has {rotor_count} rotors"
+        )
+    t = np.asarray(columns["t"], dtype=float)
+    gyro = np.column_stack([np.asarray(columns[c], dtype=float) for c in GYRO_COLUMNS])
+    rotor_speed = np.column_stack([np.asarray(columns[f"omega_{i}"], dtype=float) for i in range(1, count + 1)])
+    skip = {"t", *GYRO_COLUMNS, *(f"omega_{i}" for i in range(1, count + 1))}
+    extra = {n: np.asarray(columns[n], dtype=float) for n in names if n not in skip}
+    validate_columns(t, gyro, rotor_speed, extra, where, line_offset=line_offset)
+    return FlightLog(t=t, gyro=gyro, rotor_speed=rotor_speed, extra=extra)
+
+
+def read_flightlog(path: str | Path, vehicle: Vehicle | None = None) -> FlightLog:
+    """Read and validate a flight-log v1 CSV. With `vehicle`, the rotor count must match."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise UserError(f"{path}: not a text CSV file (is it a binary log? try `propid convert`)") from None
+    except OSError as exc:
+        raise UserError(f"cannot read flight log {path}: {exc.strerror or exc}") from None
+    header, data = _parse_table(text, str(path))
+    columns = {name: data[:, i] for i, name in enumerate(header)}
+    log = flightlog_from_columns(columns, str(path), None if vehicle is None else vehicle.rotor_count)
+    log.path = path
+    return log
+
+
+def write_flightlog(path: str | Path, log: FlightLog) -> None:
+    """Write a FlightLog as flight-log v1 CSV (missing values as empty fields)."""
+    cols = log.columns()
+    names = list(cols)
+    matrix = np.column_stack([np.asarray(cols[n], dtype=float) for n in names])
+    buffer = io.StringIO()
+    np.savetxt(buffer, matrix, delimiter=",", fmt="%.9g")
+    body = buffer.getvalue()
+    # numpy writes NaN as 'nan'; the spec prefers an empty field for a missing value.
+    body = _NAN_FIELD_RE.sub(r"\1", body)
+    with open(path, "w", encoding="utf-8", newline="\n") as handle:
+        handle.write(",".join(names) + "\n")
+        handle.write(body)

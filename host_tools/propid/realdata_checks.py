@@ -1,0 +1,315 @@
+"""Independent checks of a real flight log: least-squares fits per frequency band.
+
+These are not the filter: they are plain regressions that tell what the data can
+support, so the filter's real-data numbers can be judged against something.
+
+- Thrust (needs acc_z and mass): m * acc_z = kf * sum(omega_i^2), through the origin.
+  The accelerometer sees every rotor's thrust directly, so this is the independent
+  kf measurement the gyro-only filter is compared with.
+- Torques (needs inertia, positions, yaw signs): with tau = J dw/dt + w x (J w)
+  (dw/dt by central differences of the gyro),
+    roll:  tau_x = kf * sum(y_i omega_i^2)
+    pitch: tau_y = kf * sum(-x_i omega_i^2)
+    yaw:   tau_z = km * sum(s_i omega_i^2) [+ J_rotor * sum(s_i d omega_i/dt)]
+  i.e. the same torque model the filter uses (plus the rotor-acceleration term in yaw
+  as a separate fit, since the filter does not model it).
+
+"Band" fits band-pass both sides (zero phase, FFT, per contiguous flying segment)
+and search a lag of the response behind the rotor speeds. Steady trim torques and
+slow drifts are removed by the band-pass; sensor noise still attenuates the slope
+towards zero (least squares with a noisy regressor), so band numbers are lower bounds
+more than unbiased values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from propid.errors import UserError
+from propid.flightlog import FlightLog, Vehicle
+
+GRAVITY = 9.80665
+
+
+GROUND_CLEARANCE_M = 0.05  # airborne = this far above the lowest logged height (ground contact, ground effect)
+
+
+def flying_mask(log: FlightLog, min_fraction: float = 0.33, clearance: float = GROUND_CLEARANCE_M) -> np.ndarray:
+    """Rows in free flight (docs/real-data.md): the log's is_flying flag if present, else
+    every rotor above `min_fraction` of the median spinning rotor speed; and, when the
+    height pz is logged, at least `clearance` above the lowest logged height, so that
+    rows on the ground (take-off, landing: contact torques the model does not have)
+    are left out."""
+    speeds = log.rotor_speed
+    if "is_flying" in log.extra:
+        mask = np.nan_to_num(log.extra["is_flying"], nan=0.0) > 0.5
+    else:
+        spinning = speeds[np.isfinite(speeds) & (speeds > 0)]
+        if spinning.size == 0:
+            return np.zeros(len(log), dtype=bool)
+        threshold = min_fraction * float(np.median(spinning))
+        mask = np.all(np.nan_to_num(speeds, nan=threshold + 1.0) > threshold, axis=1) & np.any(
+            np.isfinite(speeds), axis=1
+        )
+    height = log.extra.get("pz")
+    if height is not None and np.isfinite(height).any():
+        ground = float(np.nanmin(height))
+        mask &= np.nan_to_num(height, nan=ground) > ground + clearance
+    return mask
+
+
+def absurd_speed_limit(speeds: np.ndarray) -> float:
+    """A rotor speed above this is a telemetry glitch: 2x the 99.9th percentile of the
+    finite speeds (robust to a handful of eRPM spikes, generous to real peaks)."""
+    finite = speeds[np.isfinite(speeds)]
+    if finite.size == 0:
+        raise UserError("the log has no finite rotor speed")
+    return 2.0 * float(np.percentile(finite, 99.9))
+
+
+def clean_rotor_speeds(speeds: np.ndarray, limit: float) -> tuple[np.ndarray, int]:
+    """Replace NaN and absurd values by linear interpolation along time (for fits only)."""
+    out = speeds.copy()
+    bad_total = 0
+    idx = np.arange(out.shape[0])
+    for k in range(out.shape[1]):
+        col = out[:, k]
+        bad = ~np.isfinite(col) | (col > limit)
+        bad_total += int(bad.sum())
+        if bad.any() and (~bad).sum() >= 2:
+            col[bad] = np.interp(idx[bad], idx[~bad], col[~bad])
+    return out, bad_total
+
+
+def segments(mask: np.ndarray, min_length: int) -> list[tuple[int, int]]:
+    """[start, stop) index ranges of contiguous True runs at least min_length long."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    starts = np.flatnonzero(edges == 1)
+    stops = np.flatnonzero(edges == -1)
+    return [(int(a), int(b)) for a, b in zip(starts, stops) if b - a >= min_length]
+
+
+def bandpass(x: np.ndarray, rate_hz: float, low_hz: float | None, high_hz: float | None) -> np.ndarray:
+    """Zero-phase FFT band-pass of each column with raised-cosine edges (+-25 %)."""
+    if low_hz is None and high_hz is None:
+        return x - x.mean(axis=0)
+    n = x.shape[0]
+    pad = n  # mirror padding keeps the segment ends from ringing
+    xp = np.concatenate([x[::-1], x, x[::-1]], axis=0)
+    freqs = np.fft.rfftfreq(xp.shape[0], d=1.0 / rate_hz)
+    gain = np.ones_like(freqs)
+
+    def ramp(f, edge):  # 0 below edge*0.75, 1 above edge*1.25
+        lo, hi = 0.75 * edge, 1.25 * edge
+        r = np.clip((f - lo) / (hi - lo), 0.0, 1.0)
+        return 0.5 - 0.5 * np.cos(np.pi * r)
+
+    if low_hz:
+        gain *= ramp(freqs, low_hz)
+    if high_hz:
+        gain *= 1.0 - ramp(freqs, high_hz)
+    spec = np.fft.rfft(xp, axis=0) * gain[:, None]
+    return np.fft.irfft(spec, n=xp.shape[0], axis=0)[pad : pad + n]
+
+
+@dataclass
+class Fit:
+    coeffs: list[float]
+    r2: float
+    lag: int  # samples the response lags the regressors
+    rows: int
+
+    def as_dict(self, names: list[str], rate_hz: float) -> dict:
+        out = {name: value for name, value in zip(names, self.coeffs)}
+        out.update({"r2": self.r2, "lag_samples": self.lag, "lag_ms": 1e3 * self.lag / rate_hz, "rows": self.rows})
+        return out
+
+
+def _lstsq(y_parts: list[np.ndarray], x_parts: list[np.ndarray]) -> Fit:
+    y = np.concatenate(y_parts)
+    x = np.concatenate(x_parts)
+    if y.size < x.shape[1] + 2:
+        return Fit([float("nan")] * x.shape[1], float("nan"), 0, int(y.size))
+    coeffs, *_ = np.linalg.lstsq(x, y, rcond=None)
+    resid = y - x @ coeffs
+    total = float(np.sum(y**2))  # R^2 about zero: the fits go through the origin
+    r2 = 1.0 - float(np.sum(resid**2)) / total if total > 0 else float("nan")
+    return Fit([float(c) for c in coeffs], r2, 0, int(y.size))
+
+
+def lagged_fit(
+    response: np.ndarray,
+    regressors: np.ndarray,
+    segs: list[tuple[int, int]],
+    rate_hz: float,
+    band: tuple[float | None, float | None],
+    lags: range,
+) -> Fit:
+    """Through-origin LS of response[n + lag] on regressors[n] over the segments, each
+    band-passed separately; the lag with the best R^2 wins (R^2 about zero, not the mean)."""
+    filtered = []
+    for a, b in segs:
+        yy = bandpass(response[a:b, None], rate_hz, *band)[:, 0] if band != (None, None) else response[a:b]
+        xx = bandpass(regressors[a:b], rate_hz, *band) if band != (None, None) else regressors[a:b]
+        filtered.append((yy, xx))
+    best = None
+    for lag in lags:
+        ys, xs = [], []
+        for yy, xx in filtered:
+            n = yy.shape[0]
+            lo, hi = max(0, -lag), min(n, n - lag)
+            if hi - lo < 10:
+                continue
+            ys.append(yy[lo + lag : hi + lag])
+            xs.append(xx[lo:hi])
+        if not ys:
+            continue
+        fit = _lstsq(ys, xs)
+        fit.lag = lag
+        if best is None or (np.isfinite(fit.r2) and (not np.isfinite(best.r2) or fit.r2 > best.r2)):
+            best = fit
+    return best if best is not None else Fit([float("nan")] * regressors.shape[1], float("nan"), 0, 0)
+
+
+DEFAULT_BANDS = {
+    "raw": (None, None),
+    "0.5-2Hz": (0.5, 2.0),
+    "2-10Hz": (2.0, 10.0),
+    "10-30Hz": (10.0, 30.0),
+}
+
+
+def _body_velocity(log: FlightLog) -> np.ndarray | None:
+    """World velocity rotated into the body frame with the attitude (None if not logged)."""
+    quat = log.quat
+    velocity = log.group(("vx", "vy", "vz"))
+    if quat is None or velocity is None:
+        return None
+    w, x, y, z = quat.T
+    rot = np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+    ], axis=1)  # body -> world
+    body = np.einsum("nji,nj->ni", rot, velocity)
+    return np.nan_to_num(body, nan=0.0)
+
+
+def check_log(
+    log: FlightLog,
+    vehicle: Vehicle,
+    bands: dict[str, tuple[float | None, float | None]] | None = None,
+    max_lag_s: float = 0.05,
+    unit_inertia: bool = False,
+) -> dict:
+    """Per-band thrust and torque fits on the flying rows of one log. All SI."""
+    bands = dict(DEFAULT_BANDS if bands is None else bands)
+    dt = np.diff(log.t)
+    dt_med = float(np.median(dt[dt > 0])) if np.any(dt > 0) else float("nan")
+    if not np.isfinite(dt_med):
+        raise UserError("the log's time never advances")
+    rate = 1.0 / dt_med
+    max_lag = max(1, int(round(max_lag_s * rate)))  # lag search +-max_lag_s, in samples
+    nyquist = 0.5 * rate
+    for name, (lo, hi) in list(bands.items()):
+        if hi is not None and hi >= 0.9 * nyquist:
+            del bands[name]  # band beyond what this sample rate can show
+    limit = absurd_speed_limit(log.rotor_speed)
+    speeds, repaired = clean_rotor_speeds(log.rotor_speed, limit)
+    gyro = log.gyro.copy()
+    for k in range(3):  # isolated missing gyro samples: interpolate for the fits
+        bad = ~np.isfinite(gyro[:, k])
+        if bad.any() and (~bad).sum() >= 2:
+            idx = np.arange(len(gyro))
+            gyro[bad, k] = np.interp(idx[bad], idx[~bad], gyro[~bad, k])
+    fly = flying_mask(log)
+    # central differences need both neighbours; keep segments with uniform timing
+    uniform = np.ones(len(log), dtype=bool)
+    uniform[1:] &= np.abs(dt - dt_med) < 0.5 * dt_med
+    uniform[:-1] &= np.abs(dt - dt_med) < 0.5 * dt_med
+    segs = segments(fly & uniform, min_length=int(max(2.0 * rate, 50)))
+    rows = sum(b - a for a, b in segs)
+    result = {
+        "log": str(log.path) if log.path else None,
+        "rate_hz": rate,
+        "flying_rows": int(fly.sum()),
+        "fit_rows": rows,
+        "segments": len(segs),
+        "repaired_rotor_samples": repaired,
+        "absurd_speed_limit": limit,
+        "bands": {},
+    }
+    if rows == 0:
+        result["note"] = "no flying segment long enough for the fits"
+        return result
+
+    u = speeds**2
+    pos = vehicle.positions
+    signs = vehicle.yaw_signs
+    use_unit = unit_inertia or vehicle.inertia is None
+    inertia = np.eye(3) if use_unit else np.asarray(vehicle.inertia)
+    result["inertia_used"] = "unit" if use_unit else "vehicle"
+    rate_dot = np.gradient(gyro, log.t, axis=0)
+    torque = rate_dot @ inertia.T + np.cross(gyro, gyro @ inertia.T)
+    reg_roll = (u * pos[:, 1]).sum(axis=1, keepdims=True)
+    reg_pitch = (-u * pos[:, 0]).sum(axis=1, keepdims=True)
+    reg_yaw = (u * signs).sum(axis=1, keepdims=True)
+    speed_dot = np.gradient(speeds, log.t, axis=0)
+    reg_yaw_rotor = np.column_stack([reg_yaw[:, 0], (speed_dot * signs).sum(axis=1)])
+    sum_u = u.sum(axis=1, keepdims=True)
+    body_velocity = _body_velocity(log)
+    acc = log.acc
+    thrust_ok = acc is not None and vehicle.mass is not None and np.isfinite(acc[:, 2]).any()
+    lags = range(-max_lag, max_lag + 1)
+    for name, band in bands.items():
+        entry = {}
+        if thrust_ok:
+            force = vehicle.mass * np.nan_to_num(acc[:, 2], nan=float(np.nanmedian(acc[:, 2])))
+            thrust_lags = range(0, 1) if band == (None, None) else lags
+            entry["thrust_kf"] = lagged_fit(force, sum_u, segs, rate, band, thrust_lags).as_dict(["kf"], rate)
+        band_lags = range(0, 1) if band == (None, None) else lags
+        entry["roll_kf"] = lagged_fit(torque[:, 0], reg_roll, segs, rate, band, band_lags).as_dict(["kf"], rate)
+        entry["pitch_kf"] = lagged_fit(torque[:, 1], reg_pitch, segs, rate, band, band_lags).as_dict(["kf"], rate)
+        entry["yaw_km"] = lagged_fit(torque[:, 2], reg_yaw, segs, rate, band, band_lags).as_dict(["km"], rate)
+        entry["yaw_km_rotor_inertia"] = lagged_fit(torque[:, 2], reg_yaw_rotor, segs, rate, band, band_lags).as_dict(
+            ["km", "rotor_inertia"], rate
+        )
+        if body_velocity is not None:
+            # same torque fits with a moment linear in body velocity (rotor drag / blade flapping)
+            for key, axis, reg in (("roll_kf_with_velocity", 0, reg_roll), ("pitch_kf_with_velocity", 1, reg_pitch)):
+                fit = lagged_fit(torque[:, axis], np.column_stack([reg, body_velocity]), segs, rate, band, band_lags)
+                entry[key] = fit.as_dict(["kf", "moment_per_vx", "moment_per_vy", "moment_per_vz"], rate)
+        result["bands"][name] = entry
+    return result
+
+
+def format_checks(result: dict) -> str:
+    """Human-readable table of one log's checks."""
+    lines = [
+        f"log {result.get('log')}: {result['rate_hz']:.1f} Hz, {result['fit_rows']} flying rows in "
+        f"{result['segments']} segment(s), {result['repaired_rotor_samples']} rotor samples interpolated"
+    ]
+    unit = " (unit inertia: torque coefficients are kf/J-like ratios)" if result.get("inertia_used") == "unit" else ""
+    lines.append(f"{'band':>9} {'thrust kf (R2)':>20} {'roll kf (R2,lag)':>24} {'pitch kf (R2,lag)':>24} "
+                 f"{'yaw km (R2,lag)':>24} {'yaw km, J_rotor (R2)':>30}{unit}")
+    for band, entry in result.get("bands", {}).items():
+        def cell(fit, key):
+            return f"{fit[key]:.3e} ({fit['r2']:.2f},{fit['lag_samples']:+d})"
+
+        thrust = f"{entry['thrust_kf']['kf']:.3e} ({entry['thrust_kf']['r2']:.2f})" if "thrust_kf" in entry else "n/a"
+        yr = entry["yaw_km_rotor_inertia"]
+        lines.append(
+            f"{band:>9} {thrust:>20} {cell(entry['roll_kf'], 'kf'):>24} {cell(entry['pitch_kf'], 'kf'):>24} "
+            f"{cell(entry['yaw_km'], 'km'):>24} {yr['km']:.2e}, {yr['rotor_inertia']:.2e} ({yr['r2']:.2f})"
+        )
+    velocity_lines = []
+    for band, entry in result.get("bands", {}).items():
+        if "roll_kf_with_velocity" in entry:
+            r, p = entry["roll_kf_with_velocity"], entry["pitch_kf_with_velocity"]
+            velocity_lines.append(f"{band:>9} roll kf {r['kf']:.3e} (R2 {r['r2']:.2f}), pitch kf {p['kf']:.3e} (R2 {p['r2']:.2f})")
+    if velocity_lines:
+        lines.append("torque fits with a body-velocity moment term (rotor drag / flapping):")
+        lines.extend(velocity_lines)
+    return "\n".join(lines)

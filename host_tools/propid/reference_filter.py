@@ -1,0 +1,394 @@
+"""Float64 numpy reference of the firmware filter (firmware/src/propid_*.c).
+
+The SAME algorithm, step for step: scaled state [rate(3), kf/kf_nom(N), km/km_nom(N),
+gyro bias(3)], forward-Euler prediction with the latest rotor speeds (zero-order
+hold), P := F P F^T + Q dt, three sequential scalar gyro updates (x, y, z) with the
+symmetric rank-one form, innovation gate with re-opening, coefficient clamps,
+variance floors/ceilings, the round-robin covariance integrity check and repair,
+and the same input guards and status codes. Only the arithmetic differs
+(float64 here, float32 in C), which is what tests/host_tools/test_reference_vs_c.py
+measures. Written for clarity, not speed: dense numpy where it is clearer.
+
+Inputs are rounded to float32 on entry (config, rotor speeds, gyro), exactly as
+they reach the C filter, so that both filters see identical numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from propid.cfilter import HEALTH, STATUS, Estimate, FilterConfig, health_names
+
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
+def _f32(value: float) -> float:
+    return float(np.float32(value))
+
+
+class ReferenceFilter:
+    """Mirror of propid_filter_t and the propid_* functions, in float64."""
+
+    def __init__(self, config: FilterConfig):
+        self.config = config
+        self.rotor_count = n_rot = config.rotor_count
+        self.n = 6 + 2 * n_rot
+        self.first_drag = 3 + n_rot
+        self.first_bias = 3 + 2 * n_rot
+        c = {name: _f32(getattr(config, name)) for name in (
+            "rate_std0", "thrust_coeff_rel_std0", "drag_coeff_rel_std0", "gyro_bias_std0",
+            "gyro_noise_density", "gyro_sample_rate_hz", "rate_process_noise",
+            "thrust_coeff_rel_walk", "drag_coeff_rel_walk", "gyro_bias_walk", "gate_sigma",
+            "max_rotor_speed", "gyro_range", "coeff_rel_min", "coeff_rel_max", "converged_rel_std")}
+        self.c = c
+        self.gate_max_consecutive = int(config.gate_max_consecutive)
+        self.rotor_stale_us = int(config.rotor_stale_us)
+        self.max_gyro_gap_us = int(config.max_gyro_gap_us)
+
+        inertia = np.array([[_f32(v) for v in row] for row in config.inertia])
+        self.inertia = 0.5 * (inertia + inertia.T)
+        self.inertia_inv = np.linalg.inv(self.inertia)
+        positions = np.array([[_f32(v) for v in p] for p in config.positions])
+        yaw = np.array([_f32(v) for v in config.yaw_signs])
+        self.kf_nominal = np.array([_f32(v) for v in config.thrust_coeff_nominal])
+        self.km_nominal = np.array([_f32(v) for v in config.drag_coeff_nominal])
+        # thrust_torque[i] = J^-1 (r_i x z) kf_nom_i ; drag_torque[i] = J^-1 z s_i km_nom_i
+        arm = np.stack([positions[:, 1], -positions[:, 0], np.zeros(n_rot)], axis=1)
+        self.thrust_torque = (arm @ self.inertia_inv.T) * self.kf_nominal[:, None]
+        self.drag_torque = np.outer(yaw * self.km_nominal, self.inertia_inv[:, 2])
+
+        self.gyro_var = c["gyro_noise_density"] ** 2 * c["gyro_sample_rate_hz"]
+        if c["gate_sigma"] > 0.0:
+            self.gate_sq = c["gate_sigma"] ** 2
+            self.inv_gate_sq = 1.0 / self.gate_sq
+        else:
+            self.gate_sq, self.inv_gate_sq = 0.0, 1.0
+        self.converged_var = c["converged_rel_std"] ** 2
+
+        n = self.n
+        self.prior_var = np.empty(n)
+        self.process_psd = np.empty(n)
+        self.var_floor = np.empty(n)
+        self.var_ceiling = np.empty(n)
+        coeff_ceiling = c["coeff_rel_max"] ** 2
+        for k in range(n):
+            if k < 3:
+                prior, psd, floor, ceiling = (c["rate_std0"] ** 2, c["rate_process_noise"] ** 2,
+                                              1e-12, 4.0 * c["gyro_range"] ** 2)
+            elif k < self.first_drag:
+                prior, psd, floor, ceiling = (c["thrust_coeff_rel_std0"] ** 2,
+                                              c["thrust_coeff_rel_walk"] ** 2, 1e-10, coeff_ceiling)
+            elif k < self.first_bias:
+                prior, psd, floor, ceiling = (c["drag_coeff_rel_std0"] ** 2,
+                                              c["drag_coeff_rel_walk"] ** 2, 1e-10, coeff_ceiling)
+            else:
+                prior, psd, floor, ceiling = (c["gyro_bias_std0"] ** 2, c["gyro_bias_walk"] ** 2,
+                                              1e-14, c["gyro_range"] ** 2)
+            self.prior_var[k] = prior
+            self.process_psd[k] = psd
+            self.var_floor[k] = floor
+            self.var_ceiling[k] = max(ceiling, prior)
+
+        self.counters_data = {
+            "gyro_accepted": 0, "rotor_accepted": 0, "axis_gated": [0, 0, 0], "gate_reopened": 0,
+            "cov_repairs": 0, "state_clamps": 0, "resyncs": 0, "rejected": [0] * 15,
+        }
+        self._core_to_prior()
+
+    # ------------------------------------------------------------------ life cycle
+    def _core_to_prior(self) -> None:
+        n = self.n
+        self.state = np.zeros(n)
+        self.state[3:self.first_bias] = 1.0
+        self.cov = np.diag(self.prior_var.copy())
+        self.rotor_speed_sq = np.zeros(self.rotor_count)
+        self.rotor_time_us = 0
+        self.time_us = 0
+        self.has_rotor_data = False
+        self.has_time = False
+        self.gated_run = [0, 0, 0]
+        self.health = 0
+        self.innovation = np.zeros(3)
+        self.innovation_test_ratio = np.zeros(3)
+        self.stale_mark = self.counters_data["rejected"][-STATUS["PROPID_ERR_ROTOR_STALE"]]
+        self.check_row = 0
+
+    def reset(self) -> int:
+        self._core_to_prior()
+        return STATUS["PROPID_OK"]
+
+    def _reset_state(self, k: int) -> None:
+        self.cov[k, :] = 0.0
+        self.cov[:, k] = 0.0
+        self.cov[k, k] = self.prior_var[k]
+
+    def reset_rotor(self, rotor: int) -> int:
+        if not 0 <= rotor < self.rotor_count:
+            return self._reject("PROPID_ERR_ROTOR_INDEX")
+        for k in (3 + rotor, self.first_drag + rotor):
+            self.state[k] = 1.0
+            self._reset_state(k)
+        return STATUS["PROPID_OK"]
+
+    def resync(self, t_us: int) -> int:
+        for a in range(3):
+            self._reset_state(a)
+            self.gated_run[a] = 0
+        self.time_us = int(t_us)
+        self.has_time = False
+        self.health |= HEALTH["TIME_RESYNCED"]
+        self.counters_data["resyncs"] += 1
+        return STATUS["PROPID_OK"]
+
+    def _reject(self, name: str) -> int:
+        code = STATUS[name]
+        self.counters_data["rejected"][-code] += 1
+        return code
+
+    # ------------------------------------------------------------------ model
+    def rate_derivative_and_jacobian(self, state: np.ndarray, speed_sq: np.ndarray):
+        """Angular acceleration and its Jacobian rows (3 x (3 + 2N))."""
+        n_rot = self.rotor_count
+        rate = state[:3]
+        kf_rel = state[3:3 + n_rot]
+        km_rel = state[3 + n_rot:3 + 2 * n_rot]
+        momentum = self.inertia @ rate
+        gyroscopic = np.cross(rate, momentum)
+        rate_dot = (-(self.inertia_inv @ gyroscopic)
+                    + (kf_rel * speed_sq) @ self.thrust_torque
+                    + (km_rel * speed_sq) @ self.drag_torque)
+        # d(omega x J omega)/d omega = [omega]x J - [J omega]x
+        dgyro = _skew(rate) @ self.inertia - _skew(momentum)
+        rows = np.zeros((3, 3 + 2 * n_rot))
+        rows[:, :3] = -(self.inertia_inv @ dgyro)
+        rows[:, 3:3 + n_rot] = (self.thrust_torque * speed_sq[:, None]).T
+        rows[:, 3 + n_rot:] = (self.drag_torque * speed_sq[:, None]).T
+        return rate_dot, rows
+
+    # ------------------------------------------------------------------ covariance
+    def _repair(self) -> bool:
+        n = self.n
+        changed = False
+        for i in range(n):
+            p = self.cov[i, i]
+            if not (p > 0.0 and p <= _F32_MAX):
+                self._reset_state(i)
+                changed = True
+        for i in range(n):
+            for j in range(i + 1, n):
+                pij = self.cov[i, j]
+                limit_sq = self.cov[i, i] * self.cov[j, j]
+                fixed = pij
+                if not math.isfinite(pij):
+                    fixed = 0.0
+                elif pij * pij > limit_sq:
+                    limit = 0.99 * math.sqrt(limit_sq)
+                    fixed = limit if pij > 0.0 else -limit
+                if fixed != pij or self.cov[j, i] != pij:
+                    self.cov[i, j] = self.cov[j, i] = fixed
+                    changed = True
+        return changed
+
+    def _check_row(self, row: int) -> bool:
+        pii = self.cov[row, row]
+        bad = not (pii > 0.0 and pii <= _F32_MAX)
+        if not bad:
+            r = self.cov[row, :]
+            with np.errstate(invalid="ignore", over="ignore"):
+                bad = bool(np.any(~(r * r <= pii * np.diag(self.cov))) or np.any(self.cov[:, row] != r))
+        return self._repair() if bad else False
+
+    def _enforce_bounds(self) -> bool:
+        repaired = False
+        for i in range(self.n):
+            p = self.cov[i, i]
+            if not (p > 0.0 and p <= _F32_MAX):
+                repaired |= self._repair()
+            elif p < self.var_floor[i]:
+                self.cov[i, i] = self.var_floor[i]
+            elif p > self.var_ceiling[i]:
+                c = self.var_ceiling[i] / p
+                self.cov[i, :] *= c
+                self.cov[:, i] = self.cov[i, :]
+                self.cov[i, i] = self.var_ceiling[i]
+        return repaired
+
+    # ------------------------------------------------------------------ inputs
+    def push_rotor_speeds(self, t_us: int, speeds: Sequence[float]) -> int:
+        if len(speeds) != self.rotor_count:
+            return self._reject("PROPID_ERR_ROTOR_COUNT")
+        values = [_f32(v) for v in speeds]
+        for v in values:
+            if not math.isfinite(v):
+                return self._reject("PROPID_ERR_NOT_FINITE")
+            if v < 0.0:
+                return self._reject("PROPID_ERR_ROTOR_SPEED_NEGATIVE")
+            if v > self.c["max_rotor_speed"]:
+                return self._reject("PROPID_ERR_ROTOR_SPEED_RANGE")
+        if self.has_rotor_data and t_us <= self.rotor_time_us:
+            return self._reject("PROPID_ERR_TIME_BACKWARDS")
+        self.rotor_speed_sq = np.array(values) ** 2
+        self.rotor_time_us = int(t_us)
+        self.has_rotor_data = True
+        self.counters_data["rotor_accepted"] += 1
+        return STATUS["PROPID_OK"]
+
+    def push_gyro(self, t_us: int, gyro: Sequence[float]) -> int:
+        y = [_f32(v) for v in gyro]
+        if not all(math.isfinite(v) for v in y):
+            return self._reject("PROPID_ERR_NOT_FINITE")
+        if any(abs(v) > self.c["gyro_range"] for v in y):
+            return self._reject("PROPID_ERR_GYRO_RANGE")
+        anchor = not self.has_time
+        dt = 0.0
+        if anchor:
+            if t_us < self.time_us:
+                return self._reject("PROPID_ERR_TIME_BACKWARDS")
+        else:
+            if t_us <= self.time_us:
+                return self._reject("PROPID_ERR_TIME_BACKWARDS")
+            gap = t_us - self.time_us
+            if gap > self.max_gyro_gap_us:
+                return self._reject("PROPID_ERR_TIME_JUMP")
+            dt = gap * 1e-6
+        if not self.has_rotor_data:
+            return self._reject("PROPID_ERR_NO_ROTOR_DATA")
+        if t_us > self.rotor_time_us and t_us - self.rotor_time_us > self.rotor_stale_us:
+            return self._reject("PROPID_ERR_ROTOR_STALE")
+        if not anchor:
+            rate_dot, rows = self.rate_derivative_and_jacobian(self.state, self.rotor_speed_sq)
+            rate_next = self.state[:3] + dt * rate_dot
+            jac_dt = dt * rows
+            if not (np.all(np.isfinite(rate_next)) and np.all(np.isfinite(jac_dt))
+                    and np.all(np.isfinite(self.state))):
+                return self._reject("PROPID_ERR_NUMERIC")
+        elif not np.all(np.isfinite(self.state)):
+            return self._reject("PROPID_ERR_NUMERIC")
+
+        # Accepted.
+        self.health &= ~(HEALTH["GATED"] | HEALTH["STATE_CLAMPED"])
+        if self._check_row(self.check_row):
+            self.health |= HEALTH["COV_REPAIRED"]
+            self.counters_data["cov_repairs"] += 1
+        self.check_row = 0 if self.check_row + 1 >= self.n else self.check_row + 1
+
+        if not anchor:
+            n, m = self.n, self.n - 3
+            f = np.eye(n)
+            f[:3, :m] += jac_dt
+            self.cov = f @ self.cov @ f.T
+            self.cov = 0.5 * (self.cov + self.cov.T)
+            self.cov[np.diag_indices(n)] += self.process_psd * dt
+            self.state[:3] = rate_next
+
+        gated = False
+        for axis in range(3):
+            gated |= self._update_axis(axis, y[axis])
+
+        lo, hi = self.c["coeff_rel_min"], self.c["coeff_rel_max"]
+        coeffs = self.state[3:self.first_bias]
+        clamped = int(np.sum(coeffs < lo) + np.sum(coeffs > hi))
+        self.state[3:self.first_bias] = np.clip(coeffs, lo, hi)
+        if clamped:
+            self.health |= HEALTH["STATE_CLAMPED"]
+            self.counters_data["state_clamps"] += clamped
+        if self._enforce_bounds():
+            self.health |= HEALTH["COV_REPAIRED"]
+            self.counters_data["cov_repairs"] += 1
+        if gated:
+            self.health |= HEALTH["GATED"]
+        self.time_us = int(t_us)
+        self.has_time = True
+        self.stale_mark = self.counters_data["rejected"][-STATUS["PROPID_ERR_ROTOR_STALE"]]
+        self.counters_data["gyro_accepted"] += 1
+        return STATUS["PROPID_OK_GATED"] if gated else STATUS["PROPID_OK"]
+
+    def _update_axis(self, axis: int, gyro: float) -> bool:
+        bias = self.first_bias + axis
+        cov_h = self.cov[:, axis] + self.cov[:, bias]
+        innovation_var = cov_h[axis] + cov_h[bias] + self.gyro_var
+        if not innovation_var >= self.gyro_var:
+            if self._repair():
+                self.health |= HEALTH["COV_REPAIRED"]
+                self.counters_data["cov_repairs"] += 1
+            cov_h = self.cov[:, axis] + self.cov[:, bias]
+            innovation_var = max(cov_h[axis] + cov_h[bias] + self.gyro_var, self.gyro_var)
+        innovation = gyro - self.state[axis] - self.state[bias]
+        innovation_sq = innovation * innovation
+        self.innovation[axis] = innovation
+        self.innovation_test_ratio[axis] = innovation_sq / innovation_var * self.inv_gate_sq
+        if self.gate_sq > 0.0 and innovation_sq > self.gate_sq * innovation_var:
+            if self.gated_run[axis] < self.gate_max_consecutive:
+                self.gated_run[axis] += 1
+                self.counters_data["axis_gated"][axis] += 1
+                return True
+            self.cov[axis, axis] += innovation_sq
+            cov_h = cov_h.copy()
+            cov_h[axis] += innovation_sq
+            innovation_var += innovation_sq
+            self.counters_data["gate_reopened"] += 1
+            self.health |= HEALTH["GATE_REOPENED"]
+        self.gated_run[axis] = 0
+        self.state += cov_h * (innovation / innovation_var)
+        self.cov -= np.outer(cov_h, cov_h) / innovation_var
+        self.cov = 0.5 * (self.cov + self.cov.T)
+        return False
+
+    # ------------------------------------------------------------------ outputs
+    def estimate(self) -> Estimate:
+        n_rot = self.rotor_count
+        std = np.sqrt(np.maximum(np.diag(self.cov), 0.0))
+        kf = slice(3, 3 + n_rot)
+        km = slice(self.first_drag, self.first_drag + n_rot)
+        bias = slice(self.first_bias, self.first_bias + 3)
+        var = np.diag(self.cov)
+        bits = 1 << np.arange(n_rot)
+
+        def mask(condition: np.ndarray) -> int:
+            return int(np.sum(bits[condition]))
+
+        kf_converged = mask(var[kf] < self.converged_var)
+        km_converged = mask(var[km] < self.converged_var)
+        health = self.health
+        if not self.has_rotor_data:
+            health |= HEALTH["NO_ROTOR_DATA"]
+        if self.counters_data["rejected"][-STATUS["PROPID_ERR_ROTOR_STALE"]] != self.stale_mark:
+            health |= HEALTH["ROTOR_STALE"]
+        all_rotors = (1 << n_rot) - 1
+        if kf_converged == all_rotors and km_converged == all_rotors:
+            health |= HEALTH["ALL_CONVERGED"]
+        return Estimate(
+            time_us=self.time_us,
+            body_rate=self.state[:3].copy(), body_rate_std=std[:3].copy(),
+            thrust_coeff=self.state[kf] * self.kf_nominal, thrust_coeff_std=std[kf] * self.kf_nominal,
+            drag_coeff=self.state[km] * self.km_nominal, drag_coeff_std=std[km] * self.km_nominal,
+            gyro_bias=self.state[bias].copy(), gyro_bias_std=std[bias].copy(),
+            innovation=self.innovation.copy(), innovation_test_ratio=self.innovation_test_ratio.copy(),
+            thrust_coeff_converging=mask(var[kf] < 0.25 * self.prior_var[kf]),
+            thrust_coeff_converged=kf_converged,
+            drag_coeff_converging=mask(var[km] < 0.25 * self.prior_var[km]),
+            drag_coeff_converged=km_converged,
+            health=health, health_flags=health_names(health),
+        )
+
+    def counters(self) -> dict:
+        d = dict(self.counters_data)
+        d["axis_gated"] = list(d["axis_gated"])
+        d["rejected"] = {name: d["rejected"][-code] for name, code in STATUS.items()
+                         if code < 0 and d["rejected"][-code]}
+        return d
+
+    def scaled_state(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.state.copy(), self.cov.copy()
+
+    @staticmethod
+    def status_name(code: int) -> str:
+        from propid.cfilter import STATUS_NAME
+        return STATUS_NAME.get(int(code), f"PROPID_UNKNOWN_STATUS({int(code)})")
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])

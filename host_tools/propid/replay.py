@@ -1,0 +1,548 @@
+"""Replay a flight log through the firmware filter itself (C library via ctypes).
+
+Both streams are pushed as recorded, at the log's own times:
+- "rows" logs (one row = one gyro sample and one rotor sample, e.g. the SITL, the
+  Crazyflie and Betaflight CSVs): every row pushes its rotor speeds, then its gyro. A
+  row with a missing (NaN) or absurd rotor speed is pushed anyway and the filter
+  rejects it (counted by reason); the filter keeps the previous rotor speeds.
+- "events" logs (each stream on its own time base, as the ULog and tlog importers write
+  them: gyro rows have empty omega_*, rotor rows have empty gyro_*): a row pushes only
+  the stream it carries.
+A gyro push answered with PROPID_ERR_TIME_JUMP (a gap, e.g. a cut-out segment) is
+followed by propid_resync() at that time and pushed again.
+
+Definitions used in the output (docs/real-data.md):
+- converged part of a coefficient: from the first replayed gyro sample at which the
+  filter reports it converged (relative std below config.converged_rel_std) to the end;
+  kf_mean/km_mean average the estimate over it. A coefficient that never converges is
+  averaged over the second half of the replayed samples and flagged converged = false.
+- unit-inertia mode (vehicle without inertia, e.g. the Betaflight file): the filter
+  runs with J = identity [kg m^2], so its "kf" is kf/J (roll/pitch; one J for both)
+  and its "km" is km/Jzz, in the vehicle file's (possibly assumed) geometry. Ratios
+  between rotors and changes over time are meaningful; absolute kf and km are not.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from propid.errors import UserError
+from propid.flightlog import FlightLog, Vehicle
+from propid.realdata_checks import absurd_speed_limit, check_log, flying_mask
+
+US = 1_000_000
+
+
+@dataclass
+class ReplayOptions:
+    segment: str = "all"  # "all" or "flying"
+    streams: str = "auto"  # "auto", "rows" or "events"
+    unit_inertia: bool = False
+    kf_nominal: float | None = None  # override (unit-inertia mode: kf/J)
+    km_nominal: float | None = None
+    noise: str = "auto"  # "auto": from the log; "default": the library defaults
+    max_rotor_speed: float | None = None  # None: 2x the 99.9th percentile of finite speeds
+    overrides: dict = field(default_factory=dict)  # any other propid_config_t field
+    skip_repeats: bool = False  # a row whose gyro (or rotor speeds) exactly repeat the previous row is no new sample
+    rotor_delay_s: float = 0.0  # push rotor speeds this much later than logged (stream alignment)
+    record_every: int = 1  # keep every k-th estimate for the time series
+    progress: bool = True
+
+
+@dataclass
+class ReplayResult:
+    summary: dict
+    series: dict  # time series of the estimates (numpy arrays)
+
+
+def detect_streams(log: FlightLog) -> str:
+    """'events' if some rows carry rotor speeds but no gyro (separate time bases)."""
+    gyro_missing = np.all(~np.isfinite(log.gyro), axis=1)
+    rotor_missing = np.all(~np.isfinite(log.rotor_speed), axis=1)
+    if np.any(gyro_missing & ~rotor_missing) and np.any(rotor_missing & ~gyro_missing):
+        return "events"
+    return "rows"
+
+
+def estimate_noise(log: FlightLog, vehicle_inertia: np.ndarray, positions, signs, mask) -> dict:
+    """Noise levels for the filter from the log itself (the 'auto' rule, docs/real-data.md):
+    - gyro white noise per sample from the third difference of the gyro (smooth motion
+      cancels): sigma^2 = var(d3 gyro) / 20;
+    - unmodelled angular acceleration: residual of the filter's own torque model after a
+      least-squares fit of per-rotor kf and km to this log (so that a wrong nominal does
+      not count as 'unmodelled'), minus what gyro noise alone puts into the central
+      difference: rate_process_noise = rms(residual) * sqrt(dt) [rad/s^2/sqrt(Hz)].
+    Only the log and the vehicle file's geometry and inertia enter."""
+    steps = np.diff(log.t)
+    dt = float(np.median(steps[steps > 0]))
+    rows = np.flatnonzero(mask)
+    gyro = log.gyro
+    speeds = log.rotor_speed
+    ok = np.zeros(len(log), dtype=bool)
+    ok[rows] = True
+    ok &= np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(speeds), axis=1)
+    ok &= np.all(np.nan_to_num(speeds, nan=0.0) <= absurd_speed_limit(speeds), axis=1)
+    inner = ok.copy()  # central differences need both neighbours
+    inner[1:-1] &= ok[:-2] & ok[2:]
+    inner[[0, -1]] = False
+    if inner.sum() < 50:
+        return {}
+    third = np.diff(gyro[ok], n=3, axis=0)
+    gyro_sigma = float(np.sqrt(np.mean(np.var(third, axis=0)) / 20.0))
+    rate_dot = np.zeros_like(gyro)
+    rate_dot[1:-1] = (gyro[2:] - gyro[:-2]) / (log.t[2:] - log.t[:-2])[:, None]
+    torque = rate_dot @ vehicle_inertia.T + np.cross(gyro, gyro @ vehicle_inertia.T)
+    u = speeds**2
+    n = u.shape[1]
+    rows_x = np.zeros((inner.sum(), 2 * n))
+    rows_x[:, :n] = u[inner] * positions[:, 1]
+    rows_y = np.zeros((inner.sum(), 2 * n))
+    rows_y[:, :n] = -u[inner] * positions[:, 0]
+    rows_z = np.zeros((inner.sum(), 2 * n))
+    rows_z[:, n:] = u[inner] * signs
+    design = np.vstack([rows_x, rows_y, rows_z])
+    target = np.concatenate([torque[inner, 0], torque[inner, 1], torque[inner, 2]])
+    coeffs, *_ = np.linalg.lstsq(design, target, rcond=None)
+    resid_torque = (target - design @ coeffs).reshape(3, -1).T
+    resid = resid_torque @ np.linalg.inv(vehicle_inertia).T
+    # median of squares per axis: robust to the odd glitch; remove the differentiated gyro noise
+    ms = float(np.mean(np.median(resid**2, axis=0)))
+    ms_noise = gyro_sigma**2 / (2.0 * dt * dt)
+    rms = math.sqrt(max(ms - ms_noise, 0.0))
+    rate_hz = 1.0 / dt
+    return {
+        "gyro_sample_rate_hz": rate_hz,
+        "gyro_noise_density": max(gyro_sigma, 1e-4) / math.sqrt(rate_hz),
+        "rate_process_noise": max(rms * math.sqrt(dt), 1e-3),
+    }
+
+
+def _nominals(vehicle: Vehicle, options: ReplayOptions, log: FlightLog) -> tuple[list[float], list[float], str]:
+    n = vehicle.rotor_count
+    if options.unit_inertia:
+        if options.kf_nominal is not None and options.km_nominal is not None:
+            return [options.kf_nominal] * n, [options.km_nominal] * n, "given"
+        # Start from the log's own band-limited torque fit (J = 1): a data-driven prior.
+        checks = check_log(log, vehicle, bands={"band": (1.0, 10.0)}, unit_inertia=True)
+        entry = checks["bands"].get("band")
+        if not entry:
+            raise UserError("unit-inertia mode: no flying segment to initialise kf/J and km/J from; give --kf-nominal/--km-nominal")
+        kf = 0.5 * (entry["roll_kf"]["kf"] + entry["pitch_kf"]["kf"])
+        km = entry["yaw_km_rotor_inertia"]["km"]
+        if not (kf > 0 and km > 0):
+            raise UserError(
+                f"unit-inertia mode: the log's torque fit gives kf/J = {kf:.3g}, km/J = {km:.3g}: not positive, "
+                "so the vehicle file's geometry or yaw signs disagree with the data; give --kf-nominal/--km-nominal"
+            )
+        kf = options.kf_nominal if options.kf_nominal is not None else kf
+        km = options.km_nominal if options.km_nominal is not None else km
+        return [kf] * n, [km] * n, "band-limited least-squares torque fit of this log (1-10 Hz, J = 1)"
+    kf = [options.kf_nominal] * n if options.kf_nominal is not None else vehicle.kf_nominal
+    km = [options.km_nominal] * n if options.km_nominal is not None else vehicle.km_nominal
+    if kf is None or km is None:
+        raise UserError(
+            f"vehicle file {vehicle.path or vehicle.name}: kf_nominal/km_nominal are null: give --kf-nominal and "
+            "--km-nominal (the filter needs a prior mean)"
+        )
+    return list(kf), list(km), "vehicle file" if options.kf_nominal is None else "given"
+
+
+def build_config(vehicle: Vehicle, log: FlightLog, options: ReplayOptions) -> tuple[dict, dict]:
+    """Filter configuration fields (propid_config_t names, SI) and notes on where they came from."""
+    if vehicle.inertia is None and not options.unit_inertia:
+        raise UserError(
+            f"vehicle file {vehicle.path or vehicle.name}: inertia is null. The filter turns torques into angular "
+            "acceleration with J, so without it kf and km cannot be estimated in SI units. Run with --unit-inertia "
+            "to estimate kf/J and km/Jzz ratios instead (see docs/real-data.md)"
+        )
+    inertia = np.eye(3) if options.unit_inertia else np.asarray(vehicle.inertia, dtype=float)
+    kf, km, nominal_source = _nominals(vehicle, options, log)
+    limit = options.max_rotor_speed or absurd_speed_limit(log.rotor_speed)
+    config = {
+        "rotor_count": vehicle.rotor_count,
+        "positions": vehicle.positions.tolist(),
+        "yaw_signs": vehicle.yaw_signs.tolist(),
+        "thrust_coeff_nominal": kf,
+        "drag_coeff_nominal": km,
+        "inertia": inertia.tolist(),
+        "max_rotor_speed": float(limit),
+    }
+    notes = {"nominals": nominal_source, "max_rotor_speed": "given" if options.max_rotor_speed else
+             "2x the 99.9th percentile of the log's finite rotor speeds"}
+    if options.noise == "auto":
+        mask = flying_mask(log)
+        auto = estimate_noise(log, inertia, vehicle.positions, vehicle.yaw_signs, mask)
+        config.update(auto)
+        notes["noise"] = ("auto: gyro noise and unmodelled angular acceleration measured on the log "
+                          "(residual of a least-squares fit of the filter's torque model)")
+    else:
+        notes["noise"] = "library defaults"
+    config.update(options.overrides)
+    return config, notes
+
+
+def _field(obj, name):
+    """Read a field from a dict, a dataclass or a ctypes structure alike."""
+    value = obj[name] if isinstance(obj, dict) else getattr(obj, name)
+    if hasattr(value, "_length_") or isinstance(value, (list, tuple, np.ndarray)):
+        return [float(v) for v in value]
+    return value
+
+
+class FilterSession:
+    """The firmware filter (engineer F's ctypes binding, propid.cfilter) behind the few
+    calls the replay needs; estimates come back as plain lists of floats."""
+
+    def __init__(self, vehicle: Vehicle, config_fields: dict):
+        from propid import cfilter  # the C library itself, not a Python re-implementation
+
+        self._cfilter = cfilter
+        geometry = {"rotor_count", "positions", "yaw_signs", "thrust_coeff_nominal", "drag_coeff_nominal", "inertia"}
+        self.vehicle = Vehicle(
+            name=vehicle.name,
+            rotors=vehicle.rotors,
+            mass=vehicle.mass,
+            inertia=np.asarray(config_fields["inertia"], dtype=float),
+            kf_nominal=list(config_fields["thrust_coeff_nominal"]),
+            km_nominal=list(config_fields["drag_coeff_nominal"]),
+            rotor_radius=vehicle.rotor_radius,
+            rotor_inertia=vehicle.rotor_inertia,
+            notes=vehicle.notes,
+            path=vehicle.path,
+        )
+        overrides = {k: v for k, v in config_fields.items() if k not in geometry}
+        try:
+            config = cfilter.FilterConfig.from_vehicle(self.vehicle.to_json_dict(), **overrides)
+            self._filter = cfilter.CFilter(config)
+        except (ValueError, TypeError) as exc:
+            raise UserError(f"the filter rejected its configuration: {exc}") from None
+        self.rotor_count = vehicle.rotor_count
+        self.TIME_JUMP = cfilter.STATUS["PROPID_ERR_TIME_JUMP"]
+
+    def push_rotor_speeds(self, t_us: int, speeds: np.ndarray) -> int:
+        return int(self._filter.push_rotor_speeds(t_us, speeds))
+
+    def push_gyro(self, t_us: int, gyro: np.ndarray) -> int:
+        return int(self._filter.push_gyro(t_us, gyro))
+
+    def resync(self, t_us: int) -> int:
+        return int(self._filter.resync(t_us))
+
+    def status_name(self, code: int) -> str:
+        return str(self._filter.status_name(code))
+
+    def estimate(self) -> dict:
+        est = self._filter.estimate()
+        names = ("thrust_coeff", "thrust_coeff_std", "drag_coeff", "drag_coeff_std", "gyro_bias", "gyro_bias_std",
+                 "thrust_coeff_converged", "drag_coeff_converged", "health")
+        return {name: _field(est, name) for name in names}
+
+    def counters(self) -> dict:
+        return dict(self._filter.counters())
+
+
+def _segment_mask(log: FlightLog, segment: str) -> np.ndarray:
+    if segment == "all":
+        return np.ones(len(log), dtype=bool)
+    if segment == "flying":
+        return flying_mask(log)
+    raise UserError(f"--segment {segment!r}: choose all or flying")
+
+
+def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = None) -> ReplayResult:
+    """Run the log through the C filter; return the summary (JSON-ready) and time series."""
+    options = options or ReplayOptions()
+    if log.rotor_count != vehicle.rotor_count:
+        raise UserError(f"the log has {log.rotor_count} rotors, the vehicle file {vehicle.rotor_count}")
+    config_fields, notes = build_config(vehicle, log, options)
+    filt = FilterSession(vehicle, config_fields)
+    streams = detect_streams(log) if options.streams == "auto" else options.streams
+    mask = _segment_mask(log, options.segment)
+    rows = np.flatnonzero(mask)
+    if rows.size == 0:
+        raise UserError("no rows to replay (is the vehicle ever flying? try --segment all)")
+    t_us = np.round((log.t - log.t[0]) * US).astype(np.int64) + US  # start at 1 s: time 0 is 'no time yet'
+    speeds = np.ascontiguousarray(log.rotor_speed, dtype=np.float32)
+    gyro = np.ascontiguousarray(log.gyro, dtype=np.float32)
+    has_gyro = np.any(np.isfinite(log.gyro), axis=1)
+    has_rotor = np.any(np.isfinite(log.rotor_speed), axis=1)
+    repeats = {"gyro": 0, "rotor": 0}
+    if options.skip_repeats:
+        same_gyro = np.zeros(len(log), dtype=bool)
+        same_gyro[1:] = np.all(log.gyro[1:] == log.gyro[:-1], axis=1)
+        same_rotor = np.zeros(len(log), dtype=bool)
+        same_rotor[1:] = np.all(log.rotor_speed[1:] == log.rotor_speed[:-1], axis=1)
+        repeats = {"gyro": int(np.sum(same_gyro[mask])), "rotor": int(np.sum(same_rotor[mask]))}
+        has_gyro &= ~same_gyro
+        has_rotor &= ~same_rotor
+        if streams == "rows":
+            streams = "events"  # rows now carry one stream or the other
+    delay_us = int(round(options.rotor_delay_s * US))
+    status_counts: dict[str, int] = {}
+    n = vehicle.rotor_count
+    rec_t, rec_kf, rec_kfs, rec_km, rec_kms, rec_bg, rec_bgs, rec_conv_kf, rec_conv_km = ([] for _ in range(9))
+    resyncs = 0
+    gyro_pushes = 0
+    iterator = rows
+    if options.progress:
+        from tqdm import tqdm
+
+        iterator = tqdm(rows, desc="replay", unit="row", mininterval=0.5, leave=False)
+    # Rotor rows are pushed at t + delay: interleave the two streams in time order.
+    rotor_rows = [i for i in rows if streams == "rows" or has_rotor[i]]
+    next_rotor = 0
+    for i in iterator:
+        while next_rotor < len(rotor_rows) and t_us[rotor_rows[next_rotor]] + delay_us <= t_us[i]:
+            j = rotor_rows[next_rotor]
+            next_rotor += 1
+            status = filt.push_rotor_speeds(int(t_us[j] + delay_us), speeds[j])
+            if status < 0:
+                name = filt.status_name(status)
+                status_counts[name] = status_counts.get(name, 0) + 1
+        if streams == "rows" or has_gyro[i]:
+            status = filt.push_gyro(int(t_us[i]), gyro[i])
+            if status == filt.TIME_JUMP:
+                filt.resync(int(t_us[i]))
+                resyncs += 1
+                status = filt.push_gyro(int(t_us[i]), gyro[i])
+            if status < 0:
+                name = filt.status_name(status)
+                status_counts[name] = status_counts.get(name, 0) + 1
+            gyro_pushes += 1
+            if gyro_pushes % options.record_every == 0:
+                est = filt.estimate()
+                rec_t.append(log.t[i])
+                rec_kf.append(est["thrust_coeff"][:n])
+                rec_kfs.append(est["thrust_coeff_std"][:n])
+                rec_km.append(est["drag_coeff"][:n])
+                rec_kms.append(est["drag_coeff_std"][:n])
+                rec_bg.append(est["gyro_bias"])
+                rec_bgs.append(est["gyro_bias_std"])
+                rec_conv_kf.append([(est["thrust_coeff_converged"] >> k) & 1 for k in range(n)])
+                rec_conv_km.append([(est["drag_coeff_converged"] >> k) & 1 for k in range(n)])
+    if not rec_t:
+        raise UserError("no gyro sample was replayed")
+    series = {
+        "t": np.array(rec_t),
+        "kf": np.array(rec_kf, dtype=float),
+        "kf_std": np.array(rec_kfs, dtype=float),
+        "km": np.array(rec_km, dtype=float),
+        "km_std": np.array(rec_kms, dtype=float),
+        "gyro_bias": np.array(rec_bg, dtype=float),
+        "gyro_bias_std": np.array(rec_bgs, dtype=float),
+        "kf_converged": np.array(rec_conv_kf, dtype=bool),
+        "km_converged": np.array(rec_conv_km, dtype=bool),
+    }
+    final = filt.estimate()
+    counters = filt.counters()
+
+    def converged_mean(values: np.ndarray, flags: np.ndarray) -> tuple[list[float], list[bool], list[float]]:
+        means, conv, starts = [], [], []
+        half = values.shape[0] // 2
+        for k in range(values.shape[1]):
+            on = np.flatnonzero(flags[:, k])
+            start = int(on[0]) if on.size else half
+            means.append(float(np.mean(values[start:, k])))
+            conv.append(bool(on.size) and bool(flags[-1, k]))
+            starts.append(float(series["t"][start]) if on.size else float("nan"))
+        return means, conv, starts
+
+    kf_mean, kf_conv, kf_start = converged_mean(series["kf"], series["kf_converged"])
+    km_mean, km_conv, km_start = converged_mean(series["km"], series["km_converged"])
+    finite = all(np.all(np.isfinite(series[k])) for k in ("kf", "kf_std", "km", "km_std", "gyro_bias"))
+    summary = {
+        "log": str(log.path) if log.path else None,
+        "vehicle": str(vehicle.path) if vehicle.path else vehicle.name,
+        "mode": "unit_inertia" if options.unit_inertia else "si",
+        "units": {
+            "kf": "N/(rad/s)^2" if not options.unit_inertia else "kf/J: (rad/s^2)/(rad/s)^2 per metre of arm, J = 1 kg m^2",
+            "km": "N m/(rad/s)^2" if not options.unit_inertia else "km/Jzz: (rad/s^2)/(rad/s)^2",
+            "gyro_bias": "rad/s",
+        },
+        "segment": options.segment,
+        "streams": streams,
+        "rows_replayed": int(rows.size),
+        "repeated_rows_skipped": repeats,
+        "rotor_delay_s": options.rotor_delay_s,
+        "duration_s": float(log.t[rows[-1]] - log.t[rows[0]]),
+        "kf": [float(v) for v in final["thrust_coeff"][:n]],
+        "kf_std": [float(v) for v in final["thrust_coeff_std"][:n]],
+        "km": [float(v) for v in final["drag_coeff"][:n]],
+        "km_std": [float(v) for v in final["drag_coeff_std"][:n]],
+        "kf_mean": kf_mean,
+        "km_mean": km_mean,
+        "kf_converged_from_s": kf_start,
+        "km_converged_from_s": km_start,
+        "converged": {"kf": kf_conv, "km": km_conv},
+        "gyro_bias": [float(v) for v in final["gyro_bias"]],
+        "gyro_bias_std": [float(v) for v in final["gyro_bias_std"]],
+        "rejected": dict(sorted(status_counts.items())),
+        "counters": counters,
+        "resyncs_by_replay": resyncs,
+        "health": int(final["health"]),
+        "finite": bool(finite),
+        "config": config_fields,
+        "config_notes": notes,
+        "definitions": {
+            "kf_mean": "mean of the estimate from the first sample flagged converged (rel std < converged_rel_std) "
+                       "to the end; second half of the replay if never converged",
+            "converged": "converged flag set at the end of the replay",
+        },
+    }
+    return ReplayResult(summary=summary, series=series)
+
+
+def plot_replay(result: ReplayResult, path: str, title: str = "", reference_kf: float | None = None) -> None:
+    """PNG: kf and km per rotor with +-1 sigma bands, gyro biases, over time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    s = result.series
+    fig, axes = plt.subplots(3, 1, figsize=(7.5, 7.0), sharex=True, dpi=80)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for ax, key, label in ((axes[0], "kf", "kf"), (axes[1], "km", "km")):
+        for k in range(s[key].shape[1]):
+            c = colors[k % len(colors)]
+            ax.plot(s["t"], s[key][:, k], color=c, lw=1.0, label=f"rotor {k + 1}")
+            ax.fill_between(s["t"], s[key][:, k] - s[f"{key}_std"][:, k], s[key][:, k] + s[f"{key}_std"][:, k],
+                            color=c, alpha=0.15, lw=0)
+        nominal = result.summary["config"]["thrust_coeff_nominal" if key == "kf" else "drag_coeff_nominal"]
+        ax.axhline(float(np.mean(nominal)), color="k", ls=":", lw=1, label="prior mean")
+        ax.set_ylabel(f"{label} [{result.summary['units'][key].split(':')[0]}]")
+        ax.grid(alpha=0.3)
+    if reference_kf is not None:
+        axes[0].axhline(reference_kf, color="r", ls="--", lw=1, label="independent (thrust)")
+    axes[0].legend(fontsize=7, ncol=3, loc="lower right")
+    for k, axis in enumerate("xyz"):
+        c = colors[k]
+        axes[2].plot(s["t"], s["gyro_bias"][:, k], color=c, lw=1.0, label=f"b_{axis}")
+        axes[2].fill_between(s["t"], s["gyro_bias"][:, k] - s["gyro_bias_std"][:, k],
+                             s["gyro_bias"][:, k] + s["gyro_bias_std"][:, k], color=c, alpha=0.15, lw=0)
+    axes[2].set_ylabel("gyro bias [rad/s]")
+    axes[2].set_xlabel("log time [s]")
+    axes[2].legend(fontsize=7, ncol=3)
+    axes[2].grid(alpha=0.3)
+    if title:
+        axes[0].set_title(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+# ----------------------------------------------------------------------------- fleet validation
+def _cv(values: list[float]) -> float:
+    arr = np.asarray(values, dtype=float)
+    return float(np.std(arr, ddof=1) / np.mean(arr)) if arr.size > 1 and np.mean(arr) != 0 else float("nan")
+
+
+def fleet_summary(summaries: list[dict], reference_kf: float | None = None) -> dict:
+    """Statistics over several replays of one vehicle: mean of the per-run means (over
+    rotors), their coefficient of variation (std/mean, ddof 1), agreement with the
+    independent kf, and the same for the least-squares checks when they were run."""
+    kf_runs = [float(np.mean(s["kf_mean"])) for s in summaries]
+    km_runs = [float(np.mean(s["km_mean"])) for s in summaries]
+    out = {
+        "runs": len(summaries),
+        "kf_fleet_mean": float(np.mean(kf_runs)),
+        "kf_run_cv": _cv(kf_runs),
+        "km_fleet_mean": float(np.mean(km_runs)),
+        "km_run_cv": _cv(km_runs),
+        "all_finite": all(s["finite"] for s in summaries),
+        "kf_converged_runs": sum(all(s["converged"]["kf"]) for s in summaries),
+        "runs_with_state_clamps": sum(1 for s in summaries if s["counters"].get("state_clamps", 0) > 0),
+        "cov_repairs": sum(s["counters"].get("cov_repairs", 0) for s in summaries),
+        "km_converged_runs": sum(all(s["converged"]["km"]) for s in summaries),
+    }
+    if reference_kf:
+        out["reference_kf"] = reference_kf
+        out["kf_fleet_over_reference"] = out["kf_fleet_mean"] / reference_kf
+    checks = [s.get("checks") for s in summaries]
+    if all(c and c.get("bands") for c in checks):
+        def pooled(band, key, coeff):
+            vals = [c["bands"][band][key][coeff] for c in checks if band in c["bands"] and key in c["bands"][band]]
+            return {"mean": float(np.mean(vals)), "cv": _cv(vals)} if vals else None
+
+        out["checks"] = {
+            "thrust_kf_raw": pooled("raw", "thrust_kf", "kf"),
+            "roll_kf_raw": pooled("raw", "roll_kf", "kf"),
+            "pitch_kf_raw": pooled("raw", "pitch_kf", "kf"),
+            "roll_kf_raw_with_velocity": pooled("raw", "roll_kf_with_velocity", "kf"),
+            "pitch_kf_raw_with_velocity": pooled("raw", "pitch_kf_with_velocity", "kf"),
+            "roll_kf_2_10Hz": pooled("2-10Hz", "roll_kf", "kf"),
+            "pitch_kf_2_10Hz": pooled("2-10Hz", "pitch_kf", "kf"),
+            "yaw_km_2_10Hz_with_rotor_inertia": pooled("2-10Hz", "yaw_km_rotor_inertia", "km"),
+        }
+    return out
+
+
+def validation_table(summaries: list[dict], reference_kf: float | None = None) -> str:
+    """Markdown table, one row per run (the docs' validation table)."""
+    ref = reference_kf or float("nan")
+    head = ("| run | s | rotor samples rejected | clamped steps | filter kf (x ref) | kf rotor spread | filter km | km conv. "
+            "| acc thrust kf | LS roll/pitch kf raw | raw + velocity moment | 2-10 Hz | 2-10 Hz km |")
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for s in summaries:
+        kf = np.asarray(s["kf_mean"])
+        name = Path(s["log"]).stem if s.get("log") else "?"
+        rejected = sum(v for k, v in s["rejected"].items() if "ROTOR" in k or "NOT_FINITE" in k)
+        c = (s.get("checks") or {}).get("bands", {})
+
+        def fit(band, key, coeff="kf", fmt="{:.2f}"):
+            try:
+                return fmt.format(c[band][key][coeff] / ref) if coeff == "kf" else fmt.format(c[band][key][coeff])
+            except KeyError:
+                return "n/a"
+
+        lines.append(
+            f"| {name} | {s['duration_s']:.0f} | {rejected} | {s['counters'].get('state_clamps', 0)} | "
+            f"{kf.mean():.3g} ({kf.mean() / ref:.2f}) | "
+            f"{_cv(kf):.0%} | {np.mean(s['km_mean']):.3g} | {sum(s['converged']['km'])}/{len(kf)} | "
+            f"{fit('raw', 'thrust_kf')} | {fit('raw', 'roll_kf')}/{fit('raw', 'pitch_kf')} | "
+            f"{fit('raw', 'roll_kf_with_velocity')}/{fit('raw', 'pitch_kf_with_velocity')} | "
+            f"{fit('2-10Hz', 'roll_kf')}/{fit('2-10Hz', 'pitch_kf')} | "
+            f"{fit('2-10Hz', 'yaw_km_rotor_inertia', 'km', '{:.2g}')} |"
+        )
+    return "\n".join(lines)
+
+
+def plot_fleet(summaries: list[dict], path: str, reference_kf: float) -> None:
+    """Bar chart per run: the filter's kf and the least-squares checks, relative to the
+    independent kf."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = [Path(s["log"]).stem.replace("_20251017", "") if s.get("log") else "?" for s in summaries]
+    series = {"filter (mean of rotors)": [np.mean(s["kf_mean"]) / reference_kf for s in summaries]}
+
+    def check(band, key):
+        return [((s.get("checks") or {}).get("bands", {}).get(band, {}).get(key, {}) or {}).get("kf", np.nan)
+                / reference_kf for s in summaries]
+
+    if all(s.get("checks") for s in summaries):
+        series["LS thrust from acc_z"] = check("raw", "thrust_kf")
+        series["LS torque raw (roll+pitch)/2"] = list(0.5 * (np.array(check("raw", "roll_kf")) + np.array(check("raw", "pitch_kf"))))
+        series["LS torque 2-10 Hz (roll+pitch)/2"] = list(
+            0.5 * (np.array(check("2-10Hz", "roll_kf")) + np.array(check("2-10Hz", "pitch_kf"))))
+    fig, ax = plt.subplots(figsize=(9, 3.6), dpi=80)
+    width = 0.8 / len(series)
+    x = np.arange(len(names))
+    for k, (label, values) in enumerate(series.items()):
+        ax.bar(x + (k - (len(series) - 1) / 2) * width, values, width, label=label)
+    ax.axhline(1.0, color="k", lw=1, ls="--")
+    ax.set_xticks(x)
+    ax.set_xticklabels(names, rotation=45, ha="right", fontsize=7)
+    ax.set_ylabel("kf / independent kf")
+    ax.set_ylim(0, 1.25)
+    ax.legend(fontsize=7, ncol=4, loc="upper center")
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -1,0 +1,145 @@
+/* ESC telemetry model (see esc_telemetry.h). */
+#include "esc_telemetry.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "sitl_math.h"
+
+void sitl_esc_default_params(sitl_esc_params_t *p)
+{
+    /* Bidirectional DShot: one eRPM report per motor command frame (here the
+     * 500 Hz control loop), measured over the last electrical revolutions and
+     * returned ~30 us after the frame: ~1 ms effective latency. */
+    p->rate_hz = 500.0;
+    p->phase_s = 0.00025;
+    p->latency_s = 0.001;
+    p->dropout_prob = 0.01;
+    p->quantise_dshot = 1;
+    p->pole_pairs = 7;
+}
+
+void sitl_esc_paper_params(sitl_esc_params_t *p, double control_rate_hz)
+{
+    p->rate_hz = control_rate_hz;
+    p->phase_s = 0.0;
+    p->latency_s = 0.0;
+    p->dropout_prob = 0.0;
+    p->quantise_dshot = 0;
+    p->pole_pairs = 7;
+}
+
+int sitl_esc_init(sitl_esc_telemetry_t *esc, const sitl_esc_params_t *params, int rotor_count,
+                  double extra_delay_s, double history_rate_hz, uint64_t seed)
+{
+    memset(esc, 0, sizeof(*esc));
+    if (!(params->rate_hz > 0.0) || !(params->latency_s >= 0.0) || !(extra_delay_s >= 0.0) ||
+        !(params->dropout_prob >= 0.0 && params->dropout_prob <= 1.0) ||
+        params->pole_pairs < 1 || rotor_count < 1 || rotor_count > SITL_MAX_ROTORS ||
+        !(history_rate_hz > 0.0)) {
+        return -1;
+    }
+    esc->params = *params;
+    esc->extra_delay_s = extra_delay_s;
+    esc->rotor_count = rotor_count;
+    double span = params->latency_s + extra_delay_s + 0.01;
+    double cap = ceil(span * history_rate_hz) + 64.0;
+    if (cap > 1e7) {
+        return -1;
+    }
+    esc->capacity = (int)cap;
+    esc->history = calloc((size_t)esc->capacity, sizeof(*esc->history));
+    if (esc->history == NULL) {
+        return -1;
+    }
+    sitl_rng_init(&esc->rng, seed, SITL_RNG_ESC);
+    return 0;
+}
+
+void sitl_esc_free(sitl_esc_telemetry_t *esc)
+{
+    free(esc->history);
+    esc->history = NULL;
+}
+
+void sitl_esc_record(sitl_esc_telemetry_t *esc, double t, const double *speed)
+{
+    sitl_speed_sample_t *s = &esc->history[esc->head];
+    s->time = t;
+    memcpy(s->speed, speed, (size_t)esc->rotor_count * sizeof(double));
+    esc->head = (esc->head + 1) % esc->capacity;
+    if (esc->size < esc->capacity) {
+        esc->size++;
+    }
+}
+
+static const sitl_speed_sample_t *at(const sitl_esc_telemetry_t *esc, int age)
+{
+    /* age 0 = newest */
+    int idx = (esc->head - 1 - age + 2 * esc->capacity) % esc->capacity;
+    return &esc->history[idx];
+}
+
+/* True speeds at time t by linear interpolation in the history. */
+static void lookup(const sitl_esc_telemetry_t *esc, double t, double *out)
+{
+    const sitl_speed_sample_t *newer = at(esc, 0);
+    if (t >= newer->time || esc->size == 1) {
+        memcpy(out, newer->speed, (size_t)esc->rotor_count * sizeof(double));
+        return;
+    }
+    for (int age = 1; age < esc->size; age++) {
+        const sitl_speed_sample_t *older = at(esc, age);
+        if (older->time <= t) {
+            double span = newer->time - older->time;
+            double a = span > 0.0 ? (t - older->time) / span : 1.0;
+            for (int i = 0; i < esc->rotor_count; i++) {
+                out[i] = older->speed[i] + a * (newer->speed[i] - older->speed[i]);
+            }
+            return;
+        }
+        newer = older;
+    }
+    memcpy(out, newer->speed, (size_t)esc->rotor_count * sizeof(double)); /* oldest kept */
+}
+
+double sitl_esc_quantise_dshot(double speed, int pole_pairs)
+{
+    /* Electrical period in whole microseconds, then e-period: keep the top 9
+     * bits (mantissa) with a 3-bit shift; longer than 511 << 7 us means stopped. */
+    if (!(speed > 0.0)) {
+        return 0.0;
+    }
+    double period_us = 2.0 * SITL_PI * 1e6 / (speed * (double)pole_pairs);
+    if (period_us >= 511.0 * 128.0) {
+        return 0.0;
+    }
+    unsigned long period = (unsigned long)period_us; /* the ESC's timer truncates */
+    unsigned shift = 0;
+    while ((period >> shift) > 511u) {
+        shift++;
+    }
+    unsigned long mantissa = period >> shift;
+    if (mantissa == 0) {
+        return 0.0;
+    }
+    double decoded_us = (double)(mantissa << shift);
+    return 2.0 * SITL_PI * 1e6 / (decoded_us * (double)pole_pairs);
+}
+
+int sitl_esc_report(sitl_esc_telemetry_t *esc, double t, double *speed_out)
+{
+    /* Always draw, so the loss pattern does not depend on anything else. */
+    double u = sitl_rng_uniform(&esc->rng);
+    if (esc->size == 0 || u < esc->params.dropout_prob) {
+        return 0;
+    }
+    lookup(esc, t - esc->params.latency_s - esc->extra_delay_s, speed_out);
+    if (esc->params.quantise_dshot) {
+        for (int i = 0; i < esc->rotor_count; i++) {
+            speed_out[i] = sitl_esc_quantise_dshot(speed_out[i], esc->params.pole_pairs);
+        }
+    }
+    return 1;
+}

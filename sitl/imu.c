@@ -1,0 +1,94 @@
+/* Gyro + accelerometer model (see imu.h). */
+#include "imu.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "sitl_math.h"
+
+#define DEG (SITL_PI / 180.0)
+#define G0 9.80665
+
+void sitl_imu_default_params(sitl_imu_params_t *p)
+{
+    memset(p, 0, sizeof(*p));
+    p->rate_hz = 1000.0;                    /* BMI088 gyro ODR 1000 Hz (one of 100..2000) */
+    p->gyro.noise_density = 0.014 * DEG;    /* 0.014 deg/s/sqrt(Hz), BMI088 typ. */
+    p->gyro.bias_max = 1.0 * DEG;           /* zero-rate offset +-1 deg/s, BMI088 typ. */
+    p->gyro.bias_walk = 1.0e-4;             /* in-run drift, consumer MEMS order (docs) */
+    p->gyro.range = 2000.0 * DEG;           /* +-2000 deg/s range */
+    p->gyro.resolution = 2000.0 * DEG / 32768.0; /* 16-bit: 0.061 deg/s LSB */
+    p->accel.noise_density = 175e-6 * G0;   /* 175 ug/sqrt(Hz), BMI088 accel typ. */
+    p->accel.bias_max = 20e-3 * G0;         /* zero-g offset +-20 mg */
+    p->accel.bias_walk = 1.0e-4;
+    p->accel.range = 24.0 * G0;             /* +-24 g range */
+    p->accel.resolution = 24.0 * G0 / 32768.0;
+}
+
+void sitl_imu_paper_params(sitl_imu_params_t *p)
+{
+    sitl_imu_default_params(p);
+    p->rate_hz = 500.0;
+    p->gyro.bias_walk = 0.0;
+    p->gyro.range = 0.0;
+    p->gyro.resolution = 0.0;
+    p->accel.bias_walk = 0.0;
+    p->accel.range = 0.0;
+    p->accel.resolution = 0.0;
+}
+
+void sitl_imu_init(sitl_imu_t *imu, const sitl_imu_params_t *params, uint64_t seed,
+                   const sitl_effects_t *effects)
+{
+    memset(imu, 0, sizeof(*imu));
+    imu->params = *params;
+    sitl_rng_t bias_rng;
+    sitl_rng_init(&bias_rng, seed, SITL_RNG_GYRO_BIAS);
+    for (int i = 0; i < 3; i++) {
+        imu->gyro_bias[i] = sitl_rng_range(&bias_rng, -params->gyro.bias_max,
+                                           params->gyro.bias_max);
+    }
+    sitl_rng_init(&bias_rng, seed, SITL_RNG_ACCEL_BIAS);
+    for (int i = 0; i < 3; i++) {
+        imu->accel_bias[i] = sitl_rng_range(&bias_rng, -params->accel.bias_max,
+                                            params->accel.bias_max);
+    }
+    sitl_rng_init(&imu->gyro_rng, seed, SITL_RNG_GYRO);
+    sitl_rng_init(&imu->accel_rng, seed, SITL_RNG_ACCEL);
+    sitl_effects_gyro_matrix(effects, imu->gyro_matrix);
+}
+
+static double finish(const sitl_inertial_params_t *p, double x)
+{
+    if (p->range > 0.0) {
+        x = x > p->range ? p->range : (x < -p->range ? -p->range : x);
+    }
+    if (p->resolution > 0.0) {
+        x = p->resolution * floor(x / p->resolution + 0.5);
+    }
+    return x;
+}
+
+void sitl_imu_sample(sitl_imu_t *imu, const double true_rate[3],
+                     const double specific_force[3], double dt, double gyro_out[3],
+                     double accel_out[3])
+{
+    const sitl_imu_params_t *p = &imu->params;
+    double sigma_g = p->gyro.noise_density * sqrt(p->rate_hz);
+    double sigma_a = p->accel.noise_density * sqrt(p->rate_hz);
+    double walk_g = p->gyro.bias_walk * sqrt(dt > 0.0 ? dt : 0.0);
+    double walk_a = p->accel.bias_walk * sqrt(dt > 0.0 ? dt : 0.0);
+    double scaled[3];
+    sitl_mat3_mul_vec(scaled, imu->gyro_matrix, true_rate);
+    for (int i = 0; i < 3; i++) {
+        /* Draw order is fixed (noise, then walk) so runs stay reproducible. */
+        double ng = sitl_rng_normal(&imu->gyro_rng);
+        double wg = sitl_rng_normal(&imu->gyro_rng);
+        double na = sitl_rng_normal(&imu->accel_rng);
+        double wa = sitl_rng_normal(&imu->accel_rng);
+        imu->gyro_bias[i] += walk_g * wg;
+        imu->accel_bias[i] += walk_a * wa;
+        gyro_out[i] = finish(&p->gyro, scaled[i] + imu->gyro_bias[i] + sigma_g * ng);
+        accel_out[i] = finish(&p->accel, specific_force[i] + imu->accel_bias[i] + sigma_a * na);
+    }
+}

@@ -1,0 +1,85 @@
+/*
+ * propid_sitl command line: every run setting in one struct, defaults,
+ * parser and --help text.
+ */
+#ifndef SITL_OPTIONS_H
+#define SITL_OPTIONS_H
+
+#include <stdint.h>
+
+#include "effects.h"
+#include "esc_telemetry.h"
+#include "imu.h"
+#include "trajectory.h"
+
+#define SITL_PATH_MAX 1024
+
+typedef enum {
+    SITL_MODE_ORACLE = 0,    /* controller allocation uses the true coefficients */
+    SITL_MODE_INCORRECT = 1, /* fixed wrong coefficients */
+    SITL_MODE_FILTER = 2,    /* the filter's current estimates */
+} sitl_mode_t;
+
+/* Exit codes of propid_sitl (docs/sitl.md). */
+enum {
+    SITL_EXIT_OK = 0,
+    SITL_EXIT_ERROR = 1,      /* run-time failure: file I/O, link, filter set-up */
+    SITL_EXIT_USAGE = 2,      /* bad command line or vehicle file */
+    SITL_EXIT_DIVERGED = 3,   /* the flight diverged and was stopped */
+};
+
+typedef struct {
+    char vehicle[SITL_PATH_MAX];        /* preset name or JSON path */
+    sitl_trajectory_kind_t trajectory;
+    sitl_mode_t mode;
+    uint64_t seed;
+    double duration_s;
+    char log_path[SITL_PATH_MAX];       /* "" = no log */
+    double log_rate_hz;                 /* 0 = every control step */
+    char mavlink_url[SITL_PATH_MAX];    /* "" = no link */
+    double realtime;                    /* 0 = as fast as possible */
+    double physics_rate_hz;
+    double control_rate_hz;
+    double coeff_spread;                /* true = nominal * U(1-s, 1+s) */
+    int incorrect_random;               /* 0: Incorrect uses nominal; 1: random around truth */
+    double incorrect_spread;            /* relative std of the random Incorrect draw */
+    sitl_effects_t effects;
+    int quiet;
+    char summary_json[SITL_PATH_MAX];   /* "" = none */
+    int paper;                          /* --paper was given */
+    double start_height_m;              /* trajectory origin z */
+    int start_on_ground;                /* start at rest on the ground below the origin */
+    int start_at_rest;                  /* start at the origin with zero velocity */
+    int ground_enabled;
+    double divergence_distance_m;       /* stop when farther than this from the reference */
+    double divergence_tilt_deg;         /* stop when tilted more than this */
+
+    sitl_imu_params_t imu;
+    sitl_esc_params_t esc;
+
+    /* Vehicle overrides (< 0 = keep the vehicle's value). */
+    double motor_time_constant;
+    double rotor_speed_min;
+    double rotor_speed_max;
+
+    /* Filter prior overrides (< 0 = propid_config_default). */
+    double prior_kf_rel_std;
+    double prior_km_rel_std;
+    double prior_bias_std;
+    /* Filter tuning overrides (< 0 = propid_config_default). */
+    double filter_rate_noise;           /* rate_process_noise [rad/s^2/sqrt(Hz)] */
+    double filter_coeff_walk;           /* thrust_ and drag_coeff_rel_walk [1/sqrt(s)] */
+    double filter_bias_walk;            /* gyro_bias_walk [rad/s/sqrt(s)] */
+} sitl_options_t;
+
+void sitl_options_default(sitl_options_t *opts);
+
+/* Parse argv. Returns 0 to run, 1 if --help was printed, or SITL_EXIT_USAGE
+ * after printing the reason to stderr. */
+int sitl_options_parse(sitl_options_t *opts, int argc, char **argv);
+
+void sitl_options_print_help(const char *prog);
+
+const char *sitl_mode_name(sitl_mode_t mode);
+
+#endif /* SITL_OPTIONS_H */

@@ -1,0 +1,303 @@
+/* Rigid body + rotors + ground contact, RK4 (see plant.h). */
+#include "plant.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "effects_physics.h"
+#include "sitl_math.h"
+
+int sitl_plant_init(sitl_plant_t *plant, const sitl_vehicle_t *vehicle,
+                    const double *true_thrust_coeff, const double *true_drag_coeff,
+                    const sitl_effects_t *effects, char *err, int err_size)
+{
+    if (sitl_vehicle_check(vehicle, err, err_size) != 0) {
+        return -1;
+    }
+    memset(plant, 0, sizeof(*plant));
+    plant->vehicle = *vehicle;
+    if (effects != NULL) {
+        plant->effects = *effects;
+    }
+    plant->gravity = SITL_GRAVITY;
+    plant->ground_enabled = 1;
+    plant->mass = vehicle->mass;
+    memcpy(plant->inertia, vehicle->inertia, sizeof(plant->inertia));
+    plant->rotor_count = vehicle->rotor_count;
+    double kf_sum = 0.0;
+    for (int i = 0; i < vehicle->rotor_count; i++) {
+        sitl_vec3_copy(plant->rotor_position[i], vehicle->rotor[i].position);
+        plant->yaw_sign[i] = vehicle->rotor[i].yaw_sign;
+        plant->thrust_coeff[i] = true_thrust_coeff != NULL ? true_thrust_coeff[i]
+                                                           : vehicle->rotor[i].thrust_coeff;
+        plant->drag_coeff[i] = true_drag_coeff != NULL ? true_drag_coeff[i]
+                                                       : vehicle->rotor[i].drag_coeff;
+        if (!(plant->thrust_coeff[i] > 0.0) || !(plant->drag_coeff[i] > 0.0) ||
+            !isfinite(plant->thrust_coeff[i]) || !isfinite(plant->drag_coeff[i])) {
+            snprintf(err, (size_t)err_size, "true coefficients of rotor %d must be positive",
+                     i + 1);
+            return -1;
+        }
+        kf_sum += vehicle->rotor[i].thrust_coeff;
+    }
+    plant->motor.time_constant = vehicle->motor_time_constant;
+    plant->motor.speed_min = vehicle->rotor_speed_min;
+    plant->motor.speed_max = vehicle->rotor_speed_max;
+    plant->reference_rotor_speed = sqrt(vehicle->mass * plant->gravity / kf_sum);
+
+    sitl_effects_setup_body(plant);
+    if (sitl_mat3_inverse(plant->inertia, plant->inertia_inv) != 0) {
+        snprintf(err, (size_t)err_size, "true inertia is singular");
+        return -1;
+    }
+    return 0;
+}
+
+void sitl_plant_derivative(const sitl_plant_t *plant, const sitl_state_t *state,
+                           const double *rotor_command, sitl_state_derivative_t *deriv,
+                           sitl_loads_t *loads)
+{
+    sitl_loads_t local;
+    sitl_loads_t *ld = loads != NULL ? loads : &local;
+    memset(ld, 0, sizeof(*ld));
+    double rot[3][3];
+    sitl_quat_to_matrix(state->quat, rot);
+    double v_body[3];
+    for (int i = 0; i < 3; i++) {
+        v_body[i] = rot[0][i] * state->velocity[0] + rot[1][i] * state->velocity[1] +
+                    rot[2][i] * state->velocity[2];
+    }
+
+    for (int i = 0; i < plant->rotor_count; i++) {
+        ld->rotor_accel[i] =
+            sitl_motor_acceleration(&plant->motor, rotor_command[i], state->rotor_speed[i]);
+        deriv->rotor_speed[i] = ld->rotor_accel[i];
+        sitl_effects_rotor_loads(plant, state, v_body, i, &ld->thrust[i], &ld->drag_torque[i]);
+        /* Thrust along body z at the hub: force and r x F; drag torque about z. */
+        const double *r = plant->rotor_position[i];
+        ld->force_body[2] += ld->thrust[i];
+        ld->torque_body[0] += r[1] * ld->thrust[i];
+        ld->torque_body[1] -= r[0] * ld->thrust[i];
+        ld->torque_body[2] += plant->yaw_sign[i] * ld->drag_torque[i];
+    }
+    double extra_force[3] = {0.0, 0.0, 0.0};
+    sitl_effects_rotor_wrench(plant, state, v_body, ld->rotor_accel, extra_force,
+                              ld->effect_torque_body);
+    for (int k = 0; k < 3; k++) {
+        ld->force_body[k] += extra_force[k];
+        ld->torque_body[k] += ld->effect_torque_body[k];
+    }
+
+    /* Translation: a = R F / m - g z. */
+    double accel[3];
+    sitl_mat3_mul_vec(accel, rot, ld->force_body);
+    for (int k = 0; k < 3; k++) {
+        accel[k] /= plant->mass;
+    }
+    accel[2] -= plant->gravity;
+
+    /* Rotation: J dw = tau - w x (J w). */
+    double jw[3], gyro[3], net[3];
+    sitl_mat3_mul_vec(jw, plant->inertia, state->body_rate);
+    sitl_vec3_cross(gyro, state->body_rate, jw);
+    for (int k = 0; k < 3; k++) {
+        net[k] = ld->torque_body[k] - gyro[k];
+    }
+    sitl_mat3_mul_vec(deriv->body_rate, plant->inertia_inv, net);
+
+    if (state->on_ground && accel[2] <= 0.0) {
+        /* Resting on the ground and not lifting off: the contact holds the body. */
+        memset(accel, 0, sizeof(accel));
+        memset(deriv->body_rate, 0, sizeof(deriv->body_rate));
+        memset(deriv->position, 0, sizeof(deriv->position));
+        memset(deriv->quat, 0, sizeof(deriv->quat));
+    } else {
+        sitl_vec3_copy(deriv->position, state->velocity);
+        sitl_quat_derivative(state->quat, state->body_rate, deriv->quat);
+    }
+    sitl_vec3_copy(deriv->velocity, accel);
+
+    /* Accelerometer: specific force = a - g (world), in the body frame. */
+    double sf_world[3] = {accel[0], accel[1], accel[2] + plant->gravity};
+    for (int i = 0; i < 3; i++) {
+        ld->specific_force_body[i] =
+            rot[0][i] * sf_world[0] + rot[1][i] * sf_world[1] + rot[2][i] * sf_world[2];
+    }
+}
+
+static void add_scaled(const sitl_plant_t *plant, const sitl_state_t *base,
+                       const sitl_state_derivative_t *d, double h, sitl_state_t *out)
+{
+    *out = *base;
+    for (int k = 0; k < 3; k++) {
+        out->position[k] += h * d->position[k];
+        out->velocity[k] += h * d->velocity[k];
+        out->body_rate[k] += h * d->body_rate[k];
+    }
+    for (int k = 0; k < 4; k++) {
+        out->quat[k] += h * d->quat[k];
+    }
+    for (int i = 0; i < plant->rotor_count; i++) {
+        out->rotor_speed[i] += h * d->rotor_speed[i];
+    }
+}
+
+void sitl_plant_step(const sitl_plant_t *plant, sitl_state_t *state, const double *rotor_command,
+                     double dt)
+{
+    sitl_state_derivative_t k1, k2, k3, k4;
+    sitl_state_t tmp;
+    sitl_plant_derivative(plant, state, rotor_command, &k1, NULL);
+    add_scaled(plant, state, &k1, 0.5 * dt, &tmp);
+    sitl_plant_derivative(plant, &tmp, rotor_command, &k2, NULL);
+    add_scaled(plant, state, &k2, 0.5 * dt, &tmp);
+    sitl_plant_derivative(plant, &tmp, rotor_command, &k3, NULL);
+    add_scaled(plant, state, &k3, dt, &tmp);
+    sitl_plant_derivative(plant, &tmp, rotor_command, &k4, NULL);
+
+    const double w = dt / 6.0;
+    for (int k = 0; k < 3; k++) {
+        state->position[k] += w * (k1.position[k] + 2.0 * k2.position[k] + 2.0 * k3.position[k] +
+                                   k4.position[k]);
+        state->velocity[k] += w * (k1.velocity[k] + 2.0 * k2.velocity[k] + 2.0 * k3.velocity[k] +
+                                   k4.velocity[k]);
+        state->body_rate[k] += w * (k1.body_rate[k] + 2.0 * k2.body_rate[k] +
+                                    2.0 * k3.body_rate[k] + k4.body_rate[k]);
+    }
+    for (int k = 0; k < 4; k++) {
+        state->quat[k] += w * (k1.quat[k] + 2.0 * k2.quat[k] + 2.0 * k3.quat[k] + k4.quat[k]);
+    }
+    for (int i = 0; i < plant->rotor_count; i++) {
+        state->rotor_speed[i] += w * (k1.rotor_speed[i] + 2.0 * k2.rotor_speed[i] +
+                                      2.0 * k3.rotor_speed[i] + k4.rotor_speed[i]);
+        state->rotor_speed[i] = sitl_motor_clamp(&plant->motor, state->rotor_speed[i]);
+    }
+    sitl_quat_normalise(state->quat);
+
+    if (plant->ground_enabled) {
+        if (state->position[2] <= 0.0 && (state->velocity[2] <= 0.0 || state->on_ground)) {
+            /* Touch-down or resting: inelastic contact with full friction. */
+            state->position[2] = 0.0;
+            memset(state->velocity, 0, sizeof(state->velocity));
+            memset(state->body_rate, 0, sizeof(state->body_rate));
+            state->on_ground = 1;
+        } else if (state->position[2] > 0.0) {
+            state->on_ground = 0;
+        }
+    }
+}
+
+/* Solve the 4x4 system m x = b by Gauss-Jordan with partial pivoting. */
+static int solve4(double m[4][4], double b[4], double x[4])
+{
+    for (int c = 0; c < 4; c++) {
+        int p = c;
+        for (int r = c + 1; r < 4; r++) {
+            if (fabs(m[r][c]) > fabs(m[p][c])) {
+                p = r;
+            }
+        }
+        if (fabs(m[p][c]) < 1e-12) { /* rows are normalised: entries ~1 */
+            return -1;
+        }
+        if (p != c) {
+            for (int k = 0; k < 4; k++) {
+                double t = m[c][k];
+                m[c][k] = m[p][k];
+                m[p][k] = t;
+            }
+            double t = b[c];
+            b[c] = b[p];
+            b[p] = t;
+        }
+        for (int r = 0; r < 4; r++) {
+            if (r == c) {
+                continue;
+            }
+            double f = m[r][c] / m[c][c];
+            for (int k = c; k < 4; k++) {
+                m[r][k] -= f * m[c][k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    for (int c = 0; c < 4; c++) {
+        x[c] = b[c] / m[c][c];
+    }
+    return 0;
+}
+
+int sitl_plant_hover_speeds(const sitl_plant_t *plant, double *rotor_speed)
+{
+    const int n = plant->rotor_count;
+    double a[4][SITL_MAX_ROTORS];
+    for (int i = 0; i < n; i++) {
+        const double *r = plant->rotor_position[i];
+        double kf = plant->thrust_coeff[i];
+        a[0][i] = kf;
+        a[1][i] = r[1] * kf;
+        a[2][i] = -r[0] * kf;
+        a[3][i] = plant->yaw_sign[i] * plant->drag_coeff[i];
+    }
+    /* Rows are scaled to comparable magnitude before the min-norm solve. */
+    double scale[4];
+    for (int r = 0; r < 4; r++) {
+        double s = 0.0;
+        for (int i = 0; i < n; i++) {
+            s += a[r][i] * a[r][i];
+        }
+        scale[r] = s > 0.0 ? 1.0 / sqrt(s) : 1.0;
+        for (int i = 0; i < n; i++) {
+            a[r][i] *= scale[r];
+        }
+    }
+    double aat[4][4], y[4], b[4] = {plant->mass * plant->gravity * scale[0], 0.0, 0.0, 0.0};
+    for (int r = 0; r < 4; r++) {
+        for (int c = 0; c < 4; c++) {
+            double s = 0.0;
+            for (int i = 0; i < n; i++) {
+                s += a[r][i] * a[c][i];
+            }
+            aat[r][c] = s;
+        }
+    }
+    double aat_copy[4][4], b_copy[4];
+    memcpy(aat_copy, aat, sizeof(aat));
+    memcpy(b_copy, b, sizeof(b));
+    int ok = solve4(aat, b, y) == 0;
+    if (!ok) {
+        /* N < 4 (or a degenerate layout): a tiny ridge gives the closest try. */
+        for (int r = 0; r < 4; r++) {
+            aat_copy[r][r] += 1e-9;
+        }
+        ok = solve4(aat_copy, b_copy, y) == 0;
+    }
+    int feasible = ok;
+    for (int i = 0; i < n; i++) {
+        double u = 0.0;
+        for (int r = 0; r < 4; r++) {
+            u += a[r][i] * y[r];
+        }
+        if (!ok || !(u >= 0.0)) {
+            u = ok ? 0.0 : plant->mass * plant->gravity / ((double)n * plant->thrust_coeff[i]);
+            feasible = 0;
+        }
+        double speed = sqrt(u);
+        if (speed > plant->motor.speed_max || speed < plant->motor.speed_min) {
+            feasible = 0;
+        }
+        rotor_speed[i] = sitl_motor_clamp(&plant->motor, speed);
+    }
+    return feasible ? 0 : -1;
+}
+
+void sitl_plant_hover_state(const sitl_plant_t *plant, const double position[3], double yaw,
+                            sitl_state_t *state)
+{
+    memset(state, 0, sizeof(*state));
+    sitl_vec3_copy(state->position, position);
+    sitl_quat_from_yaw(yaw, state->quat);
+    sitl_plant_hover_speeds(plant, state->rotor_speed);
+    state->on_ground = plant->ground_enabled && position[2] <= 0.0;
+}

@@ -1,0 +1,70 @@
+/* xoshiro256** (Blackman & Vigna) with a splitmix64 seeder; see rng.h. */
+#include "rng.h"
+
+#include <math.h>
+
+static uint64_t splitmix64(uint64_t *x)
+{
+    uint64_t z = (*x += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+static uint64_t rotl(uint64_t x, int k)
+{
+    return (x << k) | (x >> (64 - k));
+}
+
+void sitl_rng_init(sitl_rng_t *rng, uint64_t seed, uint64_t stream)
+{
+    uint64_t x = seed ^ (stream * 0xD1B54A32D192ED03ull);
+    for (int i = 0; i < 4; i++) {
+        rng->s[i] = splitmix64(&x);
+    }
+    rng->has_spare = 0;
+    rng->spare = 0.0;
+}
+
+uint64_t sitl_rng_next(sitl_rng_t *rng)
+{
+    uint64_t *s = rng->s;
+    uint64_t result = rotl(s[1] * 5, 7) * 9;
+    uint64_t t = s[1] << 17;
+    s[2] ^= s[0];
+    s[3] ^= s[1];
+    s[1] ^= s[2];
+    s[0] ^= s[3];
+    s[2] ^= t;
+    s[3] = rotl(s[3], 45);
+    return result;
+}
+
+double sitl_rng_uniform(sitl_rng_t *rng)
+{
+    /* 53 random bits -> [0, 1) */
+    return (double)(sitl_rng_next(rng) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+double sitl_rng_range(sitl_rng_t *rng, double lo, double hi)
+{
+    return lo + (hi - lo) * sitl_rng_uniform(rng);
+}
+
+double sitl_rng_normal(sitl_rng_t *rng)
+{
+    if (rng->has_spare) {
+        rng->has_spare = 0;
+        return rng->spare;
+    }
+    double u1 = sitl_rng_uniform(rng);
+    double u2 = sitl_rng_uniform(rng);
+    if (u1 < 1e-300) {
+        u1 = 1e-300;
+    }
+    double r = sqrt(-2.0 * log(u1));
+    double a = 2.0 * 3.14159265358979323846 * u2;
+    rng->spare = r * sin(a);
+    rng->has_spare = 1;
+    return r * cos(a);
+}

@@ -1,0 +1,536 @@
+/*
+ * The closed-loop flight (see sim.h). Order of work at one instant: ESC
+ * report, then IMU sample (both go to the filter as on the MCU), then the
+ * control step (reference, controller, coefficient source, allocation, log,
+ * divergence check, live summary, link). The plant is integrated between
+ * instants with the commands of the last control step held.
+ */
+#define _POSIX_C_SOURCE 200809L
+#include "sim.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+
+#include "flight_log.h"
+#include "sitl_math.h"
+
+#ifdef PROPID_SITL_WITH_MAVLINK
+#include "sitl_mavlink.h"
+#endif
+
+/* A periodic event in integer nanoseconds: time_k = phase + k * period. */
+typedef struct {
+    double phase_ns;
+    double period_ns;
+    uint64_t k;
+    int64_t next_ns;
+} schedule_t;
+
+static void schedule_init(schedule_t *s, double phase_s, double rate_hz)
+{
+    s->phase_ns = phase_s * 1e9;
+    s->period_ns = 1e9 / rate_hz;
+    s->k = 0;
+    s->next_ns = (int64_t)llround(s->phase_ns);
+}
+
+static void schedule_advance(schedule_t *s)
+{
+    s->k++;
+    s->next_ns = (int64_t)llround(s->phase_ns + (double)s->k * s->period_ns);
+}
+
+static double wall_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static void sleep_seconds(double s)
+{
+    if (s <= 0.0) {
+        return;
+    }
+    struct timespec ts;
+    ts.tv_sec = (time_t)s;
+    ts.tv_nsec = (long)((s - (double)ts.tv_sec) * 1e9);
+    nanosleep(&ts, NULL);
+}
+
+static int state_finite(const sitl_state_t *s, int n)
+{
+    double sum = 0.0;
+    for (int k = 0; k < 3; k++) {
+        sum += s->position[k] + s->velocity[k] + s->body_rate[k];
+    }
+    for (int k = 0; k < 4; k++) {
+        sum += s->quat[k];
+    }
+    for (int i = 0; i < n; i++) {
+        sum += s->rotor_speed[i];
+    }
+    return isfinite(sum);
+}
+
+static void print_live(FILE *out, double t, const sitl_metrics_t *m,
+                       const propid_estimate_t *e)
+{
+    double pos_err = sqrt(m->position_error[0] * m->position_error[0] +
+                          m->position_error[1] * m->position_error[1] +
+                          m->position_error[2] * m->position_error[2]);
+    fprintf(out,
+            "t=%6.2f s  pos_err %.3f m  yaw_err %6.2f deg  |kf/kf_true-1|max %5.1f%%  "
+            "|km/km_true-1|max %5.1f%%  bias_err %.4f rad/s  health 0x%02lx\n",
+            t, pos_err, m->yaw_error * 180.0 / SITL_PI, 100.0 * m->kf_rel_error_max,
+            100.0 * m->km_rel_error_max, m->bias_error_max, (unsigned long)e->health);
+    fflush(out);
+}
+
+typedef struct {
+    sitl_vehicle_t vehicle;
+    sitl_plant_t plant;
+    sitl_state_t state;
+    sitl_trajectory_t trajectory;
+    sitl_controller_t controller;
+    sitl_allocation_t allocation;
+    propid_config_t filter_config;
+    propid_filter_t filter;
+    sitl_imu_t imu;
+    sitl_esc_telemetry_t esc;
+    sitl_metrics_t metrics;
+    sitl_flight_log_t log;
+    int log_open;
+    double true_kf[SITL_MAX_ROTORS], true_km[SITL_MAX_ROTORS];
+    double incorrect_kf[SITL_MAX_ROTORS], incorrect_km[SITL_MAX_ROTORS];
+    double used_kf[SITL_MAX_ROTORS], used_km[SITL_MAX_ROTORS];
+    double command[SITL_MAX_ROTORS];        /* rotor speed commands [rad/s] */
+    double last_gyro[3], last_accel[3];
+    double last_omega[SITL_MAX_ROTORS];
+    int last_status;
+#ifdef PROPID_SITL_WITH_MAVLINK
+    sitl_mavlink_t *link;
+#endif
+} flight_t;
+
+static int fail(sitl_result_t *r, int code, const char *msg)
+{
+    r->exit_code = code;
+    snprintf(r->message, sizeof(r->message), "%s", msg);
+    return code;
+}
+
+static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
+{
+    char err[256];
+    if (sitl_setup_vehicle(o, &f->vehicle, err, (int)sizeof(err)) != 0) {
+        return fail(r, SITL_EXIT_USAGE, err);
+    }
+    const int n = f->vehicle.rotor_count;
+    if (n > SITL_ALLOC_MAX_ROTORS) {
+        return fail(r, SITL_EXIT_USAGE, "too many rotors for the allocation");
+    }
+    sitl_setup_true_coefficients(&f->vehicle, o->coeff_spread, o->seed, f->true_kf, f->true_km);
+    sitl_setup_incorrect_coefficients(o, &f->vehicle, f->true_kf, f->true_km, f->incorrect_kf,
+                                      f->incorrect_km);
+    if (sitl_plant_init(&f->plant, &f->vehicle, f->true_kf, f->true_km, &o->effects, err,
+                        (int)sizeof(err)) != 0) {
+        return fail(r, SITL_EXIT_USAGE, err);
+    }
+    f->plant.ground_enabled = o->ground_enabled;
+
+    double origin[3] = {0.0, 0.0, o->start_height_m};
+    if (sitl_trajectory_init(&f->trajectory, o->trajectory, o->duration_s, origin) != 0) {
+        return fail(r, SITL_EXIT_USAGE, "bad trajectory");
+    }
+    sitl_flat_output_t flat0;
+    sitl_trajectory_eval(&f->trajectory, 0.0, &flat0);
+    if (o->start_on_ground) {
+        double ground[3] = {flat0.position[0], flat0.position[1], 0.0};
+        sitl_plant_hover_state(&f->plant, ground, flat0.yaw, &f->state);
+        memset(f->state.rotor_speed, 0, sizeof(f->state.rotor_speed));
+        f->state.on_ground = 1;
+    } else {
+        sitl_plant_hover_state(&f->plant, flat0.position, flat0.yaw, &f->state);
+        if (!o->start_at_rest) {
+            sitl_vec3_copy(f->state.velocity, flat0.velocity);
+        }
+    }
+
+    /* The controller knows the vehicle file, not the truth. */
+    if (sitl_controller_init(&f->controller, f->vehicle.mass, f->vehicle.inertia, SITL_GRAVITY,
+                             NULL) != 0) {
+        return fail(r, SITL_EXIT_USAGE, "controller rejected the vehicle");
+    }
+    sitl_allocation_geometry_t geo;
+    memset(&geo, 0, sizeof(geo));
+    geo.rotor_count = n;
+    for (int i = 0; i < n; i++) {
+        sitl_vec3_copy(geo.position[i], f->vehicle.rotor[i].position);
+        geo.yaw_sign[i] = f->vehicle.rotor[i].yaw_sign;
+    }
+    geo.rotor_speed_min = f->vehicle.rotor_speed_min;
+    geo.rotor_speed_max = f->vehicle.rotor_speed_max;
+    if (sitl_allocation_init(&f->allocation, &geo) != 0) {
+        return fail(r, SITL_EXIT_USAGE, "allocation rejected the geometry");
+    }
+    const double *kf0 = o->mode == SITL_MODE_ORACLE ? f->true_kf : f->incorrect_kf;
+    const double *km0 = o->mode == SITL_MODE_ORACLE ? f->true_km : f->incorrect_km;
+    if (sitl_allocation_set_coefficients(&f->allocation, kf0, km0) != 0) {
+        return fail(r, SITL_EXIT_USAGE, "allocation cannot use the coefficients (need >= 4 rotors "
+                                        "spanning thrust, roll, pitch and yaw)");
+    }
+    memcpy(f->used_kf, kf0, sizeof(f->used_kf));
+    memcpy(f->used_km, km0, sizeof(f->used_km));
+    memcpy(f->command, f->state.rotor_speed, sizeof(f->command));
+
+    const char *bad = NULL;
+    if (sitl_setup_filter_config(o, &f->vehicle, &f->filter_config, &bad) != PROPID_OK) {
+        snprintf(err, sizeof(err), "filter configuration rejected: field '%s'",
+                 bad != NULL ? bad : "?");
+        return fail(r, SITL_EXIT_ERROR, err);
+    }
+    propid_status_t st = propid_init(&f->filter, &f->filter_config);
+    if (st != PROPID_OK) {
+        snprintf(err, sizeof(err), "propid_init failed: %s", propid_status_name(st));
+        return fail(r, SITL_EXIT_ERROR, err);
+    }
+    double kf_std[SITL_MAX_ROTORS], km_std[SITL_MAX_ROTORS];
+    for (int i = 0; i < n; i++) {
+        kf_std[i] = (double)f->filter_config.thrust_coeff_rel_std0 * f->vehicle.rotor[i].thrust_coeff;
+        km_std[i] = (double)f->filter_config.drag_coeff_rel_std0 * f->vehicle.rotor[i].drag_coeff;
+    }
+    sitl_metrics_init(&f->metrics, n, kf_std, km_std, (double)f->filter_config.gyro_bias_std0);
+
+    sitl_imu_init(&f->imu, &o->imu, o->seed, &o->effects);
+    double history_rate = o->physics_rate_hz + o->imu.rate_hz + o->esc.rate_hz +
+                          o->control_rate_hz;
+    if (sitl_esc_init(&f->esc, &o->esc, n, sitl_effects_esc_extra_delay(&o->effects),
+                      history_rate, o->seed) != 0) {
+        return fail(r, SITL_EXIT_USAGE, "bad ESC telemetry parameters");
+    }
+    sitl_esc_record(&f->esc, 0.0, f->state.rotor_speed);
+    for (int k = 0; k < 3; k++) {
+        f->last_gyro[k] = NAN;
+        f->last_accel[k] = NAN;
+    }
+    for (int i = 0; i < SITL_MAX_ROTORS; i++) {
+        f->last_omega[i] = NAN;
+    }
+    f->last_status = PROPID_OK;
+
+    if (o->log_path[0] != '\0') {
+        if (sitl_flight_log_open(&f->log, o->log_path, n) != 0) {
+            snprintf(err, sizeof(err), "cannot write the log '%.200s'", o->log_path);
+            return fail(r, SITL_EXIT_ERROR, err);
+        }
+        f->log_open = 1;
+        char vpath[SITL_PATH_MAX + 32];
+        char notes[1024], fx[256];
+        sitl_flight_log_vehicle_path(o->log_path, vpath, sizeof(vpath));
+        sitl_effects_describe(&o->effects, fx, (int)sizeof(fx));
+        snprintf(notes, sizeof(notes),
+                 "written by propid_sitl: vehicle '%s', geometry and inertia as simulated "
+                 "(before effects), nominal catalogue coefficients (the truth is in the CSV "
+                 "true_kf_i/true_km_i columns); seed %llu, coeff spread %g, effects %s",
+                 f->vehicle.name, (unsigned long long)o->seed, o->coeff_spread, fx);
+        if (sitl_vehicle_write_json(vpath, &f->vehicle, notes) != 0) {
+            snprintf(err, sizeof(err), "cannot write '%.200s'", vpath);
+            return fail(r, SITL_EXIT_ERROR, err);
+        }
+    }
+#ifdef PROPID_SITL_WITH_MAVLINK
+    if (o->mavlink_url[0] != '\0') {
+        sitl_mavlink_rates_t rates;
+        sitl_mavlink_default_rates(&rates);
+        f->link = sitl_mavlink_open(o->mavlink_url, &rates);
+        if (f->link == NULL) {
+            return fail(r, SITL_EXIT_ERROR, "cannot open the MAVLink link");
+        }
+    }
+#else
+    if (o->mavlink_url[0] != '\0') {
+        return fail(r, SITL_EXIT_USAGE, "--mavlink: this propid_sitl was built without the "
+                                        "MAVLink link (sitl_mavlink.c / propid_mavlink)");
+    }
+#endif
+    return SITL_EXIT_OK;
+}
+
+static void teardown(flight_t *f, sitl_result_t *r)
+{
+    if (f->log_open && sitl_flight_log_close(&f->log) != 0 && r->exit_code == SITL_EXIT_OK) {
+        fail(r, SITL_EXIT_ERROR, "error while writing the log");
+    }
+    f->log_open = 0;
+    sitl_esc_free(&f->esc);
+#ifdef PROPID_SITL_WITH_MAVLINK
+    if (f->link != NULL) {
+        sitl_mavlink_close(f->link);
+        f->link = NULL;
+    }
+#endif
+}
+
+static void take_coefficients(flight_t *f, const sitl_options_t *o)
+{
+    if (o->mode != SITL_MODE_FILTER) {
+        return;
+    }
+    propid_estimate_t e;
+    if (propid_get_estimate(&f->filter, &e) != PROPID_OK) {
+        return;
+    }
+    double kf[SITL_MAX_ROTORS], km[SITL_MAX_ROTORS];
+    for (int i = 0; i < f->vehicle.rotor_count; i++) {
+        kf[i] = (double)e.thrust_coeff[i];
+        km[i] = (double)e.drag_coeff[i];
+    }
+    /* A rejected set (non-positive, singular) leaves the previous one in use. */
+    if (sitl_allocation_set_coefficients(&f->allocation, kf, km) == 0) {
+        memcpy(f->used_kf, kf, sizeof(f->used_kf));
+        memcpy(f->used_km, km, sizeof(f->used_km));
+    }
+}
+
+/* Returns a reason string if the flight has diverged, else NULL. */
+static const char *divergence(const flight_t *f, const sitl_options_t *o,
+                              const sitl_flat_output_t *ref)
+{
+    if (!state_finite(&f->state, f->vehicle.rotor_count)) {
+        return "non-finite state";
+    }
+    double r[3][3];
+    sitl_quat_to_matrix(f->state.quat, r);
+    if (r[2][2] < cos(o->divergence_tilt_deg * SITL_PI / 180.0)) {
+        return o->divergence_tilt_deg >= 90.0 ? "upside down" : "tilted beyond the limit";
+    }
+    double d[3];
+    for (int k = 0; k < 3; k++) {
+        d[k] = f->state.position[k] - ref->position[k];
+    }
+    if (sitl_vec3_norm(d) > o->divergence_distance_m) {
+        return "too far from the reference";
+    }
+    return NULL;
+}
+
+static void fill_row(const flight_t *f, double t, const sitl_flat_output_t *ref,
+                     const propid_estimate_t *e, sitl_log_row_t *row)
+{
+    const int n = f->vehicle.rotor_count;
+    memset(row, 0, sizeof(*row));
+    row->t = t;
+    for (int k = 0; k < 3; k++) {
+        row->gyro[k] = f->last_gyro[k];
+        row->acc[k] = f->last_accel[k];
+        row->velocity[k] = f->state.velocity[k];
+        row->position[k] = f->state.position[k];
+        row->ref_position[k] = ref->position[k];
+        row->true_bias[k] = f->imu.gyro_bias[k];
+        row->true_rate[k] = f->state.body_rate[k];
+    }
+    for (int k = 0; k < 4; k++) {
+        row->quat[k] = f->state.quat[k];
+    }
+    row->ref_yaw = ref->yaw;
+    for (int i = 0; i < n; i++) {
+        row->omega[i] = f->last_omega[i];
+        row->cmd[i] = sitl_motor_clamp(&f->plant.motor, f->command[i]) /
+                      f->vehicle.rotor_speed_max;
+        row->true_kf[i] = f->true_kf[i];
+        row->true_km[i] = f->true_km[i];
+        row->true_omega[i] = f->state.rotor_speed[i];
+    }
+    row->estimate = *e;
+    row->status = f->last_status;
+}
+
+int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
+{
+    static flight_t flight; /* large (filter, history): keep it off the stack */
+    flight_t *f = &flight;
+    memset(f, 0, sizeof(*f));
+    memset(r, 0, sizeof(*r));
+    r->coeff_converged_s = -1.0;
+    r->bias_converged_s = -1.0;
+    double wall_start = wall_seconds();
+
+    if (setup(f, o, r) != SITL_EXIT_OK) {
+        teardown(f, r);
+        return r->exit_code;
+    }
+    const int n = f->vehicle.rotor_count;
+
+    schedule_t control, imu, esc, physics, logsched, live;
+    schedule_init(&control, 0.0, o->control_rate_hz);
+    schedule_init(&imu, 1.0 / o->imu.rate_hz, o->imu.rate_hz);
+    schedule_init(&esc, o->esc.phase_s, o->esc.rate_hz);
+    schedule_init(&physics, 0.0, o->physics_rate_hz);
+    schedule_advance(&physics);
+    schedule_init(&logsched, 0.0, o->log_rate_hz > 0.0 ? o->log_rate_hz : o->control_rate_hz);
+    schedule_init(&live, 0.0, 2.0);
+    schedule_advance(&live);
+    const int64_t end_ns = (int64_t)llround(o->duration_s * 1e9);
+    int64_t now_ns = 0;
+    double last_imu_t = 0.0;
+    propid_estimate_t est;
+    memset(&est, 0, sizeof(est));
+
+    for (;;) {
+        const double t = (double)now_ns * 1e-9;
+        const uint64_t t_us = (uint64_t)((now_ns + 500) / 1000);
+
+        if (now_ns == esc.next_ns) {
+            double speed[SITL_MAX_ROTORS];
+            if (sitl_esc_report(&f->esc, t, speed)) {
+                float speed_f[SITL_MAX_ROTORS];
+                for (int i = 0; i < n; i++) {
+                    speed_f[i] = (float)speed[i];
+                    f->last_omega[i] = speed[i];
+                }
+                propid_push_rotor_speeds(&f->filter, t_us, speed_f, (uint8_t)n);
+            }
+            schedule_advance(&esc);
+        }
+        if (now_ns == imu.next_ns) {
+            sitl_state_derivative_t d;
+            sitl_loads_t loads;
+            sitl_plant_derivative(&f->plant, &f->state, f->command, &d, &loads);
+            sitl_imu_sample(&f->imu, f->state.body_rate, loads.specific_force_body,
+                            t - last_imu_t, f->last_gyro, f->last_accel);
+            last_imu_t = t;
+            float gyro_f[3] = {(float)f->last_gyro[0], (float)f->last_gyro[1],
+                               (float)f->last_gyro[2]};
+            f->last_status = (int)propid_push_gyro(&f->filter, t_us, gyro_f);
+            schedule_advance(&imu);
+        }
+        if (now_ns == control.next_ns || now_ns >= end_ns) {
+            sitl_flat_output_t ref;
+            sitl_trajectory_eval(&f->trajectory, t, &ref);
+            propid_get_estimate(&f->filter, &est);
+            sitl_metrics_add(&f->metrics, t, f->state.position, ref.position,
+                             sitl_quat_yaw(f->state.quat), ref.yaw, &est, f->true_kf, f->true_km,
+                             f->imu.gyro_bias);
+            r->control_steps++;
+            const char *why = divergence(f, o, &ref);
+            if (why == NULL && now_ns < end_ns) {
+                /* Controller on the true state (as in the paper). */
+                take_coefficients(f, o);
+                sitl_vehicle_state_t vs;
+                sitl_vec3_copy(vs.position, f->state.position);
+                sitl_vec3_copy(vs.velocity, f->state.velocity);
+                memcpy(vs.quat_wxyz, f->state.quat, sizeof(vs.quat_wxyz));
+                sitl_vec3_copy(vs.body_rate, f->state.body_rate);
+                sitl_control_output_t cmd;
+                sitl_controller_update(&f->controller, &vs, &ref, &cmd);
+                sitl_allocation_result_t alloc;
+                if (sitl_allocation_solve(&f->allocation, cmd.thrust, cmd.moment, &alloc) == 0) {
+                    memcpy(f->command, alloc.rotor_speed, (size_t)n * sizeof(double));
+                }
+            }
+            /* The row holds the state at t and the command sent at t. */
+            if (now_ns >= logsched.next_ns || why != NULL || now_ns >= end_ns) {
+                if (f->log_open) {
+                    sitl_log_row_t row;
+                    fill_row(f, t, &ref, &est, &row);
+                    sitl_flight_log_write(&f->log, &row);
+                    r->log_rows++;
+                }
+                while (logsched.next_ns <= now_ns) {
+                    schedule_advance(&logsched);
+                }
+            }
+            if (out != NULL && !o->quiet && now_ns >= live.next_ns) {
+                print_live(out, t, &f->metrics, &est);
+                schedule_advance(&live);
+            }
+            if (why != NULL) {
+                r->diverged = 1;
+                r->diverged_at_s = t;
+                snprintf(r->message, sizeof(r->message), "flight diverged at t=%.3f s: %s", t,
+                         why);
+                r->exit_code = SITL_EXIT_DIVERGED;
+                break;
+            }
+            if (now_ns >= end_ns) {
+                break;
+            }
+#ifdef PROPID_SITL_WITH_MAVLINK
+            if (f->link != NULL) {
+                sitl_mavlink_snapshot_t snap;
+                memset(&snap, 0, sizeof(snap));
+                snap.time_s = t;
+                memcpy(snap.quat_wxyz, f->state.quat, sizeof(snap.quat_wxyz));
+                sitl_vec3_copy(snap.position_m, f->state.position);
+                sitl_vec3_copy(snap.velocity_m_s, f->state.velocity);
+                for (int k = 0; k < 3; k++) {
+                    snap.gyro_rad_s[k] = isfinite(f->last_gyro[k]) ? f->last_gyro[k] : 0.0;
+                    snap.accel_m_s2[k] = isfinite(f->last_accel[k]) ? f->last_accel[k] : 0.0;
+                }
+                for (int i = 0; i < n; i++) {
+                    snap.rotor_speed_rad_s[i] = isfinite(f->last_omega[i]) ? f->last_omega[i] : 0.0;
+                }
+                snap.rotor_count = n;
+                sitl_mavlink_update(f->link, &snap, &f->filter);
+                sitl_mavlink_poll(f->link, &f->filter);
+            }
+#endif
+            if (o->realtime > 0.0) {
+                sleep_seconds(t / o->realtime - (wall_seconds() - wall_start));
+            }
+            schedule_advance(&control);
+        }
+
+        /* Integrate to the next instant anything happens. */
+        int64_t next = physics.next_ns;
+        if (esc.next_ns < next) {
+            next = esc.next_ns;
+        }
+        if (imu.next_ns < next) {
+            next = imu.next_ns;
+        }
+        if (control.next_ns < next) {
+            next = control.next_ns;
+        }
+        if (end_ns < next) {
+            next = end_ns;
+        }
+        if (next > now_ns) {
+            sitl_plant_step(&f->plant, &f->state, f->command, (double)(next - now_ns) * 1e-9);
+            now_ns = next;
+            sitl_esc_record(&f->esc, (double)now_ns * 1e-9, f->state.rotor_speed);
+        }
+        if (physics.next_ns <= now_ns) {
+            schedule_advance(&physics);
+        }
+    }
+
+    r->flown_s = (double)now_ns * 1e-9;
+    r->rotor_count = n;
+    for (int k = 0; k < 3; k++) {
+        r->rmse[k] = sitl_metrics_rmse(&f->metrics, k);
+        r->true_bias[k] = f->imu.gyro_bias[k];
+    }
+    r->rmse_yaw_deg = sitl_metrics_rmse_yaw_deg(&f->metrics);
+    r->final_position_error_m = sitl_vec3_norm(f->metrics.position_error);
+    r->final_yaw_error_deg = f->metrics.yaw_error * 180.0 / SITL_PI;
+    r->kf_rel_error_max = f->metrics.kf_rel_error_max;
+    r->km_rel_error_max = f->metrics.km_rel_error_max;
+    r->bias_error_max = f->metrics.bias_error_max;
+    r->coeff_converged_s = f->metrics.coeff_converged_since;
+    r->bias_converged_s = f->metrics.bias_converged_since;
+    for (int i = 0; i < n; i++) {
+        r->true_kf[i] = f->true_kf[i];
+        r->true_km[i] = f->true_km[i];
+        r->used_kf[i] = f->used_kf[i];
+        r->used_km[i] = f->used_km[i];
+    }
+    propid_get_estimate(&f->filter, &r->estimate);
+    propid_get_counters(&f->filter, &r->counters);
+    teardown(f, r);
+    r->wall_time_s = wall_seconds() - wall_start;
+    return r->exit_code;
+}

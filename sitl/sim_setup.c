@@ -1,0 +1,143 @@
+/* Flight set-up: vehicle, true and Incorrect coefficients, filter config. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "rng.h"
+#include "sim.h"
+
+int sitl_setup_vehicle(const sitl_options_t *opts, sitl_vehicle_t *v, char *err, int err_size)
+{
+    if (sitl_vehicle_preset(opts->vehicle, v) != 0) {
+        size_t len = strlen(opts->vehicle);
+        if (len < 5 || strcmp(opts->vehicle + len - 5, ".json") != 0) {
+            int n = snprintf(err, (size_t)err_size, "--vehicle: unknown preset '%s' (presets:",
+                             opts->vehicle);
+            for (int i = 0; sitl_vehicle_preset_names[i] != NULL && n > 0 && n < err_size; i++) {
+                n += snprintf(err + n, (size_t)(err_size - n), " %s",
+                              sitl_vehicle_preset_names[i]);
+            }
+            if (n > 0 && n < err_size) {
+                snprintf(err + n, (size_t)(err_size - n), "; or a FILE.json)");
+            }
+            return -1;
+        }
+        /* Vehicle files carry no motor or rotor-aero data: documented defaults
+         * (docs/sitl.md), overridable by the CLI below. */
+        memset(v, 0, sizeof(*v));
+        v->motor_time_constant = 0.03;
+        v->rotor_speed_min = 0.0;
+        v->rotor_speed_max = 1e6; /* placeholder until the hover speed is known */
+        if (sitl_vehicle_load_json(opts->vehicle, v, err, err_size) != 0) {
+            return -1;
+        }
+        double kf_sum = 0.0;
+        for (int i = 0; i < v->rotor_count; i++) {
+            kf_sum += v->rotor[i].thrust_coeff;
+        }
+        /* Thrust-to-weight 4 by default: hover at half the maximum speed. */
+        v->rotor_speed_max = 2.0 * sqrt(v->mass * 9.81 / kf_sum);
+        if (v->rotor_radius > 0.0) {
+            /* Rotor aerodynamics scaled from the Hummingbird preset by radius
+             * (dimensional analysis: k_d, k_z ~ R^3, k_h ~ R^2, J_r ~ R^5). */
+            double s = v->rotor_radius / 0.10;
+            double file_rotor_inertia = v->rotor_inertia;
+            v->rotor_drag_coeff = 1.19e-4 * s * s * s;
+            v->inflow_coeff = 2.32e-4 * s * s * s;
+            v->translational_lift_coeff = 3.39e-3 * s * s;
+            v->flapping_coeff = 0.5 * v->rotor_radius * v->rotor_drag_coeff;
+            v->rotor_inertia = file_rotor_inertia > 0.0 ? file_rotor_inertia
+                                                        : 1.5e-5 * s * s * s * s * s;
+        }
+    }
+    if (opts->motor_time_constant > 0.0) {
+        v->motor_time_constant = opts->motor_time_constant;
+    }
+    if (opts->rotor_speed_min >= 0.0) {
+        v->rotor_speed_min = opts->rotor_speed_min;
+    }
+    if (opts->rotor_speed_max > 0.0) {
+        v->rotor_speed_max = opts->rotor_speed_max;
+    }
+    return sitl_vehicle_check(v, err, err_size);
+}
+
+void sitl_setup_true_coefficients(const sitl_vehicle_t *v, double spread, uint64_t seed,
+                                  double *true_kf, double *true_km)
+{
+    sitl_rng_t rng;
+    sitl_rng_init(&rng, seed, SITL_RNG_COEFFS);
+    for (int i = 0; i < v->rotor_count; i++) {
+        true_kf[i] = v->rotor[i].thrust_coeff * sitl_rng_range(&rng, 1.0 - spread, 1.0 + spread);
+        true_km[i] = v->rotor[i].drag_coeff * sitl_rng_range(&rng, 1.0 - spread, 1.0 + spread);
+    }
+}
+
+void sitl_setup_incorrect_coefficients(const sitl_options_t *opts, const sitl_vehicle_t *v,
+                                       const double *true_kf, const double *true_km, double *kf,
+                                       double *km)
+{
+    sitl_rng_t rng;
+    sitl_rng_init(&rng, opts->seed, SITL_RNG_INCORRECT);
+    for (int i = 0; i < v->rotor_count; i++) {
+        if (!opts->incorrect_random) {
+            kf[i] = v->rotor[i].thrust_coeff;
+            km[i] = v->rotor[i].drag_coeff;
+        } else {
+            /* Gaussian around the truth (the paper's Incorrect), kept positive. */
+            double a = 1.0 + opts->incorrect_spread * sitl_rng_normal(&rng);
+            double b = 1.0 + opts->incorrect_spread * sitl_rng_normal(&rng);
+            kf[i] = true_kf[i] * fmax(a, 0.1);
+            km[i] = true_km[i] * fmax(b, 0.1);
+        }
+    }
+}
+
+propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_vehicle_t *v,
+                                         propid_config_t *c, const char **bad_field)
+{
+    propid_config_default(c);
+    c->rotor_count = (uint8_t)v->rotor_count;
+    for (int i = 0; i < v->rotor_count; i++) {
+        for (int k = 0; k < 3; k++) {
+            c->rotor[i].position_m[k] = (float)v->rotor[i].position[k];
+        }
+        c->rotor[i].yaw_sign = (float)v->rotor[i].yaw_sign;
+        c->rotor[i].thrust_coeff_nominal = (float)v->rotor[i].thrust_coeff;
+        c->rotor[i].drag_coeff_nominal = (float)v->rotor[i].drag_coeff;
+    }
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++) {
+            c->inertia[i][j] = (float)v->inertia[i][j];
+        }
+    }
+    /* What an integrator copies from the IMU datasheet and its driver set-up. */
+    if (opts->imu.gyro.noise_density > 0.0) {
+        c->gyro_noise_density = (float)opts->imu.gyro.noise_density;
+    }
+    c->gyro_sample_rate_hz = (float)opts->imu.rate_hz;
+    if (opts->imu.gyro.range > 0.0) {
+        c->gyro_range = (float)opts->imu.gyro.range;
+    }
+    c->max_rotor_speed = (float)(1.5 * v->rotor_speed_max);
+    if (opts->prior_kf_rel_std > 0.0) {
+        c->thrust_coeff_rel_std0 = (float)opts->prior_kf_rel_std;
+    }
+    if (opts->prior_km_rel_std > 0.0) {
+        c->drag_coeff_rel_std0 = (float)opts->prior_km_rel_std;
+    }
+    if (opts->prior_bias_std > 0.0) {
+        c->gyro_bias_std0 = (float)opts->prior_bias_std;
+    }
+    if (opts->filter_rate_noise >= 0.0) {
+        c->rate_process_noise = (float)opts->filter_rate_noise;
+    }
+    if (opts->filter_coeff_walk >= 0.0) {
+        c->thrust_coeff_rel_walk = (float)opts->filter_coeff_walk;
+        c->drag_coeff_rel_walk = (float)opts->filter_coeff_walk;
+    }
+    if (opts->filter_bias_walk >= 0.0) {
+        c->gyro_bias_walk = (float)opts->filter_bias_walk;
+    }
+    return propid_config_check(c, bad_field);
+}

@@ -1,0 +1,31 @@
+# `make sitl`: fly the default closed-loop Lissajous with the filter in the
+# loop (Crazyflie, plus frame, seed 1, 10 s at real time), stream MAVLink to
+# udp:127.0.0.1:14550 (QGroundControl / `propid listen` can watch), log the
+# flight and plot the estimates against the truth (docs/sitl.md).
+# Included by the top Makefile; uses its setup/host verbs, BUILD, BUILD_HOST, VENV.
+#
+# Overrides:  make sitl REALTIME=0                  (as fast as possible)
+#             make sitl SITL_ARGS="--mode oracle"   (replaces the flight options)
+#             make sitl SITL_EXTRA="--effect rotor_drag"   (added to them)
+
+.PHONY: sitl
+
+SITL_OUT     ?= $(BUILD)/sitl
+REALTIME     ?= 1
+SITL_MAVLINK ?= udp:127.0.0.1:14550
+SITL_ARGS    ?= --vehicle crazyflie-plus --trajectory lissajous --mode filter --seed 1 --duration 10
+SITL_EXTRA   ?=
+
+sitl: setup host
+	@mkdir -p $(SITL_OUT)
+	@echo "sitl: flying ($(SITL_ARGS) $(SITL_EXTRA)), realtime $(REALTIME), MAVLink $(SITL_MAVLINK)"
+	@status=0; $(BUILD_HOST)/sitl/propid_sitl $(SITL_ARGS) $(SITL_EXTRA) --realtime $(REALTIME) \
+	    --log $(SITL_OUT)/flight.csv --summary-json $(SITL_OUT)/summary.json \
+	    $(if $(SITL_MAVLINK),--mavlink $(SITL_MAVLINK)) || status=$$?; \
+	if [ $$status -ne 0 ] && [ $$status -ne 3 ]; then exit $$status; fi; \
+	cd $(REPO) && $(VENV)/bin/propid plot --log $(SITL_OUT)/flight.csv --out $(SITL_OUT)/estimates.png \
+	    || exit $$?; \
+	echo "sitl: log      $(SITL_OUT)/flight.csv (+ flight.vehicle.json)"; \
+	echo "sitl: summary  $(SITL_OUT)/summary.json"; \
+	echo "sitl: plot     $(SITL_OUT)/estimates.png"; \
+	exit $$status

@@ -1,0 +1,96 @@
+/* Quaternion and 3x3 helpers (see sitl_math.h). */
+#include "sitl_math.h"
+
+int sitl_mat3_inverse(const double m[3][3], double inv[3][3])
+{
+    double c00 = m[1][1] * m[2][2] - m[1][2] * m[2][1];
+    double c01 = m[1][2] * m[2][0] - m[1][0] * m[2][2];
+    double c02 = m[1][0] * m[2][1] - m[1][1] * m[2][0];
+    double det = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02;
+    if (!isfinite(det) || fabs(det) < 1e-300) {
+        return -1;
+    }
+    double k = 1.0 / det;
+    inv[0][0] = c00 * k;
+    inv[1][0] = c01 * k;
+    inv[2][0] = c02 * k;
+    inv[0][1] = (m[0][2] * m[2][1] - m[0][1] * m[2][2]) * k;
+    inv[1][1] = (m[0][0] * m[2][2] - m[0][2] * m[2][0]) * k;
+    inv[2][1] = (m[0][1] * m[2][0] - m[0][0] * m[2][1]) * k;
+    inv[0][2] = (m[0][1] * m[1][2] - m[0][2] * m[1][1]) * k;
+    inv[1][2] = (m[0][2] * m[1][0] - m[0][0] * m[1][2]) * k;
+    inv[2][2] = (m[0][0] * m[1][1] - m[0][1] * m[1][0]) * k;
+    return 0;
+}
+
+void sitl_quat_to_matrix(const double q[4], double r[3][3])
+{
+    double w = q[0], x = q[1], y = q[2], z = q[3];
+    r[0][0] = 1.0 - 2.0 * (y * y + z * z);
+    r[0][1] = 2.0 * (x * y - w * z);
+    r[0][2] = 2.0 * (x * z + w * y);
+    r[1][0] = 2.0 * (x * y + w * z);
+    r[1][1] = 1.0 - 2.0 * (x * x + z * z);
+    r[1][2] = 2.0 * (y * z - w * x);
+    r[2][0] = 2.0 * (x * z - w * y);
+    r[2][1] = 2.0 * (y * z + w * x);
+    r[2][2] = 1.0 - 2.0 * (x * x + y * y);
+}
+
+void sitl_quat_rotate(const double q[4], const double v_body[3], double v_world[3])
+{
+    double r[3][3];
+    sitl_quat_to_matrix(q, r);
+    sitl_mat3_mul_vec(v_world, r, v_body);
+}
+
+void sitl_quat_rotate_inverse(const double q[4], const double v_world[3], double v_body[3])
+{
+    double r[3][3];
+    sitl_quat_to_matrix(q, r);
+    for (int i = 0; i < 3; i++) {
+        v_body[i] = r[0][i] * v_world[0] + r[1][i] * v_world[1] + r[2][i] * v_world[2];
+    }
+}
+
+void sitl_quat_derivative(const double q[4], const double w[3], double dq[4])
+{
+    dq[0] = 0.5 * (-q[1] * w[0] - q[2] * w[1] - q[3] * w[2]);
+    dq[1] = 0.5 * (q[0] * w[0] + q[2] * w[2] - q[3] * w[1]);
+    dq[2] = 0.5 * (q[0] * w[1] + q[3] * w[0] - q[1] * w[2]);
+    dq[3] = 0.5 * (q[0] * w[2] + q[1] * w[1] - q[2] * w[0]);
+}
+
+void sitl_quat_normalise(double q[4])
+{
+    double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    if (n > 0.0 && isfinite(n)) {
+        for (int i = 0; i < 4; i++) {
+            q[i] /= n;
+        }
+    }
+}
+
+void sitl_quat_from_yaw(double yaw, double q[4])
+{
+    q[0] = cos(0.5 * yaw);
+    q[1] = 0.0;
+    q[2] = 0.0;
+    q[3] = sin(0.5 * yaw);
+}
+
+double sitl_quat_yaw(const double q[4])
+{
+    return atan2(2.0 * (q[0] * q[3] + q[1] * q[2]), 1.0 - 2.0 * (q[2] * q[2] + q[3] * q[3]));
+}
+
+double sitl_wrap_angle(double angle)
+{
+    while (angle > SITL_PI) {
+        angle -= 2.0 * SITL_PI;
+    }
+    while (angle <= -SITL_PI) {
+        angle += 2.0 * SITL_PI;
+    }
+    return angle;
+}

@@ -1,0 +1,186 @@
+/* Reference trajectories with analytic derivatives up to snap (see trajectory.h). */
+#include "trajectory.h"
+
+#include <math.h>
+#include <string.h>
+
+/* M_PI is not in strict C11. */
+static const double pi = 3.14159265358979323846;
+
+static const char *const kind_names[SITL_TRAJ_KIND_COUNT] = {"hover", "step", "circle",
+                                                             "lissajous"};
+
+int sitl_trajectory_from_name(const char *name, sitl_trajectory_kind_t *kind)
+{
+    if (name == NULL || kind == NULL) {
+        return -1;
+    }
+    for (int i = 0; i < SITL_TRAJ_KIND_COUNT; i++) {
+        if (strcmp(name, kind_names[i]) == 0) {
+            *kind = (sitl_trajectory_kind_t)i;
+            return 0;
+        }
+    }
+    return -1;
+}
+
+const char *sitl_trajectory_name(sitl_trajectory_kind_t kind)
+{
+    if ((int)kind < 0 || (int)kind >= SITL_TRAJ_KIND_COUNT) {
+        return "?";
+    }
+    return kind_names[kind];
+}
+
+int sitl_trajectory_init(sitl_trajectory_t *traj, sitl_trajectory_kind_t kind,
+                         double duration_s, const double origin[3])
+{
+    if (traj == NULL || (int)kind < 0 || (int)kind >= SITL_TRAJ_KIND_COUNT ||
+        !isfinite(duration_s) || duration_s <= 0.0) {
+        return -1;
+    }
+    memset(traj, 0, sizeof(*traj));
+    traj->kind = kind;
+    traj->duration_s = duration_s;
+    if (origin != NULL) {
+        for (int i = 0; i < 3; i++) {
+            traj->origin[i] = origin[i];
+        }
+    }
+    /* Defaults for a Crazyflie-class vehicle; docs/results.md gives the reasons. */
+    traj->step_time_s = 0.0; /* the reference jumps right after t = 0 */
+    traj->step_amplitude_m = 1.0;
+
+    /* About 1.07 m/s around the circle; the start angle splits the start-up
+     * transient (the vehicle starts at rest) evenly between x and y. */
+    traj->circle_radius_m = 0.85;
+    traj->circle_cycles = 2.0;
+    traj->circle_start_angle_rad = -1.0;
+
+    /* Large slow Lissajous + small fast Lissajous (paper eq. 9, superimposed).
+     * The fast part (about 2.5 m/s^2 of lateral acceleration at 1 Hz) is what
+     * excites the rotors differentially, which the coefficients need; it stays
+     * within what 0.07 s Crazyflie motors follow. z moves slowly only. */
+    traj->lissajous_slow.amplitude_m[0] = 0.6;
+    traj->lissajous_slow.amplitude_m[1] = 0.5;
+    traj->lissajous_slow.amplitude_m[2] = 0.02;
+    traj->lissajous_slow.cycles[0] = 1.0;
+    traj->lissajous_slow.cycles[1] = 2.0;
+    traj->lissajous_slow.cycles[2] = 1.0;
+    traj->lissajous_fast.amplitude_m[0] = 0.08;
+    traj->lissajous_fast.amplitude_m[1] = 0.08;
+    traj->lissajous_fast.amplitude_m[2] = 0.0;
+    traj->lissajous_fast.cycles[0] = 10.0;
+    traj->lissajous_fast.cycles[1] = 9.0;
+    traj->lissajous_fast.cycles[2] = 8.0;
+
+    if (kind == SITL_TRAJ_CIRCLE || kind == SITL_TRAJ_LISSAJOUS) {
+        /* Large slow yaw swings (+-86 deg, 1.5 cycles): the gyro biases are only
+         * observable through the gyroscopic coupling, whose signal grows with the
+         * yaw excursion. */
+        traj->yaw_amplitude_rad = 1.5;
+        traj->yaw_cycles = 1.5;
+    }
+    return 0;
+}
+
+/*
+ * Derivatives 0..4 of a sin(w t) and a (1 - cos(w t)) at t.
+ * d^k/dt^k sin(w t) = w^k sin(w t + k pi/2).
+ */
+static void sine_derivatives(double amplitude, double omega, double t, double out[5])
+{
+    double s = sin(omega * t), c = cos(omega * t);
+    double w1 = omega, w2 = w1 * omega, w3 = w2 * omega, w4 = w3 * omega;
+    out[0] = amplitude * s;
+    out[1] = amplitude * w1 * c;
+    out[2] = -amplitude * w2 * s;
+    out[3] = -amplitude * w3 * c;
+    out[4] = amplitude * w4 * s;
+}
+
+static void one_minus_cos_derivatives(double amplitude, double omega, double t, double out[5])
+{
+    double s = sin(omega * t), c = cos(omega * t);
+    double w1 = omega, w2 = w1 * omega, w3 = w2 * omega, w4 = w3 * omega;
+    out[0] = amplitude * (1.0 - c);
+    out[1] = amplitude * w1 * s;
+    out[2] = amplitude * w2 * c;
+    out[3] = -amplitude * w3 * s;
+    out[4] = -amplitude * w4 * c;
+}
+
+/* Add derivative orders 0..4 of one axis into flat. */
+static void add_axis(sitl_flat_output_t *flat, int axis, const double d[5])
+{
+    flat->position[axis] += d[0];
+    flat->velocity[axis] += d[1];
+    flat->acceleration[axis] += d[2];
+    flat->jerk[axis] += d[3];
+    flat->snap[axis] += d[4];
+}
+
+static void add_lissajous(sitl_flat_output_t *flat, const sitl_lissajous_part_t *part,
+                          double period, double t)
+{
+    double d[5];
+    const double two_pi = 2.0 * pi;
+    one_minus_cos_derivatives(part->amplitude_m[0], two_pi * part->cycles[0] / period, t, d);
+    add_axis(flat, 0, d);
+    sine_derivatives(part->amplitude_m[1], two_pi * part->cycles[1] / period, t, d);
+    add_axis(flat, 1, d);
+    sine_derivatives(part->amplitude_m[2], two_pi * part->cycles[2] / period, t, d);
+    add_axis(flat, 2, d);
+}
+
+static void add_yaw(sitl_flat_output_t *flat, const sitl_trajectory_t *traj, double t)
+{
+    double d[5];
+    sine_derivatives(traj->yaw_amplitude_rad, 2.0 * pi * traj->yaw_cycles / traj->duration_s,
+                     t, d);
+    flat->yaw = d[0];
+    flat->yaw_rate = d[1];
+    flat->yaw_acceleration = d[2];
+}
+
+void sitl_trajectory_eval(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat)
+{
+    memset(flat, 0, sizeof(*flat));
+    if (t < 0.0) {
+        t = 0.0;
+    }
+    switch (traj->kind) {
+    case SITL_TRAJ_HOVER:
+        break;
+    case SITL_TRAJ_STEP:
+        /* A true step: the controller sees the full error at once. Strictly
+         * after step_time_s, so a step at 0 still starts at the origin. */
+        if (t > traj->step_time_s) {
+            flat->position[0] = traj->step_amplitude_m;
+        }
+        break;
+    case SITL_TRAJ_CIRCLE: {
+        /* x = R (cos(phi + w t) - cos phi), y = R (sin(phi + w t) - sin phi):
+         * through origin at t = 0; derivatives of cos(a) = sin(a + pi/2). */
+        double omega = 2.0 * pi * traj->circle_cycles / traj->duration_s;
+        double phase = traj->circle_start_angle_rad;
+        double dx[5], dy[5];
+        sine_derivatives(traj->circle_radius_m, omega, t + (phase + 0.5 * pi) / omega, dx);
+        sine_derivatives(traj->circle_radius_m, omega, t + phase / omega, dy);
+        dx[0] -= traj->circle_radius_m * cos(phase);
+        dy[0] -= traj->circle_radius_m * sin(phase);
+        add_axis(flat, 0, dx);
+        add_axis(flat, 1, dy);
+        add_yaw(flat, traj, t);
+        break;
+    }
+    case SITL_TRAJ_LISSAJOUS:
+        add_lissajous(flat, &traj->lissajous_slow, traj->duration_s, t);
+        add_lissajous(flat, &traj->lissajous_fast, traj->duration_s, t);
+        add_yaw(flat, traj, t);
+        break;
+    }
+    for (int i = 0; i < 3; i++) {
+        flat->position[i] += traj->origin[i];
+    }
+}

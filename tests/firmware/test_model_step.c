@@ -1,0 +1,445 @@
+/*
+ * One filter step against its dense textbook form:
+ * - the sparse covariance prediction equals F P F^T + Q dt computed densely;
+ * - three sequential scalar updates equal the batch 3-axis Kalman update
+ *   P - P H^T (H P H^T + R)^-1 H P (they must: R is diagonal);
+ * - P stays exactly symmetric and positive definite over a long run;
+ * - gating, re-opening, clamping and covariance repair do what docs/design.md says.
+ * Dense references are computed in float here (test code only).
+ */
+#include <math.h>
+#include <string.h>
+
+#include "propid/propid.h"
+#include "unity.h"
+#include "../../firmware/src/propid_internal.h"
+#include "../../firmware/src/propid_model.h"
+
+#define N_MAX PROPID_MAX_STATES
+
+void setUp(void) {}
+void tearDown(void) {}
+
+static propid_filter_t filter;
+static float dense_a[N_MAX][N_MAX];
+static float dense_b[N_MAX][N_MAX];
+static float saved_cov[N_MAX][N_MAX];
+
+typedef struct {
+    uint32_t state;
+} rng_t;
+
+static float rng_uniform(rng_t *rng, float lo, float hi)
+{
+    uint32_t x = rng->state;
+    x ^= x << 13;
+    x ^= x >> 17;
+    x ^= x << 5;
+    rng->state = x;
+    return lo + (hi - lo) * ((float)(x >> 8) * (1.0f / 16777216.0f));
+}
+
+static void init_quad(void)
+{
+    propid_config_t config;
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.17f, 0.785398f, 1.0f,
+                                                                 5.57e-6f, 1.36e-7f));
+    const float inertia[3][3] = {{3.65e-3f, 1.0e-4f, 0.0f}, {1.0e-4f, 3.68e-3f, 0.0f}, {0.0f, 0.0f, 7.03e-3f}};
+    memcpy(config.inertia, inertia, sizeof(inertia));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+}
+
+/* A random symmetric positive definite P = L L^T + small diagonal, and a random state. */
+static void randomise(rng_t *rng)
+{
+    const uint8_t n = filter.derived.state_count;
+    static float l[N_MAX][N_MAX];
+    for (uint8_t i = 0; i < n; ++i) {
+        for (uint8_t j = 0; j < n; ++j) {
+            l[i][j] = j <= i ? rng_uniform(rng, -0.1f, 0.1f) : 0.0f;
+        }
+    }
+    for (uint8_t i = 0; i < n; ++i) {
+        for (uint8_t j = 0; j <= i; ++j) {
+            float sum = 0.0f;
+            for (uint8_t k = 0; k < n; ++k) {
+                sum += l[i][k] * l[j][k];
+            }
+            if (i == j) {
+                sum += 1.0e-3f;
+            }
+            filter.core.cov[i][j] = sum;
+            filter.core.cov[j][i] = sum;
+        }
+        filter.core.state[i] = i < 3u ? rng_uniform(rng, -2.0f, 2.0f)
+                                      : (i < n - 3u ? rng_uniform(rng, 0.7f, 1.3f) : rng_uniform(rng, -0.05f, 0.05f));
+    }
+    for (uint8_t i = 0; i < 4u; ++i) {
+        const float s = rng_uniform(rng, 400.0f, 1400.0f);
+        filter.core.rotor_speed_sq[i] = s * s;
+    }
+}
+
+/* Bit-for-bit equality of two floats. */
+static int same_bits(float a, float b)
+{
+    return memcmp(&a, &b, sizeof(a)) == 0;
+}
+
+static float max_abs_diff(const float a[N_MAX][N_MAX], const float b[N_MAX][N_MAX], uint8_t n, float *scale)
+{
+    float diff = 0.0f;
+    *scale = 0.0f;
+    for (uint8_t i = 0; i < n; ++i) {
+        for (uint8_t j = 0; j < n; ++j) {
+            diff = fmaxf(diff, fabsf(a[i][j] - b[i][j]));
+            *scale = fmaxf(*scale, fabsf(b[i][j]));
+        }
+    }
+    return diff;
+}
+
+static void test_sparse_prediction_equals_dense(void)
+{
+    init_quad();
+    rng_t rng = {11u};
+    const uint8_t n = filter.derived.state_count;
+    for (int trial = 0; trial < 10; ++trial) {
+        randomise(&rng);
+        const float dt = rng_uniform(&rng, 0.0005f, 0.01f);
+        float rate_next[3];
+        float jac_dt[3][N_MAX];
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&filter, dt, rate_next, jac_dt));
+        /* Dense F = I + dt A. */
+        static float f[N_MAX][N_MAX];
+        memset(f, 0, sizeof(f));
+        for (uint8_t i = 0; i < n; ++i) {
+            f[i][i] = 1.0f;
+        }
+        float rows[3][N_MAX];
+        memset(rows, 0, sizeof(rows));
+        propid_model_rate_jacobian(&filter.config, &filter.derived, filter.core.state,
+                                   filter.core.rotor_speed_sq, rows);
+        for (uint8_t a = 0; a < 3u; ++a) {
+            for (uint8_t k = 0; k < n - 3u; ++k) {
+                f[a][k] += dt * rows[a][k];
+            }
+        }
+        /* dense_a = F P, dense_b = F P F^T + Q dt */
+        for (uint8_t i = 0; i < n; ++i) {
+            for (uint8_t j = 0; j < n; ++j) {
+                float sum = 0.0f;
+                for (uint8_t k = 0; k < n; ++k) {
+                    sum += f[i][k] * filter.core.cov[k][j];
+                }
+                dense_a[i][j] = sum;
+            }
+        }
+        for (uint8_t i = 0; i < n; ++i) {
+            for (uint8_t j = 0; j < n; ++j) {
+                float sum = 0.0f;
+                for (uint8_t k = 0; k < n; ++k) {
+                    sum += dense_a[i][k] * f[j][k];
+                }
+                dense_b[i][j] = sum + (i == j ? filter.derived.process_psd[i] * dt : 0.0f);
+            }
+        }
+        propid_predict_covariance(&filter.derived, &filter.core, dt, jac_dt);
+        float scale;
+        const float diff = max_abs_diff(filter.core.cov, dense_b, n, &scale);
+        TEST_ASSERT_LESS_THAN_FLOAT(1.0e-5f * scale, diff);
+        for (uint8_t i = 0; i < n; ++i) {
+            for (uint8_t j = 0; j < n; ++j) {
+                TEST_ASSERT_TRUE(same_bits(filter.core.cov[i][j], filter.core.cov[j][i]));
+            }
+        }
+    }
+}
+
+/* Solve the 3x3 system S X = B by Cramer (test only). */
+static void invert3(const float s[3][3], float inv[3][3])
+{
+    const float c00 = s[1][1] * s[2][2] - s[1][2] * s[2][1];
+    const float c01 = s[1][2] * s[2][0] - s[1][0] * s[2][2];
+    const float c02 = s[1][0] * s[2][1] - s[1][1] * s[2][0];
+    const float det = s[0][0] * c00 + s[0][1] * c01 + s[0][2] * c02;
+    inv[0][0] = c00 / det;
+    inv[0][1] = (s[0][2] * s[2][1] - s[0][1] * s[2][2]) / det;
+    inv[0][2] = (s[0][1] * s[1][2] - s[0][2] * s[1][1]) / det;
+    inv[1][0] = c01 / det;
+    inv[1][1] = (s[0][0] * s[2][2] - s[0][2] * s[2][0]) / det;
+    inv[1][2] = (s[0][2] * s[1][0] - s[0][0] * s[1][2]) / det;
+    inv[2][0] = c02 / det;
+    inv[2][1] = (s[0][1] * s[2][0] - s[0][0] * s[2][1]) / det;
+    inv[2][2] = (s[0][0] * s[1][1] - s[0][1] * s[1][0]) / det;
+}
+
+static void test_sequential_updates_equal_batch_update(void)
+{
+    init_quad();
+    filter.config.gate_sigma = 0.0f; /* no gating for this comparison */
+    filter.derived.gate_sq = 0.0f;
+    filter.derived.inv_gate_sq = 1.0f;
+    rng_t rng = {23u};
+    const uint8_t n = filter.derived.state_count;
+    const uint8_t bias = (uint8_t)(n - 3u);
+    for (int trial = 0; trial < 10; ++trial) {
+        randomise(&rng);
+        const float gyro[3] = {rng_uniform(&rng, -2.0f, 2.0f), rng_uniform(&rng, -2.0f, 2.0f),
+                               rng_uniform(&rng, -2.0f, 2.0f)};
+        /* Batch: PHt (n x 3), S = H P H^T + R (3 x 3). */
+        float pht[N_MAX][3];
+        for (uint8_t i = 0; i < n; ++i) {
+            for (uint8_t a = 0; a < 3u; ++a) {
+                pht[i][a] = filter.core.cov[i][a] + filter.core.cov[i][bias + a];
+            }
+        }
+        float s[3][3];
+        float s_inv[3][3];
+        for (uint8_t a = 0; a < 3u; ++a) {
+            for (uint8_t b = 0; b < 3u; ++b) {
+                s[a][b] = pht[a][b] + pht[bias + a][b] + (a == b ? filter.derived.gyro_var : 0.0f);
+            }
+        }
+        invert3(s, s_inv);
+        float innovation[3];
+        for (uint8_t a = 0; a < 3u; ++a) {
+            innovation[a] = gyro[a] - filter.core.state[a] - filter.core.state[bias + a];
+        }
+        float state_expected[N_MAX];
+        for (uint8_t i = 0; i < n; ++i) {
+            float k_row[3];
+            for (uint8_t b = 0; b < 3u; ++b) {
+                k_row[b] = pht[i][0] * s_inv[0][b] + pht[i][1] * s_inv[1][b] + pht[i][2] * s_inv[2][b];
+            }
+            state_expected[i] = filter.core.state[i] + k_row[0] * innovation[0] + k_row[1] * innovation[1] +
+                                k_row[2] * innovation[2];
+            for (uint8_t j = 0; j < n; ++j) {
+                dense_b[i][j] = filter.core.cov[i][j] - (k_row[0] * pht[j][0] + k_row[1] * pht[j][1] +
+                                                         k_row[2] * pht[j][2]);
+            }
+        }
+        for (uint8_t a = 0; a < 3u; ++a) {
+            TEST_ASSERT_EQUAL_INT(0, propid_update_axis(&filter, a, gyro[a]));
+        }
+        float scale;
+        const float diff = max_abs_diff(filter.core.cov, dense_b, n, &scale);
+        TEST_ASSERT_LESS_THAN_FLOAT(2.0e-4f * scale, diff);
+        for (uint8_t i = 0; i < n; ++i) {
+            TEST_ASSERT_FLOAT_WITHIN(1.0e-4f * (fabsf(state_expected[i]) + 1.0f), state_expected[i],
+                                     filter.core.state[i]);
+        }
+    }
+}
+
+/* Cholesky in float: 1 if P is positive definite. */
+static int positive_definite(const float p[N_MAX][N_MAX], uint8_t n)
+{
+    static float l[N_MAX][N_MAX];
+    for (uint8_t i = 0; i < n; ++i) {
+        for (uint8_t j = 0; j <= i; ++j) {
+            float sum = p[i][j];
+            for (uint8_t k = 0; k < j; ++k) {
+                sum -= l[i][k] * l[j][k];
+            }
+            if (i == j) {
+                if (!(sum > 0.0f)) {
+                    return 0;
+                }
+                l[i][i] = sqrtf(sum);
+            } else {
+                l[i][j] = sum / l[j][j];
+            }
+        }
+    }
+    return 1;
+}
+
+static void run_steps(uint32_t seed, uint32_t steps, uint64_t *t_us)
+{
+    rng_t rng = {seed};
+    for (uint32_t k = 0; k < steps; ++k) {
+        const float t = (float)*t_us * 1.0e-6f;
+        float speeds[4];
+        for (int i = 0; i < 4; ++i) {
+            speeds[i] = 900.0f + 300.0f * sinf(3.0f * t + (float)i) + rng_uniform(&rng, -20.0f, 20.0f);
+        }
+        const float gyro[3] = {1.5f * sinf(2.0f * t), 1.5f * cosf(1.7f * t), 0.8f * sinf(0.9f * t)};
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, *t_us, speeds, 4u));
+        *t_us += 2000u;
+        TEST_ASSERT_TRUE(propid_push_gyro(&filter, *t_us, gyro) >= 0);
+    }
+}
+
+static void test_covariance_stays_symmetric_positive_definite(void)
+{
+    init_quad();
+    uint64_t t_us = 1000u;
+    const uint8_t n = filter.derived.state_count;
+    for (int block = 0; block < 10; ++block) {
+        run_steps((uint32_t)(block + 1), 500u, &t_us);
+        for (uint8_t i = 0; i < n; ++i) {
+            for (uint8_t j = 0; j < n; ++j) {
+                TEST_ASSERT_TRUE(same_bits(filter.core.cov[i][j], filter.core.cov[j][i]));
+            }
+        }
+        TEST_ASSERT_TRUE(positive_definite(filter.core.cov, n));
+    }
+    propid_counters_t counters;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
+    TEST_ASSERT_EQUAL_UINT32(0u, counters.cov_repairs);
+}
+
+static void test_first_gyro_sample_only_anchors(void)
+{
+    init_quad();
+    const float speeds[4] = {1000.0f, 1000.0f, 1000.0f, 1000.0f};
+    const float gyro[3] = {0.5f, -0.2f, 0.1f};
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 0u, speeds, 4u));
+    memcpy(saved_cov, filter.core.cov, sizeof(saved_cov));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, 5000u, gyro));
+    /* No prediction: the coefficient block is untouched by the (rate+bias) update
+     * because the prior has no cross-covariances. */
+    TEST_ASSERT_EQUAL_FLOAT(saved_cov[3][3], filter.core.cov[3][3]);
+    TEST_ASSERT_TRUE(filter.core.cov[0][0] < saved_cov[0][0]);
+    TEST_ASSERT_EQUAL_UINT64(5000u, filter.core.time_us);
+}
+
+static void test_gate_rejects_outlier_then_reopens(void)
+{
+    init_quad();
+    uint64_t t_us = 1000u;
+    run_steps(5u, 200u, &t_us);
+    propid_counters_t before;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &before));
+    const float speeds[4] = {900.0f, 900.0f, 900.0f, 900.0f};
+    /* An x rate far from anything the filter predicts, held for a while. */
+    const uint16_t limit = filter.config.gate_max_consecutive;
+    for (uint16_t k = 0; k < limit; ++k) {
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t_us, speeds, 4u));
+        t_us += 2000u;
+        const float gyro[3] = {filter.core.state[0] + 20.0f, filter.core.state[1], filter.core.state[2]};
+        TEST_ASSERT_EQUAL_INT(PROPID_OK_GATED, propid_push_gyro(&filter, t_us, gyro));
+        propid_estimate_t est;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
+        TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_GATED) != 0u);
+        TEST_ASSERT_TRUE(est.innovation_test_ratio[0] > 1.0f);
+    }
+    /* The next one re-opens the axis: fused, flagged, counted. */
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t_us, speeds, 4u));
+    t_us += 2000u;
+    const float target = filter.core.state[0] + filter.core.state[9 + 2] + 20.0f;
+    const float gyro[3] = {target, filter.core.state[1], filter.core.state[2]};
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, t_us, gyro));
+    propid_counters_t after;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &after));
+    TEST_ASSERT_EQUAL_UINT32(before.axis_gated[0] + limit, after.axis_gated[0]);
+    TEST_ASSERT_EQUAL_UINT32(before.gate_reopened + 1u, after.gate_reopened);
+    propid_estimate_t est;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
+    TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_GATE_REOPENED) != 0u);
+    TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_GATED) == 0u);
+}
+
+static void test_corrupted_covariance_is_repaired(void)
+{
+    init_quad();
+    uint64_t t_us = 1000u;
+    run_steps(7u, 50u, &t_us);
+    const uint8_t n = filter.derived.state_count;
+    /* A NaN off-diagonal and a correlation above one, in coefficient rows. */
+    filter.core.cov[4][9] = NAN;
+    filter.core.cov[9][4] = NAN;
+    filter.core.cov[5][6] = 2.0f * sqrtf(filter.core.cov[5][5] * filter.core.cov[6][6]);
+    filter.core.cov[6][5] = filter.core.cov[5][6];
+    run_steps(8u, n, &t_us); /* the round-robin check visits every row within n samples */
+    propid_estimate_t est;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
+    TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_COV_REPAIRED) != 0u);
+    propid_counters_t counters;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
+    TEST_ASSERT_TRUE(counters.cov_repairs >= 1u);
+    for (uint8_t i = 0; i < n; ++i) {
+        for (uint8_t j = 0; j < n; ++j) {
+            TEST_ASSERT_TRUE(isfinite(filter.core.cov[i][j]));
+            TEST_ASSERT_TRUE(filter.core.cov[i][j] * filter.core.cov[i][j] <=
+                             filter.core.cov[i][i] * filter.core.cov[j][j] * 1.0001f);
+        }
+    }
+    /* A negative variance is caught on the very next sample. */
+    filter.core.cov[7][7] = -1.0f;
+    run_steps(9u, 1u, &t_us);
+    TEST_ASSERT_TRUE(filter.core.cov[7][7] > 0.0f);
+    TEST_ASSERT_TRUE(positive_definite(filter.core.cov, n));
+}
+
+static void test_coefficients_are_clamped(void)
+{
+    init_quad();
+    uint64_t t_us = 1000u;
+    run_steps(3u, 5u, &t_us);
+    filter.core.state[3] = 100.0f; /* far above coeff_rel_max */
+    filter.core.state[8] = -1.0f;  /* below coeff_rel_min */
+    run_steps(4u, 1u, &t_us);
+    TEST_ASSERT_TRUE(filter.core.state[3] <= filter.config.coeff_rel_max);
+    TEST_ASSERT_TRUE(filter.core.state[8] >= filter.config.coeff_rel_min);
+    propid_estimate_t est;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
+    TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_STATE_CLAMPED) != 0u);
+    propid_counters_t counters;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
+    TEST_ASSERT_TRUE(counters.state_clamps >= 2u);
+}
+
+static void test_time_jump_resync_workflow(void)
+{
+    init_quad();
+    uint64_t t_us = 1000u;
+    run_steps(12u, 100u, &t_us);
+    const float speeds[4] = {900.0f, 900.0f, 900.0f, 900.0f};
+    const float gyro[3] = {0.1f, -0.1f, 0.05f};
+    const uint64_t late = t_us + filter.config.max_gyro_gap_us + 1u;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, late, speeds, 4u));
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_TIME_JUMP, propid_push_gyro(&filter, late, gyro));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_resync(&filter, late));
+    /* Rate variance back to the prior, uncorrelated. */
+    TEST_ASSERT_EQUAL_FLOAT(filter.derived.prior_var[0], filter.core.cov[0][0]);
+    TEST_ASSERT_EQUAL_FLOAT(0.0f, filter.core.cov[0][11]);
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_TIME_BACKWARDS, propid_push_gyro(&filter, late - 1u, gyro));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, late, gyro)); /* same sample anchors */
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, late + 2000u, gyro));
+    propid_estimate_t est;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
+    TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_TIME_RESYNCED) != 0u);
+
+    /* Stale rotor data (gyro keeps coming, ESC stops): rejected, flagged until
+     * the next accepted sample. */
+    uint64_t t = late + 2000u;
+    while (t + 2000u - late <= (uint64_t)filter.config.rotor_stale_us) {
+        t += 2000u;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, t, gyro));
+    }
+    t += 2000u;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_ROTOR_STALE, propid_push_gyro(&filter, t, gyro));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
+    TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_ROTOR_STALE) != 0u);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, speeds, 4u));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, t, gyro));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
+    TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_ROTOR_STALE) == 0u);
+}
+
+int main(void)
+{
+    UNITY_BEGIN();
+    RUN_TEST(test_sparse_prediction_equals_dense);
+    RUN_TEST(test_sequential_updates_equal_batch_update);
+    RUN_TEST(test_covariance_stays_symmetric_positive_definite);
+    RUN_TEST(test_first_gyro_sample_only_anchors);
+    RUN_TEST(test_gate_rejects_outlier_then_reopens);
+    RUN_TEST(test_corrupted_covariance_is_repaired);
+    RUN_TEST(test_coefficients_are_clamped);
+    RUN_TEST(test_time_jump_resync_workflow);
+    return UNITY_END();
+}

@@ -1,0 +1,174 @@
+"""The C filter (through ctypes) against the float64 numpy reference of the same
+algorithm, on a recorded synthetic flight. Tolerance and its derivation:
+docs/design.md, "C filter vs float64 reference".
+
+The sequence: an X quad (Hummingbird-class) with per-rotor coefficients off the
+nominal, an excitation torque plus a rate-hold loop, ESC speeds at 250 Hz and
+gyro at 500 Hz (white noise + bias), 5 s, a few gross gyro outliers (gated by
+both filters) and one propid_reset_rotor. Both filters get identical inputs.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from propid.cfilter import STATUS, CFilter, FilterConfig, c_default_tuning, DEFAULT_TUNING, load_library
+from propid.errors import UserError
+from propid.reference_filter import ReferenceFilter
+
+# Agreement bounds (derived in docs/design.md):
+STATE_TOL_SIGMA = 0.02   # |x_C - x_ref| <= 0.02 * std_ref for every state, every sample
+COV_TOL_REL = 2.0e-3     # |P_ii,C - P_ii,ref| <= 2e-3 * P_ii,ref for every variance, every sample
+
+
+
+@pytest.fixture(scope="module", autouse=True)
+def library():
+    """The C library must be built (cmake target propid_shared): a missing library
+    is a failure with the path in the message, not a skip."""
+    try:
+        return load_library()
+    except UserError as exc:
+        pytest.fail(str(exc))
+
+
+def make_config() -> FilterConfig:
+    inertia = [3.65e-3, 3.68e-3, 7.03e-3]
+    return FilterConfig.symmetric(4, 0.17, math.pi / 4, 1.0, 5.57e-6, 1.36e-7, inertia)
+
+
+def record_flight(seed: int = 7, duration_s: float = 5.0):
+    """Events (t_us, kind, values) of a simulated flight, in push order."""
+    rng = np.random.default_rng(seed)
+    config = make_config()
+    inertia = np.diag(np.array(config.inertia).diagonal())
+    j_diag = np.diag(inertia)
+    positions = np.array(config.positions)
+    yaw = np.array(config.yaw_signs)
+    kf_true = 5.57e-6 * (1.0 + rng.uniform(-0.2, 0.2, 4))
+    km_true = 1.36e-7 * (1.0 + rng.uniform(-0.2, 0.2, 4))
+    bias = rng.uniform(-0.03, 0.03, 3)
+    gyro_std = config.gyro_noise_density * math.sqrt(500.0)
+    # Nominal allocation matrix: torque = T u.
+    t_matrix = np.vstack([positions[:, 1] * 5.57e-6, -positions[:, 0] * 5.57e-6, yaw * 1.36e-7])
+    t_pinv = np.linalg.pinv(t_matrix)
+    hover_sq = (0.6 * 1500.0) ** 2
+
+    rate = np.zeros(3)
+    speeds = np.zeros(4)
+    events = []
+    physics_us, gyro_us, esc_us = 250, 2000, 4000
+    end_us = int(duration_s * 1e6)
+    outliers = {int(1.2e6), int(2.5e6), int(3.7e6)}
+    for t_us in range(0, end_us + 1, physics_us):
+        t = t_us * 1e-6
+        if t_us % gyro_us == 0 and t_us > 0:
+            gyro = rate + bias + gyro_std * rng.standard_normal(3)
+            if t_us in outliers:
+                gyro[t_us % 3] += 5.0
+            events.append((t_us, "gyro", gyro.tolist()))
+        if t_us == int(3.0e6):
+            events.append((t_us, "reset_rotor", 2))
+        if t_us % esc_us == 0:
+            accel = 20.0 * np.array([math.sin(2 * math.pi * 1.3 * t), math.sin(2 * math.pi * 1.7 * t + 1.0),
+                                     0.8 * math.sin(2 * math.pi * 0.9 * t + 2.0)])
+            torque = j_diag * (accel - 4.0 * rate)
+            collective = hover_sq * (1.0 + 0.25 * math.sin(2 * math.pi * 0.6 * t))
+            u = collective + t_pinv @ (torque - t_matrix @ np.full(4, collective))
+            speeds = np.sqrt(np.clip(u, 0.0, None))
+            speeds *= 1.0 + 0.03 * np.sin(2 * math.pi * (2.3 + 0.7 * np.arange(4)) * t + np.arange(4))
+            speeds = np.minimum(speeds, 1500.0)
+            events.append((t_us, "rotor", speeds.tolist()))
+        u_sq = speeds ** 2
+        thrust = kf_true * u_sq
+        tau = np.array([np.sum(positions[:, 1] * thrust), -np.sum(positions[:, 0] * thrust),
+                        np.sum(yaw * km_true * u_sq)])
+
+        def rate_dot(w):
+            return (tau - np.cross(w, j_diag * w)) / j_diag
+
+        h = physics_us * 1e-6
+        rate = rate + h * rate_dot(rate + 0.5 * h * rate_dot(rate))
+    return events
+
+
+def replay(filt, events, perturb_at=None):
+    """Run the events through one filter; per gyro sample, (status, state, cov)."""
+    trace = []
+    for t_us, kind, values in events:
+        if kind == "rotor":
+            assert filt.push_rotor_speeds(t_us, values) == STATUS["PROPID_OK"]
+        elif kind == "reset_rotor":
+            assert filt.reset_rotor(values) == STATUS["PROPID_OK"]
+        else:
+            gyro = list(values)
+            if perturb_at is not None and t_us == perturb_at:
+                gyro[0] += 0.01
+            status = filt.push_gyro(t_us, gyro)
+            state, cov = filt.scaled_state()
+            trace.append((status, state, np.diag(cov).copy()))
+    return trace
+
+
+def disagreement(trace_c, trace_ref):
+    """max |dx| / std_ref and max relative variance difference, over samples and states."""
+    worst_state, worst_cov = 0.0, 0.0
+    for (status_c, x_c, var_c), (status_r, x_r, var_r) in zip(trace_c, trace_ref):
+        if status_c != status_r:
+            return math.inf, math.inf
+        worst_state = max(worst_state, float(np.max(np.abs(x_c - x_r) / np.sqrt(var_r))))
+        worst_cov = max(worst_cov, float(np.max(np.abs(var_c - var_r) / var_r)))
+    return worst_state, worst_cov
+
+
+@pytest.fixture(scope="module")
+def flight():
+    return record_flight()
+
+
+@pytest.fixture(scope="module")
+def reference_trace(flight):
+    return replay(ReferenceFilter(make_config()), flight)
+
+
+def test_defaults_match_c():
+    c_defaults = c_default_tuning()
+    for name, value in DEFAULT_TUNING.items():
+        assert c_defaults[name] == pytest.approx(value, rel=1e-6), name
+
+
+def test_c_agrees_with_reference(flight, reference_trace):
+    trace_c = replay(CFilter(make_config()), flight)
+    assert len(trace_c) == len(reference_trace) > 2000
+    statuses = [s for s, _, _ in trace_c]
+    assert statuses.count(STATUS["PROPID_OK_GATED"]) == 3  # the three outliers
+    state_err, cov_err = disagreement(trace_c, reference_trace)
+    print(f"C vs reference: max |dx|/std = {state_err:.3g}, max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+
+
+def test_disagreement_is_detected(flight, reference_trace):
+    """The comparison can fail: one gyro sample off by 0.01 rad/s (about one
+    noise std) in the C run only must exceed the tolerance."""
+    gyro_times = [t for t, kind, _ in flight if kind == "gyro"]
+    trace_c = replay(CFilter(make_config()), flight, perturb_at=gyro_times[len(gyro_times) // 2])
+    state_err, _ = disagreement(trace_c, reference_trace)
+    assert state_err > 5 * STATE_TOL_SIGMA
+
+
+def test_reference_converges(flight, reference_trace):
+    """The reference itself identifies the coefficients (guards against two
+    identical wrong implementations agreeing)."""
+    ref = ReferenceFilter(make_config())
+    replay(ref, flight)
+    est = ref.estimate()
+    rng = np.random.default_rng(7)
+    kf_true = 5.57e-6 * (1.0 + rng.uniform(-0.2, 0.2, 4))
+    km_true = 1.36e-7 * (1.0 + rng.uniform(-0.2, 0.2, 4))
+    assert np.all(np.abs(est.thrust_coeff / kf_true - 1.0) < 0.03)
+    assert np.all(np.abs(est.drag_coeff / km_true - 1.0) < 0.06)
+    assert np.all(np.abs(est.thrust_coeff - kf_true) < 4.0 * est.thrust_coeff_std)

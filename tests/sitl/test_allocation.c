@@ -1,0 +1,228 @@
+/*
+ * Allocation: wrench -> rotor speeds -> wrench round trips (plus, X, hexa,
+ * distinct per-rotor coefficients), the saturation priority (yaw first, then
+ * collective thrust, roll/pitch last) and input checks.
+ * Plain C (no framework): prints each failure, exit status = failure count.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "allocation.h"
+
+static int failures;
+
+#define CHECK(cond, ...)                                                                           \
+    do {                                                                                           \
+        if (!(cond)) {                                                                             \
+            failures++;                                                                            \
+            printf("FAIL %s:%d: ", __FILE__, __LINE__);                                            \
+            printf(__VA_ARGS__);                                                                   \
+            printf("\n");                                                                          \
+        }                                                                                          \
+    } while (0)
+
+static const double kf_nom = 2.3e-8, km_nom = 7.8e-10, arm = 0.043;
+static const double speed_max = 2500.0;
+
+static void symmetric_geometry(sitl_allocation_geometry_t *g, int n, double first_angle)
+{
+    memset(g, 0, sizeof(*g));
+    g->rotor_count = n;
+    g->rotor_speed_min = 0.0;
+    g->rotor_speed_max = speed_max;
+    for (int i = 0; i < n; i++) {
+        double a = first_angle + 2.0 * 3.14159265358979323846 * i / n;
+        g->position[i][0] = arm * cos(a);
+        g->position[i][1] = arm * sin(a);
+        g->yaw_sign[i] = (i % 2 == 0) ? 1.0 : -1.0;
+    }
+}
+
+/* Deterministic spread of coefficients around nominal, like the campaign's truth. */
+static void spread(int n, double *kf, double *km, int seed)
+{
+    for (int i = 0; i < n; i++) {
+        double a = 0.8 + 0.4 * fmod(0.618033988749 * (i + 1 + 7 * seed), 1.0);
+        double b = 0.8 + 0.4 * fmod(0.414213562373 * (i + 3 + 5 * seed), 1.0);
+        kf[i] = kf_nom * a;
+        km[i] = km_nom * b;
+    }
+}
+
+static int rel_close(double a, double b, double scale, double tol) { return fabs(a - b) <= tol * scale; }
+
+static void check_round_trip(int n, double first_angle, int seed)
+{
+    sitl_allocation_geometry_t g;
+    symmetric_geometry(&g, n, first_angle);
+    sitl_allocation_t alloc;
+    CHECK(sitl_allocation_init(&alloc, &g) == 0, "init n=%d", n);
+    double kf[SITL_ALLOC_MAX_ROTORS], km[SITL_ALLOC_MAX_ROTORS];
+    spread(n, kf, km, seed);
+    CHECK(sitl_allocation_set_coefficients(&alloc, kf, km) == 0, "coefficients n=%d", n);
+
+    /* Hover-ish thrust with moments a controller would ask for. */
+    const double thrust = 0.3, moment[3] = {2e-4, -1.5e-4, 3e-5};
+    sitl_allocation_result_t r;
+    CHECK(sitl_allocation_solve(&alloc, thrust, moment, &r) == 0, "solve n=%d", n);
+    CHECK(r.saturation == 0, "n=%d unexpected saturation %u", n, r.saturation);
+    double w[4];
+    sitl_allocation_wrench(&alloc, r.rotor_speed, w);
+    CHECK(rel_close(w[0], thrust, thrust, 1e-9), "n=%d thrust %g vs %g", n, w[0], thrust);
+    for (int k = 0; k < 3; k++) {
+        CHECK(rel_close(w[k + 1], moment[k], fabs(moment[k]), 1e-9), "n=%d moment %d %g vs %g", n,
+              k, w[k + 1], moment[k]);
+        CHECK(rel_close(r.achieved[k + 1], moment[k], fabs(moment[k]), 1e-9),
+              "n=%d achieved moment %d", n, k);
+    }
+    /* Check the wrench map against the physics written out independently:
+     * tau = sum r_i x (kf_i u_i z) + s_i km_i u_i z */
+    double tau[3] = {0, 0, 0}, f = 0.0;
+    for (int i = 0; i < n; i++) {
+        double u = r.rotor_speed[i] * r.rotor_speed[i];
+        f += kf[i] * u;
+        tau[0] += g.position[i][1] * kf[i] * u;
+        tau[1] -= g.position[i][0] * kf[i] * u;
+        tau[2] += g.yaw_sign[i] * km[i] * u;
+    }
+    CHECK(rel_close(f, thrust, thrust, 1e-9), "n=%d physics thrust %g", n, f);
+    for (int k = 0; k < 3; k++) {
+        CHECK(rel_close(tau[k], moment[k], fabs(moment[k]), 1e-9), "n=%d physics moment %d", n, k);
+    }
+}
+
+static void test_round_trips(void)
+{
+    const double pi = 3.14159265358979323846;
+    check_round_trip(4, 0.0, 1);      /* plus */
+    check_round_trip(4, pi / 4.0, 2); /* X */
+    check_round_trip(6, 0.0, 3);      /* hexa: minimum-norm pseudo-inverse */
+    check_round_trip(8, pi / 8.0, 4); /* octo */
+}
+
+/* Solve on a plus quad with nominal coefficients. */
+static void setup_plus(sitl_allocation_t *alloc)
+{
+    sitl_allocation_geometry_t g;
+    symmetric_geometry(&g, 4, 0.0);
+    sitl_allocation_init(alloc, &g);
+    double kf[4] = {kf_nom, kf_nom, kf_nom, kf_nom}, km[4] = {km_nom, km_nom, km_nom, km_nom};
+    sitl_allocation_set_coefficients(alloc, kf, km);
+}
+
+static int within_bounds(const sitl_allocation_result_t *r, int n)
+{
+    for (int i = 0; i < n; i++) {
+        if (!(r->rotor_speed[i] >= 0.0 && r->rotor_speed[i] <= speed_max * (1.0 + 1e-12))) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+static void test_yaw_sacrificed_first(void)
+{
+    sitl_allocation_t alloc;
+    setup_plus(&alloc);
+    const double thrust = 0.3, moment[3] = {1e-4, -5e-5, 5e-2}; /* ~5x the achievable yaw */
+    sitl_allocation_result_t r;
+    sitl_allocation_solve(&alloc, thrust, moment, &r);
+    CHECK(within_bounds(&r, 4), "speeds out of bounds");
+    CHECK(r.saturation == SITL_ALLOC_SAT_YAW, "flags %u, expected yaw only", r.saturation);
+    CHECK(r.yaw_fraction > 0.0 && r.yaw_fraction < 1.0, "yaw fraction %g", r.yaw_fraction);
+    CHECK(rel_close(r.achieved[0], thrust, thrust, 1e-9), "thrust not kept: %g", r.achieved[0]);
+    CHECK(rel_close(r.achieved[1], moment[0], fabs(moment[0]), 1e-9), "roll not kept");
+    CHECK(rel_close(r.achieved[2], moment[1], fabs(moment[1]), 1e-9), "pitch not kept");
+    CHECK(rel_close(r.achieved[3], r.yaw_fraction * moment[2], fabs(moment[2]), 1e-9),
+          "yaw achieved %g vs fraction %g", r.achieved[3], r.yaw_fraction);
+    CHECK(r.achieved[3] > 0.0, "yaw moment kept its sign");
+    /* the reduced yaw saturates at least one rotor (largest feasible fraction) */
+    int at_bound = 0;
+    for (int i = 0; i < 4; i++) {
+        at_bound |= fabs(r.rotor_speed[i] - speed_max) < 1e-6 || r.rotor_speed[i] < 1e-3;
+    }
+    CHECK(at_bound, "yaw reduced more than needed");
+}
+
+static void test_thrust_moved_before_roll_pitch(void)
+{
+    sitl_allocation_t alloc;
+    setup_plus(&alloc);
+    /* More thrust than four rotors at full speed give, plus a roll moment. */
+    const double thrust_max = 4.0 * kf_nom * speed_max * speed_max;
+    const double thrust = 1.2 * thrust_max, moment[3] = {2e-3, 0.0, 1e-5};
+    sitl_allocation_result_t r;
+    sitl_allocation_solve(&alloc, thrust, moment, &r);
+    CHECK(within_bounds(&r, 4), "speeds out of bounds");
+    CHECK((r.saturation & SITL_ALLOC_SAT_THRUST) && !(r.saturation & SITL_ALLOC_SAT_ROLL_PITCH),
+          "flags %u", r.saturation);
+    CHECK(rel_close(r.achieved[1], moment[0], fabs(moment[0]), 1e-9), "roll not kept: %g",
+          r.achieved[1]);
+    CHECK(r.achieved[0] < thrust && r.achieved[0] > 0.8 * thrust_max, "thrust %g", r.achieved[0]);
+    CHECK(fabs(r.achieved[3]) < 1e-12, "yaw should be dropped before thrust moves");
+
+    /* Roll moment larger than the rotors can make at any thrust: scaled, sign kept. */
+    const double huge[3] = {1.0, 0.0, 0.0};
+    sitl_allocation_solve(&alloc, 0.3, huge, &r);
+    CHECK(within_bounds(&r, 4), "speeds out of bounds (huge roll)");
+    CHECK(r.saturation & SITL_ALLOC_SAT_ROLL_PITCH, "flags %u", r.saturation);
+    CHECK(r.achieved[1] > 0.0, "roll sign lost");
+    const double roll_max = arm * kf_nom * speed_max * speed_max; /* one side full, other off */
+    CHECK(r.achieved[1] > 0.99 * roll_max, "roll %g far below the achievable %g", r.achieved[1],
+          roll_max);
+
+    /* Negative thrust: clipped to zero speeds, no NaN. */
+    const double none[3] = {0.0, 0.0, 0.0};
+    sitl_allocation_solve(&alloc, -1.0, none, &r);
+    CHECK(within_bounds(&r, 4) && r.rotor_speed[0] == 0.0, "negative thrust -> %g",
+          r.rotor_speed[0]);
+}
+
+static void test_bad_input(void)
+{
+    sitl_allocation_geometry_t g;
+    symmetric_geometry(&g, 4, 0.0);
+    sitl_allocation_t alloc;
+    g.rotor_speed_max = 0.0;
+    CHECK(sitl_allocation_init(&alloc, &g) == -1, "max speed 0 accepted");
+    symmetric_geometry(&g, 4, 0.0);
+    g.yaw_sign[2] = 0.5;
+    CHECK(sitl_allocation_init(&alloc, &g) == -1, "yaw sign 0.5 accepted");
+    symmetric_geometry(&g, 4, 0.0);
+    g.rotor_count = 9;
+    CHECK(sitl_allocation_init(&alloc, &g) == -1, "9 rotors accepted");
+
+    symmetric_geometry(&g, 4, 0.0);
+    CHECK(sitl_allocation_init(&alloc, &g) == 0, "init");
+    sitl_allocation_result_t r;
+    const double m[3] = {0, 0, 0};
+    CHECK(sitl_allocation_solve(&alloc, 0.3, m, &r) == -1, "solve before coefficients");
+    double kf[4] = {kf_nom, -kf_nom, kf_nom, kf_nom}, km[4] = {km_nom, km_nom, km_nom, km_nom};
+    CHECK(sitl_allocation_set_coefficients(&alloc, kf, km) == -1, "negative kf accepted");
+    kf[1] = kf_nom;
+    km[3] = NAN;
+    CHECK(sitl_allocation_set_coefficients(&alloc, kf, km) == -1, "NaN km accepted");
+
+    /* Singular: all rotors on the x axis cannot make a roll moment. */
+    for (int i = 0; i < 4; i++) {
+        g.position[i][1] = 0.0;
+    }
+    sitl_allocation_init(&alloc, &g);
+    km[3] = km_nom;
+    CHECK(sitl_allocation_set_coefficients(&alloc, kf, km) == -1, "singular map accepted");
+    CHECK(!alloc.ready, "singular map marked ready");
+    const double bad_moment[3] = {NAN, 0, 0};
+    setup_plus(&alloc);
+    CHECK(sitl_allocation_solve(&alloc, 0.3, bad_moment, &r) == -1, "NaN moment accepted");
+}
+
+int main(void)
+{
+    test_round_trips();
+    test_yaw_sacrificed_first();
+    test_thrust_moved_before_roll_pitch();
+    test_bad_input();
+    printf("test_allocation: %d failure(s)\n", failures);
+    return failures == 0 ? 0 : 1;
+}

@@ -1,0 +1,100 @@
+#!/usr/bin/env bash
+# Command-line checks of propid_sitl: help, usage errors and exit codes, log
+# columns (TEAM.md contract 4), the vehicle file beside the log, summary JSON,
+# byte-identical logs from one seed, vehicle files as input, divergence exit 3.
+# usage: test_cli.sh PATH/TO/propid_sitl WORKDIR
+set -u
+SITL="$1"
+WORK="$2"
+mkdir -p "$WORK"
+failures=0
+fail() { echo "FAIL: $*"; failures=$((failures + 1)); }
+expect_rc() { # expected_rc description command...
+    local want="$1" what="$2"; shift 2
+    "$@" >"$WORK/out.txt" 2>"$WORK/err.txt"
+    local rc=$?
+    if [ "$rc" -ne "$want" ]; then
+        fail "$what: exit $rc, expected $want"; sed 's/^/  | /' "$WORK/err.txt" | head -5
+    fi
+}
+
+expect_rc 0 "--help" "$SITL" --help
+grep -q -- "--vehicle" "$WORK/out.txt" || fail "--help does not list --vehicle"
+grep -q "Exit codes" "$WORK/out.txt" || fail "--help does not list the exit codes"
+
+expect_rc 2 "unknown option" "$SITL" --no-such-option
+expect_rc 2 "bad mode" "$SITL" --mode sometimes
+grep -q "oracle|incorrect|filter" "$WORK/err.txt" || fail "bad mode message"
+expect_rc 2 "bad number" "$SITL" --duration ten
+expect_rc 2 "unknown effect" "$SITL" --effect warp_drive
+expect_rc 2 "unknown vehicle" "$SITL" --vehicle no-such-quad --quiet
+expect_rc 2 "physics slower than control" "$SITL" --physics-rate 100 --quiet
+
+cat >"$WORK/nomass.vehicle.json" <<'JSON'
+{"name": "x", "mass": null, "inertia": [1e-3, 1e-3, 2e-3],
+ "rotors": [{"position": [0.1, 0, 0], "yaw_sign": 1}], "kf_nominal": 1e-6, "km_nominal": 1e-8}
+JSON
+expect_rc 2 "vehicle file without mass" "$SITL" --vehicle "$WORK/nomass.vehicle.json" --quiet
+grep -q "'mass' is missing or null" "$WORK/err.txt" || fail "missing-mass message: $(cat "$WORK/err.txt")"
+
+# A logged flight, twice with the same seed, once with another.
+expect_rc 0 "logged flight" "$SITL" --trajectory circle --seed 7 --duration 10 --quiet \
+    --log "$WORK/a.csv" --summary-json "$WORK/a.json"
+grep -q "tracking RMSE" "$WORK/out.txt" || fail "no final summary"
+expect_rc 0 "logged flight again" "$SITL" --trajectory circle --seed 7 --duration 10 --quiet \
+    --log "$WORK/b.csv"
+cmp -s "$WORK/a.csv" "$WORK/b.csv" || fail "same seed gave different logs"
+expect_rc 0 "other seed" "$SITL" --trajectory circle --seed 8 --duration 10 --quiet --log "$WORK/c.csv"
+cmp -s "$WORK/a.csv" "$WORK/c.csv" && fail "different seeds gave the same log"
+
+header=$(head -1 "$WORK/a.csv")
+expected="t,gyro_x,gyro_y,gyro_z,omega_1,omega_2,omega_3,omega_4,acc_x,acc_y,acc_z,qw,qx,qy,qz,vx,vy,vz,px,py,pz,cmd_1,cmd_2,cmd_3,cmd_4,ref_px,ref_py,ref_pz,ref_yaw,true_kf_1,true_kf_2,true_kf_3,true_kf_4,true_km_1,true_km_2,true_km_3,true_km_4,true_bg_x,true_bg_y,true_bg_z,true_wx,true_wy,true_wz,est_kf_1,std_kf_1,est_kf_2,std_kf_2,est_kf_3,std_kf_3,est_kf_4,std_kf_4,est_km_1,std_km_1,est_km_2,std_km_2,est_km_3,std_km_3,est_km_4,std_km_4,est_bg_x,est_bg_y,est_bg_z,std_bg_x,std_bg_y,std_bg_z,est_wx,est_wy,est_wz,health,status,true_omega_1,true_omega_2,true_omega_3,true_omega_4"
+[ "$header" = "$expected" ] || fail "log header differs from the contract: $header"
+rows=$(($(wc -l <"$WORK/a.csv") - 1))
+[ "$rows" -eq 5001 ] || fail "expected 5001 rows at 500 Hz for 10 s, got $rows"
+cols=$(echo "$header" | tr ',' '\n' | wc -l)
+bad=$(awk -F, -v n="$cols" 'NR > 1 && NF != n {c++} END {print c + 0}' "$WORK/a.csv")
+[ "$bad" -eq 0 ] || fail "$bad rows with the wrong field count"
+[ -f "$WORK/a.vehicle.json" ] || fail "no a.vehicle.json beside the log"
+
+if command -v python3 >/dev/null; then
+    python3 - "$WORK" <<'PY' || fail "vehicle/summary JSON check"
+import json, sys
+w = sys.argv[1]
+v = json.load(open(w + "/a.vehicle.json"))
+assert v["mass"] == 0.03 and len(v["rotors"]) == 4, v
+assert v["kf_nominal"] == 2.3e-8 and v["km_nominal"] == 7.8e-10, v
+assert v["rotors"][0]["position"] == [0.043, 0, 0] and v["rotors"][1]["yaw_sign"] == -1, v
+s = json.load(open(w + "/a.json"))
+assert s["stable"] is True and s["exit_code"] == 0 and s["trajectory"] == "circle", s
+assert 0 < s["rmse_x_m"] < 0.05, s
+PY
+fi
+
+# The written vehicle file flies.
+expect_rc 0 "vehicle from file" "$SITL" --vehicle "$WORK/a.vehicle.json" --trajectory hover \
+    --mode oracle --duration 2 --quiet
+# Paper sensors and effects parse and fly.
+expect_rc 0 "paper + effects" "$SITL" --paper --effect rotor_drag --effect esc_delay=0.01 \
+    --duration 10 --quiet --log-rate 100 --log "$WORK/p.csv"
+rows=$(($(wc -l <"$WORK/p.csv") - 1))
+[ "$rows" -eq 1001 ] || fail "--log-rate 100: expected 1001 rows, got $rows"
+
+# Divergence: exit 3 with a message, log kept.
+expect_rc 3 "divergence" "$SITL" --vehicle hummingbird-plus --mode oracle --motor-tau 0.3 \
+    --quiet --log "$WORK/d.csv"
+grep -q "diverged" "$WORK/err.txt" || fail "no divergence message"
+[ "$(wc -l <"$WORK/d.csv")" -gt 100 ] || fail "divergence log too short"
+
+# MAVLink: flies when the link is built in, otherwise a clear usage error.
+"$SITL" --duration 10 --quiet --mavlink udp:127.0.0.1:14599 >"$WORK/out.txt" 2>"$WORK/err.txt"
+rc=$?
+if [ $rc -ne 0 ] && ! { [ $rc -eq 2 ] && grep -q "without the MAVLink link" "$WORK/err.txt"; }; then
+    fail "--mavlink: exit $rc"; head -3 "$WORK/err.txt"
+fi
+
+if [ $failures -ne 0 ]; then
+    echo "test_cli.sh: $failures failure(s)"
+    exit 1
+fi
+echo "test_cli.sh: all passed"

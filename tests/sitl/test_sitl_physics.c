@@ -1,0 +1,233 @@
+/*
+ * Plant physics: free fall, hover equilibrium, torque signs of the plus and
+ * X layouts, motor lag, torque-free rigid-body rotation (RK4 quality), ground
+ * contact and take-off, physics-rate independence.
+ */
+#include <math.h>
+#include <string.h>
+
+#include "plant.h"
+#include "sitl_math.h"
+#include "unity.h"
+
+static sitl_plant_t plant;
+static sitl_vehicle_t vehicle;
+
+static void make_plant(const char *preset)
+{
+    char err[256];
+    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset(preset, &vehicle));
+    TEST_ASSERT_EQUAL_INT_MESSAGE(0, sitl_plant_init(&plant, &vehicle, NULL, NULL, NULL, err,
+                                                     (int)sizeof(err)),
+                                  err);
+}
+
+void setUp(void)
+{
+    make_plant("crazyflie-plus");
+}
+
+void tearDown(void)
+{
+}
+
+static void fly(sitl_state_t *s, const double *cmd, double seconds, double dt)
+{
+    long steps = lround(seconds / dt);
+    for (long k = 0; k < steps; k++) {
+        sitl_plant_step(&plant, s, cmd, dt);
+    }
+}
+
+static void test_free_fall_is_exact(void)
+{
+    plant.ground_enabled = 0;
+    sitl_state_t s;
+    memset(&s, 0, sizeof(s));
+    s.quat[0] = 1.0;
+    s.position[2] = 10.0;
+    double cmd[SITL_MAX_ROTORS] = {0};
+    fly(&s, cmd, 1.0, 0.0005);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, 10.0 - 0.5 * SITL_GRAVITY, s.position[2]);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, -SITL_GRAVITY, s.velocity[2]);
+}
+
+static void test_hover_speeds_hold_the_vehicle(void)
+{
+    const char *presets[4] = {"crazyflie-plus", "crazyflie-x", "hummingbird-plus",
+                              "hummingbird-x"};
+    for (int p = 0; p < 4; p++) {
+        make_plant(presets[p]);
+        /* Unequal true coefficients: hover needs unequal speeds. */
+        double kf[4] = {2.1e-8, 2.5e-8, 2.2e-8, 2.4e-8};
+        double km[4] = {7.0e-10, 8.5e-10, 7.5e-10, 8.0e-10};
+        if (p >= 2) {
+            for (int i = 0; i < 4; i++) {
+                kf[i] *= 5.57e-6 / 2.3e-8;
+                km[i] *= 1.36e-7 / 7.8e-10;
+            }
+        }
+        char err[256];
+        TEST_ASSERT_EQUAL_INT(0, sitl_plant_init(&plant, &vehicle, kf, km, NULL, err, 256));
+        sitl_state_t s;
+        double pos[3] = {1.0, 2.0, 3.0};
+        sitl_plant_hover_state(&plant, pos, 0.3, &s);
+        double cmd[SITL_MAX_ROTORS];
+        memcpy(cmd, s.rotor_speed, sizeof(cmd));
+        fly(&s, cmd, 2.0, 0.0005);
+        TEST_ASSERT_DOUBLE_WITHIN(1e-9, 3.0, s.position[2]);
+        TEST_ASSERT_DOUBLE_WITHIN(1e-9, 1.0, s.position[0]);
+        TEST_ASSERT_DOUBLE_WITHIN(1e-9, 0.0, s.body_rate[2]);
+        TEST_ASSERT_DOUBLE_WITHIN(1e-9, 0.0, s.body_rate[0]);
+    }
+}
+
+/* Angular acceleration when one rotor runs 10 % above the others. */
+static void one_rotor_faster(int rotor, double dw[3])
+{
+    sitl_state_t s;
+    double pos[3] = {0.0, 0.0, 1.0};
+    sitl_plant_hover_state(&plant, pos, 0.0, &s);
+    s.rotor_speed[rotor] *= 1.1;
+    sitl_state_derivative_t d;
+    sitl_plant_derivative(&plant, &s, s.rotor_speed, &d, NULL);
+    sitl_vec3_copy(dw, d.body_rate);
+}
+
+static void test_plus_layout_torque_signs(void)
+{
+    double dw[3];
+    /* Rotor 1 on +x: more thrust there pitches the nose up = negative y (FLU). */
+    one_rotor_faster(0, dw);
+    TEST_ASSERT_TRUE(dw[1] < 0.0);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, 0.0, dw[0]);
+    TEST_ASSERT_TRUE(dw[2] > 0.0); /* yaw_sign + */
+    /* Rotor 2 on +y: rolls right side down = positive x. */
+    one_rotor_faster(1, dw);
+    TEST_ASSERT_TRUE(dw[0] > 0.0);
+    TEST_ASSERT_TRUE(dw[2] < 0.0); /* yaw_sign - */
+    /* Magnitude: L * kf * dOmega^2 / Jxx. */
+    sitl_state_t s;
+    double pos[3] = {0.0, 0.0, 1.0};
+    sitl_plant_hover_state(&plant, pos, 0.0, &s);
+    double w = s.rotor_speed[1];
+    double expected = 0.043 * 2.3e-8 * (1.21 - 1.0) * w * w / 1.43e-5;
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9 * expected, expected, dw[0]);
+}
+
+static void test_x_layout_geometry(void)
+{
+    make_plant("crazyflie-x");
+    double a = 0.043 / sqrt(2.0);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-12, a, vehicle.rotor[0].position[0]);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-12, a, vehicle.rotor[0].position[1]);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-12, -a, vehicle.rotor[1].position[0]); /* CCW: rotor 2 front-left -> back-left */
+    TEST_ASSERT_DOUBLE_WITHIN(1e-12, a, vehicle.rotor[1].position[1]);
+    double dw[3];
+    one_rotor_faster(0, dw); /* front-left: roll positive, pitch nose-up (negative) */
+    TEST_ASSERT_TRUE(dw[0] > 0.0);
+    TEST_ASSERT_TRUE(dw[1] < 0.0);
+}
+
+static void test_motor_first_order_lag(void)
+{
+    sitl_state_t s;
+    double pos[3] = {0.0, 0.0, 100.0};
+    sitl_plant_hover_state(&plant, pos, 0.0, &s);
+    double w0 = s.rotor_speed[0];
+    double cmd[SITL_MAX_ROTORS];
+    memcpy(cmd, s.rotor_speed, sizeof(cmd));
+    cmd[0] = w0 + 500.0;
+    fly(&s, cmd, 0.072, 0.0001); /* one time constant */
+    TEST_ASSERT_DOUBLE_WITHIN(0.5, w0 + 500.0 * (1.0 - exp(-1.0)), s.rotor_speed[0]);
+    cmd[0] = 1e6; /* beyond the limit */
+    fly(&s, cmd, 2.0, 0.0005);
+    TEST_ASSERT_TRUE(s.rotor_speed[0] <= 2500.0);
+    TEST_ASSERT_DOUBLE_WITHIN(1.0, 2500.0, s.rotor_speed[0]);
+}
+
+static void test_torque_free_rotation_conserves_energy_and_momentum(void)
+{
+    plant.ground_enabled = 0;
+    plant.gravity = 0.0;
+    sitl_state_t s;
+    memset(&s, 0, sizeof(s));
+    s.quat[0] = 1.0;
+    s.position[2] = 1.0;
+    sitl_vec3_set(s.body_rate, 3.0, 0.5, 2.0);
+    double cmd[SITL_MAX_ROTORS] = {0};
+    double jw[3], h0[3], e0;
+    sitl_mat3_mul_vec(jw, plant.inertia, s.body_rate);
+    sitl_quat_rotate(s.quat, jw, h0);
+    e0 = 0.5 * sitl_vec3_dot(s.body_rate, jw);
+    fly(&s, cmd, 5.0, 0.0005);
+    double h1[3];
+    sitl_mat3_mul_vec(jw, plant.inertia, s.body_rate);
+    sitl_quat_rotate(s.quat, jw, h1);
+    double e1 = 0.5 * sitl_vec3_dot(s.body_rate, jw);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-8 * e0, e0, e1);
+    for (int k = 0; k < 3; k++) {
+        TEST_ASSERT_DOUBLE_WITHIN(1e-8 * sitl_vec3_norm(h0), h0[k], h1[k]);
+    }
+}
+
+static void test_ground_holds_and_releases(void)
+{
+    sitl_state_t s;
+    double pos[3] = {0.0, 0.0, 0.0};
+    sitl_plant_hover_state(&plant, pos, 0.0, &s);
+    memset(s.rotor_speed, 0, sizeof(s.rotor_speed));
+    s.on_ground = 1;
+    double cmd[SITL_MAX_ROTORS] = {0};
+    fly(&s, cmd, 1.0, 0.0005);
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, s.position[2]);
+    TEST_ASSERT_EQUAL_INT(1, s.on_ground);
+    /* Thrust 1.5 x weight: lifts off. */
+    double w = sqrt(1.5 * 0.03 * SITL_GRAVITY / (4.0 * 2.3e-8));
+    for (int i = 0; i < 4; i++) {
+        cmd[i] = w;
+    }
+    fly(&s, cmd, 1.0, 0.0005);
+    TEST_ASSERT_TRUE(s.position[2] > 0.5);
+    TEST_ASSERT_EQUAL_INT(0, s.on_ground);
+    /* Rotors off again: falls back and stops at z = 0, never below. */
+    memset(cmd, 0, sizeof(cmd));
+    for (int k = 0; k < 6000; k++) {
+        sitl_plant_step(&plant, &s, cmd, 0.0005);
+        TEST_ASSERT_TRUE(s.position[2] >= 0.0);
+    }
+    TEST_ASSERT_EQUAL_INT(1, s.on_ground);
+}
+
+static void test_step_size_independence(void)
+{
+    /* The same manoeuvre at 2 kHz and 10 kHz agrees to RK4 accuracy. */
+    sitl_state_t a, b;
+    double pos[3] = {0.0, 0.0, 5.0};
+    sitl_plant_hover_state(&plant, pos, 0.0, &a);
+    b = a;
+    double cmd[SITL_MAX_ROTORS];
+    memcpy(cmd, a.rotor_speed, sizeof(cmd));
+    cmd[1] *= 1.02;
+    cmd[0] *= 0.99;
+    fly(&a, cmd, 0.5, 0.0005);
+    fly(&b, cmd, 0.5, 0.0001);
+    for (int k = 0; k < 3; k++) {
+        TEST_ASSERT_DOUBLE_WITHIN(1e-6, b.position[k], a.position[k]);
+        TEST_ASSERT_DOUBLE_WITHIN(1e-5, b.body_rate[k], a.body_rate[k]);
+    }
+}
+
+int main(void)
+{
+    UNITY_BEGIN();
+    RUN_TEST(test_free_fall_is_exact);
+    RUN_TEST(test_hover_speeds_hold_the_vehicle);
+    RUN_TEST(test_plus_layout_torque_signs);
+    RUN_TEST(test_x_layout_geometry);
+    RUN_TEST(test_motor_first_order_lag);
+    RUN_TEST(test_torque_free_rotation_conserves_energy_and_momentum);
+    RUN_TEST(test_ground_holds_and_releases);
+    RUN_TEST(test_step_size_independence);
+    return UNITY_END();
+}

@@ -1,0 +1,153 @@
+/*
+ * Sensor models: gyro noise level and bias draw, saturation and quantisation;
+ * ESC telemetry latency, DShot quantisation bound, dropout rate;
+ * reproducibility of every random stream from the seed.
+ */
+#include <math.h>
+#include <string.h>
+
+#include "esc_telemetry.h"
+#include "imu.h"
+#include "rng.h"
+#include "unity.h"
+
+void setUp(void)
+{
+}
+
+void tearDown(void)
+{
+}
+
+static void test_gyro_noise_matches_density_and_bias_in_range(void)
+{
+    sitl_imu_params_t p;
+    sitl_imu_default_params(&p);
+    p.gyro.bias_walk = 0.0;
+    p.gyro.resolution = 0.0;
+    sitl_effects_t fx;
+    sitl_effects_clear(&fx);
+    sitl_imu_t imu;
+    sitl_imu_init(&imu, &p, 42, &fx);
+    for (int k = 0; k < 3; k++) {
+        TEST_ASSERT_TRUE(fabs(imu.gyro_bias[k]) <= p.gyro.bias_max);
+    }
+    const int n = 20000;
+    double sum[3] = {0}, sum2[3] = {0};
+    double w[3] = {0.1, -0.2, 0.3}, f[3] = {0, 0, 9.81}, g[3], a[3];
+    for (int i = 0; i < n; i++) {
+        sitl_imu_sample(&imu, w, f, 1.0 / p.rate_hz, g, a);
+        for (int k = 0; k < 3; k++) {
+            double e = g[k] - w[k] - imu.gyro_bias[k];
+            sum[k] += e;
+            sum2[k] += e * e;
+        }
+    }
+    double sigma = p.gyro.noise_density * sqrt(p.rate_hz);
+    for (int k = 0; k < 3; k++) {
+        double mean = sum[k] / n;
+        double sd = sqrt(sum2[k] / n - mean * mean);
+        TEST_ASSERT_DOUBLE_WITHIN(0.03 * sigma, sigma, sd);
+        TEST_ASSERT_DOUBLE_WITHIN(4.0 * sigma / sqrt(n), 0.0, mean);
+    }
+}
+
+static void test_gyro_saturates_and_quantises(void)
+{
+    sitl_imu_params_t p;
+    sitl_imu_default_params(&p);
+    p.gyro.noise_density = 0.0;
+    p.gyro.bias_max = 0.0;
+    p.gyro.bias_walk = 0.0;
+    sitl_effects_t fx;
+    sitl_effects_clear(&fx);
+    sitl_imu_t imu;
+    sitl_imu_init(&imu, &p, 1, &fx);
+    double w[3] = {100.0, -100.0, 0.01234}, f[3] = {0, 0, 9.81}, g[3], a[3];
+    sitl_imu_sample(&imu, w, f, 0.001, g, a);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-12, p.gyro.range, g[0]);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-12, -p.gyro.range, g[1]);
+    double lsb_count = g[2] / p.gyro.resolution;
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, round(lsb_count), lsb_count);
+    TEST_ASSERT_DOUBLE_WITHIN(0.5 * p.gyro.resolution, 0.01234, g[2]);
+}
+
+static void test_esc_latency_and_dshot_quantisation(void)
+{
+    sitl_esc_params_t p;
+    sitl_esc_default_params(&p);
+    p.dropout_prob = 0.0;
+    sitl_esc_telemetry_t esc;
+    TEST_ASSERT_EQUAL_INT(0, sitl_esc_init(&esc, &p, 2, 0.0, 4000.0, 3));
+    for (int k = 0; k <= 400; k++) {
+        double t = k * 0.00025;
+        double s[2] = {1500.0 + 2000.0 * t, 800.0};
+        sitl_esc_record(&esc, t, s);
+    }
+    double out[2];
+    TEST_ASSERT_EQUAL_INT(1, sitl_esc_report(&esc, 0.1, out));
+    double truth = 1500.0 + 2000.0 * (0.1 - p.latency_s);
+    /* e-period: 9-bit mantissa of whole microseconds -> relative error < 2 / 256. */
+    TEST_ASSERT_DOUBLE_WITHIN(truth * 2.0 / 256.0, truth, out[0]);
+    TEST_ASSERT_TRUE(out[0] != truth);
+    /* Quantised values are exact decodes of a period. */
+    double q = sitl_esc_quantise_dshot(1770.0, 7);
+    double period = 2.0 * 3.14159265358979323846 * 1e6 / (q * 7.0);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-6, round(period), period);
+    TEST_ASSERT_DOUBLE_WITHIN(1770.0 * 0.003, 1770.0, q);
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, sitl_esc_quantise_dshot(0.0, 7));
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, sitl_esc_quantise_dshot(0.5, 7)); /* below the slowest period */
+    sitl_esc_free(&esc);
+}
+
+static void test_esc_dropout_rate(void)
+{
+    sitl_esc_params_t p;
+    sitl_esc_default_params(&p);
+    p.dropout_prob = 0.2;
+    sitl_esc_telemetry_t esc;
+    TEST_ASSERT_EQUAL_INT(0, sitl_esc_init(&esc, &p, 1, 0.0, 1000.0, 9));
+    double s = 1000.0, out;
+    sitl_esc_record(&esc, 0.0, &s);
+    int got = 0;
+    const int n = 10000;
+    for (int i = 0; i < n; i++) {
+        got += sitl_esc_report(&esc, 0.0, &out);
+    }
+    TEST_ASSERT_DOUBLE_WITHIN(0.02, 0.8, (double)got / n);
+    sitl_esc_free(&esc);
+}
+
+static void test_streams_are_reproducible_and_independent(void)
+{
+    sitl_rng_t a, b, c;
+    sitl_rng_init(&a, 7, SITL_RNG_GYRO);
+    sitl_rng_init(&b, 7, SITL_RNG_GYRO);
+    sitl_rng_init(&c, 7, SITL_RNG_ESC);
+    int same_ac = 0;
+    for (int i = 0; i < 1000; i++) {
+        double x = sitl_rng_normal(&a), y = sitl_rng_normal(&b), z = sitl_rng_normal(&c);
+        TEST_ASSERT_EQUAL_DOUBLE(x, y);
+        same_ac += x == z;
+    }
+    TEST_ASSERT_TRUE(same_ac < 5);
+    sitl_rng_init(&a, 8, SITL_RNG_GYRO);
+    sitl_rng_init(&b, 7, SITL_RNG_GYRO);
+    TEST_ASSERT_TRUE(sitl_rng_next(&a) != sitl_rng_next(&b));
+    /* Uniform range sanity. */
+    for (int i = 0; i < 1000; i++) {
+        double u = sitl_rng_range(&a, -2.0, 3.0);
+        TEST_ASSERT_TRUE(u >= -2.0 && u < 3.0);
+    }
+}
+
+int main(void)
+{
+    UNITY_BEGIN();
+    RUN_TEST(test_gyro_noise_matches_density_and_bias_in_range);
+    RUN_TEST(test_gyro_saturates_and_quantises);
+    RUN_TEST(test_esc_latency_and_dshot_quantisation);
+    RUN_TEST(test_esc_dropout_rate);
+    RUN_TEST(test_streams_are_reproducible_and_independent);
+    return UNITY_END();
+}
