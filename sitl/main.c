@@ -1,11 +1,28 @@
 /* propid_sitl: closed-loop multirotor SITL with the propid filter in the loop. */
+#define _POSIX_C_SOURCE 200809L
+#include <signal.h>
 #include <stdio.h>
+#include <string.h>
 
 #include "options.h"
 #include "sim.h"
 
+static void on_signal(int signo)
+{
+    (void)signo;
+    sitl_request_stop();
+}
+
 int main(int argc, char **argv)
 {
+    /* Ctrl-C during a real-time flight: stop cleanly, keep the log. */
+    struct sigaction sa;
+    memset(&sa, 0, sizeof(sa));
+    sa.sa_handler = on_signal;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+
     static sitl_options_t opts;
     sitl_options_default(&opts);
     int rc = sitl_options_parse(&opts, argc, argv);
@@ -17,11 +34,11 @@ int main(int argc, char **argv)
     }
     static sitl_result_t result;
     rc = sitl_run(&opts, &result, stdout);
-    if (rc != SITL_EXIT_OK && rc != SITL_EXIT_DIVERGED) {
+    if (rc != SITL_EXIT_OK && rc != SITL_EXIT_DIVERGED && rc != SITL_EXIT_INTERRUPTED) {
         fprintf(stderr, "propid_sitl: %s\n", result.message);
         return rc;
     }
-    if (rc == SITL_EXIT_DIVERGED) {
+    if (rc == SITL_EXIT_DIVERGED || rc == SITL_EXIT_INTERRUPTED) {
         fprintf(stderr, "propid_sitl: %s (log kept up to there)\n", result.message);
     }
     sitl_print_final_summary(stdout, &opts, &result);

@@ -112,7 +112,8 @@ void sitl_options_print_help(const char *prog)
         "  --quiet                   no live summary\n"
         "  --help\n"
         "\n"
-        "Exit codes: 0 ok, 1 run-time error, 2 usage error, 3 flight diverged.\n",
+        "Exit codes: 0 ok, 1 run-time error, 2 usage error, 3 flight diverged,\n"
+        "130 interrupted (Ctrl-C; the log is kept).\n",
         prog);
 }
 

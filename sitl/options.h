@@ -26,6 +26,7 @@ enum {
     SITL_EXIT_ERROR = 1,      /* run-time failure: file I/O, link, filter set-up */
     SITL_EXIT_USAGE = 2,      /* bad command line or vehicle file */
     SITL_EXIT_DIVERGED = 3,   /* the flight diverged and was stopped */
+    SITL_EXIT_INTERRUPTED = 130, /* stopped by SIGINT/SIGTERM (log kept) */
 };
 
 typedef struct {

@@ -9,6 +9,7 @@
 #include "sim.h"
 
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <string.h>
 #include <time.h>
@@ -19,6 +20,13 @@
 #ifdef PROPID_SITL_WITH_MAVLINK
 #include "sitl_mavlink.h"
 #endif
+
+static volatile sig_atomic_t stop_requested;
+
+void sitl_request_stop(void)
+{
+    stop_requested = 1;
+}
 
 /* A periodic event in integer nanoseconds: time_k = phase + k * period. */
 typedef struct {
@@ -358,6 +366,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     r->bias_converged_s = -1.0;
     double wall_start = wall_seconds();
 
+    stop_requested = 0;
     if (setup(f, o, r) != SITL_EXIT_OK) {
         teardown(f, r);
         return r->exit_code;
@@ -456,6 +465,11 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
                 break;
             }
             if (now_ns >= end_ns) {
+                break;
+            }
+            if (stop_requested) {
+                snprintf(r->message, sizeof(r->message), "interrupted at t=%.3f s", t);
+                r->exit_code = SITL_EXIT_INTERRUPTED;
                 break;
             }
 #ifdef PROPID_SITL_WITH_MAVLINK

@@ -70,6 +70,11 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts,
                                          const sitl_vehicle_t *vehicle, propid_config_t *config,
                                          const char **bad_field);
 
+/* Ask a running sitl_run() to stop at its next control step (async-signal-safe:
+ * it only sets a flag; main() calls it from SIGINT/SIGTERM). The run then ends
+ * like a finished one, log closed, with exit code SITL_EXIT_INTERRUPTED. */
+void sitl_request_stop(void);
+
 /* Fly. out: where the live and final summaries go (NULL = nowhere). */
 int sitl_run(const sitl_options_t *opts, sitl_result_t *result, FILE *out);
 

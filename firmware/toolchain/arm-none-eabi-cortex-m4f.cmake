@@ -24,9 +24,10 @@ set(CMAKE_TRY_COMPILE_TARGET_TYPE STATIC_LIBRARY)
 set(PROPID_CPU_FLAGS "-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard")
 # -fno-math-errno lets sqrtf become the vsqrt.f32 instruction.
 # -ffp-contract=fast: with -std=c11 GCC would otherwise not fuse a*b+c into vfma.
-# -fstack-usage writes a .su file per object (make target reports the worst frame).
+# -fstack-usage writes a .su file per object (make target reports the worst frame),
+# -fcallgraph-info=su a .ci call graph with frame sizes (worst call chains, recursion).
 set(CMAKE_C_FLAGS_INIT
-    "${PROPID_CPU_FLAGS} -fno-math-errno -ffp-contract=fast -fstack-usage -ffunction-sections -fdata-sections")
+    "${PROPID_CPU_FLAGS} -fno-math-errno -ffp-contract=fast -fstack-usage -fcallgraph-info=su -ffunction-sections -fdata-sections")
 set(CMAKE_ASM_FLAGS_INIT "${PROPID_CPU_FLAGS}")
 # CMake's GNU module appends -O3 to *_INIT values, so pin the per-config flags in
 # the cache (FORCE: an existing build directory picks up a change here too).

@@ -66,7 +66,7 @@ for rotors in 4 8; do
 done
 
 echo
-echo "== largest stack frames of the firmware libraries (-fstack-usage; one frame each)"
+echo "== largest single stack frames of the firmware libraries (-fstack-usage)"
 # Only the libraries' objects (CMake keeps them under <target>.dir), not the example.
 mapfile -t su_files < <(find "$build/firmware" -name '*.su' \
     \( -path '*/propid.dir/*' -o -path '*/propid_mavlink.dir/*' \) 2>/dev/null | sort)
@@ -87,3 +87,13 @@ else
     dynamic=$(cat "${su_files[@]}" | awk -F'\t' '$3 ~ /dynamic/' | wc -l)
     echo "  frames of dynamic size (VLA/alloca): $dynamic"
 fi
+
+echo
+echo "== worst-case stack of whole call chains (-fcallgraph-info; library callees not counted)"
+graph_dirs=()
+for dir in "$build/firmware/CMakeFiles/propid.dir" "$build/firmware/mavlink/CMakeFiles/propid_mavlink.dir"; do
+    [ -d "$dir" ] && graph_dirs+=("$dir")
+done
+python3 "$repo/firmware/toolchain/stack_report.py" --show 4 \
+    --budget propid_push_gyro=1024 --budget propid_push_rotor_speeds=1024 \
+    --budget propid_get_estimate=1024 --max 2048 "${graph_dirs[@]}" || true

@@ -11,7 +11,8 @@ the firmware rules forbid.
 
     stack_report.py [--budget FUNCTION=BYTES]... DIR...
 
-Prints the worst chain of every public propid_* function; exits 1 on recursion,
+Prints the worst chains from the entry points (functions nothing else in these
+objects calls, i.e. the API); exits 1 on recursion,
 on a dynamically sized frame, or when a budget is exceeded.
 """
 
@@ -74,6 +75,9 @@ def main() -> int:
     parser.add_argument("directories", nargs="+", help="directories searched for .ci files")
     parser.add_argument("--budget", action="append", default=[], metavar="FUNCTION=BYTES",
                         help="fail if FUNCTION's worst chain needs more than BYTES")
+    parser.add_argument("--max", type=int, default=0, metavar="BYTES",
+                        help="fail if any entry point's worst chain needs more than BYTES")
+    parser.add_argument("--show", type=int, default=8, help="chains to print (deepest first)")
     args = parser.parse_args()
 
     frames, kinds, calls = load(args.directories)
@@ -84,24 +88,40 @@ def main() -> int:
         print(f"  dynamically sized frames (VLA/alloca): {', '.join(dynamic)}")
         status = 1
 
-    public = sorted(f for f in frames if f.startswith("propid_") and not calls.get(f) is None
-                    or f.startswith("propid_"))
+    # Entry points: functions defined here that nothing here calls (the API).
+    called = {callee for callees in calls.values() for callee in callees}
+    roots = sorted(f for f in frames if f not in called)
     rows = []
-    for function in public:
+    cyclic: set[str] = set()
+    # Walk every function (a cycle need not be reachable from an entry point).
+    for function in roots + sorted(set(frames) - set(roots)):
         try:
             depth, chain = worst_chain(function, frames, calls, memo, [])
         except RecursionError as cycle:
-            print(f"  RECURSION: {cycle}")
+            members = str(cycle).split(" -> ")
+            if not cyclic.intersection(members):
+                print(f"  RECURSION: {cycle}")
+            cyclic.update(members)
             status = 1
             continue
-        unknown = [f for f in chain if f not in frames]
-        rows.append((depth, function, chain, unknown))
+        if function in roots:
+            unknown = [f for f in chain if f not in frames]
+            rows.append((depth, function, chain, unknown))
 
-    for depth, function, chain, unknown in sorted(rows, key=lambda r: (-r[0], r[1]))[:8]:
-        note = f"  (+ {', '.join(unknown)})" if unknown else ""
-        print(f"  {depth:6d} bytes  {' -> '.join(chain)}{note}")
+    def short(name: str) -> str:
+        return name.rsplit(":", 1)[-1]  # static functions are titled "path/file.c:name"
+
+    for depth, function, chain, unknown in sorted(rows, key=lambda r: (-r[0], r[1]))[: args.show]:
+        note = f"  (+ {', '.join(short(u) for u in unknown)}: library, not counted)" if unknown else ""
+        print(f"  {depth:6d} bytes  {' -> '.join(short(c) for c in chain)}{note}")
 
     by_name = {function: depth for depth, function, _, _ in rows}
+    if args.max > 0:
+        worst = max(rows, default=(0, "-", [], []), key=lambda r: r[0])
+        verdict = "ok" if worst[0] <= args.max else "EXCEEDED"
+        print(f"  budget {verdict}: deepest entry point {short(worst[1])} needs {worst[0]} bytes (max {args.max})")
+        if worst[0] > args.max:
+            status = 1
     for budget in args.budget:
         function, _, limit = budget.partition("=")
         if function not in by_name:

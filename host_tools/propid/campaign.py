@@ -42,7 +42,7 @@ def locate_sitl(explicit: str | None = None) -> Path:
     if not path.is_file() or not os.access(path, os.X_OK):
         raise UserError(f"propid_sitl not found at {path} (build it with `make sitl`, "
                         "or set PROPID_BUILD_DIR / --sitl)")
-    return path
+    return path.resolve()
 
 
 @dataclass
@@ -127,6 +127,9 @@ def run_job(config: CampaignConfig, job: Job) -> dict:
                               check=False)
     except subprocess.TimeoutExpired:
         record.update(stable=False, error=f"timed out after {config.timeout_s:g} s")
+        return record
+    except OSError as exc:  # e.g. the binary is being rebuilt right now
+        record.update(stable=False, error=f"cannot run {cmd[0]}: {exc.strerror}")
         return record
     record["wall_s"] = round(time.monotonic() - start, 3)
     record["exit_code"] = proc.returncode

@@ -48,7 +48,7 @@ class ReplayOptions:
     max_rotor_speed: float | None = None  # None: 2x the 99.9th percentile of finite speeds
     overrides: dict = field(default_factory=dict)  # any other propid_config_t field
     skip_repeats: bool = False  # a row whose gyro (or rotor speeds) exactly repeat the previous row is no new sample
-    rotor_delay_s: float = 0.0  # push rotor speeds this much later than logged (stream alignment)
+    rotor_delay_s: float | str = 0.0  # push rotor speeds this much later than logged, or "auto"
     record_every: int = 1  # keep every k-th estimate for the time series
     progress: bool = True
 
@@ -69,55 +69,74 @@ def detect_streams(log: FlightLog) -> str:
 
 
 def estimate_noise(log: FlightLog, vehicle_inertia: np.ndarray, positions, signs, mask) -> dict:
-    """Noise levels for the filter from the log itself (the 'auto' rule, docs/real-data.md):
-    - gyro white noise per sample from the third difference of the gyro (smooth motion
-      cancels): sigma^2 = var(d3 gyro) / 20;
-    - unmodelled angular acceleration: residual of the filter's own torque model after a
-      least-squares fit of per-rotor kf and km to this log (so that a wrong nominal does
-      not count as 'unmodelled'), minus what gyro noise alone puts into the central
-      difference: rate_process_noise = rms(residual) * sqrt(dt) [rad/s^2/sqrt(Hz)].
-    Only the log and the vehicle file's geometry and inertia enter."""
+    """Noise levels for the filter from the log itself (the 'auto' rule, docs/real-data.md).
+
+    The filter models the body rate as driven by the rotor torques plus white angular
+    acceleration noise q (rate_process_noise), seen through a gyro with white noise sigma.
+    1. Fit per-rotor kf and km to the log by least squares with the filter's own torque
+       model (so a wrong nominal does not count as 'unmodelled').
+    2. Residual rate increments over k samples, r_k = w[n+k] - w[n] - sum(a_fit) dt, have
+       variance q^2 k dt + 2 sigma^2: from k = 1 and k = K (about 50 ms) both follow.
+    Only the log and the vehicle file's geometry and inertia enter; variances use the
+    central 99 % of the increments (glitches out). Floors: sigma >= 1 mrad/s (below any
+    MEMS gyro's noise or quantisation), q >= 1e-3 rad/s^2/sqrt(Hz)."""
     steps = np.diff(log.t)
     dt = float(np.median(steps[steps > 0]))
-    rows = np.flatnonzero(mask)
     gyro = log.gyro
     speeds = log.rotor_speed
-    ok = np.zeros(len(log), dtype=bool)
-    ok[rows] = True
+    ok = mask.copy()
     ok &= np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(speeds), axis=1)
     ok &= np.all(np.nan_to_num(speeds, nan=0.0) <= absurd_speed_limit(speeds), axis=1)
     inner = ok.copy()  # central differences need both neighbours
     inner[1:-1] &= ok[:-2] & ok[2:]
     inner[[0, -1]] = False
-    if inner.sum() < 50:
+    if inner.sum() < 100:
         return {}
-    third = np.diff(gyro[ok], n=3, axis=0)
-    gyro_sigma = float(np.sqrt(np.mean(np.var(third, axis=0)) / 20.0))
     rate_dot = np.zeros_like(gyro)
     rate_dot[1:-1] = (gyro[2:] - gyro[:-2]) / (log.t[2:] - log.t[:-2])[:, None]
     torque = rate_dot @ vehicle_inertia.T + np.cross(gyro, gyro @ vehicle_inertia.T)
-    u = speeds**2
+    u = np.where(np.isfinite(speeds), speeds, 0.0) ** 2
     n = u.shape[1]
-    rows_x = np.zeros((inner.sum(), 2 * n))
-    rows_x[:, :n] = u[inner] * positions[:, 1]
-    rows_y = np.zeros((inner.sum(), 2 * n))
-    rows_y[:, :n] = -u[inner] * positions[:, 0]
-    rows_z = np.zeros((inner.sum(), 2 * n))
-    rows_z[:, n:] = u[inner] * signs
-    design = np.vstack([rows_x, rows_y, rows_z])
+
+    def design(rows):
+        zeros = np.zeros((rows.sum(), n))
+        return np.vstack([
+            np.hstack([u[rows] * positions[:, 1], zeros]),
+            np.hstack([-u[rows] * positions[:, 0], zeros]),
+            np.hstack([zeros, u[rows] * signs]),
+        ])
+
     target = np.concatenate([torque[inner, 0], torque[inner, 1], torque[inner, 2]])
-    coeffs, *_ = np.linalg.lstsq(design, target, rcond=None)
-    resid_torque = (target - design @ coeffs).reshape(3, -1).T
-    resid = resid_torque @ np.linalg.inv(vehicle_inertia).T
-    # median of squares per axis: robust to the odd glitch; remove the differentiated gyro noise
-    ms = float(np.mean(np.median(resid**2, axis=0)))
-    ms_noise = gyro_sigma**2 / (2.0 * dt * dt)
-    rms = math.sqrt(max(ms - ms_noise, 0.0))
+    coeffs, *_ = np.linalg.lstsq(design(inner), target, rcond=None)
+    all_rows = np.ones(len(log), dtype=bool)
+    fitted_torque = (design(all_rows) @ coeffs).reshape(3, -1).T
+    accel_fit = fitted_torque @ np.linalg.inv(vehicle_inertia).T  # gyroscopic term is small here
+
+    def robust_var(x):  # variance of the central 99 % (glitches out, repeated samples kept)
+        lo, hi = np.percentile(x, [0.5, 99.5], axis=0)
+        return np.array([np.var(x[(x[:, a] >= lo[a]) & (x[:, a] <= hi[a]), a]) for a in range(3)])
+
+    def increment_var(k):
+        start = np.arange(len(log) - k)
+        valid = np.ones(start.size, dtype=bool)
+        for j in range(k + 1):
+            valid &= ok[start + j]
+        cum = np.vstack([np.zeros((1, 3)), np.cumsum(accel_fit * dt, axis=0)])
+        resid = (gyro[start + k] - gyro[start]) - (cum[start + k] - cum[start])
+        return robust_var(resid[valid]) if valid.sum() > 50 else None
+
+    k_long = max(2, int(round(0.05 / dt)))
+    var_1, var_k = increment_var(1), increment_var(k_long)
+    if var_1 is None or var_k is None:
+        return {}
+    q2 = np.maximum((var_k - var_1) / ((k_long - 1) * dt), 0.0)
+    sigma2 = np.maximum((var_1 - q2 * dt) / 2.0, 0.0)
     rate_hz = 1.0 / dt
+    gyro_sigma = math.sqrt(float(np.mean(sigma2)))
     return {
         "gyro_sample_rate_hz": rate_hz,
-        "gyro_noise_density": max(gyro_sigma, 1e-4) / math.sqrt(rate_hz),
-        "rate_process_noise": max(rms * math.sqrt(dt), 1e-3),
+        "gyro_noise_density": max(gyro_sigma, 1e-3) / math.sqrt(rate_hz),
+        "rate_process_noise": max(math.sqrt(float(np.mean(q2))), 1e-3),
     }
 
 
@@ -183,6 +202,19 @@ def build_config(vehicle: Vehicle, log: FlightLog, options: ReplayOptions) -> tu
         notes["noise"] = "library defaults"
     config.update(options.overrides)
     return config, notes
+
+
+def estimate_rotor_delay(log: FlightLog, vehicle: Vehicle) -> float:
+    """Delay of the angular-acceleration response behind the logged rotor speeds: the lag
+    (0..50 ms) that best fits the 2-10 Hz roll and pitch torque regressions (mean of the
+    two). It aligns the streams of a log whose rotor speeds were time-stamped early; it
+    uses no coefficient value."""
+    checks = check_log(log, vehicle, bands={"2-10Hz": (2.0, 10.0)}, unit_inertia=vehicle.inertia is None)
+    entry = checks["bands"].get("2-10Hz")
+    if not entry:
+        return 0.0
+    lag_ms = 0.5 * (entry["roll_kf"]["lag_ms"] + entry["pitch_kf"]["lag_ms"])
+    return max(0.0, lag_ms * 1e-3)
 
 
 def _field(obj, name):
@@ -281,7 +313,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         has_rotor &= ~same_rotor
         if streams == "rows":
             streams = "events"  # rows now carry one stream or the other
-    delay_us = int(round(options.rotor_delay_s * US))
+    rotor_delay_s = estimate_rotor_delay(log, vehicle) if options.rotor_delay_s == "auto" else float(options.rotor_delay_s)
+    delay_us = int(round(rotor_delay_s * US))
     status_counts: dict[str, int] = {}
     n = vehicle.rotor_count
     rec_t, rec_kf, rec_kfs, rec_km, rec_kms, rec_bg, rec_bgs, rec_conv_kf, rec_conv_km = ([] for _ in range(9))
@@ -367,7 +400,9 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "streams": streams,
         "rows_replayed": int(rows.size),
         "repeated_rows_skipped": repeats,
-        "rotor_delay_s": options.rotor_delay_s,
+        "rotor_delay_s": rotor_delay_s,
+        "rotor_delay_rule": "auto: best lag of the 2-10 Hz roll/pitch torque fits" if options.rotor_delay_s == "auto"
+        else "given",
         "duration_s": float(log.t[rows[-1]] - log.t[rows[0]]),
         "kf": [float(v) for v in final["thrust_coeff"][:n]],
         "kf_std": [float(v) for v in final["thrust_coeff_std"][:n]],

@@ -18,3 +18,15 @@ void *propid_fixture_heap(size_t bytes)
 {
     return malloc(bytes);
 }
+
+/* Recursion: the call-graph check must report it. Two calls, so the compiler
+ * cannot turn it into a loop. */
+unsigned propid_fixture_recursive(unsigned depth);
+
+unsigned propid_fixture_recursive(unsigned depth)
+{
+    if (depth < 2u) {
+        return depth;
+    }
+    return propid_fixture_recursive(depth - 1u) + propid_fixture_recursive(depth - 2u);
+}

@@ -258,3 +258,16 @@ def test_reset_command_is_executed_and_acknowledged(tmp_path):
     assert "MAV_CMD_PROPID_RESET param1=2 executed" in err
     assert "MAV_CMD_PROPID_RESET param1=-1 executed" in err
     assert "param1=9" not in err
+
+
+@pytest.mark.parametrize("url, message", [
+    ("udp:127.0.0.1", "is not udp:HOST:PORT"),
+    ("tcp:127.0.0.1:14550", "is not udp:HOST:PORT"),
+    ("udp:127.0.0.1:99999", "bad port"),
+])
+def test_bad_mavlink_url_is_refused(url, message):
+    _require_sitl()
+    result = subprocess.run([str(SITL), "--duration", "0.1", "--quiet", "--mavlink", url],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode != 0
+    assert message in result.stderr

@@ -56,6 +56,7 @@ class Recorder:
         self.assembler = mavlink_io.EstimateRows()
         self.frames = 0
         self.bad = 0
+        self.interrupted = False
         self.by_type: dict[str, int] = {}
 
     def handle(self, msg, receive_time: float) -> None:
@@ -175,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
         written.append(f"{args.tlog} ({recorder.frames} frames)")
     if args.csv:
         written.append(f"{args.csv} ({recorder.rows.count} estimate rows)")
-    note = "interrupted; kept " if getattr(recorder, "interrupted", False) else "wrote "
+    note = "interrupted; kept " if recorder.interrupted else "wrote "
     print(note + ", ".join(written), file=sys.stderr)
     if recorder.bad:
         print(f"warning: {recorder.bad} undecodable chunks skipped", file=sys.stderr)

@@ -53,8 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--skip-repeats", action="store_true",
                         help="treat a row whose gyro (or rotor speeds) exactly repeat the previous row as no new "
                              "sample (logs resampled by sample-and-hold)")
-    parser.add_argument("--rotor-delay", type=float, default=0.0, metavar="S",
-                        help="push rotor speeds S seconds after their logged time (align streams)")
+    parser.add_argument("--rotor-delay", type=_delay, default=0.0, metavar="S|auto",
+                        help="push rotor speeds S seconds after their logged time (align streams); auto: the "
+                             "lag that best fits the 2-10 Hz roll/pitch torque regressions (default 0: as logged)")
     parser.add_argument("--unit-inertia", action="store_true",
                         help="run with J = identity: estimates are kf/J and km/Jzz ratios (for vehicles without inertia)")
     parser.add_argument("--kf-nominal", type=float, help="prior mean of kf (overrides the vehicle file)")
@@ -71,6 +72,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--checks", action="store_true",
                         help="also run the independent least-squares checks (thrust from acc_z vs torque fits per band)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _delay(text: str):
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError("expected seconds or 'auto'") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError("rotor delay must be within 0..1 s")
+    return value
 
 
 def _finite_json(value):
