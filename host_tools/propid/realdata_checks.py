@@ -42,7 +42,7 @@ def flying_mask(log: FlightLog, min_fraction: float = 0.33, clearance: float = G
     height pz is logged, at least `clearance` above the lowest logged height, so that
     rows on the ground (take-off, landing: contact torques the model does not have)
     are left out."""
-    speeds = log.rotor_speed
+    speeds = _hold_rotor_rows(log.rotor_speed)
     if "is_flying" in log.extra:
         mask = np.nan_to_num(log.extra["is_flying"], nan=0.0) > 0.5
     else:
@@ -58,6 +58,19 @@ def flying_mask(log: FlightLog, min_fraction: float = 0.33, clearance: float = G
         ground = float(np.nanmin(height))
         mask &= np.nan_to_num(height, nan=ground) > ground + clearance
     return mask
+
+
+def _hold_rotor_rows(speeds: np.ndarray) -> np.ndarray:
+    """Rows without any rotor speed (gyro rows of an event-style log) take the latest
+    rotor row before them, as the filter does."""
+    empty = ~np.any(np.isfinite(speeds), axis=1)
+    if not empty.any() or empty.all():
+        return speeds
+    index = np.where(~empty, np.arange(len(speeds)), 0)
+    np.maximum.accumulate(index, out=index)
+    held = speeds[index]
+    held[empty & (np.cumsum(~empty) == 0)] = np.nan  # nothing to hold before the first rotor row
+    return held
 
 
 def absurd_speed_limit(speeds: np.ndarray) -> float:

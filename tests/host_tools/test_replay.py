@@ -136,6 +136,9 @@ def test_events_log_pushes_each_stream_at_its_own_time(cfilter_available):
     assert s["counters"]["gyro_accepted"] == n_g
     assert s["counters"]["rotor_accepted"] + sum(s["rejected"].values()) == n_r
     np.testing.assert_allclose(s["kf_mean"], KF_TRUE, rtol=0.08)
+    # the flying gate holds the latest rotor row over the gyro rows: no gyro row is lost
+    flying = replay(events, parse_vehicle(VEHICLE), ReplayOptions(segment="flying", progress=False)).summary
+    assert flying["counters"]["gyro_accepted"] == n_g
 
 
 def test_missing_inertia_is_explained(cfilter_available):

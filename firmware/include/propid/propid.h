@@ -176,6 +176,15 @@ typedef struct {
     float prior_var[PROPID_MAX_STATES];             /* per-state prior variance */
     float var_floor[PROPID_MAX_STATES];             /* per-state variance floor */
     float var_ceiling[PROPID_MAX_STATES];           /* per-state variance ceiling */
+    /* Sparsity of the 3 rate rows of A = df/dx (structurally non-zero entries only,
+     * fixed by geometry and inertia): row a has jac_count[a] entries, the first
+     * jac_rate_count[a] of them in rate columns, the rest in coefficient columns. */
+    uint8_t jac_count[3];
+    uint8_t jac_rate_count[3];
+    uint8_t jac_column[3][PROPID_MAX_STATES - 3];   /* state index of each entry */
+    uint8_t jac_rotor[3][PROPID_MAX_STATES - 3];    /* coefficient entry: its rotor */
+    float jac_torque[3][PROPID_MAX_STATES - 3];     /* coefficient entry: A = jac_torque * u_rotor */
+    float gyro_jacobian[3][3][3];                   /* A_ab = sum_c gyro_jacobian[a][b][c] omega_c */
 } propid_derived_t;
 
 typedef struct {

@@ -29,6 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, metavar="OUT.csv", help="flight-log v1 CSV to write")
     parser.add_argument("--checks", action="store_true",
                         help="also print the independent least-squares checks (needs --vehicle)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,7 +40,8 @@ def run(args: argparse.Namespace) -> int:
         motor_map = parse_motor_map(args.motor_map, count)
     if args.log_index < 1:
         raise UserError("--log-index counts from 1")
-    log, info = import_log(args.input, args.format, vehicle, args.log_index, motor_map, args.gyro_topic)
+    log, info = import_log(args.input, args.format, vehicle, args.log_index, motor_map, args.gyro_topic,
+                           progress=not args.no_progress)
     out = Path(args.out)
     if out.resolve() == Path(args.input).resolve():
         raise UserError("--out must differ from the input file")

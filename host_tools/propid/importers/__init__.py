@@ -49,6 +49,7 @@ def import_log(
     log_index: int = 1,
     motor_map: list[int] | None = None,
     gyro_topic: str = "sensor_combined",
+    progress: bool = False,
 ) -> tuple[FlightLog, dict]:
     """Read any supported log into flight-log v1 units and frames."""
     if fmt not in FORMATS:
@@ -58,7 +59,7 @@ def import_log(
     if fmt == "betaflight":
         from propid.importers.betaflight import import_betaflight
 
-        return import_betaflight(path, vehicle, log_index, motor_map)
+        return import_betaflight(path, vehicle, log_index, motor_map, progress)
     if fmt == "ulog":
         from propid.importers.ulog import import_ulog
 

@@ -132,7 +132,9 @@ def convert_betaflight(
     return log, info
 
 
-def decode_blackbox(path: str | Path, log_index: int = 1) -> tuple[dict, dict[str, np.ndarray], dict]:
+def decode_blackbox(
+    path: str | Path, log_index: int = 1, progress: bool = False
+) -> tuple[dict, dict[str, np.ndarray], dict]:
     """Decode main frames of log `log_index` (1-based, as Betaflight's explorer counts)
     of a .bbl/.bfl file with orangebox: (headers, field table, info)."""
     try:
@@ -158,14 +160,22 @@ def decode_blackbox(path: str | Path, log_index: int = 1) -> tuple[dict, dict[st
     names = parser.field_names
     wanted = [i for i, n in enumerate(names) if n.split("[")[0] in _WANTED_BASES]
     rows = []
+    frames = parser.frames()
+    if progress:
+        from tqdm import tqdm
+
+        frames = tqdm(frames, desc=f"{path.name} log {log_index}", unit="frame", mininterval=0.5, leave=False)
     try:
-        for frame in parser.frames():
+        for frame in frames:
             data = frame.data
             rows.append([data[i] for i in wanted])
     except RuntimeError as exc:
         if not rows:
             raise UserError(f"{path} log {log_index}: {exc}") from None
         # a truncated file (power cut): keep the frames decoded so far
+    finally:
+        if progress:
+            frames.close()
     if not rows:
         raise UserError(f"{path} log {log_index}: no data frames")
     table = np.array(rows, dtype=float)
@@ -184,9 +194,13 @@ _WANTED_BASES = {
 
 
 def import_betaflight(
-    path: str | Path, vehicle: Vehicle | None = None, log_index: int = 1, motor_map: list[int] | None = None
+    path: str | Path,
+    vehicle: Vehicle | None = None,
+    log_index: int = 1,
+    motor_map: list[int] | None = None,
+    progress: bool = False,
 ) -> tuple[FlightLog, dict]:
-    headers, fields, decode_info = decode_blackbox(path, log_index)
+    headers, fields, decode_info = decode_blackbox(path, log_index, progress)
     log, info = convert_betaflight(headers, fields, vehicle, motor_map, where=f"{path} log {log_index}")
     info.update(decode_info)
     return log, info
