@@ -64,9 +64,10 @@ typedef struct {
     double attitude_error[3]; /* e_R [rad-ish] */
 } sitl_control_output_t;
 
-/* Default tuning: position wn 2.5 rad/s, zeta 0.8; attitude wn 12 rad/s, zeta 1.5
- * on all three axes: robust to first-order motor lags up to ~0.1 s (Crazyflie
- * motors, 0.072 s) as well as fast motors (documented in docs/results.md). */
+/* Default tuning: position x, y wn 2.5 rad/s, zeta 0.8; z wn 4 rad/s, zeta 0.9;
+ * attitude wn 12 rad/s, zeta 1.5 on all three axes: robust to first-order motor
+ * lags up to ~0.1 s (Crazyflie motors, 0.072 s) as well as fast motors
+ * (documented in docs/results.md). */
 void sitl_controller_default_tuning(sitl_controller_tuning_t *tuning);
 
 /* Set mass, inertia, gravity and derive the gains from tuning (NULL = default).

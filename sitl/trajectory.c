@@ -58,7 +58,7 @@ int sitl_trajectory_init(sitl_trajectory_t *traj, sitl_trajectory_kind_t kind,
     traj->circle_start_angle_rad = -1.0;
 
     /* Large slow Lissajous + small fast Lissajous (paper eq. 9, superimposed).
-     * The fast part (about 2.5 m/s^2 of lateral acceleration at 1 Hz) is what
+     * The fast part (about 3 m/s^2 of lateral acceleration at about 1 Hz) is what
      * excites the rotors differentially, which the coefficients need; it stays
      * within what 0.07 s Crazyflie motors follow. z moves slowly only. */
     traj->lissajous_slow.amplitude_m[0] = 0.6;

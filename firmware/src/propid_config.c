@@ -145,6 +145,94 @@ static int inertia_inverse(const float inertia[3][3], float inverse[3][3])
     return all_finite(&inverse[0][0], 9u);
 }
 
+/* Torque components below float32 resolution (2^-23) of the largest one are the
+ * rounding residue of the geometry (a plus frame's cosf(pi/2) gives r_x ~ 1e-8 m,
+ * not 0), not physics: make them exact zeros so the step skips them. */
+static void flush_residues(float *values, size_t count)
+{
+    float largest = 0.0f;
+    for (size_t k = 0; k < count; ++k) {
+        largest = fabsf(values[k]) > largest ? fabsf(values[k]) : largest;
+    }
+    const float threshold = largest * 1.1920929e-7f;
+    for (size_t k = 0; k < count; ++k) {
+        if (fabsf(values[k]) <= threshold) {
+            values[k] = 0.0f;
+        }
+    }
+}
+
+static void cross3(const float a[3], const float b[3], float out[3])
+{
+    out[0] = a[1] * b[2] - a[2] * b[1];
+    out[1] = a[2] * b[0] - a[0] * b[2];
+    out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* Structure of the 3 rate rows of A = df/dx, so the step touches only entries that
+ * can be non-zero (docs/design.md, "Cost"):
+ * - rate columns: the gyroscopic term c = omega x J omega is quadratic in omega,
+ *   so A_ab = -(J^-1 dc/domega)_ab = sum_c gyro_jacobian[a][b][c] omega_c with
+ *   gyro_jacobian[a][b][c] = -sum_d Jinv_ad ((e_b x J e_c)_d + (e_c x J e_b)_d);
+ *   (and -J^-1 c = A_rr omega / 2). A diagonal inertia leaves 2 entries per row
+ *   (1 in the yaw row when Jxx == Jyy);
+ * - coefficient columns: A = thrust_torque[i][a] u_i or drag_torque[i][a] u_i,
+ *   present only when that torque component is not exactly zero (a diagonal
+ *   inertia has no yaw thrust and no roll/pitch drag entries). */
+static void derive_sparsity(const propid_config_t *config, propid_derived_t *out)
+{
+    const uint8_t rotor_count = config->rotor_count;
+    for (uint8_t b = 0; b < 3u; ++b) {
+        for (uint8_t c = 0; c < 3u; ++c) {
+            const float unit_b[3] = {b == 0u ? 1.0f : 0.0f, b == 1u ? 1.0f : 0.0f, b == 2u ? 1.0f : 0.0f};
+            const float unit_c[3] = {c == 0u ? 1.0f : 0.0f, c == 1u ? 1.0f : 0.0f, c == 2u ? 1.0f : 0.0f};
+            const float column_b[3] = {config->inertia[0][b], config->inertia[1][b], config->inertia[2][b]};
+            const float column_c[3] = {config->inertia[0][c], config->inertia[1][c], config->inertia[2][c]};
+            float first[3];
+            float second[3];
+            cross3(unit_b, column_c, first);
+            cross3(unit_c, column_b, second);
+            for (uint8_t a = 0; a < 3u; ++a) {
+                float sum = 0.0f;
+                for (uint8_t d = 0; d < 3u; ++d) {
+                    sum += out->inertia_inv[a][d] * (first[d] + second[d]);
+                }
+                out->gyro_jacobian[a][b][c] = -sum;
+            }
+        }
+    }
+    for (uint8_t a = 0; a < 3u; ++a) {
+        uint8_t count = 0u;
+        for (uint8_t b = 0; b < 3u; ++b) {
+            const float *coeff = out->gyro_jacobian[a][b];
+            if (coeff[0] != 0.0f || coeff[1] != 0.0f || coeff[2] != 0.0f) {
+                out->jac_column[a][count] = b;
+                out->jac_rotor[a][count] = 0u;
+                out->jac_torque[a][count] = 0.0f;
+                count++;
+            }
+        }
+        out->jac_rate_count[a] = count;
+        for (uint8_t i = 0; i < rotor_count; ++i) {
+            if (out->thrust_torque[i][a] != 0.0f) {
+                out->jac_column[a][count] = (uint8_t)(PROPID_RATE_STATES + i);
+                out->jac_rotor[a][count] = i;
+                out->jac_torque[a][count] = out->thrust_torque[i][a];
+                count++;
+            }
+        }
+        for (uint8_t i = 0; i < rotor_count; ++i) {
+            if (out->drag_torque[i][a] != 0.0f) {
+                out->jac_column[a][count] = (uint8_t)(PROPID_RATE_STATES + rotor_count + i);
+                out->jac_rotor[a][count] = i;
+                out->jac_torque[a][count] = out->drag_torque[i][a];
+                count++;
+            }
+        }
+        out->jac_count[a] = count;
+    }
+}
+
 #define PROPID_BAD(name)                                                                           \
     do {                                                                                           \
         if (bad_field != NULL) {                                                                   \
@@ -264,6 +352,10 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         PROPID_BAD("inertia");
     }
 
+    flush_residues(&out.thrust_torque[0][0], 3u * PROPID_MAX_ROTORS);
+    flush_residues(&out.drag_torque[0][0], 3u * PROPID_MAX_ROTORS);
+    derive_sparsity(config, &out);
+
     out.gyro_var = config->gyro_noise_density * config->gyro_noise_density *
                    config->gyro_sample_rate_hz;
     if (!positive_finite(out.gyro_var) || out.gyro_var < 1.0e-20f) {
@@ -321,6 +413,13 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         out.process_psd[k] = psd;
         out.var_floor[k] = floor_var;
         out.var_ceiling[k] = ceiling;
+        /* Both positive and finite, floor <= ceiling: their bit patterns are ordered. */
+        uint32_t floor_bits;
+        uint32_t ceiling_bits;
+        memcpy(&floor_bits, &floor_var, sizeof(floor_bits));
+        memcpy(&ceiling_bits, &ceiling, sizeof(ceiling_bits));
+        out.var_floor_bits[k] = floor_bits;
+        out.var_range_bits[k] = ceiling_bits - floor_bits;
     }
 
     if (derived != NULL) {

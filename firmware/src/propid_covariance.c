@@ -38,6 +38,9 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
     /* Bad variances: the state forgets its correlations and returns to its prior. */
     for (uint8_t i = 0; i < n; ++i) {
         const float p = core->cov[i][i];
+        if (p >= derived->var_floor[i] && p <= derived->var_ceiling[i]) {
+            continue; /* the usual case: one test pair per diagonal (NaN fails it) */
+        }
         if (!(p > 0.0f && p <= FLT_MAX)) {
             propid_cov_reset_state(derived, core, i);
             changed = 1;
@@ -72,12 +75,19 @@ int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, u
     if (row >= n) {
         return 0;
     }
-    const float pii = core->cov[row][row];
+    /* The diagonal and the part of the row right of it: over n samples every
+     * element (i, j), i <= j, is visited once, its mirror compared bit for bit. */
+    const float *values = core->cov[row];
+    const float pii = values[row];
     int bad = !(pii > 0.0f && pii <= FLT_MAX);
-    for (uint8_t j = 0; j < n && !bad; ++j) {
-        const float pij = core->cov[row][j];
+    for (uint8_t j = (uint8_t)(row + 1u); j < n; ++j) {
+        const float pij = values[j];
+        uint32_t bits_ij;
+        uint32_t bits_ji;
+        memcpy(&bits_ij, &values[j], sizeof(bits_ij));
+        memcpy(&bits_ji, &core->cov[j][row], sizeof(bits_ji));
         /* A NaN fails the comparison, so it is caught too. */
-        bad = !(pij * pij <= pii * core->cov[j][j]) || core->cov[j][row] != pij;
+        bad |= !(pij * pij <= pii * core->cov[j][j]) | (bits_ij != bits_ji);
     }
     if (bad) {
         return propid_cov_repair(derived, core);
@@ -91,6 +101,9 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
     int repaired = 0;
     for (uint8_t i = 0; i < n; ++i) {
         const float p = core->cov[i][i];
+        if (p >= derived->var_floor[i] && p <= derived->var_ceiling[i]) {
+            continue; /* the usual case: one test pair per diagonal (NaN fails it) */
+        }
         if (!(p > 0.0f && p <= FLT_MAX)) {
             repaired |= propid_cov_repair(derived, core);
         } else if (p < derived->var_floor[i]) {

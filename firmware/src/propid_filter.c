@@ -34,8 +34,9 @@ propid_status_t propid_init(propid_filter_t *filter, const propid_config_t *conf
         }
         return PROPID_ERR_NULL;
     }
-    propid_derived_t derived;
-    if (propid_config_derive(config, &derived, NULL) != PROPID_OK) {
+    /* Validate first (nothing written on a bad config), then derive in place: one
+     * propid_derived_t on the stack instead of two. */
+    if (propid_config_derive(config, NULL, NULL) != PROPID_OK) {
         if (initialised(filter)) {
             return reject(filter, PROPID_ERR_CONFIG);
         }
@@ -43,7 +44,7 @@ propid_status_t propid_init(propid_filter_t *filter, const propid_config_t *conf
     }
     memset(filter, 0, sizeof(*filter));
     filter->config = *config;
-    filter->derived = derived;
+    (void)propid_config_derive(&filter->config, &filter->derived, NULL);
     core_to_prior(filter);
     filter->magic = PROPID_MAGIC;
     return PROPID_OK;
@@ -232,21 +233,18 @@ propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
         core->state[2] = rate_next[2];
     }
 
-    int gated = 0;
-    for (uint8_t a = 0; a < 3u; ++a) {
-        gated |= propid_update_axis(filter, a, gyro_rad_s[a]);
-    }
+    const int gated = propid_update_gyro(filter, gyro_rad_s) != 0u;
     const uint32_t clamped = propid_clamp_coefficients(config, core);
     if (clamped != 0u) {
         core->health |= PROPID_HEALTH_STATE_CLAMPED;
         filter->counters.state_clamps += clamped;
     }
-    if (propid_cov_enforce_bounds(derived, core)) {
-        core->health |= PROPID_HEALTH_COV_REPAIRED;
-        filter->counters.cov_repairs++;
-    }
     if (gated) {
         core->health |= PROPID_HEALTH_GATED;
+    }
+    /* The latest rotor speeds start the next interval. */
+    for (uint8_t i = 0; i < config->rotor_count; ++i) {
+        core->input_speed_sq[i] = core->rotor_speed_sq[i];
     }
     core->time_us = time_us;
     core->has_time = 1u;

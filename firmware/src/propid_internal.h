@@ -10,6 +10,18 @@
 /* Marks a filter on which propid_init() succeeded ("PRID"). */
 #define PROPID_MAGIC 0x50524944u
 
+/* State count of a quad: the step has an unrolled copy of its loops for it. */
+#if PROPID_MAX_ROTORS >= 4
+#define PROPID_QUAD_STATES 14u
+#else
+#define PROPID_QUAD_STATES 0u
+#endif
+
+/* Loop annotations for the two copies of the step's kernels: fully unrolled for
+ * the quad (GCC and Clang honour the pragma), plain otherwise. */
+#define PROPID_UNROLL_QUAD _Pragma("GCC unroll 14")
+#define PROPID_NO_UNROLL
+
 /* Index of the first thrust coefficient, first drag coefficient, first bias. */
 static inline uint8_t propid_first_thrust(void) { return PROPID_RATE_STATES; }
 static inline uint8_t propid_first_drag(uint8_t rotor_count)
@@ -42,18 +54,20 @@ int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, u
 int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core);
 
 /* propid_predict.c */
-/* Euler step of the body rates into rate_next and dt * (Jacobian rows of the rate
- * dynamics) into rate_jacobian_dt, without touching the filter. Returns
- * PROPID_ERR_NUMERIC when either would be non-finite. */
+/* Euler step of the body rates into rate_next and dt * (the structurally non-zero
+ * Jacobian entries of the rate dynamics) into jacobian_dt[a][p], entry p of row a
+ * being column derived->jac_column[a][p], without touching the filter. Returns
+ * PROPID_ERR_NUMERIC when either (or a state) would be non-finite. */
 propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, float rate_next[3],
-                                     float rate_jacobian_dt[3][PROPID_MAX_STATES]);
-/* P := F P F^T + Q dt with F = I + rate_jacobian_dt (only the 3 rate rows differ from I). */
+                                     float jacobian_dt[3][PROPID_MAX_STATES]);
+/* P := F P F^T + Q dt with F = I + G, G the sparse rows from propid_predict_stage
+ * (only the 3 rate rows differ from I). */
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
-                               const float rate_jacobian_dt[3][PROPID_MAX_STATES]);
+                               const float jacobian_dt[3][PROPID_MAX_STATES]);
 
-/* propid_update.c: fuse one gyro axis (scalar update, H = e_rate + e_bias).
- * Returns 1 when the sample was gated out on this axis, 0 when it was fused. */
-int propid_update_axis(propid_filter_t *filter, uint8_t axis, float gyro);
+/* propid_update.c: fuse one gyro sample, three scalar updates (x, y, z; H = e_rate +
+ * e_bias each) applied in one pass. Returns the mask of axes gated out (bit a). */
+uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3]);
 /* Clamp the coefficients to [coeff_rel_min, coeff_rel_max]; returns how many were clamped. */
 uint32_t propid_clamp_coefficients(const propid_config_t *config, propid_core_t *core);
 

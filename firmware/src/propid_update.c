@@ -1,85 +1,327 @@
-/* Measurement update: one scalar update per gyro axis, y_a = omega_a + b_a + v.
+/* Measurement update: three scalar updates, one per gyro axis,
+ * y_a = omega_a + b_a + v_a, in the order x, y, z (docs/math.md §3).
  *
- * H = e_rate(a) + e_bias(a) has two non-zeros, so P H^T is the sum of two
- * columns and S = H P H^T + R needs no product. With the optimal gain
- * K = P H^T / S the covariance update is P := P - (P H^T)(P H^T)^T / S, a
- * symmetric rank-one downdate computed on one triangle and mirrored
- * (docs/math.md explains why this form and not Joseph's). */
+ * For axis a, H_a = e_rate(a) + e_bias(a), so h_a = P H_a^T is the sum of two rows
+ * of the symmetric P, S_a = h_a[a] + h_a[bias] + R, and the update is
+ *   x += h_a nu_a / S_a,    P -= h_a h_a^T / S_a
+ * applied to the P left by the previous axis. The three downdates are applied in
+ * ONE pass over P: the later axes' vectors are computed from the P in memory
+ * with the earlier axes' pending rank-one terms folded in,
+ *   h_a = P H_a^T - sum_{p<a} g_p (h_p . H_a),   g_p = h_p / S_p,
+ * which is the same matrix algebra (each h_a and S_a equals the sequential one in
+ * exact arithmetic), then one sweep over the upper triangle writes
+ *   P_ij -= sum_a g_a,i h_a,j   (mirrored),   x_i += sum_a g_a,i nu_a.
+ * Cost: ~3 n per axis for the vectors plus one pass of n (n + 1) / 2 elements
+ * instead of three. Rare paths (a covariance that fails S >= R, a gate re-open)
+ * first apply the pending terms, then work on the updated P. */
+#include <math.h>
+#include <string.h>
+
 #include "propid_internal.h"
 
-int propid_update_axis(propid_filter_t *filter, uint8_t axis, float gyro)
+
+/* h[i] = EXPR for i < N, with a running sum for the finiteness test. */
+#define PROPID_FORM_VECTOR(N, UNROLL, EXPR)                                                        \
+    do {                                                                                           \
+        UNROLL for (uint8_t i = 0; i < (N); ++i)                                                   \
+        {                                                                                          \
+            const float value = (EXPR);                                                            \
+            h[i] = value;                                                                          \
+            check += value;                                                                        \
+        }                                                                                          \
+    } while (0)
+
+typedef struct {
+    uint8_t count;                      /* pending fused axes */
+    float h[3][PROPID_MAX_STATES];      /* P H^T of each pending axis (its gain is h / S) */
+    float inv_var[3];                   /* 1 / S: the gain is g = h / S */
+    float innovation[3];
+} pending_t;
+
+/* 1 when a value is outside [floor, ceiling] (or negative, or not finite): for
+ * non-negative floats the bit patterns are ordered like the values, so one
+ * unsigned comparison of (bits - floor_bits) with (ceiling_bits - floor_bits)
+ * tests both bounds; negative values and NaN land far above the range. */
+static inline uint32_t outside_positive_range(float value, uint32_t floor_bits, uint32_t range_bits)
+{
+    uint32_t bits;
+    memcpy(&bits, &value, sizeof(bits));
+    return (uint32_t)(bits - floor_bits) > range_bits ? 1u : 0u;
+}
+
+/* P_ij -= sum_k g_k,i h_k,j on the upper triangle (mirrored), x += sum_k g_k nu_k,
+ * for three pending terms of a quad: n constant, fully unrolled, two rows at a
+ * time so that each h_j triple is loaded once for both rows. Also tests every new
+ * variance against its floor and ceiling; returns 1 when all are inside. */
+static int apply_three_quad(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
+                            const pending_t *restrict pending, const propid_derived_t *derived)
+{
+    const uint8_t n = PROPID_QUAD_STATES;
+    const float nu0 = pending->innovation[0];
+    const float nu1 = pending->innovation[1];
+    const float nu2 = pending->innovation[2];
+    const float inv0 = pending->inv_var[0];
+    const float inv1 = pending->inv_var[1];
+    const float inv2 = pending->inv_var[2];
+    const float *h0 = pending->h[0];
+    const float *h1 = pending->h[1];
+    const float *h2 = pending->h[2];
+    uint32_t outside = 0u;
+#pragma GCC unroll 7
+    for (uint8_t i = 0; i < n; i = (uint8_t)(i + 2u)) {
+        const uint8_t k = (uint8_t)(i + 1u);
+        const float a0 = h0[i] * inv0; /* gains of row i */
+        const float a1 = h1[i] * inv1;
+        const float a2 = h2[i] * inv2;
+        const float b0 = h0[k] * inv0; /* gains of row k = i + 1 */
+        const float b1 = h1[k] * inv1;
+        const float b2 = h2[k] * inv2;
+        state[i] += a0 * nu0 + a1 * nu1 + a2 * nu2;
+        state[k] += b0 * nu0 + b1 * nu1 + b2 * nu2;
+        float *row_i = cov[i];
+        float *row_k = cov[k];
+        const float p_ii = row_i[i] - a0 * h0[i] - a1 * h1[i] - a2 * h2[i];
+        const float p_ik = row_i[k] - a0 * h0[k] - a1 * h1[k] - a2 * h2[k];
+        const float p_kk = row_k[k] - b0 * h0[k] - b1 * h1[k] - b2 * h2[k];
+        row_i[i] = p_ii;
+        row_i[k] = p_ik;
+        row_k[i] = p_ik;
+        row_k[k] = p_kk;
+        outside |= outside_positive_range(p_ii, derived->var_floor_bits[i], derived->var_range_bits[i]);
+        outside |= outside_positive_range(p_kk, derived->var_floor_bits[k], derived->var_range_bits[k]);
+#pragma GCC unroll 12
+        for (uint8_t j = (uint8_t)(i + 2u); j < n; ++j) {
+            const float hj0 = h0[j];
+            const float hj1 = h1[j];
+            const float hj2 = h2[j];
+            const float value_i = row_i[j] - a0 * hj0 - a1 * hj1 - a2 * hj2;
+            const float value_k = row_k[j] - b0 * hj0 - b1 * hj1 - b2 * hj2;
+            row_i[j] = value_i;
+            row_k[j] = value_k;
+            cov[j][i] = value_i;
+            cov[j][k] = value_k;
+        }
+    }
+    return outside == 0u;
+}
+
+/* Applies the pending terms; returns 1 only when it also verified every variance
+ * against its floor and ceiling (the quad's three-term pass), else 0. */
+static int apply_pending(propid_core_t *core, const propid_derived_t *derived, pending_t *pending)
+{
+    const uint8_t n = derived->state_count;
+    int verified = 0;
+    if (pending->count == 3u && n == PROPID_QUAD_STATES) {
+        verified = apply_three_quad(core->cov, core->state, pending, derived);
+    } else {
+        for (uint8_t k = 0; k < pending->count; ++k) {
+            const float *h = pending->h[k];
+            const float inv_var = pending->inv_var[k];
+            const float nu = pending->innovation[k];
+            for (uint8_t i = 0; i < n; ++i) {
+                const float g = h[i] * inv_var;
+                core->state[i] += g * nu;
+                float *row = core->cov[i];
+                for (uint8_t j = i; j < n; ++j) {
+                    const float value = row[j] - g * h[j];
+                    row[j] = value;
+                    core->cov[j][i] = value;
+                }
+            }
+        }
+    }
+    pending->count = 0u;
+    return verified;
+}
+
+/* h_a[i] for one i: the two rows of P plus the pending terms. */
+static float pending_h(const float (*cov)[PROPID_MAX_STATES], const pending_t *pending,
+                       const float *projection, uint8_t rate, uint8_t bias, uint8_t i)
+{
+    float value = cov[rate][i] + cov[bias][i];
+    for (uint8_t k = 0; k < pending->count; ++k) {
+        value -= projection[k] * pending->h[k][i];
+    }
+    return value;
+}
+
+/* The axis' rate forgets everything and restarts from this sample: rate :=
+ * measurement - bias estimate, rate variance := its prior, correlations zeroed
+ * (zeroing a row/column and setting a positive diagonal keeps P PSD). */
+static void reanchor_rate(propid_filter_t *filter, uint8_t axis, uint8_t bias, float gyro)
+{
+    propid_core_t *core = &filter->core;
+    core->state[axis] = gyro - core->state[bias];
+    propid_cov_reset_state(&filter->derived, core, axis);
+}
+
+/* One axis: S, innovation, gate (and re-anchor), then its vector queued in
+ * `pending`. Returns 1 when the axis was gated out. Always inlined: the quad gets
+ * a copy per axis with the axis and n constant. */
+static inline __attribute__((always_inline)) uint32_t
+fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const uint8_t axis,
+          const float measured, const uint8_t n)
+{
+    propid_core_t *core = &filter->core;
+    const propid_derived_t *derived = &filter->derived;
+    const float noise_var = derived->gyro_var;
+    float (*cov)[PROPID_MAX_STATES] = core->cov;
+    pending_t *const pending = pending_ref;
+    const uint8_t bias = (uint8_t)(n - PROPID_BIAS_STATES + axis);
+    for (;;) { /* at most twice: the repair-and-retry below happens once per sample */
+        float projection[3]; /* (h_k . H_axis) / S_k of each pending axis k */
+        float shift_rate = 0.0f;
+        float shift_bias = 0.0f;
+        for (uint8_t k = 0; k < pending->count; ++k) {
+            projection[k] = (pending->h[k][axis] + pending->h[k][bias]) * pending->inv_var[k];
+            const float step = pending->innovation[k] * pending->inv_var[k];
+            shift_rate += pending->h[k][axis] * step;
+            shift_bias += pending->h[k][bias] * step;
+        }
+        float h_rate = pending_h(cov, pending, projection, axis, bias, axis);
+        float h_bias = pending_h(cov, pending, projection, axis, bias, bias);
+        float innovation_var = h_rate + h_bias + noise_var;
+        if (!(innovation_var >= noise_var)) {
+            /* var(omega + b) < 0 or NaN: P is no longer PSD. Repair and recompute. */
+            (void)apply_pending(core, derived, pending);
+            if (propid_cov_repair(derived, core)) {
+                core->health |= PROPID_HEALTH_COV_REPAIRED;
+                filter->counters.cov_repairs++;
+            }
+            shift_rate = 0.0f;
+            shift_bias = 0.0f;
+            h_rate = cov[axis][axis] + cov[bias][axis];
+            h_bias = cov[axis][bias] + cov[bias][bias];
+            innovation_var = h_rate + h_bias + noise_var;
+            if (!(innovation_var >= noise_var)) {
+                innovation_var = noise_var;
+            }
+        }
+        /* The state after the pending axes, on the two components H reads. */
+        float innovation = measured - (core->state[axis] + shift_rate) - (core->state[bias] + shift_bias);
+        const float innovation_sq = innovation * innovation;
+        float inv_innovation_var = 1.0f / innovation_var;
+        core->innovation[axis] = innovation;
+        core->innovation_test_ratio[axis] = innovation_sq * inv_innovation_var * derived->inv_gate_sq;
+
+        if (derived->gate_sq > 0.0f && innovation_sq > derived->gate_sq * innovation_var) {
+            if (core->gated_run[axis] < filter->config.gate_max_consecutive) {
+                core->gated_run[axis]++;
+                filter->counters.axis_gated[axis]++;
+                return 1u;
+            }
+            /* Too many rejections in a row: the filter, not the sensor, is probably
+             * wrong. Re-anchor this axis' rate on the sample (prior variance, no
+             * correlations) and fuse it: the update then has the conditioning of
+             * the very first sample (P_hh <= rate prior + bias variance), never the
+             * P_hh ~ nu^2 of an inflation by the innovation. */
+            (void)apply_pending(core, derived, pending);
+            reanchor_rate(filter, axis, bias, measured);
+            h_rate = cov[axis][axis] + cov[bias][axis];
+            h_bias = cov[axis][bias] + cov[bias][bias];
+            innovation_var = h_rate + h_bias + noise_var;
+            inv_innovation_var = 1.0f / innovation_var;
+            innovation = measured - core->state[axis] - core->state[bias];
+            filter->counters.gate_reopened++;
+            core->health |= PROPID_HEALTH_GATE_REOPENED;
+        }
+        core->gated_run[axis] = 0u;
+
+        /* This axis' vectors (pending terms folded in), queued for the joint pass. */
+        const uint8_t slot = pending->count;
+        float *h = pending->h[slot];
+        const float *rate_row = cov[axis];
+        const float *bias_row = cov[bias];
+        const float *h0 = pending->h[0];
+        const float *h1 = pending->h[1];
+        float check = 0.0f;
+        if (n == PROPID_QUAD_STATES) {
+            /* Unrolled copies for the quad, one per number of folded-in terms. */
+            if (slot == 0u) {
+                PROPID_FORM_VECTOR(PROPID_QUAD_STATES, PROPID_UNROLL_QUAD, rate_row[i] + bias_row[i]);
+            } else if (slot == 1u) {
+                const float c0 = projection[0];
+                PROPID_FORM_VECTOR(PROPID_QUAD_STATES, PROPID_UNROLL_QUAD,
+                                   rate_row[i] + bias_row[i] - c0 * h0[i]);
+            } else {
+                const float c0 = projection[0];
+                const float c1 = projection[1];
+                PROPID_FORM_VECTOR(PROPID_QUAD_STATES, PROPID_UNROLL_QUAD,
+                                   rate_row[i] + bias_row[i] - c0 * h0[i] - c1 * h1[i]);
+            }
+        } else {
+            const float c0 = slot > 0u ? projection[0] : 0.0f;
+            const float c1 = slot > 1u ? projection[1] : 0.0f;
+            /* Unused terms read an already written, finite vector with weight 0. */
+            const float *first = slot > 0u ? h0 : rate_row;
+            const float *second = slot > 1u ? h1 : first;
+            PROPID_FORM_VECTOR(n, PROPID_NO_UNROLL,
+                               rate_row[i] + bias_row[i] - c0 * first[i] - c1 * second[i]);
+        }
+        /* A non-finite covariance element in the two rows this axis reads (e.g.
+         * spread from a corrupted element by the prediction) must never reach the
+         * state: repair P (after the pending terms) and redo this axis. */
+        if (!isfinite(check) && !*repaired) {
+            *repaired = 1;
+            (void)apply_pending(core, derived, pending);
+            if (propid_cov_repair(derived, core)) {
+                core->health |= PROPID_HEALTH_COV_REPAIRED;
+                filter->counters.cov_repairs++;
+            }
+            continue; /* redo this axis on the repaired P */
+        }
+        pending->innovation[slot] = innovation;
+        pending->inv_var[slot] = inv_innovation_var;
+        pending->count++;
+        return 0u;
+    }
+}
+
+uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
 {
     propid_core_t *core = &filter->core;
     const propid_derived_t *derived = &filter->derived;
     const uint8_t n = derived->state_count;
-    const uint8_t bias = (uint8_t)(propid_first_bias(filter->config.rotor_count) + axis);
-    float (*cov)[PROPID_MAX_STATES] = core->cov;
-
-    float cov_h[PROPID_MAX_STATES]; /* P H^T */
-    for (uint8_t i = 0; i < n; ++i) {
-        cov_h[i] = cov[i][axis] + cov[i][bias];
-    }
-    float innovation_var = cov_h[axis] + cov_h[bias] + derived->gyro_var;
-    if (!(innovation_var >= derived->gyro_var)) {
-        /* var(omega + b) < 0 or NaN: P is no longer PSD. Repair and recompute. */
-        if (propid_cov_repair(derived, core)) {
-            core->health |= PROPID_HEALTH_COV_REPAIRED;
-            filter->counters.cov_repairs++;
-        }
-        for (uint8_t i = 0; i < n; ++i) {
-            cov_h[i] = cov[i][axis] + cov[i][bias];
-        }
-        innovation_var = cov_h[axis] + cov_h[bias] + derived->gyro_var;
-        if (!(innovation_var >= derived->gyro_var)) {
-            innovation_var = derived->gyro_var;
+    pending_t pending;
+    pending.count = 0u;
+    int repaired = 0; /* at most one repair-and-retry per sample */
+    uint32_t gated_mask;
+    if (n == PROPID_QUAD_STATES) {
+        gated_mask = fuse_axis(filter, &pending, &repaired, 0u, gyro[0], PROPID_QUAD_STATES);
+        gated_mask |= fuse_axis(filter, &pending, &repaired, 1u, gyro[1], PROPID_QUAD_STATES) << 1;
+        gated_mask |= fuse_axis(filter, &pending, &repaired, 2u, gyro[2], PROPID_QUAD_STATES) << 2;
+    } else {
+        gated_mask = 0u;
+        for (uint8_t axis = 0; axis < 3u; ++axis) {
+            gated_mask |= fuse_axis(filter, &pending, &repaired, axis, gyro[axis], n) << axis;
         }
     }
-    const float innovation = gyro - core->state[axis] - core->state[bias];
-    const float innovation_sq = innovation * innovation;
-    float inv_innovation_var = 1.0f / innovation_var;
-    core->innovation[axis] = innovation;
-    core->innovation_test_ratio[axis] = innovation_sq * inv_innovation_var * derived->inv_gate_sq;
-
-    if (derived->gate_sq > 0.0f && innovation_sq > derived->gate_sq * innovation_var) {
-        if (core->gated_run[axis] < filter->config.gate_max_consecutive) {
-            core->gated_run[axis]++;
-            filter->counters.axis_gated[axis]++;
-            return 1;
-        }
-        /* Too many rejections in a row: the filter, not the sensor, is probably
-         * wrong. Inflate the rate variance by the innovation^2 so that the sample
-         * lands inside one sigma, and fuse it. Adding to a diagonal keeps P PSD. */
-        cov[axis][axis] += innovation_sq;
-        cov_h[axis] += innovation_sq;
-        innovation_var += innovation_sq;
-        inv_innovation_var = 1.0f / innovation_var;
-        filter->counters.gate_reopened++;
-        core->health |= PROPID_HEALTH_GATE_REOPENED;
+    /* Variance floors and ceilings: already tested inside the quad's pass; the
+     * full pass (which also repairs) runs when that found one outside, or when
+     * the pass was not the quad's three-term one. */
+    if (!apply_pending(core, derived, &pending) && propid_cov_enforce_bounds(derived, core)) {
+        core->health |= PROPID_HEALTH_COV_REPAIRED;
+        filter->counters.cov_repairs++;
     }
-    core->gated_run[axis] = 0u;
-
-    const float scaled_innovation = innovation * inv_innovation_var;
-    for (uint8_t i = 0; i < n; ++i) {
-        core->state[i] += cov_h[i] * scaled_innovation;
-    }
-    for (uint8_t i = 0; i < n; ++i) {
-        const float gain_i = cov_h[i] * inv_innovation_var;
-        float *row = cov[i];
-        for (uint8_t j = i; j < n; ++j) {
-            const float value = row[j] - gain_i * cov_h[j];
-            row[j] = value;
-            cov[j][i] = value;
-        }
-    }
-    return 0;
+    return gated_mask;
 }
 
 uint32_t propid_clamp_coefficients(const propid_config_t *config, propid_core_t *core)
 {
     const uint8_t first = propid_first_thrust();
     const uint8_t end = propid_first_bias(config->rotor_count);
+    /* Fast test of both bounds on the bit patterns (0 < min < max, see
+     * outside_positive_range); the rare clamp then compares the values. */
+    uint32_t min_bits;
+    uint32_t max_bits;
+    memcpy(&min_bits, &config->coeff_rel_min, sizeof(min_bits));
+    memcpy(&max_bits, &config->coeff_rel_max, sizeof(max_bits));
+    const uint32_t range_bits = max_bits - min_bits;
     uint32_t clamped = 0u;
     for (uint8_t k = first; k < end; ++k) {
+        if (!outside_positive_range(core->state[k], min_bits, range_bits)) {
+            continue;
+        }
         if (core->state[k] < config->coeff_rel_min) {
             core->state[k] = config->coeff_rel_min;
             clamped++;

@@ -189,9 +189,12 @@ def lagged_fit(
 DEFAULT_BANDS = {
     "raw": (None, None),
     "0.5-2Hz": (0.5, 2.0),
+    "2-5Hz": (2.0, 5.0),
+    "5-10Hz": (5.0, 10.0),
+    "10-20Hz": (10.0, 20.0),
     "2-10Hz": (2.0, 10.0),
-    "10-30Hz": (10.0, 30.0),
 }
+EVIDENCE_BANDS = ("0.5-2Hz", "2-5Hz", "5-10Hz", "10-20Hz")  # the per-band evidence table (docs/real-data.md)
 
 
 def _body_velocity(log: FlightLog) -> np.ndarray | None:
@@ -326,3 +329,82 @@ def format_checks(result: dict) -> str:
         lines.append("torque fits with a body-velocity moment term (rotor drag / flapping):")
         lines.extend(velocity_lines)
     return "\n".join(lines)
+
+
+def band_evidence_table(checks: list[dict], names: list[str], reference_kf: float | None = None) -> str:
+    """Markdown: per run and band, the gyro-torque roll/pitch kf (ratio to the reference, or
+    to the run's own accelerometer thrust kf without one) with R^2, and the yaw km without
+    and with the rotor-acceleration term, beside the accelerometer thrust kf (raw); last
+    column the 2-10 Hz torque kf divided by R^2 (the reverse regression: an upper bound if
+    all the unexplained variance were noise on the rotor-speed regressor)."""
+    head = "| run | acc thrust kf (raw) |" + "".join(
+        f" {b.replace('Hz', ' Hz')} roll / pitch kf (R^2) | {b.replace('Hz', ' Hz')} km / km+J_r [1e-10] |"
+        for b in EVIDENCE_BANDS) + " 2-10 Hz roll / pitch kf / R^2 (errors-in-variables bound) |"
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    pooled = {b: [] for b in EVIDENCE_BANDS}
+    eiv = []
+    for name, c in zip(names, checks):
+        bands = c.get("bands", {})
+        thrust = bands.get("raw", {}).get("thrust_kf", {}).get("kf", float("nan"))
+        ref = reference_kf or thrust
+        cells = [f"{thrust / reference_kf:.2f}" if reference_kf else f"{thrust:.3g}"]
+        for b in EVIDENCE_BANDS:
+            e = bands.get(b)
+            if not e:
+                cells += ["n/a", "n/a"]
+                continue
+            r, p = e["roll_kf"], e["pitch_kf"]
+            pooled[b].append(0.5 * (r["kf"] + p["kf"]) / ref)
+            cells.append(f"{r['kf'] / ref:.2f} / {p['kf'] / ref:.2f} ({r['r2']:.2f}/{p['r2']:.2f})")
+            cells.append(f"{e['yaw_km']['km'] * 1e10:.2f} / {e['yaw_km_rotor_inertia']['km'] * 1e10:.2f}")
+        # Through-origin LS of y on x gives Sxy/Sxx; of x on y (all error in the regressor) Syy/Sxy =
+        # (Sxy/Sxx)/R^2 with R^2 about zero: the truth lies between them if only noise separates the two.
+        e = bands.get("2-10Hz")
+        if e and e["roll_kf"]["r2"] > 0 and e["pitch_kf"]["r2"] > 0:
+            eiv.append(0.5 * (e["roll_kf"]["kf"] / e["roll_kf"]["r2"] + e["pitch_kf"]["kf"] / e["pitch_kf"]["r2"]) / ref)
+        cells.append(f"{e['roll_kf']['kf'] / e['roll_kf']['r2'] / ref:.2f} / {e['pitch_kf']['kf'] / e['pitch_kf']['r2'] / ref:.2f}"
+                     if e and e["roll_kf"]["r2"] > 0 and e["pitch_kf"]["r2"] > 0 else "n/a")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    mean_cells = ["**mean (roll+pitch)/2**", ""]
+    for b in EVIDENCE_BANDS:
+        mean_cells += [f"**{np.mean(pooled[b]):.2f}**" if pooled[b] else "n/a", ""]
+    mean_cells.append(f"**{np.mean(eiv):.2f}**" if eiv else "n/a")
+    lines.append("| " + " | ".join(mean_cells) + " |")
+    return "\n".join(lines)
+
+
+def plot_band_evidence(checks: list[dict], names: list[str], path: str, reference_kf: float) -> None:
+    """PNG: torque-derived kf (roll+pitch)/2 and the band-passed accelerometer thrust kf per
+    band, relative to the reference, one line per run."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    bands = ["raw", *EVIDENCE_BANDS]
+    x = np.arange(len(bands))
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), dpi=80, sharey=True)
+    colors = {"square": "C0", "random1": "C1", "random2": "C2", "multisine": "C3"}
+    for name, c in zip(names, checks):
+        color = next((v for k, v in colors.items() if name.startswith(k)), "C4")
+        torque, thrust = [], []
+        for b in bands:
+            e = c.get("bands", {}).get(b, {})
+            torque.append(0.5 * (e["roll_kf"]["kf"] + e["pitch_kf"]["kf"]) / reference_kf if e else np.nan)
+            thrust.append(e["thrust_kf"]["kf"] / reference_kf if e and "thrust_kf" in e else np.nan)
+        axes[0].plot(x, torque, "-o", color=color, ms=3, lw=1, alpha=0.8)
+        axes[1].plot(x, thrust, "-o", color=color, ms=3, lw=1, alpha=0.8)
+    for ax, title in zip(axes, ("gyro torque fit: (roll + pitch)/2", "accelerometer thrust fit (same band)")):
+        ax.axhline(1.0, color="k", ls="--", lw=1)
+        ax.set_xticks(x)
+        ax.set_xticklabels([b.replace("Hz", " Hz") for b in bands], fontsize=8)
+        ax.set_title(title, fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.set_ylim(-0.1, 1.3)
+    axes[0].set_ylabel("kf / independent kf")
+    for k, v in colors.items():
+        axes[1].plot([], [], color=v, label=k)
+    axes[1].legend(fontsize=7, loc="lower left")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

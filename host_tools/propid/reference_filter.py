@@ -105,6 +105,7 @@ class ReferenceFilter:
         self.state[3:self.first_bias] = 1.0
         self.cov = np.diag(self.prior_var.copy())
         self.rotor_speed_sq = np.zeros(self.rotor_count)
+        self.input_speed_sq = np.zeros(self.rotor_count)
         self.rotor_time_us = 0
         self.time_us = 0
         self.has_rotor_data = False
@@ -196,9 +197,11 @@ class ReferenceFilter:
         pii = self.cov[row, row]
         bad = not (pii > 0.0 and pii <= _F32_MAX)
         if not bad:
-            r = self.cov[row, :]
+            # The part of the row right of the diagonal (C: every element once per n samples).
+            r = self.cov[row, row + 1:]
             with np.errstate(invalid="ignore", over="ignore"):
-                bad = bool(np.any(~(r * r <= pii * np.diag(self.cov))) or np.any(self.cov[:, row] != r))
+                bad = bool(np.any(~(r * r <= pii * np.diag(self.cov)[row + 1:]))
+                           or np.any(self.cov[row + 1:, row] != r))
         return self._repair() if bad else False
 
     def _enforce_bounds(self) -> bool:
@@ -259,7 +262,9 @@ class ReferenceFilter:
         if t_us > self.rotor_time_us and t_us - self.rotor_time_us > self.rotor_stale_us:
             return self._reject("PROPID_ERR_ROTOR_STALE")
         if not anchor:
-            rate_dot, rows = self.rate_derivative_and_jacobian(self.state, self.rotor_speed_sq)
+            # Trapezoid input over the interval, as the C filter (docs/math.md).
+            speed_sq = 0.5 * (self.input_speed_sq + self.rotor_speed_sq)
+            rate_dot, rows = self.rate_derivative_and_jacobian(self.state, speed_sq)
             rate_next = self.state[:3] + dt * rate_dot
             jac_dt = dt * rows
             if not (np.all(np.isfinite(rate_next)) and np.all(np.isfinite(jac_dt))
@@ -300,6 +305,7 @@ class ReferenceFilter:
             self.counters_data["cov_repairs"] += 1
         if gated:
             self.health |= HEALTH["GATED"]
+        self.input_speed_sq = self.rotor_speed_sq.copy()
         self.time_us = int(t_us)
         self.has_time = True
         self.stale_mark = self.counters_data["rejected"][-STATUS["PROPID_ERR_ROTOR_STALE"]]
@@ -325,10 +331,13 @@ class ReferenceFilter:
                 self.gated_run[axis] += 1
                 self.counters_data["axis_gated"][axis] += 1
                 return True
-            self.cov[axis, axis] += innovation_sq
-            cov_h = cov_h.copy()
-            cov_h[axis] += innovation_sq
-            innovation_var += innovation_sq
+            # Re-anchor this axis' rate on the sample: rate := measurement - bias,
+            # prior variance, no correlations; then fuse (C: reanchor_rate).
+            self.state[axis] = _f32(gyro) - self.state[bias]
+            self._reset_state(axis)
+            cov_h = self.cov[:, axis] + self.cov[:, bias]
+            innovation_var = cov_h[axis] + cov_h[bias] + self.gyro_var
+            innovation = gyro - self.state[axis] - self.state[bias]
             self.counters_data["gate_reopened"] += 1
             self.health |= HEALTH["GATE_REOPENED"]
         self.gated_run[axis] = 0

@@ -49,6 +49,8 @@ class ReplayOptions:
     overrides: dict = field(default_factory=dict)  # any other propid_config_t field
     skip_repeats: bool = False  # a row whose gyro (or rotor speeds) exactly repeat the previous row is no new sample
     rotor_delay_s: float | str = 0.0  # push rotor speeds this much later than logged, or "auto"
+    prefilter_hz: float | str | None = None  # matched causal low-pass of gyro and rotor speed^2: Hz, "auto" or None
+    diagnostic_highpass_hz: float | None = None  # diagnostic only: emulate removing slow content (docs/real-data.md)
     record_every: int = 1  # keep every k-th estimate for the time series
     progress: bool = True
 
@@ -204,17 +206,86 @@ def build_config(vehicle: Vehicle, log: FlightLog, options: ReplayOptions) -> tu
     return config, notes
 
 
-def estimate_rotor_delay(log: FlightLog, vehicle: Vehicle) -> float:
-    """Delay of the angular-acceleration response behind the logged rotor speeds: the lag
-    (0..50 ms) that best fits the 2-10 Hz roll and pitch torque regressions (mean of the
-    two). It aligns the streams of a log whose rotor speeds were time-stamped early; it
-    uses no coefficient value."""
-    checks = check_log(log, vehicle, bands={"2-10Hz": (2.0, 10.0)}, unit_inertia=vehicle.inertia is None)
-    entry = checks["bands"].get("2-10Hz")
-    if not entry:
+_INPUT_RULE: dict = {}
+
+
+def filter_input_rule() -> str:
+    """How the loaded C library turns rotor samples into the input of one prediction step
+    (t_k-1, t_k]: "zoh" (the latest rotor sample) or "trapezoid" (mean of the sample that was
+    latest at t_k-1 and the latest one). Found by probing the library through its API, once:
+    a symmetric quad, negligible measurement weight, one step in which a single rotor speeds
+    up; the predicted rate change is the full step (zoh) or half of it (trapezoid)."""
+    if "rule" in _INPUT_RULE:
+        return _INPUT_RULE["rule"]
+    from propid import cfilter
+
+    arm, kf, inertia = 0.1, 1e-6, 1e-3
+    config = cfilter.FilterConfig.symmetric(4, arm, math.pi / 4, 1.0, kf, 1e-8, [inertia] * 3,
+                                            rate_std0=1e-4, gyro_noise_density=10.0, gyro_sample_rate_hz=100.0,
+                                            gate_sigma=0.0, thrust_coeff_rel_std0=1e-3, drag_coeff_rel_std0=1e-3,
+                                            gyro_bias_std0=1e-4)
+    probe = cfilter.CFilter(config)
+    base, fast = [500.0] * 4, [1000.0, 500.0, 500.0, 500.0]
+    for k, speeds in enumerate((base, base, fast)):
+        t_us = US + k * 10_000
+        probe.push_rotor_speeds(t_us, speeds)
+        probe.push_gyro(t_us, [0.0, 0.0, 0.0])
+    position = np.array(config.positions[0])
+    torque = kf * (fast[0] ** 2 - base[0] ** 2) * np.array([position[1], -position[0]])
+    full_step = 0.01 * torque / inertia
+    ratio = float(np.dot(probe.estimate().body_rate[:2], full_step) / np.dot(full_step, full_step))
+    _INPUT_RULE["rule"] = "trapezoid" if abs(ratio - 0.5) < abs(ratio - 1.0) else "zoh"
+    _INPUT_RULE["ratio"] = ratio
+    return _INPUT_RULE["rule"]
+
+
+DELAY_BAND_HZ = (2.0, 10.0)
+MAX_ROTOR_DELAY_S = 0.05
+
+
+def estimate_rotor_delay(log: FlightLog, vehicle: Vehicle, mask: np.ndarray | None = None,
+                         unit_inertia: bool = False) -> float:
+    """Delay of the angular-acceleration response behind the logged rotor speeds, in whole
+    samples of the log, by the filter's own discretisation: the replay pushes rotor sample n
+    at t_n + m dt before gyro sample n + m, so the Euler step (t_{n+m-1}, t_{n+m}] integrates
+    u[n]. The rule regresses the measured torque of that step, J (w[k] - w[k-1])/dt + w x Jw,
+    on the model's roll and pitch regressors u[k - m] (with a trapezoidal library input,
+    0.5 (u[k - m] + u[k - m - 1]): filter_input_rule) (both band-passed to 2-10 Hz per flying
+    segment) for m = 0 .. 50 ms and takes the m with the largest R^2 (sum over roll and
+    pitch), i.e. the peak of the normalised cross-correlation of modelled and measured
+    torque. Scale-free: it uses no coefficient value."""
+    from propid.realdata_checks import clean_rotor_speeds, lagged_fit, segments
+
+    steps = np.diff(log.t)
+    dt = float(np.median(steps[steps > 0]))
+    rate = 1.0 / dt
+    if DELAY_BAND_HZ[1] >= 0.45 * rate:
         return 0.0
-    lag_ms = 0.5 * (entry["roll_kf"]["lag_ms"] + entry["pitch_kf"]["lag_ms"])
-    return max(0.0, lag_ms * 1e-3)
+    inertia = np.eye(3) if unit_inertia or vehicle.inertia is None else np.asarray(vehicle.inertia)
+    mask = flying_mask(log) if mask is None else mask
+    uniform = np.ones(len(log), dtype=bool)
+    uniform[1:] &= np.abs(steps - dt) < 0.5 * dt
+    segs = segments(mask & uniform, int(max(2.0 * rate, 50)))
+    if not segs:
+        return 0.0
+    speeds, _ = clean_rotor_speeds(log.rotor_speed, absurd_speed_limit(log.rotor_speed))
+    gyro = _hold_gaps(log.gyro, ~np.isfinite(log.gyro))
+    step_rate = np.zeros_like(gyro)
+    step_rate[1:] = (gyro[1:] - gyro[:-1]) / dt
+    torque = step_rate @ inertia.T + np.cross(gyro, gyro @ inertia.T)
+    u = speeds**2
+    if filter_input_rule() == "trapezoid":  # the step integrates the mean of the previous and the latest sample
+        u = np.vstack([u[:1], 0.5 * (u[1:] + u[:-1])])
+    pos = vehicle.positions
+    regs = [(u * pos[:, 1]).sum(axis=1, keepdims=True), (-u * pos[:, 0]).sum(axis=1, keepdims=True)]
+    segs = [(max(a, 1), b) for a, b in segs]  # the first row of a segment has no step
+    best, best_score = 0, -np.inf
+    for lag in range(0, int(round(MAX_ROTOR_DELAY_S * rate)) + 1):
+        score = sum(lagged_fit(torque[:, axis], regs[axis], segs, rate, DELAY_BAND_HZ, range(lag, lag + 1)).r2
+                    for axis in range(2))
+        if np.isfinite(score) and score > best_score:
+            best, best_score = lag, score
+    return best * dt
 
 
 def _field(obj, name):
@@ -270,7 +341,7 @@ class FilterSession:
     def estimate(self) -> dict:
         est = self._filter.estimate()
         names = ("thrust_coeff", "thrust_coeff_std", "drag_coeff", "drag_coeff_std", "gyro_bias", "gyro_bias_std",
-                 "thrust_coeff_converged", "drag_coeff_converged", "health")
+                 "thrust_coeff_converged", "drag_coeff_converged", "health", "innovation_test_ratio")
         return {name: _field(est, name) for name in names}
 
     def counters(self) -> dict:
@@ -290,13 +361,33 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     options = options or ReplayOptions()
     if log.rotor_count != vehicle.rotor_count:
         raise UserError(f"the log has {log.rotor_count} rotors, the vehicle file {vehicle.rotor_count}")
-    config_fields, notes = build_config(vehicle, log, options)
-    filt = FilterSession(vehicle, config_fields)
+    if options.noise == "nis":
+        return _replay_nis(log, vehicle, options)
     streams = detect_streams(log) if options.streams == "auto" else options.streams
+    logged_streams = streams  # --skip-repeats turns a rows log into events below; the time base stays the rows'
     mask = _segment_mask(log, options.segment)
     rows = np.flatnonzero(mask)
     if rows.size == 0:
         raise UserError("no rows to replay (is the vehicle ever flying? try --segment all)")
+    recorded = log
+    prefilter_info = None
+    if options.prefilter_hz is not None:
+        if streams != "rows" or options.skip_repeats:
+            raise UserError("the matched pre-filter needs a rows log (one gyro and one rotor sample per row, uniform "
+                            "time) and cannot be combined with --skip-repeats")
+        inertia = np.eye(3) if options.unit_inertia or vehicle.inertia is None else np.asarray(vehicle.inertia)
+        log, prefilter_info = prefilter_log(log, vehicle, mask, options.prefilter_hz, inertia)
+    highpass_info = None
+    if options.diagnostic_highpass_hz is not None:
+        if streams != "rows" or options.skip_repeats:
+            raise UserError("--diagnostic-highpass needs a rows log and cannot be combined with --skip-repeats")
+        log, highpass_info = highpass_emulation_log(log, vehicle, mask, float(options.diagnostic_highpass_hz))
+    config_fields, notes = build_config(vehicle, log, options)
+    if prefilter_info is not None:
+        notes["prefilter"] = prefilter_info
+    if highpass_info is not None:
+        notes["diagnostic_highpass"] = highpass_info
+    filt = FilterSession(vehicle, config_fields)
     t_us = np.round((log.t - log.t[0]) * US).astype(np.int64) + US  # start at 1 s: time 0 is 'no time yet'
     speeds = np.ascontiguousarray(log.rotor_speed, dtype=np.float32)
     gyro = np.ascontiguousarray(log.gyro, dtype=np.float32)
@@ -313,11 +404,23 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         has_rotor &= ~same_rotor
         if streams == "rows":
             streams = "events"  # rows now carry one stream or the other
-    rotor_delay_s = estimate_rotor_delay(log, vehicle) if options.rotor_delay_s == "auto" else float(options.rotor_delay_s)
+    if options.rotor_delay_s == "auto" and logged_streams == "rows":
+        rotor_delay_s = estimate_rotor_delay(log, vehicle, mask, unit_inertia=options.unit_inertia)
+        delay_rule = ("auto: whole-sample lag (0-50 ms) maximising the 2-10 Hz R^2 of measured vs modelled "
+                      "roll/pitch torque in the filter's Euler step")
+    elif options.rotor_delay_s == "auto":
+        rotor_delay_s = 0.0  # event-style logs carry each stream's own time stamps
+        delay_rule = "auto: 0 for an event-style log (each stream keeps its own time stamps)"
+    else:
+        rotor_delay_s = float(options.rotor_delay_s)
+        delay_rule = "given"
     delay_us = int(round(rotor_delay_s * US))
     status_counts: dict[str, int] = {}
     n = vehicle.rotor_count
-    rec_t, rec_kf, rec_kfs, rec_km, rec_kms, rec_bg, rec_bgs, rec_conv_kf, rec_conv_km = ([] for _ in range(9))
+    rec_t, rec_kf, rec_kfs, rec_km, rec_kms, rec_bg, rec_bgs, rec_conv_kf, rec_conv_km, rec_nis = ([] for _ in range(10))
+    from propid.cfilter import DEFAULT_TUNING
+
+    gate = float(config_fields.get("gate_sigma", DEFAULT_TUNING["gate_sigma"]))
     resyncs = 0
     gyro_pushes = 0
     iterator = rows
@@ -357,6 +460,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
                 rec_bgs.append(est["gyro_bias_std"])
                 rec_conv_kf.append([(est["thrust_coeff_converged"] >> k) & 1 for k in range(n)])
                 rec_conv_km.append([(est["drag_coeff_converged"] >> k) & 1 for k in range(n)])
+                rec_nis.append(est["innovation_test_ratio"] if status >= 0 else [np.nan] * 3)
     if not rec_t:
         raise UserError("no gyro sample was replayed")
     series = {
@@ -369,6 +473,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "gyro_bias_std": np.array(rec_bgs, dtype=float),
         "kf_converged": np.array(rec_conv_kf, dtype=bool),
         "km_converged": np.array(rec_conv_km, dtype=bool),
+        "nis": np.array(rec_nis, dtype=float) * (gate * gate if gate > 0 else np.nan),
     }
     final = filt.estimate()
     counters = filt.counters()
@@ -401,8 +506,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "rows_replayed": int(rows.size),
         "repeated_rows_skipped": repeats,
         "rotor_delay_s": rotor_delay_s,
-        "rotor_delay_rule": "auto: best lag of the 2-10 Hz roll/pitch torque fits" if options.rotor_delay_s == "auto"
-        else "given",
+        "rotor_delay_rule": delay_rule,
+        "filter_rotor_input": filter_input_rule(),
         "duration_s": float(log.t[rows[-1]] - log.t[rows[0]]),
         "kf": [float(v) for v in final["thrust_coeff"][:n]],
         "kf_std": [float(v) for v in final["thrust_coeff_std"][:n]],
@@ -416,6 +521,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "gyro_bias": [float(v) for v in final["gyro_bias"]],
         "gyro_bias_std": [float(v) for v in final["gyro_bias_std"]],
         "rejected": dict(sorted(status_counts.items())),
+        "nis_mean": nis_mean(series),
         "counters": counters,
         "resyncs_by_replay": resyncs,
         "health": int(final["health"]),
@@ -429,6 +535,55 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         },
     }
     return ReplayResult(summary=summary, series=series)
+
+
+NIS_TOLERANCE = 0.05
+NIS_MAX_ITERATIONS = 8
+
+
+def _replay_nis(log: FlightLog, vehicle: Vehicle, options: ReplayOptions) -> ReplayResult:
+    """--noise nis: gyro noise by the 'auto' rule, then rate_process_noise q scaled until the
+    filter's own innovations are consistent with it: mean normalised innovation squared
+    nu^2/S over the gyro axes = 1 (within NIS_TOLERANCE). nu^2/S ~ 1/q^2 when the process
+    noise dominates S; secant steps on log NIS against log q converge in a few replays.
+    Uses no coefficient value."""
+    from dataclasses import replace
+
+    base = replace(options, noise="auto")
+    given = options.overrides.get("rate_process_noise")
+    q = float(given) if given else float(build_config(vehicle, log, replace(base, overrides={}))[0].get(
+        "rate_process_noise", 1.0))
+    history = []
+    result = None
+    for _ in range(NIS_MAX_ITERATIONS):
+        result = replay(log, vehicle, replace(base, overrides={**options.overrides, "rate_process_noise": q}))
+        nis = result.summary["nis_mean"]
+        history.append({"rate_process_noise": q, "nis_mean": nis})
+        if not np.isfinite(nis) or nis <= 0 or abs(nis - 1.0) < NIS_TOLERANCE:
+            break
+        # secant step on log NIS vs log q (slope -2 when the process noise dominates S)
+        slope = -2.0
+        if len(history) >= 2:
+            (q0, n0), (q1, n1) = [(h["rate_process_noise"], h["nis_mean"]) for h in history[-2:]]
+            if q0 != q1 and n0 > 0 and n1 > 0:
+                slope = float(np.clip(math.log(n1 / n0) / math.log(q1 / q0), -2.0, -0.1))
+        q = float(np.clip(q * math.exp(-math.log(nis) / slope), 1e-4, 1e4))
+    result.summary["config_notes"]["noise"] = (
+        "nis: gyro noise by the auto rule; rate_process_noise scaled until the mean normalised innovation "
+        "squared of this replay is 1")
+    result.summary["config_notes"]["nis_iterations"] = history
+    return result
+
+
+def nis_mean(series: dict, skip_s: float = 2.0) -> float:
+    """Mean normalised innovation squared nu^2/S over the gyro axes and the accepted samples
+    after the first skip_s seconds (1 for a consistent filter)."""
+    nis = series.get("nis")
+    if nis is None or nis.size == 0:
+        return float("nan")
+    late = series["t"] >= series["t"][0] + skip_s
+    values = nis[late] if late.any() else nis
+    return float(np.nanmean(values)) if np.isfinite(values).any() else float("nan")
 
 
 def plot_replay(result: ReplayResult, path: str, title: str = "", reference_kf: float | None = None) -> None:
@@ -519,13 +674,13 @@ def fleet_summary(summaries: list[dict], reference_kf: float | None = None) -> d
 def validation_table(summaries: list[dict], reference_kf: float | None = None) -> str:
     """Markdown table, one row per run (the docs' validation table)."""
     ref = reference_kf or float("nan")
-    head = ("| run | s | rotor samples rejected | clamped steps | filter kf (x ref) | kf rotor spread | filter km | km conv. "
+    head = ("| run | s | rotor delay [ms] | rotor samples rejected | gated gyro axes | clamped steps | filter kf (x ref) | kf rotor spread | filter km | km conv. "
             "| acc thrust kf | LS roll/pitch kf raw | raw + velocity moment | 2-10 Hz | 2-10 Hz km |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for s in summaries:
         kf = np.asarray(s["kf_mean"])
         name = Path(s["log"]).stem if s.get("log") else "?"
-        rejected = sum(v for k, v in s["rejected"].items() if "ROTOR" in k or "NOT_FINITE" in k)
+        rejected = sum(v for k, v in s["rejected"].items() if k in ("PROPID_ERR_NOT_FINITE", "PROPID_ERR_ROTOR_SPEED_RANGE"))
         c = (s.get("checks") or {}).get("bands", {})
 
         def fit(band, key, coeff="kf", fmt="{:.2f}"):
@@ -535,7 +690,8 @@ def validation_table(summaries: list[dict], reference_kf: float | None = None) -
                 return "n/a"
 
         lines.append(
-            f"| {name} | {s['duration_s']:.0f} | {rejected} | {s['counters'].get('state_clamps', 0)} | "
+            f"| {name} | {s['duration_s']:.0f} | {1e3 * s.get('rotor_delay_s', 0.0):.0f} | {rejected} | "
+            f"{sum(s['counters'].get('axis_gated', [0]))} | {s['counters'].get('state_clamps', 0)} | "
             f"{kf.mean():.3g} ({kf.mean() / ref:.2f}) | "
             f"{_cv(kf):.0%} | {np.mean(s['km_mean']):.3g} | {sum(s['converged']['km'])}/{len(kf)} | "
             f"{fit('raw', 'thrust_kf')} | {fit('raw', 'roll_kf')}/{fit('raw', 'pitch_kf')} | "
@@ -581,3 +737,209 @@ def plot_fleet(summaries: list[dict], path: str, reference_kf: float) -> None:
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+# ----------------------------------------------------------------------------- matched pre-filter
+# A causal low-pass applied identically to the gyro and to the rotor-speed-squared stream
+# (docs/real-data.md, "Matched pre-filter"). The rate dynamics J dw/dt = B(kf, km) u are
+# linear in u = Omega^2 (up to the small gyroscopic term), so one LTI filter H on both
+# sides keeps J d(Hw)/dt = B(kf, km) (Hu) with the SAME coefficients, while removing the
+# band in which the torque model does not explain the measured angular acceleration.
+# The filter is two identical first-order sections in cascade (critically damped, 2nd
+# order): its impulse response is non-negative, so filtered Omega^2 stays >= 0 and can be
+# pushed as the rotor speed sqrt(H u). A high-pass part cannot be pushed (it makes u
+# negative); removing slow content needs a disturbance-torque state in the filter.
+
+CASCADE_3DB = math.sqrt(math.sqrt(2.0) - 1.0)  # -3 dB frequency of two equal 1st-order sections / their pole frequency
+COHERENCE_THRESHOLD = 0.5
+COHERENCE_WINDOW_S = 2.56
+
+
+def lowpass_pole(cutoff_hz: float, rate_hz: float) -> float:
+    """Pole a of each first-order section y[n] = a y[n-1] + (1 - a) x[n], chosen so that the
+    cascade of two has its -3 dB point at cutoff_hz."""
+    if not (cutoff_hz > 0 and rate_hz > 0):
+        raise UserError(f"pre-filter cut-off {cutoff_hz} Hz at {rate_hz} Hz: both must be positive")
+    pole_hz = cutoff_hz / CASCADE_3DB
+    return math.exp(-2.0 * math.pi * pole_hz / rate_hz)
+
+
+def matched_lowpass(x: np.ndarray, pole: float, starts: np.ndarray) -> np.ndarray:
+    """Two first-order sections in cascade along axis 0, restarted (at the input value:
+    no start-up transient) at every index in `starts`. Unit DC gain; the impulse response
+    (1-a)^2 (n+1) a^n is non-negative."""
+    out = np.empty_like(x, dtype=float)
+    restart = np.zeros(x.shape[0], dtype=bool)
+    restart[starts] = True
+    restart[0] = True
+    gain = 1.0 - pole
+    s1 = s2 = x[0].astype(float)
+    for n in range(x.shape[0]):
+        if restart[n]:
+            s1 = s2 = x[n].astype(float)
+        s1 = pole * s1 + gain * x[n]
+        s2 = pole * s2 + gain * s1
+        out[n] = s2
+    return out
+
+
+def noise_gain(pole: float) -> float:
+    """sum of h[n]^2 of the cascade: the variance ratio of white noise through it."""
+    n = np.arange(int(20 / max(1e-9, 1.0 - pole)) + 50)
+    h = (1.0 - pole) ** 2 * (n + 1) * pole**n
+    return float(np.sum(h**2))
+
+
+def _hold_gaps(x: np.ndarray, bad: np.ndarray) -> np.ndarray:
+    """Replace bad samples by the last good one before them (the next good one at the start),
+    i.e. what the filter itself does with a rejected rotor sample (zero-order hold)."""
+    out = x.copy()
+    for k in range(x.shape[1]):
+        good = np.flatnonzero(~bad[:, k])
+        if good.size == 0:
+            continue
+        idx = np.searchsorted(good, np.arange(x.shape[0]), side="right") - 1
+        idx = np.where(idx < 0, 0, idx)
+        out[:, k] = x[good[idx], k]
+    return out
+
+
+def torque_coherence(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Magnitude-squared coherence between the torque model's roll/pitch regressors
+    (sum y_i Omega_i^2, sum -x_i Omega_i^2) and the measured torque J dw/dt + w x Jw, per
+    frequency (Welch: Hann windows of COHERENCE_WINDOW_S, 50 % overlap, within the flying
+    segments). Returns (frequencies, coherence averaged over roll and pitch). Lag-free and
+    scale-free: it uses no coefficient value and no stream alignment."""
+    from propid.realdata_checks import clean_rotor_speeds, segments
+
+    steps = np.diff(log.t)
+    dt = float(np.median(steps[steps > 0]))
+    nper = max(16, int(round(COHERENCE_WINDOW_S / dt)))
+    speeds, _ = clean_rotor_speeds(log.rotor_speed, absurd_speed_limit(log.rotor_speed))
+    u = speeds**2
+    gyro = _hold_gaps(log.gyro, ~np.isfinite(log.gyro))
+    rate_dot = np.gradient(gyro, log.t, axis=0)
+    torque = rate_dot @ inertia.T + np.cross(gyro, gyro @ inertia.T)
+    pos = vehicle.positions
+    regs = [(u * pos[:, 1]).sum(axis=1), (-u * pos[:, 0]).sum(axis=1)]
+    window = np.hanning(nper)
+    freqs = np.fft.rfftfreq(nper, dt)
+    coherence = []
+    for axis in range(2):
+        sxx = syy = sxy = 0.0
+        for a, b in segments(mask, nper):
+            for s in range(a, b - nper + 1, nper // 2):
+                x = regs[axis][s : s + nper]
+                y = torque[s : s + nper, axis]
+                fx = np.fft.rfft((x - x.mean()) * window)
+                fy = np.fft.rfft((y - y.mean()) * window)
+                sxx = sxx + np.abs(fx) ** 2
+                syy = syy + np.abs(fy) ** 2
+                sxy = sxy + np.conj(fx) * fy
+        if np.isscalar(sxx):
+            return freqs, np.full(freqs.shape, np.nan)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            coherence.append(np.abs(sxy) ** 2 / (sxx * syy))
+    return freqs, 0.5 * (coherence[0] + coherence[1])
+
+
+COHERENCE_SMOOTH_HZ = 2.0
+
+
+def coherence_cutoff(freqs: np.ndarray, coherence: np.ndarray, low_hz: float = 2.0,
+                     threshold: float = COHERENCE_THRESHOLD) -> float | None:
+    """The pre-filter cut-off rule: the coherence is smoothed by a moving average over
+    COHERENCE_SMOOTH_HZ; from the best-explained frequency between low_hz and 4 x low_hz
+    (robust to a dip at the low edge) upwards, the first frequency at which it falls below
+    the threshold. None if it is below the threshold there (the torque model explains no
+    band of this log)."""
+    width = max(1, int(round(COHERENCE_SMOOTH_HZ / (freqs[1] - freqs[0]))) | 1)
+    smooth = np.convolve(np.nan_to_num(coherence, nan=0.0), np.ones(width) / width, mode="same")
+    lo, hi = int(np.searchsorted(freqs, low_hz)), int(np.searchsorted(freqs, 4.0 * low_hz))
+    if lo >= freqs.size:
+        return None
+    start = lo + int(np.argmax(smooth[lo : max(hi, lo + 1)]))
+    if smooth[start] < threshold:
+        return None
+    below = np.flatnonzero(smooth[start:] < threshold)
+    return float(freqs[start + below[0]]) if below.size else float(freqs[-1])
+
+
+def prefilter_log(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, cutoff: float | str,
+                  inertia: np.ndarray) -> tuple[FlightLog, dict]:
+    """The log as the filter sees it with the matched pre-filter: gyro -> H gyro, rotor speed ->
+    sqrt(H Omega^2), same time stamps. Missing or absurd rotor speeds (and missing gyro
+    samples) are held at the previous good value first: a recursive filter needs every
+    sample, and holding is what the filter does with a rejected rotor sample anyway. The
+    filter restarts at every contiguous replayed segment (no start-up transient)."""
+    steps = np.diff(log.t)
+    dt = float(np.median(steps[steps > 0]))
+    rate = 1.0 / dt
+    info: dict = {"rule": "given"}
+    if cutoff == "auto":
+        freqs, coherence = torque_coherence(log, vehicle, mask, inertia)
+        found = coherence_cutoff(freqs, coherence)
+        info.update(rule=f"auto: from the best-explained frequency in 2-8 Hz upwards, the first frequency where the roll/pitch "
+                         f"torque-model coherence (Welch, {COHERENCE_WINDOW_S} s windows, {COHERENCE_SMOOTH_HZ} Hz "
+                         f"moving average) falls below {COHERENCE_THRESHOLD}",
+                    coherence_hz=[float(f) for f in freqs[::4]], coherence=[float(c) for c in coherence[::4]])
+        if found is None:
+            info["note"] = "the torque model explains no band above 2 Hz of this log: no pre-filter applied"
+            info["cutoff_hz"] = None
+            return log, info
+        cutoff = found
+    cutoff = float(cutoff)
+    if cutoff >= 0.45 * rate:
+        info.update(cutoff_hz=cutoff, note="cut-off at or above 0.45 x the sample rate: no pre-filter applied")
+        return log, info
+    pole = lowpass_pole(cutoff, rate)
+    limit = absurd_speed_limit(log.rotor_speed)
+    bad_rotor = ~np.isfinite(log.rotor_speed) | (np.nan_to_num(log.rotor_speed, nan=0.0) > limit)
+    bad_gyro = ~np.isfinite(log.gyro)
+    speeds = _hold_gaps(log.rotor_speed, bad_rotor)
+    gyro = _hold_gaps(log.gyro, bad_gyro)
+    gap = np.concatenate([[True], (steps > 1.5 * dt)])  # a time gap restarts the filter too
+    starts = np.flatnonzero(mask & (gap | ~np.concatenate([[False], mask[:-1]])))
+    filtered_u = matched_lowpass(np.nan_to_num(speeds, nan=0.0) ** 2, pole, starts)
+    filtered_gyro = matched_lowpass(np.nan_to_num(gyro, nan=0.0), pole, starts)
+    out = FlightLog(t=log.t, gyro=filtered_gyro, rotor_speed=np.sqrt(np.maximum(filtered_u, 0.0)),
+                    extra=log.extra, path=log.path)
+    info.update(cutoff_hz=cutoff, pole=pole, noise_gain=noise_gain(pole),
+                held_rotor_samples=int(np.sum(np.any(bad_rotor, axis=1) & mask)),
+                held_gyro_samples=int(np.sum(np.any(bad_gyro, axis=1) & mask)),
+                filter="two equal first-order low-pass sections in cascade (critically damped), "
+                       "applied to gyro and to rotor speed squared")
+    return out, info
+
+
+def highpass_emulation_log(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, cutoff_hz: float) -> tuple[FlightLog, dict]:
+    """DIAGNOSTIC ONLY (not an estimator mode): what the filter would read if slow content,
+    where unmodelled moments dominate, were removed, as a disturbance-torque state would.
+    A high-pass of Omega^2 goes negative and cannot be pushed as a speed; instead every
+    rotor gets u' = (u - L u) + U0 with the same offset U0 (large enough to keep u' > 0)
+    and the gyro gets w - L w (L: the matched low-pass at cutoff_hz). For a vehicle whose
+    rotor positions and yaw signs sum to zero, U0 adds no torque when the rotors' kf (and
+    km) are equal, so the common kf is unchanged; unequal per-rotor kf would turn U0 into a
+    large constant torque, so this mode pins the rotors to a common value: per-rotor numbers
+    mean nothing here."""
+    positions_sum = np.abs(vehicle.positions[:, :2].sum(axis=0)).max()
+    arm = float(np.abs(vehicle.positions[:, :2]).max())
+    if positions_sum > 1e-6 * max(arm, 1e-9) or abs(float(np.sum(vehicle.yaw_signs))) > 0:
+        raise UserError("--diagnostic-highpass needs a symmetric vehicle (rotor x, y positions and yaw signs summing to 0)")
+    steps = np.diff(log.t)
+    dt = float(np.median(steps[steps > 0]))
+    pole = lowpass_pole(cutoff_hz, 1.0 / dt)
+    limit = absurd_speed_limit(log.rotor_speed)
+    bad_rotor = ~np.isfinite(log.rotor_speed) | (np.nan_to_num(log.rotor_speed, nan=0.0) > limit)
+    speeds = _hold_gaps(log.rotor_speed, bad_rotor)
+    gyro = _hold_gaps(log.gyro, ~np.isfinite(log.gyro))
+    gap = np.concatenate([[True], (steps > 1.5 * dt)])
+    starts = np.flatnonzero(mask & (gap | ~np.concatenate([[False], mask[:-1]])))
+    u = np.nan_to_num(speeds, nan=0.0) ** 2
+    u_high = u - matched_lowpass(u, pole, starts)
+    gyro_high = np.nan_to_num(gyro, nan=0.0) - matched_lowpass(np.nan_to_num(gyro, nan=0.0), pole, starts)
+    offset = max(float(np.mean(u[mask])), 1.05 * float(-u_high[mask].min()))
+    out = FlightLog(t=log.t, gyro=gyro_high, rotor_speed=np.sqrt(np.maximum(u_high + offset, 0.0)),
+                    extra=log.extra, path=log.path)
+    return out, {"cutoff_hz": cutoff_hz, "offset_rotor_speed_sq": offset,
+                 "note": "diagnostic only: slow content removed by emulation; rotors pinned to a common kf"}

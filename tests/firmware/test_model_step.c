@@ -75,9 +75,13 @@ static void randomise(rng_t *rng)
         filter.core.state[i] = i < 3u ? rng_uniform(rng, -2.0f, 2.0f)
                                       : (i < n - 3u ? rng_uniform(rng, 0.7f, 1.3f) : rng_uniform(rng, -0.05f, 0.05f));
     }
-    for (uint8_t i = 0; i < 4u; ++i) {
+    for (uint8_t i = 0; i < filter.config.rotor_count; ++i) {
         const float s = rng_uniform(rng, 400.0f, 1400.0f);
         filter.core.rotor_speed_sq[i] = s * s;
+        /* A different input at the start of the interval: the step must use the
+         * trapezoid mean of the two. */
+        const float s0 = rng_uniform(rng, 400.0f, 1400.0f);
+        filter.core.input_speed_sq[i] = s0 * s0;
     }
 }
 
@@ -100,9 +104,22 @@ static float max_abs_diff(const float a[N_MAX][N_MAX], const float b[N_MAX][N_MA
     return diff;
 }
 
-static void test_sparse_prediction_equals_dense(void)
+/* A plus-frame hexa with diagonal inertia: the plain-loop (non-quad) path, and a
+ * Jacobian with structural zeros (and a cosf(pi/2) geometry residue). */
+static void init_hexa_plus(void)
 {
-    init_quad();
+    propid_config_t config;
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 6u, 0.25f, 0.0f, 1.0f,
+                                                                 8.0e-6f, 2.0e-7f));
+    propid_config_set_inertia_diag(&config, 6.0e-3f, 6.5e-3f, 1.1e-2f);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+}
+
+/* Sparse prediction (state and covariance) against the dense textbook form on the
+ * filter set up by the caller. */
+static void check_prediction_against_dense(void)
+{
     rng_t rng = {11u};
     const uint8_t n = filter.derived.state_count;
     for (int trial = 0; trial < 10; ++trial) {
@@ -111,6 +128,20 @@ static void test_sparse_prediction_equals_dense(void)
         float rate_next[3];
         float jac_dt[3][N_MAX];
         TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&filter, dt, rate_next, jac_dt));
+        /* Euler step of the rates against the model's derivative, with the
+         * interval's input = mean of the start and latest rotor speeds squared. */
+        float speed_sq_mean[PROPID_MAX_ROTORS];
+        for (uint8_t i = 0; i < filter.config.rotor_count; ++i) {
+            speed_sq_mean[i] = 0.5f * (filter.core.input_speed_sq[i] + filter.core.rotor_speed_sq[i]);
+        }
+        float rate_dot[3];
+        propid_model_rate_derivative(&filter.config, &filter.derived, filter.core.state,
+                                     speed_sq_mean, rate_dot);
+        for (uint8_t a = 0; a < 3u; ++a) {
+            const float expected = filter.core.state[a] + dt * rate_dot[a];
+            TEST_ASSERT_FLOAT_WITHIN(1.0e-5f * (fabsf(expected) + fabsf(dt * rate_dot[a]) + 1.0f),
+                                     expected, rate_next[a]);
+        }
         /* Dense F = I + dt A. */
         static float f[N_MAX][N_MAX];
         memset(f, 0, sizeof(f));
@@ -120,7 +151,7 @@ static void test_sparse_prediction_equals_dense(void)
         float rows[3][N_MAX];
         memset(rows, 0, sizeof(rows));
         propid_model_rate_jacobian(&filter.config, &filter.derived, filter.core.state,
-                                   filter.core.rotor_speed_sq, rows);
+                                   speed_sq_mean, rows);
         for (uint8_t a = 0; a < 3u; ++a) {
             for (uint8_t k = 0; k < n - 3u; ++k) {
                 f[a][k] += dt * rows[a][k];
@@ -157,6 +188,14 @@ static void test_sparse_prediction_equals_dense(void)
     }
 }
 
+static void test_sparse_prediction_equals_dense(void)
+{
+    init_quad();
+    check_prediction_against_dense();
+    init_hexa_plus();
+    check_prediction_against_dense();
+}
+
 /* Solve the 3x3 system S X = B by Cramer (test only). */
 static void invert3(const float s[3][3], float inv[3][3])
 {
@@ -175,9 +214,8 @@ static void invert3(const float s[3][3], float inv[3][3])
     inv[2][2] = (s[0][0] * s[1][1] - s[0][1] * s[1][0]) / det;
 }
 
-static void test_sequential_updates_equal_batch_update(void)
+static void check_updates_against_batch(void)
 {
-    init_quad();
     filter.config.gate_sigma = 0.0f; /* no gating for this comparison */
     filter.derived.gate_sq = 0.0f;
     filter.derived.inv_gate_sq = 1.0f;
@@ -220,9 +258,7 @@ static void test_sequential_updates_equal_batch_update(void)
                                                          k_row[2] * pht[j][2]);
             }
         }
-        for (uint8_t a = 0; a < 3u; ++a) {
-            TEST_ASSERT_EQUAL_INT(0, propid_update_axis(&filter, a, gyro[a]));
-        }
+        TEST_ASSERT_EQUAL_UINT32(0u, propid_update_gyro(&filter, gyro));
         float scale;
         const float diff = max_abs_diff(filter.core.cov, dense_b, n, &scale);
         TEST_ASSERT_LESS_THAN_FLOAT(2.0e-4f * scale, diff);
@@ -231,6 +267,14 @@ static void test_sequential_updates_equal_batch_update(void)
                                      filter.core.state[i]);
         }
     }
+}
+
+static void test_sequential_updates_equal_batch_update(void)
+{
+    init_quad();
+    check_updates_against_batch(); /* unrolled quad path */
+    init_hexa_plus();
+    check_updates_against_batch(); /* plain loops */
 }
 
 /* Cholesky in float: 1 if P is positive definite. */
@@ -340,6 +384,12 @@ static void test_gate_rejects_outlier_then_reopens(void)
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
     TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_GATE_REOPENED) != 0u);
     TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_GATED) == 0u);
+    /* Re-anchored: rate + bias now explain the sample, the rate variance is at most
+     * its prior (no inflation by the innovation), and P is still positive definite. */
+    TEST_ASSERT_FLOAT_WITHIN(0.05f, target, filter.core.state[0] + filter.core.state[9 + 2]);
+    TEST_ASSERT_TRUE(filter.core.cov[0][0] <= filter.derived.prior_var[0]);
+    TEST_ASSERT_TRUE(positive_definite(filter.core.cov, filter.derived.state_count));
+    TEST_ASSERT_EQUAL_UINT32(before.cov_repairs, after.cov_repairs);
 }
 
 static void test_corrupted_covariance_is_repaired(void)

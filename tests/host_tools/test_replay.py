@@ -246,3 +246,156 @@ def test_replay_of_a_sitl_log_reproduces_the_in_loop_filter(cfilter_available, t
     in_loop_km = [log.extra[f"est_km_{i + 1}"][-1] for i in range(vehicle.rotor_count)]
     np.testing.assert_allclose(s["kf"], in_loop_kf, rtol=0.005)
     np.testing.assert_allclose(s["km"], in_loop_km, rtol=0.005)
+
+
+# ----------------------------------------------------------------------------- real-log alignment and pre-filter
+def test_matched_lowpass_is_nonnegative_unit_dc_and_cuts_at_its_corner():
+    from propid.replay import lowpass_pole, matched_lowpass, noise_gain
+
+    rate, cutoff = 100.0, 10.0
+    pole = lowpass_pole(cutoff, rate)
+    impulse = np.zeros((400, 1))
+    impulse[1] = 1.0  # sample 0 is the restart value (0): a clean impulse response
+    h = matched_lowpass(impulse, pole, np.array([0]))[:, 0]
+    assert np.all(h >= 0.0) and h.sum() == pytest.approx(1.0, abs=1e-9)  # Omega^2 stays >= 0, DC gain 1
+    assert noise_gain(pole) == pytest.approx(np.sum(h**2), rel=1e-6)
+    t = np.arange(4000) / rate
+    for freq, gain in ((cutoff, 1 / np.sqrt(2)), (1.0, 0.99), (40.0, 0.3)):  # gentle: 2nd order
+        out = matched_lowpass(np.sin(2 * np.pi * freq * t)[:, None], pole, np.array([0]))[1000:, 0]
+        amplitude = np.sqrt(2 * np.mean(out**2))
+        if freq == cutoff:
+            assert amplitude == pytest.approx(gain, rel=0.05)  # -3 dB at the requested cut-off
+        elif freq < cutoff:
+            assert amplitude > gain
+        else:
+            assert amplitude < gain
+    # restart at every segment start: a constant input gives no start-up transient
+    steps = np.concatenate([np.full(50, 3.0), np.full(50, 7.0)])[:, None]
+    np.testing.assert_array_equal(matched_lowpass(steps, pole, np.array([0, 50])), steps)
+
+
+def test_same_lowpass_on_both_streams_keeps_the_rate_dynamics_exact():
+    """Filtering gyro and Omega^2 with one LTI filter keeps the discrete rate relation the
+    filter integrates (w[k] - w[k-1] = c u[k]) with the same coefficient c."""
+    from propid.replay import lowpass_pole, matched_lowpass
+
+    rng = np.random.default_rng(3)
+    u = rng.uniform(1e6, 4e6, size=(3000, 1))
+    c = 2.5e-7
+    w = np.cumsum(c * u, axis=0)
+    pole = lowpass_pole(8.0, 100.0)
+    uf = matched_lowpass(u, pole, np.array([0]))
+    wf = matched_lowpass(w, pole, np.array([0]))
+    # exact once the restart transient (filter states started at the first input) has decayed
+    np.testing.assert_allclose(np.diff(wf[:, 0])[200:], c * uf[201:, 0], rtol=1e-9)
+    # a band-limited fit of the raw relation would need a high-pass, which a non-negative
+    # impulse response cannot be: the filtered input stays positive
+    assert np.all(uf > 0)
+
+
+def test_coherence_cutoff_rule():
+    from propid.replay import coherence_cutoff
+
+    freqs = np.arange(0, 50.01, 0.39)
+    coherence = np.where(freqs < 15.0, 0.9, 0.2)
+    assert coherence_cutoff(freqs, coherence) == pytest.approx(15.0, abs=1.0)
+    # a dip near the low edge does not end the band: the search starts at the best-explained frequency
+    dipped = np.where((freqs > 1.5) & (freqs < 3.0), 0.2, coherence)
+    assert coherence_cutoff(freqs, dipped) == pytest.approx(15.0, abs=1.0)
+    assert coherence_cutoff(freqs, np.full(freqs.shape, 0.1)) is None  # nothing explained: no pre-filter
+    assert coherence_cutoff(freqs, np.full(freqs.shape, 0.9)) == pytest.approx(freqs[-1])
+
+
+def test_rotor_delay_auto_finds_the_streams_offset(cfilter_available):
+    """The synthetic log applies speeds[k] over (t_k, t_k+1]; the replay's Euler step
+    (t_k-1, t_k] integrates the rotor sample pushed last, so the aligned push is one sample
+    late. Rotor speeds time-stamped 3 samples early need 3 more."""
+    from propid.replay import estimate_rotor_delay, filter_input_rule
+
+    # with a trapezoidal library input the true offset sits half-way between two whole samples
+    lags = (1,) if filter_input_rule() == "zoh" else (0, 1)
+    log = synthetic_log(duration=12.0)
+    vehicle = parse_vehicle(VEHICLE)
+    assert round(estimate_rotor_delay(log, vehicle) * 500.0) in lags
+    early = FlightLog(t=log.t[:-3], gyro=log.gyro[:-3], rotor_speed=log.rotor_speed[3:], extra={})
+    assert round(estimate_rotor_delay(early, vehicle) * 500.0) in [lag + 3 for lag in lags]
+    s = replay(early, vehicle, ReplayOptions(rotor_delay_s="auto", progress=False)).summary
+    assert round(s["rotor_delay_s"] * 500.0) in [lag + 3 for lag in lags] and s["rotor_delay_rule"].startswith("auto")
+    np.testing.assert_allclose(s["kf_mean"], KF_TRUE, rtol=0.05)
+
+
+def test_filter_input_probe_reads_the_library(cfilter_available):
+    """The delay rule mirrors the library's prediction input; the probe must see either the
+    full step (zero-order hold) or half of it (trapezoid), nothing in between."""
+    from propid import replay as replay_module
+
+    replay_module._INPUT_RULE.clear()
+    rule = replay_module.filter_input_rule()
+    ratio = replay_module._INPUT_RULE["ratio"]
+    assert min(abs(ratio - 1.0), abs(ratio - 0.5)) < 0.02
+    assert rule == ("zoh" if ratio > 0.75 else "trapezoid")
+
+
+def test_prefiltered_replay_recovers_known_coefficients(cfilter_available):
+    """A 3 Hz cut-off cuts deep into the 0.5-5 Hz excitation: only because gyro and Omega^2
+    go through the SAME filter do the coefficients survive (filtering one side only reads
+    kf 0.16-0.43 x here)."""
+    log = synthetic_log(duration=20.0)
+    s = replay(log, parse_vehicle(VEHICLE), ReplayOptions(prefilter_hz=3.0, rotor_delay_s="auto",
+                                                          progress=False)).summary
+    info = s["config_notes"]["prefilter"]
+    assert info["cutoff_hz"] == 3.0 and s["finite"]
+    # glitches are held (as the filter would hold them) before filtering, never pushed
+    glitch_rows = int(np.any(~np.isfinite(log.rotor_speed) | (log.rotor_speed > 1e4), axis=1).sum())
+    assert info["held_rotor_samples"] == glitch_rows
+    assert "PROPID_ERR_NOT_FINITE" not in s["rejected"] and "PROPID_ERR_ROTOR_SPEED_RANGE" not in s["rejected"]
+    np.testing.assert_allclose(s["kf_mean"], KF_TRUE, rtol=0.03)
+    np.testing.assert_allclose(s["km_mean"], KM_TRUE, rtol=0.05)
+    auto = replay(log, parse_vehicle(VEHICLE), ReplayOptions(prefilter_hz="auto", progress=False)).summary
+    assert auto["config_notes"]["prefilter"]["rule"].startswith("auto")
+
+
+def test_nis_noise_makes_the_innovations_consistent(cfilter_available):
+    log = synthetic_log(duration=6.0)
+    # start from a process noise 30x too large: the rule must bring nu^2/S back to 1
+    s = replay(log, parse_vehicle(VEHICLE), ReplayOptions(noise="nis", overrides={"rate_process_noise": 0.5},
+                                                          progress=False)).summary
+    history = s["config_notes"]["nis_iterations"]
+    assert len(history) >= 2 and s["config"]["rate_process_noise"] == history[-1]["rate_process_noise"]
+    assert s["nis_mean"] == pytest.approx(1.0, abs=0.1)
+    assert abs(history[0]["nis_mean"] - 1.0) > abs(s["nis_mean"] - 1.0)
+
+
+def test_band_evidence_table_and_plot(tmp_path):
+    from propid.realdata_checks import EVIDENCE_BANDS, band_evidence_table, check_log, plot_band_evidence
+
+    log = synthetic_log(duration=12.0)
+    vehicle = parse_vehicle(VEHICLE)
+    checks = check_log(log, vehicle)
+    reference = float(np.mean(KF_TRUE))
+    table = band_evidence_table([checks], ["synthetic"], reference)
+    lines = table.splitlines()
+    assert len(lines) == 4 and lines[2].startswith("| synthetic |")
+    assert all(band.replace("Hz", " Hz") in lines[0] for band in EVIDENCE_BANDS)
+    assert "errors-in-variables" in lines[0] and all(line.count("|") == lines[0].count("|") for line in lines)
+    # the model holds exactly here: the 2-5 Hz torque fits recover the mean kf
+    ratios = checks["bands"]["2-5Hz"]
+    assert ratios["roll_kf"]["kf"] / reference == pytest.approx(1.0, abs=0.1)
+    assert ratios["pitch_kf"]["kf"] / reference == pytest.approx(1.0, abs=0.1)
+    png = tmp_path / "bands.png"
+    plot_band_evidence([checks], ["synthetic"], str(png), reference)
+    assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.skipif(not CRAZYFLIE.is_dir(), reason="shared real data not present")
+def test_real_crazyflie_alignment_and_prefilter(cfilter_available):
+    """multisine run 1 (README: rotor speeds lead the response by 0-1 samples). The default
+    CLI replay aligns the streams; the pre-filter holds the 28 NaN rows and 2 spikes."""
+    vehicle = read_vehicle(CRAZYFLIE / "crazyflie21b.vehicle.json")
+    log = read_flightlog(CRAZYFLIE / "multisine_20251017_run1.csv", vehicle)
+    s = replay(log, vehicle, ReplayOptions(segment="flying", rotor_delay_s="auto", prefilter_hz="auto",
+                                           progress=False)).summary
+    assert 0.0 < s["rotor_delay_s"] <= 0.03
+    info = s["config_notes"]["prefilter"]
+    assert info["held_rotor_samples"] == 30 and 5.0 < info["cutoff_hz"] < 45.0
+    assert s["finite"] and s["counters"]["state_clamps"] == 0

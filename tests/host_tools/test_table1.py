@@ -241,3 +241,22 @@ def test_campaign_with_a_stand_in_simulator(tmp_path):
     assert saved["circle"]["oracle"]["per_trial"][0]["seed"] == 1
     assert "| Circle | Oracle |" in (tmp_path / "out" / "table1.md").read_text()
     assert not any((tmp_path / "out" / "logs").iterdir())  # logs deleted by default
+
+
+def test_campaign_command_carries_the_documented_conditions(tmp_path):
+    from propid.campaign import CampaignConfig, Job, sitl_command
+
+    config = CampaignConfig(out_dir=tmp_path, sitl=Path("/bin/true"), coeff_spread=0.2,
+                            gyro_bias_max=math.radians(1.0))
+    cmd = sitl_command(config, Job("circle", "filter", 3, 4), tmp_path / "x.csv")
+    text = " ".join(cmd)
+    assert "--paper" in cmd and "--start-at-rest" in cmd
+    assert "--mode filter" in text and "--seed 4" in text and "--trajectory circle" in text
+    # priors = the truth distribution's std: 0.2/sqrt(3) and 1 deg/s / sqrt(3)
+    assert "--prior-kf-std 0.11547" in text and "--prior-km-std 0.11547" in text
+    assert "--prior-bias-std 0.0100767" in text
+    assert "--filter-coeff-walk 0.0" in text and "--incorrect-source nominal" in text
+    library = CampaignConfig(out_dir=tmp_path, sitl=Path("/bin/true"), priors_from_truth=False,
+                             filter_rate_noise=None, filter_coeff_walk=None, filter_bias_walk=None)
+    text = " ".join(sitl_command(library, Job("step", "oracle", 0, 1), tmp_path / "y.csv"))
+    assert "--prior" not in text and "--filter-" not in text

@@ -137,6 +137,8 @@ typedef struct {
     float state[PROPID_MAX_STATES];
     float cov[PROPID_MAX_STATES][PROPID_MAX_STATES];  /* symmetric, kept in the scaled units */
     float rotor_speed_sq[PROPID_MAX_ROTORS];          /* latest accepted rotor speeds squared */
+    float input_speed_sq[PROPID_MAX_ROTORS];          /* rotor speeds squared in force at time_us
+                                                         (start of the next prediction interval) */
     uint64_t rotor_time_us;                           /* time of the latest accepted rotor speeds */
     uint64_t time_us;                                 /* filter time = last accepted gyro time */
     uint8_t has_rotor_data;
@@ -176,6 +178,8 @@ typedef struct {
     float prior_var[PROPID_MAX_STATES];             /* per-state prior variance */
     float var_floor[PROPID_MAX_STATES];             /* per-state variance floor */
     float var_ceiling[PROPID_MAX_STATES];           /* per-state variance ceiling */
+    uint32_t var_floor_bits[PROPID_MAX_STATES];     /* bit pattern of var_floor (bounds test) */
+    uint32_t var_range_bits[PROPID_MAX_STATES];     /* bits(var_ceiling) - bits(var_floor) */
     /* Sparsity of the 3 rate rows of A = df/dx (structurally non-zero entries only,
      * fixed by geometry and inertia): row a has jac_count[a] entries, the first
      * jac_rate_count[a] of them in rate columns, the rest in coefficient columns. */

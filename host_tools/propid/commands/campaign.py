@@ -43,9 +43,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(propid_sitl --paper); realistic: the SITL's BMI088/DShot models")
     parser.add_argument("--start-on-trajectory", action="store_true",
                         help="start each flight with the reference's velocity instead of at rest")
-    parser.add_argument("--esc-phase", type=float, default=0.001, metavar="S",
-                        help="rotor-speed reports this long after each gyro sample's period start "
-                             "(default 0.001 = mid-way at 500 Hz; 0 = synchronous with the gyro)")
+    parser.add_argument("--esc-phase", type=float, default=None, metavar="S",
+                        help="time of the first rotor-speed report (propid_sitl --esc-phase); "
+                             "default with --sensors paper: 0.001 = mid-way between 500 Hz gyro "
+                             "samples (docs/results.md); 0 = synchronous with the gyro")
     parser.add_argument("--filter-rate-noise", type=float, default=0.002, metavar="X",
                         help="EKF rate process noise [rad/s^2/sqrt(Hz)] (default 0.002)")
     parser.add_argument("--filter-coeff-walk", type=float, default=0.0, metavar="X",
@@ -80,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
         gyro_bias_max=args.gyro_bias_max,
         paper_sensors=args.sensors == "paper",
         start_at_rest=not args.start_on_trajectory,
-        esc_phase_s=args.esc_phase,
+        esc_phase_s=(args.esc_phase if args.esc_phase is not None
+                     else (0.001 if args.sensors == "paper" else None)),
         filter_rate_noise=None if args.library_filter_config else args.filter_rate_noise,
         filter_coeff_walk=None if args.library_filter_config else args.filter_coeff_walk,
         filter_bias_walk=None if args.library_filter_config else args.filter_bias_walk,

@@ -53,16 +53,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--skip-repeats", action="store_true",
                         help="treat a row whose gyro (or rotor speeds) exactly repeat the previous row as no new "
                              "sample (logs resampled by sample-and-hold)")
-    parser.add_argument("--rotor-delay", type=_delay, default=0.0, metavar="S|auto",
-                        help="push rotor speeds S seconds after their logged time (align streams); auto: the "
-                             "lag that best fits the 2-10 Hz roll/pitch torque regressions (default 0: as logged)")
+    parser.add_argument("--rotor-delay", type=_delay, default="auto", metavar="S|auto",
+                        help="push rotor speeds S seconds after their logged time (align streams). auto (default): "
+                             "the whole-sample lag, 0-50 ms, that maximises the 2-10 Hz correlation of modelled and "
+                             "measured roll/pitch torque in the filter's own discretisation; 0: replay as recorded")
+    parser.add_argument("--prefilter", type=_prefilter, default=None, metavar="HZ|auto|off",
+                        help="matched causal low-pass (critically damped, 2nd order) of the gyro AND the rotor "
+                             "speed squared before the filter; auto: cut-off where the torque-model coherence "
+                             "falls below 0.5 (default off; docs/real-data.md)")
+    parser.add_argument("--diagnostic-highpass", type=float, metavar="HZ",
+                        help="DIAGNOSTIC ONLY: remove content below HZ from gyro and rotor speed squared (common "
+                             "offset trick, symmetric vehicles; pins the rotors to one kf) to show what slow "
+                             "unmodelled moments cost (docs/real-data.md)")
     parser.add_argument("--unit-inertia", action="store_true",
                         help="run with J = identity: estimates are kf/J and km/Jzz ratios (for vehicles without inertia)")
     parser.add_argument("--kf-nominal", type=float, help="prior mean of kf (overrides the vehicle file)")
     parser.add_argument("--km-nominal", type=float, help="prior mean of km (overrides the vehicle file)")
-    parser.add_argument("--noise", choices=["auto", "default"], default="auto",
+    parser.add_argument("--noise", choices=["auto", "nis", "default"], default="auto",
                         help="auto: gyro noise and unmodelled angular acceleration measured on the log; "
-                             "default: the library defaults (tuned for the SITL)")
+                             "nis: as auto, then the angular-acceleration noise scaled until the mean normalised "
+                             "innovation squared is 1 (several replays); default: the library defaults (SITL)")
     parser.add_argument("--max-rotor-speed", type=float, metavar="RAD_S",
                         help="reject larger rotor speeds (default: 2x the 99.9th percentile of the log's speeds)")
     group = parser.add_argument_group("filter configuration overrides (propid_config_t fields)")
@@ -71,6 +81,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reference-kf", type=float, help="independent kf to draw on the plot and compare with")
     parser.add_argument("--checks", action="store_true",
                         help="also run the independent least-squares checks (thrust from acc_z vs torque fits per band)")
+    parser.add_argument("--band-table", metavar="OUT.md",
+                        help="with --checks: per run and band (0.5-2, 2-5, 5-10, 10-20 Hz) the torque-derived kf "
+                             "and km beside the accelerometer thrust kf (Markdown)")
+    parser.add_argument("--band-plot", metavar="PNG",
+                        help="with --checks and --reference-kf: torque and thrust kf per band, one line per run")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -83,6 +98,18 @@ def _delay(text: str):
         raise argparse.ArgumentTypeError("expected seconds or 'auto'") from None
     if not 0.0 <= value <= 1.0:
         raise argparse.ArgumentTypeError("rotor delay must be within 0..1 s")
+    return value
+
+
+def _prefilter(text: str):
+    if text in ("auto", "off"):
+        return None if text == "off" else text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError("expected a cut-off in Hz, 'auto' or 'off'") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError("the pre-filter cut-off must be positive")
     return value
 
 
@@ -119,6 +146,8 @@ def run(args: argparse.Namespace) -> int:
         overrides=overrides,
         skip_repeats=args.skip_repeats,
         rotor_delay_s=args.rotor_delay,
+        prefilter_hz=args.prefilter,
+        diagnostic_highpass_hz=args.diagnostic_highpass,
         progress=not args.no_progress and len(log_paths) == 1,
     )
     runs = log_paths
@@ -169,6 +198,22 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {args.json}")
     elif len(summaries) == 1:
         print(text)
+    if (args.band_table or args.band_plot) and not args.checks:
+        raise UserError("--band-table/--band-plot need --checks")
+    if args.band_table or args.band_plot:
+        from propid.realdata_checks import band_evidence_table, plot_band_evidence
+
+        names = [Path(s["log"]).stem if s.get("log") else "log" for s in summaries]
+        checks = [s["checks"] for s in summaries]
+        if args.band_table:
+            Path(args.band_table).write_text(band_evidence_table(checks, names, args.reference_kf) + "\n",
+                                             encoding="utf-8")
+            print(f"wrote {args.band_table}")
+        if args.band_plot:
+            if not args.reference_kf:
+                raise UserError("--band-plot needs --reference-kf (the plot is relative to it)")
+            plot_band_evidence(checks, names, args.band_plot, args.reference_kf)
+            print(f"wrote {args.band_plot}")
     if args.plot:
         if len(results) == 1:
             plot_replay(results[0], args.plot, title=log_paths[0].name, reference_kf=args.reference_kf)
