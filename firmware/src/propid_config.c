@@ -179,6 +179,47 @@ static void cross3(const float a[3], const float b[3], float out[3])
  * - coefficient columns: A = thrust_torque[i][a] u_i or drag_torque[i][a] u_i,
  *   present only when that torque component is not exactly zero (a diagonal
  *   inertia has no yaw thrust and no roll/pitch drag entries). */
+/* A quad whose structure fits the fixed layout of propid_internal.h (no gyroscopic
+ * entry on the rate diagonal, no drag in the roll/pitch rows, no thrust in the yaw
+ * row: any diagonal inertia) gets its lists rewritten to exactly that layout and
+ * quad_layout = 1, so the step can use its straight-line quad kernels. The lists
+ * then may hold entries that are zero for this frame; they add exact zeros. */
+static void derive_quad_layout(const propid_config_t *config, propid_derived_t *out)
+{
+    out->quad_layout = 0u;
+    if (config->rotor_count != 4u) {
+        return;
+    }
+    for (uint8_t a = 0; a < 3u; ++a) {
+        const float *self = out->gyro_jacobian[a][a];
+        if (self[0] != 0.0f || self[1] != 0.0f || self[2] != 0.0f) {
+            return;
+        }
+        for (uint8_t i = 0; i < 4u; ++i) {
+            if ((a < 2u && out->drag_torque[i][a] != 0.0f) || (a == 2u && out->thrust_torque[i][a] != 0.0f)) {
+                return;
+            }
+        }
+    }
+    for (uint8_t a = 0; a < 3u; ++a) {
+        out->jac_column[a][0] = a == 0u ? 1u : 0u;
+        out->jac_column[a][1] = a == 2u ? 1u : 2u;
+        for (uint8_t p = 0; p < 2u; ++p) {
+            out->jac_rotor[a][p] = 0u;
+            out->jac_torque[a][p] = 0.0f;
+        }
+        for (uint8_t i = 0; i < 4u; ++i) {
+            const uint8_t p = (uint8_t)(2u + i);
+            out->jac_column[a][p] = (uint8_t)(PROPID_RATE_STATES + (a < 2u ? 0u : 4u) + i);
+            out->jac_rotor[a][p] = i;
+            out->jac_torque[a][p] = a < 2u ? out->thrust_torque[i][a] : out->drag_torque[i][a];
+        }
+        out->jac_rate_count[a] = 2u;
+        out->jac_count[a] = (uint8_t)PROPID_QUAD_JAC_ENTRIES;
+    }
+    out->quad_layout = 1u;
+}
+
 static void derive_sparsity(const propid_config_t *config, propid_derived_t *out)
 {
     const uint8_t rotor_count = config->rotor_count;
@@ -231,6 +272,7 @@ static void derive_sparsity(const propid_config_t *config, propid_derived_t *out
         }
         out->jac_count[a] = count;
     }
+    derive_quad_layout(config, out);
 }
 
 #define PROPID_BAD(name)                                                                           \

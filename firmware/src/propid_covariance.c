@@ -1,6 +1,6 @@
 /* Covariance housekeeping: prior, per-state variance bounds, integrity checks and
- * repair. The filter keeps the full symmetric matrix; every writer updates both
- * triangles, so P[i][j] == P[j][i] bit for bit. */
+ * repair. Only the upper triangle of the symmetric P is kept (propid_internal.h,
+ * propid_cov_at): symmetry is exact by construction, there is no mirror to check. */
 #include <float.h>
 #include <math.h>
 #include <string.h>
@@ -24,6 +24,7 @@ void propid_cov_set_prior(const propid_derived_t *derived, uint8_t rotor_count, 
 void propid_cov_reset_state(const propid_derived_t *derived, propid_core_t *core, uint8_t index)
 {
     const uint8_t n = derived->state_count;
+    /* Both triangles: the unused lower one then holds zeros, not old values. */
     for (uint8_t j = 0; j < n; ++j) {
         core->cov[index][j] = 0.0f;
         core->cov[j][index] = 0.0f;
@@ -59,9 +60,8 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
                 const float limit = 0.99f * sqrtf(limit_sq);
                 fixed = pij > 0.0f ? limit : -limit;
             }
-            if (fixed != pij || core->cov[j][i] != pij) {
+            if (fixed != pij) {
                 core->cov[i][j] = fixed;
-                core->cov[j][i] = fixed;
                 changed = 1;
             }
         }
@@ -75,19 +75,15 @@ int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, u
     if (row >= n) {
         return 0;
     }
-    /* The diagonal and the part of the row right of it: over n samples every
-     * element (i, j), i <= j, is visited once, its mirror compared bit for bit. */
+    /* The diagonal and the part of the row right of it (the stored triangle):
+     * over n samples every element (i, j), i <= j, is visited once. */
     const float *values = core->cov[row];
     const float pii = values[row];
     int bad = !(pii > 0.0f && pii <= FLT_MAX);
     for (uint8_t j = (uint8_t)(row + 1u); j < n; ++j) {
         const float pij = values[j];
-        uint32_t bits_ij;
-        uint32_t bits_ji;
-        memcpy(&bits_ij, &values[j], sizeof(bits_ij));
-        memcpy(&bits_ji, &core->cov[j][row], sizeof(bits_ji));
         /* A NaN fails the comparison, so it is caught too. */
-        bad |= !(pij * pij <= pii * core->cov[j][j]) | (bits_ij != bits_ji);
+        bad |= !(pij * pij <= pii * core->cov[j][j]);
     }
     if (bad) {
         return propid_cov_repair(derived, core);
@@ -113,9 +109,11 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
             /* Scale row and column by c = ceiling / p and set the diagonal to the
              * ceiling: D P D plus a non-negative diagonal term, still PSD. Rare. */
             const float c = derived->var_ceiling[i] / p;
-            for (uint8_t j = 0; j < n; ++j) {
-                core->cov[i][j] *= c;
-                core->cov[j][i] = core->cov[i][j];
+            for (uint8_t j = 0; j < i; ++j) {
+                core->cov[j][i] *= c; /* column i above the diagonal */
+            }
+            for (uint8_t j = (uint8_t)(i + 1u); j < n; ++j) {
+                core->cov[i][j] *= c; /* row i right of the diagonal */
             }
             core->cov[i][i] = derived->var_ceiling[i];
         }

@@ -242,10 +242,9 @@ propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
     if (gated) {
         core->health |= PROPID_HEALTH_GATED;
     }
-    /* The latest rotor speeds start the next interval. */
-    for (uint8_t i = 0; i < config->rotor_count; ++i) {
-        core->input_speed_sq[i] = core->rotor_speed_sq[i];
-    }
+    /* The latest rotor speeds start the next interval (whole arrays: a constant
+     * size compiles to a few load/store-multiple instructions, not a call). */
+    memcpy(core->input_speed_sq, core->rotor_speed_sq, sizeof(core->input_speed_sq));
     core->time_us = time_us;
     core->has_time = 1u;
     core->stale_mark = filter->counters.rejected[-(int)PROPID_ERR_ROTOR_STALE];

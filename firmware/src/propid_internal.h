@@ -17,6 +17,32 @@
 #define PROPID_QUAD_STATES 0u
 #endif
 
+/* Covariance storage: P is symmetric and only its upper triangle is kept, P_ij
+ * (i <= j) in cov[i][j]. The strictly lower part of the array is never read and
+ * not kept up to date (it holds zeros or old values); writing only one triangle
+ * saves a store per element in every pass over P. Read an element at any (i, j)
+ * with propid_cov_at; with constant indices it compiles to one load. */
+static inline float propid_cov_at(const float (*cov)[PROPID_MAX_STATES], uint8_t i, uint8_t j)
+{
+    return i <= j ? cov[i][j] : cov[j][i];
+}
+
+/* Fixed Jacobian layout of a quad whose rate rows have the structure of a
+ * diagonal inertia (derived->quad_layout = 1): row a of G has exactly
+ * PROPID_QUAD_JAC_ENTRIES entries, entries 0 and 1 in the two other rate columns
+ * (ascending), entries 2..5 in the columns of rotors 0..3's thrust coefficient
+ * (rows 0 and 1) or drag coefficient (row 2). Entries that are structurally zero
+ * for a given frame (a plus frame's roll row has no thrust from rotors 0 and 2)
+ * stay in the layout with a zero torque: fixed straight-line kernels beat index
+ * lists. */
+#define PROPID_QUAD_JAC_ENTRIES 6u
+
+/* Keeps the compiler's instruction scheduler from hoisting the loads of later
+ * iterations of a fully unrolled kernel above this point: hoisted loads outlive
+ * the 32 FPU registers and are spilled to the stack (measured: ~100 extra
+ * instructions per kernel). No instruction is emitted. */
+#define PROPID_SCHEDULE_BARRIER() __asm__ volatile("" ::: "memory")
+
 /* Loop annotations for the two copies of the step's kernels: fully unrolled for
  * the quad (GCC and Clang honour the pragma), plain otherwise. */
 #define PROPID_UNROLL_QUAD _Pragma("GCC unroll 14")

@@ -14,9 +14,67 @@
 
 #include "propid_internal.h"
 
+/* propid_predict_stage for the quad layout (propid_internal.h): the same
+ * arithmetic in the same order as the general loop below over the same lists,
+ * straight-line. Takes the arrays it reads as separate pointers: offsets from
+ * the filter's base exceed the 1 KiB reach of a VFP load, each would cost an
+ * extra address computation. */
+static __attribute__((noinline)) propid_status_t
+predict_stage_quad(const float *restrict state, const float *restrict input_speed_sq,
+                   const float *restrict latest_speed_sq, const float (*restrict gyro_jacobian)[3][3],
+                   const float (*restrict jac_torque)[PROPID_MAX_STATES - 3], float dt,
+                   float *restrict rate_next, float (*restrict jacobian_dt)[PROPID_MAX_STATES])
+{
+    const float rate[3] = {state[0], state[1], state[2]};
+    const float half_dt = 0.5f * dt;
+    float speed_sq_dt[4];
+#pragma GCC unroll 4
+    for (uint8_t i = 0; i < 4u; ++i) {
+        speed_sq_dt[i] = half_dt * (input_speed_sq[i] + latest_speed_sq[i]);
+    }
+    float check = 0.0f;
+#pragma GCC unroll 3
+    for (uint8_t a = 0; a < 3u; ++a) {
+        float *g = jacobian_dt[a];
+        const uint8_t other0 = a == 0u ? 1u : 0u;
+        const uint8_t other1 = a == 2u ? 1u : 2u;
+        const float *coeff0 = gyro_jacobian[a][other0];
+        const float *coeff1 = gyro_jacobian[a][other1];
+        const float entry0 = dt * (coeff0[0] * rate[0] + coeff0[1] * rate[1] + coeff0[2] * rate[2]);
+        const float entry1 = dt * (coeff1[0] * rate[0] + coeff1[1] * rate[1] + coeff1[2] * rate[2]);
+        const float gyroscopic = entry0 * rate[other0] + entry1 * rate[other1];
+        g[0] = entry0;
+        g[1] = entry1;
+        const float *coefficient = state + (a < 2u ? PROPID_RATE_STATES : PROPID_RATE_STATES + 4u);
+        const float *torque = jac_torque[a];
+        float rotors = 0.0f;
+#pragma GCC unroll 4
+        for (uint8_t i = 0; i < 4u; ++i) {
+            const float entry = torque[2u + i] * speed_sq_dt[i];
+            rotors += entry * coefficient[i];
+            g[2u + i] = entry;
+        }
+        rate_next[a] = rate[a] + (rotors + 0.5f * gyroscopic);
+        check += rate_next[a] + gyroscopic + rotors;
+    }
+#pragma GCC unroll 14
+    for (uint8_t k = 0; k < PROPID_QUAD_STATES; ++k) {
+        check += state[k];
+    }
+    if (!isfinite(check)) {
+        return PROPID_ERR_NUMERIC;
+    }
+    return PROPID_OK;
+}
+
 propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, float rate_next[3],
                                      float jacobian_dt[3][PROPID_MAX_STATES])
 {
+    if (filter->derived.quad_layout) {
+        return predict_stage_quad(filter->core.state, filter->core.input_speed_sq,
+                                  filter->core.rotor_speed_sq, filter->derived.gyro_jacobian,
+                                  filter->derived.jac_torque, dt, rate_next, jacobian_dt);
+    }
     const propid_derived_t *derived = &filter->derived;
     const float *state = filter->core.state;
     const uint8_t rotor_count = filter->config.rotor_count;
@@ -85,18 +143,17 @@ static inline __attribute__((always_inline)) void name(                         
     float rows[3][PROPID_MAX_STATES];                                                           \
     for (uint8_t a = 0; a < 3u; ++a) {                                                          \
         float acc[PROPID_MAX_STATES]; /* registers in the unrolled quad copy */                 \
-        const float *own = cov[a];                                                              \
 UNROLL                                                                                          \
         for (uint8_t j = 0; j < n; ++j) {                                                       \
-            acc[j] = own[j];                                                                    \
+            acc[j] = propid_cov_at(cov, a, j);                                                  \
         }                                                                                       \
         const uint8_t count = derived->jac_count[a];                                            \
         for (uint8_t p = 0; p < count; ++p) {                                                   \
             const float g = jacobian_dt[a][p];                                                  \
-            const float *source = cov[derived->jac_column[a][p]];                               \
+            const uint8_t source = derived->jac_column[a][p];                                   \
 UNROLL                                                                                          \
             for (uint8_t j = 0; j < n; ++j) {                                                   \
-                acc[j] += g * source[j];                                                        \
+                acc[j] += g * propid_cov_at(cov, source, j);                                    \
             }                                                                                   \
         }                                                                                       \
         float *row = rows[a];                                                                   \
@@ -105,8 +162,8 @@ UNROLL                                                                          
             row[j] = acc[j];                                                                    \
         }                                                                                       \
     }                                                                                           \
-    /* Rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp, one                  \
-     * triangle, both halves written from the same value; Q dt on its diagonal. */              \
+    /* Rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp, upper               \
+     * triangle; Q dt on its diagonal. */                                                       \
     for (uint8_t b = 0; b < 3u; ++b) {                                                          \
         const uint8_t count = derived->jac_count[b];                                            \
         const uint8_t *column = derived->jac_column[b];                                         \
@@ -121,7 +178,6 @@ UNROLL                                                                          
                 value += derived->process_psd[b] * dt;                                          \
             }                                                                                   \
             cov[a][b] = value;                                                                  \
-            cov[b][a] = value;                                                                  \
         }                                                                                       \
     }                                                                                           \
     /* Cross terms with every non-rate state; Q dt on the other diagonals. */                   \
@@ -130,25 +186,97 @@ UNROLL                                                                          
         const float t0 = rows[0][j];                                                            \
         const float t1 = rows[1][j];                                                            \
         const float t2 = rows[2][j];                                                            \
-        float *row_j = cov[j];                                                                  \
         cov[0][j] = t0;                                                                         \
         cov[1][j] = t1;                                                                         \
         cov[2][j] = t2;                                                                         \
-        row_j[0] = t0;                                                                          \
-        row_j[1] = t1;                                                                          \
-        row_j[2] = t2;                                                                          \
-        row_j[j] += derived->process_psd[j] * dt;                                               \
+        cov[j][j] += derived->process_psd[j] * dt;                                              \
     }                                                                                           \
 }
 
 PROPID_DEFINE_PREDICT(predict_covariance_quad, PROPID_UNROLL_QUAD)
 PROPID_DEFINE_PREDICT(predict_covariance_any, PROPID_NO_UNROLL)
 
+/* The propagation for the quad layout, column by column: column j of T needs
+ * P_cj for the 11 non-bias rows c; each is loaded once (one load with a constant
+ * offset each, from the stored triangle) and feeds all three rows of T, with the
+ * 18 G entries held in registers. The rate columns (j < 3) are computed first, into
+ * locals, because the later columns overwrite rows/columns 0..2. The rate block
+ * (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp collects its
+ * coefficient-column terms during the sweep (upper triangle). */
+static __attribute__((noinline)) void predict_covariance_quad_layout(const propid_derived_t *derived,
+                                           float (*restrict cov)[PROPID_MAX_STATES], float dt,
+                                           const float jacobian_dt[3][PROPID_MAX_STATES])
+{
+    /* Row 0: columns 1, 2, 3..6; row 1: 0, 2, 3..6; row 2: 0, 1, 7..10. */
+    const float *g0 = jacobian_dt[0];
+    const float *g1 = jacobian_dt[1];
+    const float *g2 = jacobian_dt[2];
+    const float g0r0 = g0[0], g0r1 = g0[1], g0c0 = g0[2], g0c1 = g0[3], g0c2 = g0[4], g0c3 = g0[5];
+    const float g1r0 = g1[0], g1r1 = g1[1], g1c0 = g1[2], g1c1 = g1[3], g1c2 = g1[4], g1c3 = g1[5];
+    const float g2r0 = g2[0], g2r1 = g2[1], g2c0 = g2[2], g2c1 = g2[3], g2c2 = g2[4], g2c3 = g2[5];
+    float rate_cols[3][3]; /* T_ab for the rate columns b */
+    float block00 = 0.0f, block01 = 0.0f, block11 = 0.0f; /* thrust-column terms */
+    float block02 = 0.0f, block12 = 0.0f, block22 = 0.0f; /* drag-column terms */
+#pragma GCC unroll 14
+    for (uint8_t j = 0; j < PROPID_QUAD_STATES; ++j) {
+#define PROPID_P(c) propid_cov_at((const float (*)[PROPID_MAX_STATES])cov, (c), j)
+        const float p0 = PROPID_P(0u), p1 = PROPID_P(1u), p2 = PROPID_P(2u);
+        const float k0 = PROPID_P(3u), k1 = PROPID_P(4u), k2 = PROPID_P(5u), k3 = PROPID_P(6u);
+        const float d0 = PROPID_P(7u), d1 = PROPID_P(8u), d2 = PROPID_P(9u), d3 = PROPID_P(10u);
+#undef PROPID_P
+        /* The own element last: the sums then start with a product (a fresh
+         * register) instead of a copy of an operand the other rows still need. */
+        const float t0 = (g0r0 * p1 + g0r1 * p2 + g0c0 * k0 + g0c1 * k1 + g0c2 * k2 + g0c3 * k3) + p0;
+        const float t1 = (g1r0 * p0 + g1r1 * p2 + g1c0 * k0 + g1c1 * k1 + g1c2 * k2 + g1c3 * k3) + p1;
+        const float t2 = (g2r0 * p0 + g2r1 * p1 + g2c0 * d0 + g2c1 * d1 + g2c2 * d2 + g2c3 * d3) + p2;
+        if (j < 3u) {
+            rate_cols[0][j] = t0;
+            rate_cols[1][j] = t1;
+            rate_cols[2][j] = t2;
+            PROPID_SCHEDULE_BARRIER();
+            continue;
+        }
+        if (j < 7u) {
+            /* The entries of column j from the registers (j is a constant here). */
+            const float g0j = j == 3u ? g0c0 : j == 4u ? g0c1 : j == 5u ? g0c2 : g0c3;
+            const float g1j = j == 3u ? g1c0 : j == 4u ? g1c1 : j == 5u ? g1c2 : g1c3;
+            block00 += t0 * g0j;
+            block01 += t0 * g1j;
+            block11 += t1 * g1j;
+        } else if (j < 11u) {
+            const float g2j = j == 7u ? g2c0 : j == 8u ? g2c1 : j == 9u ? g2c2 : g2c3;
+            block02 += t0 * g2j;
+            block12 += t1 * g2j;
+            block22 += t2 * g2j;
+        }
+        cov[0][j] = t0;
+        cov[1][j] = t1;
+        cov[2][j] = t2;
+        cov[j][j] += derived->process_psd[j] * dt;
+        PROPID_SCHEDULE_BARRIER();
+    }
+    const float (*t)[3] = (const float (*)[3])rate_cols;
+    const float p00 = t[0][0] + t[0][1] * g0r0 + t[0][2] * g0r1 + block00 + derived->process_psd[0] * dt;
+    const float p01 = t[0][1] + t[0][0] * g1r0 + t[0][2] * g1r1 + block01;
+    const float p02 = t[0][2] + t[0][0] * g2r0 + t[0][1] * g2r1 + block02;
+    const float p11 = t[1][1] + t[1][0] * g1r0 + t[1][2] * g1r1 + block11 + derived->process_psd[1] * dt;
+    const float p12 = t[1][2] + t[1][0] * g2r0 + t[1][1] * g2r1 + block12;
+    const float p22 = t[2][2] + t[2][0] * g2r0 + t[2][1] * g2r1 + block22 + derived->process_psd[2] * dt;
+    cov[0][0] = p00;
+    cov[0][1] = p01;
+    cov[0][2] = p02;
+    cov[1][1] = p11;
+    cov[1][2] = p12;
+    cov[2][2] = p22;
+}
+
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
                                const float jacobian_dt[3][PROPID_MAX_STATES])
 {
     const uint8_t n = derived->state_count;
-    if (n == PROPID_QUAD_STATES) {
+    if (derived->quad_layout) {
+        predict_covariance_quad_layout(derived, core->cov, dt, jacobian_dt);
+    } else if (n == PROPID_QUAD_STATES) {
         predict_covariance_quad(derived, core->cov, dt, jacobian_dt, PROPID_QUAD_STATES);
     } else {
         predict_covariance_any(derived, core->cov, dt, jacobian_dt, n);

@@ -10,7 +10,7 @@
  *   h_a = P H_a^T - sum_{p<a} g_p (h_p . H_a),   g_p = h_p / S_p,
  * which is the same matrix algebra (each h_a and S_a equals the sequential one in
  * exact arithmetic), then one sweep over the upper triangle writes
- *   P_ij -= sum_a g_a,i h_a,j   (mirrored),   x_i += sum_a g_a,i nu_a.
+ *   P_ij -= sum_a g_a,i h_a,j   (upper triangle),   x_i += sum_a g_a,i nu_a.
  * Cost: ~3 n per axis for the vectors plus one pass of n (n + 1) / 2 elements
  * instead of three. Rare paths (a covariance that fails S >= R, a gate re-open)
  * first apply the pending terms, then work on the updated P. */
@@ -49,59 +49,71 @@ static inline uint32_t outside_positive_range(float value, uint32_t floor_bits, 
     return (uint32_t)(bits - floor_bits) > range_bits ? 1u : 0u;
 }
 
-/* P_ij -= sum_k g_k,i h_k,j on the upper triangle (mirrored), x += sum_k g_k nu_k,
- * for three pending terms of a quad: n constant, fully unrolled, two rows at a
- * time so that each h_j triple is loaded once for both rows. Also tests every new
- * variance against its floor and ceiling; returns 1 when all are inside. */
-static int apply_three_quad(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
-                            const pending_t *restrict pending, const propid_derived_t *derived)
+/* Rows first .. first + rows - 1 of the quad's three-term pass: their gains
+ * g_k,i = h_k,i / S_k and state updates, the upper triangle of their diagonal
+ * block, then every column to the right, where each h_j triple is loaded once
+ * for all the group's rows (4 rows: 23 instructions per 4 elements, with the 12
+ * gains in registers). Returns non-zero when a new variance of the group is
+ * outside its [floor, ceiling]. */
+static inline __attribute__((always_inline)) uint32_t
+apply_row_group(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
+                const pending_t *restrict pending, const propid_derived_t *restrict derived,
+                const uint8_t first, const uint8_t rows)
 {
-    const uint8_t n = PROPID_QUAD_STATES;
-    const float nu0 = pending->innovation[0];
-    const float nu1 = pending->innovation[1];
-    const float nu2 = pending->innovation[2];
-    const float inv0 = pending->inv_var[0];
-    const float inv1 = pending->inv_var[1];
-    const float inv2 = pending->inv_var[2];
     const float *h0 = pending->h[0];
     const float *h1 = pending->h[1];
     const float *h2 = pending->h[2];
+    const float inv0 = pending->inv_var[0];
+    const float inv1 = pending->inv_var[1];
+    const float inv2 = pending->inv_var[2];
+    const float nu0 = pending->innovation[0];
+    const float nu1 = pending->innovation[1];
+    const float nu2 = pending->innovation[2];
+    float gain[4][3];
     uint32_t outside = 0u;
-#pragma GCC unroll 7
-    for (uint8_t i = 0; i < n; i = (uint8_t)(i + 2u)) {
-        const uint8_t k = (uint8_t)(i + 1u);
-        const float a0 = h0[i] * inv0; /* gains of row i */
-        const float a1 = h1[i] * inv1;
-        const float a2 = h2[i] * inv2;
-        const float b0 = h0[k] * inv0; /* gains of row k = i + 1 */
-        const float b1 = h1[k] * inv1;
-        const float b2 = h2[k] * inv2;
-        state[i] += a0 * nu0 + a1 * nu1 + a2 * nu2;
-        state[k] += b0 * nu0 + b1 * nu1 + b2 * nu2;
-        float *row_i = cov[i];
-        float *row_k = cov[k];
-        const float p_ii = row_i[i] - a0 * h0[i] - a1 * h1[i] - a2 * h2[i];
-        const float p_ik = row_i[k] - a0 * h0[k] - a1 * h1[k] - a2 * h2[k];
-        const float p_kk = row_k[k] - b0 * h0[k] - b1 * h1[k] - b2 * h2[k];
-        row_i[i] = p_ii;
-        row_i[k] = p_ik;
-        row_k[i] = p_ik;
-        row_k[k] = p_kk;
-        outside |= outside_positive_range(p_ii, derived->var_floor_bits[i], derived->var_range_bits[i]);
-        outside |= outside_positive_range(p_kk, derived->var_floor_bits[k], derived->var_range_bits[k]);
-#pragma GCC unroll 12
-        for (uint8_t j = (uint8_t)(i + 2u); j < n; ++j) {
-            const float hj0 = h0[j];
-            const float hj1 = h1[j];
-            const float hj2 = h2[j];
-            const float value_i = row_i[j] - a0 * hj0 - a1 * hj1 - a2 * hj2;
-            const float value_k = row_k[j] - b0 * hj0 - b1 * hj1 - b2 * hj2;
-            row_i[j] = value_i;
-            row_k[j] = value_k;
-            cov[j][i] = value_i;
-            cov[j][k] = value_k;
+#pragma GCC unroll 4
+    for (uint8_t r = 0; r < rows; ++r) {
+        const uint8_t i = (uint8_t)(first + r);
+        gain[r][0] = h0[i] * inv0;
+        gain[r][1] = h1[i] * inv1;
+        gain[r][2] = h2[i] * inv2;
+        state[i] += gain[r][0] * nu0 + gain[r][1] * nu1 + gain[r][2] * nu2;
+    }
+#pragma GCC unroll 4
+    for (uint8_t r = 0; r < rows; ++r) {
+        const uint8_t i = (uint8_t)(first + r);
+#pragma GCC unroll 4
+        for (uint8_t c = r; c < rows; ++c) {
+            const uint8_t j = (uint8_t)(first + c);
+            cov[i][j] = cov[i][j] - gain[r][0] * h0[j] - gain[r][1] * h1[j] - gain[r][2] * h2[j];
+        }
+        outside |= outside_positive_range(cov[i][i], derived->var_floor_bits[i], derived->var_range_bits[i]);
+    }
+#pragma GCC unroll 10
+    for (uint8_t j = (uint8_t)(first + rows); j < PROPID_QUAD_STATES; ++j) {
+        const float hj0 = h0[j];
+        const float hj1 = h1[j];
+        const float hj2 = h2[j];
+#pragma GCC unroll 4
+        for (uint8_t r = 0; r < rows; ++r) {
+            float *p = &cov[first + r][j];
+            *p = *p - gain[r][0] * hj0 - gain[r][1] * hj1 - gain[r][2] * hj2;
         }
     }
+    return outside;
+}
+
+/* P_ij -= sum_k g_k,i h_k,j on the stored upper triangle, x += sum_k g_k nu_k,
+ * for three pending terms of a quad: n constant, fully unrolled, four rows at a
+ * time. Also tests every new variance against its floor and ceiling; returns 1
+ * when all are inside. */
+static int apply_three_quad(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
+                            const pending_t *restrict pending, const propid_derived_t *restrict derived)
+{
+    uint32_t outside = apply_row_group(cov, state, pending, derived, 0u, 4u);
+    outside |= apply_row_group(cov, state, pending, derived, 4u, 4u);
+    outside |= apply_row_group(cov, state, pending, derived, 8u, 4u);
+    outside |= apply_row_group(cov, state, pending, derived, 12u, 2u);
     return outside == 0u;
 }
 
@@ -123,9 +135,7 @@ static int apply_pending(propid_core_t *core, const propid_derived_t *derived, p
                 core->state[i] += g * nu;
                 float *row = core->cov[i];
                 for (uint8_t j = i; j < n; ++j) {
-                    const float value = row[j] - g * h[j];
-                    row[j] = value;
-                    core->cov[j][i] = value;
+                    row[j] -= g * h[j];
                 }
             }
         }
@@ -138,7 +148,7 @@ static int apply_pending(propid_core_t *core, const propid_derived_t *derived, p
 static float pending_h(const float (*cov)[PROPID_MAX_STATES], const pending_t *pending,
                        const float *projection, uint8_t rate, uint8_t bias, uint8_t i)
 {
-    float value = cov[rate][i] + cov[bias][i];
+    float value = propid_cov_at(cov, rate, i) + propid_cov_at(cov, bias, i);
     for (uint8_t k = 0; k < pending->count; ++k) {
         value -= projection[k] * pending->h[k][i];
     }
@@ -178,8 +188,8 @@ fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const 
             shift_rate += pending->h[k][axis] * step;
             shift_bias += pending->h[k][bias] * step;
         }
-        float h_rate = pending_h(cov, pending, projection, axis, bias, axis);
-        float h_bias = pending_h(cov, pending, projection, axis, bias, bias);
+        float h_rate = pending_h((const float (*)[PROPID_MAX_STATES])cov, pending, projection, axis, bias, axis);
+        float h_bias = pending_h((const float (*)[PROPID_MAX_STATES])cov, pending, projection, axis, bias, bias);
         float innovation_var = h_rate + h_bias + noise_var;
         if (!(innovation_var >= noise_var)) {
             /* var(omega + b) < 0 or NaN: P is no longer PSD. Repair and recompute. */
@@ -190,7 +200,7 @@ fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const 
             }
             shift_rate = 0.0f;
             shift_bias = 0.0f;
-            h_rate = cov[axis][axis] + cov[bias][axis];
+            h_rate = cov[axis][axis] + cov[axis][bias]; /* P_bias,axis */
             h_bias = cov[axis][bias] + cov[bias][bias];
             innovation_var = h_rate + h_bias + noise_var;
             if (!(innovation_var >= noise_var)) {
@@ -217,7 +227,7 @@ fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const 
              * P_hh ~ nu^2 of an inflation by the innovation. */
             (void)apply_pending(core, derived, pending);
             reanchor_rate(filter, axis, bias, measured);
-            h_rate = cov[axis][axis] + cov[bias][axis];
+            h_rate = cov[axis][axis] + cov[axis][bias]; /* P_bias,axis */
             h_bias = cov[axis][bias] + cov[bias][bias];
             innovation_var = h_rate + h_bias + noise_var;
             inv_innovation_var = 1.0f / innovation_var;
@@ -230,34 +240,33 @@ fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const 
         /* This axis' vectors (pending terms folded in), queued for the joint pass. */
         const uint8_t slot = pending->count;
         float *h = pending->h[slot];
-        const float *rate_row = cov[axis];
-        const float *bias_row = cov[bias];
+        const float (*stored)[PROPID_MAX_STATES] = (const float (*)[PROPID_MAX_STATES])cov;
+#define PROPID_PH(i) (propid_cov_at(stored, axis, (i)) + propid_cov_at(stored, bias, (i)))
         const float *h0 = pending->h[0];
         const float *h1 = pending->h[1];
         float check = 0.0f;
         if (n == PROPID_QUAD_STATES) {
             /* Unrolled copies for the quad, one per number of folded-in terms. */
             if (slot == 0u) {
-                PROPID_FORM_VECTOR(PROPID_QUAD_STATES, PROPID_UNROLL_QUAD, rate_row[i] + bias_row[i]);
+                PROPID_FORM_VECTOR(PROPID_QUAD_STATES, PROPID_UNROLL_QUAD, PROPID_PH(i));
             } else if (slot == 1u) {
                 const float c0 = projection[0];
-                PROPID_FORM_VECTOR(PROPID_QUAD_STATES, PROPID_UNROLL_QUAD,
-                                   rate_row[i] + bias_row[i] - c0 * h0[i]);
+                PROPID_FORM_VECTOR(PROPID_QUAD_STATES, PROPID_UNROLL_QUAD, PROPID_PH(i) - c0 * h0[i]);
             } else {
                 const float c0 = projection[0];
                 const float c1 = projection[1];
                 PROPID_FORM_VECTOR(PROPID_QUAD_STATES, PROPID_UNROLL_QUAD,
-                                   rate_row[i] + bias_row[i] - c0 * h0[i] - c1 * h1[i]);
+                                   PROPID_PH(i) - c0 * h0[i] - c1 * h1[i]);
             }
         } else {
             const float c0 = slot > 0u ? projection[0] : 0.0f;
             const float c1 = slot > 1u ? projection[1] : 0.0f;
-            /* Unused terms read an already written, finite vector with weight 0. */
-            const float *first = slot > 0u ? h0 : rate_row;
+            /* Unused terms read an already written vector (a row of P) with weight 0. */
+            const float *first = slot > 0u ? h0 : stored[axis];
             const float *second = slot > 1u ? h1 : first;
-            PROPID_FORM_VECTOR(n, PROPID_NO_UNROLL,
-                               rate_row[i] + bias_row[i] - c0 * first[i] - c1 * second[i]);
+            PROPID_FORM_VECTOR(n, PROPID_NO_UNROLL, PROPID_PH(i) - c0 * first[i] - c1 * second[i]);
         }
+#undef PROPID_PH
         /* A non-finite covariance element in the two rows this axis reads (e.g.
          * spread from a corrupted element by the prediction) must never reach the
          * state: repair P (after the pending terms) and redo this axis. */
@@ -277,6 +286,110 @@ fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const 
     }
 }
 
+/* The usual quad sample, straight-line: all three axes pass the gate, every
+ * S >= R and the vectors are finite. Same arithmetic in the same order as
+ * fuse_axis (the scalars S, innovation and projections are formed from the few
+ * vector entries they need before the vectors themselves). Returns 1 with the
+ * three axes queued in `pending` and their innovations recorded, or 0 without
+ * writing anything: the general path then handles the sample. */
+static int fuse_quad_usual(propid_filter_t *filter, pending_t *pending, const float gyro[3])
+{
+    propid_core_t *core = &filter->core;
+    const propid_derived_t *derived = &filter->derived;
+    const float (*cov)[PROPID_MAX_STATES] = (const float (*)[PROPID_MAX_STATES])core->cov;
+#define PROPID_P(i, j) propid_cov_at(cov, (i), (j))
+    const float *state = core->state;
+    const float noise_var = derived->gyro_var;
+    const float gate_sq = derived->gate_sq;
+    const uint8_t b0 = PROPID_QUAD_STATES - 3u; /* bias states 11, 12, 13 */
+    const uint8_t b1 = PROPID_QUAD_STATES - 2u;
+    const uint8_t b2 = PROPID_QUAD_STATES - 1u;
+
+    /* x axis: h_0 = P_:,0 + P_:,11 */
+    const float h0_r0 = PROPID_P(0, 0) + PROPID_P(b0, 0);
+    const float h0_b0 = PROPID_P(0, b0) + PROPID_P(b0, b0);
+    const float var0 = h0_r0 + h0_b0 + noise_var;
+    const float nu0 = gyro[0] - state[0] - state[b0];
+    const float nu0_sq = nu0 * nu0;
+    if (!(var0 >= noise_var) || (gate_sq > 0.0f && nu0_sq > gate_sq * var0)) {
+        return 0;
+    }
+    const float inv0 = 1.0f / var0;
+    const float step0 = nu0 * inv0;
+
+    /* y axis: h_1 = P_:,1 + P_:,12 - c10 h_0 */
+    const float h0_r1 = PROPID_P(0, 1) + PROPID_P(b0, 1);
+    const float h0_b1 = PROPID_P(0, b1) + PROPID_P(b0, b1);
+    const float c10 = (h0_r1 + h0_b1) * inv0;
+    const float h1_r1 = PROPID_P(1, 1) + PROPID_P(b1, 1) - c10 * h0_r1;
+    const float h1_b1 = PROPID_P(1, b1) + PROPID_P(b1, b1) - c10 * h0_b1;
+    const float var1 = h1_r1 + h1_b1 + noise_var;
+    const float nu1 = gyro[1] - (state[1] + h0_r1 * step0) - (state[b1] + h0_b1 * step0);
+    const float nu1_sq = nu1 * nu1;
+    if (!(var1 >= noise_var) || (gate_sq > 0.0f && nu1_sq > gate_sq * var1)) {
+        return 0;
+    }
+    const float inv1 = 1.0f / var1;
+    const float step1 = nu1 * inv1;
+
+    /* z axis: h_2 = P_:,2 + P_:,13 - c20 h_0 - c21 h_1 */
+    const float h0_r2 = PROPID_P(0, 2) + PROPID_P(b0, 2);
+    const float h0_b2 = PROPID_P(0, b2) + PROPID_P(b0, b2);
+    const float h1_r2 = PROPID_P(1, 2) + PROPID_P(b1, 2) - c10 * h0_r2;
+    const float h1_b2 = PROPID_P(1, b2) + PROPID_P(b1, b2) - c10 * h0_b2;
+    const float c20 = (h0_r2 + h0_b2) * inv0;
+    const float c21 = (h1_r2 + h1_b2) * inv1;
+    const float h2_r2 = PROPID_P(2, 2) + PROPID_P(b2, 2) - c20 * h0_r2 - c21 * h1_r2;
+    const float h2_b2 = PROPID_P(2, b2) + PROPID_P(b2, b2) - c20 * h0_b2 - c21 * h1_b2;
+    const float var2 = h2_r2 + h2_b2 + noise_var;
+    const float shift_r2 = h0_r2 * step0 + h1_r2 * step1;
+    const float shift_b2 = h0_b2 * step0 + h1_b2 * step1;
+    const float nu2 = gyro[2] - (state[2] + shift_r2) - (state[b2] + shift_b2);
+    const float nu2_sq = nu2 * nu2;
+    if (!(var2 >= noise_var) || (gate_sq > 0.0f && nu2_sq > gate_sq * var2)) {
+        return 0;
+    }
+    const float inv2 = 1.0f / var2;
+
+    /* The three vectors, with one finiteness test over all of them. */
+    float *h0 = pending->h[0];
+    float *h1 = pending->h[1];
+    float *h2 = pending->h[2];
+    float check = 0.0f;
+#pragma GCC unroll 14
+    for (uint8_t i = 0; i < PROPID_QUAD_STATES; ++i) {
+        const float value0 = PROPID_P(0, i) + PROPID_P(b0, i);
+        const float value1 = PROPID_P(1, i) + PROPID_P(b1, i) - c10 * value0;
+        const float value2 = PROPID_P(2, i) + PROPID_P(b2, i) - c20 * value0 - c21 * value1;
+        h0[i] = value0;
+        h1[i] = value1;
+        h2[i] = value2;
+        check += value0 + value1 + value2;
+    }
+#undef PROPID_P
+    if (!isfinite(check)) {
+        return 0;
+    }
+    const float inv_gate_sq = derived->inv_gate_sq;
+    core->innovation[0] = nu0;
+    core->innovation[1] = nu1;
+    core->innovation[2] = nu2;
+    core->innovation_test_ratio[0] = nu0_sq * inv0 * inv_gate_sq;
+    core->innovation_test_ratio[1] = nu1_sq * inv1 * inv_gate_sq;
+    core->innovation_test_ratio[2] = nu2_sq * inv2 * inv_gate_sq;
+    core->gated_run[0] = 0u;
+    core->gated_run[1] = 0u;
+    core->gated_run[2] = 0u;
+    pending->innovation[0] = nu0;
+    pending->innovation[1] = nu1;
+    pending->innovation[2] = nu2;
+    pending->inv_var[0] = inv0;
+    pending->inv_var[1] = inv1;
+    pending->inv_var[2] = inv2;
+    pending->count = 3u;
+    return 1;
+}
+
 uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
 {
     propid_core_t *core = &filter->core;
@@ -286,7 +399,9 @@ uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
     pending.count = 0u;
     int repaired = 0; /* at most one repair-and-retry per sample */
     uint32_t gated_mask;
-    if (n == PROPID_QUAD_STATES) {
+    if (n == PROPID_QUAD_STATES && fuse_quad_usual(filter, &pending, gyro)) {
+        gated_mask = 0u;
+    } else if (n == PROPID_QUAD_STATES) {
         gated_mask = fuse_axis(filter, &pending, &repaired, 0u, gyro[0], PROPID_QUAD_STATES);
         gated_mask |= fuse_axis(filter, &pending, &repaired, 1u, gyro[1], PROPID_QUAD_STATES) << 1;
         gated_mask |= fuse_axis(filter, &pending, &repaired, 2u, gyro[2], PROPID_QUAD_STATES) << 2;

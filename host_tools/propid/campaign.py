@@ -59,10 +59,9 @@ class CampaignConfig:
     gyro_bias_max: float = 0.0174533  # truth bias per axis U(-b, b) [rad/s] (1 deg/s)
     paper_sensors: bool = True        # --paper: 500 Hz gyro, exact rotor speeds
     start_at_rest: bool = True        # the paper's simulator starts the vehicle at rest
-    # When the rotor-speed report is taken relative to the gyro sample: half the
-    # 500 Hz period, so the filter's held "latest speed" over each 2 ms prediction
-    # is the mid-interval speed (docs/results.md shows both this and 0 = synchronous).
-    esc_phase_s: float | None = 0.001
+    # Time of the first rotor-speed report (propid_sitl --esc-phase); None = the
+    # simulator's default (with --paper: synchronous with the gyro, as in the paper).
+    esc_phase_s: float | None = None
     # Filter configuration the SITL gives the EKF (docs/results.md): priors equal to
     # the truth distribution's std, no random walks (the truth is constant, as in the
     # paper's eq. 7), a small rate process noise (the simulated model is exact but

@@ -942,4 +942,5 @@ def highpass_emulation_log(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, c
     out = FlightLog(t=log.t, gyro=gyro_high, rotor_speed=np.sqrt(np.maximum(u_high + offset, 0.0)),
                     extra=log.extra, path=log.path)
     return out, {"cutoff_hz": cutoff_hz, "offset_rotor_speed_sq": offset,
+                 "held_rotor_samples": int(np.sum(np.any(bad_rotor, axis=1) & mask)),
                  "note": "diagnostic only: slow content removed by emulation; rotors pinned to a common kf"}

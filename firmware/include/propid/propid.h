@@ -166,6 +166,9 @@ typedef struct {
 /* Quantities derived once from the configuration (so the step does no divisions). */
 typedef struct {
     uint8_t state_count;                            /* 6 + 2 * rotor_count */
+    uint8_t quad_layout;                            /* private: 1 when the step's fixed quad kernels
+                                                       apply (jac_* in the fixed layout, see
+                                                       propid_internal.h); fills padding */
     float inertia_inv[3][3];
     float thrust_torque[PROPID_MAX_ROTORS][3];      /* J^-1 (r_i x z) kf_nominal_i */
     float drag_torque[PROPID_MAX_ROTORS][3];        /* J^-1 z yaw_sign_i km_nominal_i */

@@ -45,8 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="start each flight with the reference's velocity instead of at rest")
     parser.add_argument("--esc-phase", type=float, default=None, metavar="S",
                         help="time of the first rotor-speed report (propid_sitl --esc-phase); "
-                             "default with --sensors paper: 0.001 = mid-way between 500 Hz gyro "
-                             "samples (docs/results.md); 0 = synchronous with the gyro")
+                             "default: the simulator's (with --sensors paper: synchronous with "
+                             "the gyro samples, as in the paper)")
     parser.add_argument("--filter-rate-noise", type=float, default=0.002, metavar="X",
                         help="EKF rate process noise [rad/s^2/sqrt(Hz)] (default 0.002)")
     parser.add_argument("--filter-coeff-walk", type=float, default=0.0, metavar="X",
@@ -81,8 +81,7 @@ def run(args: argparse.Namespace) -> int:
         gyro_bias_max=args.gyro_bias_max,
         paper_sensors=args.sensors == "paper",
         start_at_rest=not args.start_on_trajectory,
-        esc_phase_s=(args.esc_phase if args.esc_phase is not None
-                     else (0.001 if args.sensors == "paper" else None)),
+        esc_phase_s=args.esc_phase,
         filter_rate_noise=None if args.library_filter_config else args.filter_rate_noise,
         filter_coeff_walk=None if args.library_filter_config else args.filter_coeff_walk,
         filter_bias_walk=None if args.library_filter_config else args.filter_bias_walk,
