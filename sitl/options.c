@@ -27,6 +27,9 @@ void sitl_options_default(sitl_options_t *o)
     o->mode = SITL_MODE_FILTER;
     o->seed = 1;
     o->duration_s = 10.0;
+    o->trajectory_period_s = SITL_TRAJ_DEFAULT_PERIOD_S;
+    o->yaw_amplitude_rad = -1.0;
+    o->yaw_cycles = -1.0;
     o->physics_rate_hz = 2000.0;
     o->control_rate_hz = 500.0;
     o->coeff_spread = 0.2;
@@ -45,6 +48,7 @@ void sitl_options_default(sitl_options_t *o)
     o->prior_kf_rel_std = -1.0;
     o->prior_km_rel_std = -1.0;
     o->prior_bias_std = -1.0;
+    o->prior_rate_std = -1.0;
     o->filter_rate_noise = -1.0;
     o->filter_coeff_walk = -1.0;
     o->filter_bias_walk = -1.0;
@@ -66,6 +70,10 @@ void sitl_options_print_help(const char *prog)
         "  --mode MODE               oracle | incorrect | filter (default)\n"
         "  --seed N                  random seed (default 1); same seed -> same log\n"
         "  --duration S              flight time [s] (default 10)\n"
+        "  --trajectory-period S     the trajectory's period T [s] (default 10, the paper's;\n"
+        "                            independent of --duration)\n"
+        "  --yaw-amplitude RAD, --yaw-cycles N   circle/lissajous back-and-forth yaw\n"
+        "                            A sin(2 pi N t / T) (default 1.5 rad, 1.5 cycles)\n"
         "  --start-height M          trajectory origin height [m] (default 1)\n"
         "  --start-on-ground         start at rest on the ground, rotors stopped\n"
         "  --start-at-rest           start hovering with zero velocity (default: on the\n"
@@ -83,6 +91,9 @@ void sitl_options_print_help(const char *prog)
         "  --incorrect-spread S      random: truth x (1 + N(0, S)) (default 0.1)\n"
         "  --prior-kf-std R, --prior-km-std R   filter prior relative std (default: library)\n"
         "  --prior-bias-std RAD_S    filter prior gyro-bias std (default: library)\n"
+        "  --prior-rate-std RAD_S    filter prior body-rate std (rate_std0; default: library).\n"
+        "                            The filter's rate starts at 0: a small value says the\n"
+        "                            vehicle is known to be at rest at the first gyro sample\n"
         "  --filter-rate-noise X     filter rate_process_noise [rad/s^2/sqrt(Hz)] (default: library)\n"
         "  --filter-coeff-walk X     filter kf/km relative random walk [1/sqrt(s)] (default: library)\n"
         "  --filter-bias-walk X      filter gyro-bias random walk [rad/s/sqrt(s)] (default: library)\n"
@@ -101,6 +112,7 @@ void sitl_options_print_help(const char *prog)
         "  --imu-rate HZ (1000)      --gyro-noise RAD_S_SQRT_HZ   --gyro-bias-max RAD_S\n"
         "  --gyro-bias-walk X        --gyro-range RAD_S (0 = none) --gyro-resolution RAD_S\n"
         "  --accel-noise X           --accel-bias-max M_S2\n"
+        "  --imu-sample-at-start     first IMU sample at t = 0 (default: one period later)\n"
         "  --esc-rate HZ (500)       --esc-latency S (0.001)  --esc-phase S (0.00025)\n"
         "  --esc-dropout P (0.01)    --esc-quantisation dshot|none   --esc-pole-pairs N (7)\n"
         "\n"
@@ -149,7 +161,8 @@ static const char *const valued[] = {
     "--gyro-bias-walk", "--gyro-range", "--gyro-resolution", "--accel-noise", "--accel-bias-max",
     "--esc-rate", "--esc-latency", "--esc-phase", "--esc-dropout", "--esc-quantisation",
     "--esc-pole-pairs", "--motor-tau", "--rotor-speed-min", "--rotor-speed-max",
-    "--prior-kf-std", "--prior-km-std", "--prior-bias-std", "--filter-rate-noise",
+    "--prior-kf-std", "--prior-km-std", "--prior-bias-std", "--prior-rate-std",
+    "--filter-rate-noise", "--trajectory-period", "--yaw-amplitude", "--yaw-cycles",
     "--filter-coeff-walk", "--filter-bias-walk", NULL};
 
 static int takes_value(const char *name)
@@ -205,6 +218,12 @@ static int apply(sitl_options_t *o, const char *name, const char *val)
         o->seed = (uint64_t)s;
     } else if (strcmp(name, "--duration") == 0) {
         NUM(1e-3, 1e6, o->duration_s);
+    } else if (strcmp(name, "--trajectory-period") == 0) {
+        NUM(1e-2, 1e6, o->trajectory_period_s);
+    } else if (strcmp(name, "--yaw-amplitude") == 0) {
+        NUM(0.0, 3.0, o->yaw_amplitude_rad);
+    } else if (strcmp(name, "--yaw-cycles") == 0) {
+        NUM(0.0, 1e3, o->yaw_cycles);
     } else if (strcmp(name, "--log") == 0) {
         return parse_path(name, val, o->log_path);
     } else if (strcmp(name, "--log-rate") == 0) {
@@ -292,6 +311,8 @@ static int apply(sitl_options_t *o, const char *name, const char *val)
         NUM(1e-6, 10.0, o->prior_km_rel_std);
     } else if (strcmp(name, "--prior-bias-std") == 0) {
         NUM(1e-9, 10.0, o->prior_bias_std);
+    } else if (strcmp(name, "--prior-rate-std") == 0) {
+        NUM(1e-9, 100.0, o->prior_rate_std);
     } else if (strcmp(name, "--filter-rate-noise") == 0) {
         NUM(0.0, 1e4, o->filter_rate_noise);
     } else if (strcmp(name, "--filter-coeff-walk") == 0) {
@@ -354,6 +375,10 @@ int sitl_options_parse(sitl_options_t *o, int argc, char **argv)
         }
         if (strcmp(name, "--start-at-rest") == 0) {
             o->start_at_rest = 1;
+            continue;
+        }
+        if (strcmp(name, "--imu-sample-at-start") == 0) {
+            o->imu_sample_at_start = 1;
             continue;
         }
         if (strcmp(name, "--no-ground") == 0) {

@@ -34,7 +34,10 @@ typedef struct {
     sitl_trajectory_kind_t trajectory;
     sitl_mode_t mode;
     uint64_t seed;
-    double duration_s;
+    double duration_s;                  /* how long the flight lasts */
+    double trajectory_period_s;         /* the trajectory's period T (independent of it) */
+    double yaw_amplitude_rad;           /* < 0 = the trajectory's default */
+    double yaw_cycles;                  /* < 0 = the trajectory's default */
     char log_path[SITL_PATH_MAX];       /* "" = no log */
     double log_rate_hz;                 /* 0 = every control step */
     char mavlink_url[SITL_PATH_MAX];    /* "" = no link */
@@ -56,6 +59,7 @@ typedef struct {
     double divergence_tilt_deg;         /* stop when tilted more than this */
 
     sitl_imu_params_t imu;
+    int imu_sample_at_start;            /* first IMU sample at t = 0, not after one period */
     sitl_esc_params_t esc;
 
     /* Vehicle overrides (< 0 = keep the vehicle's value). */
@@ -67,6 +71,7 @@ typedef struct {
     double prior_kf_rel_std;
     double prior_km_rel_std;
     double prior_bias_std;
+    double prior_rate_std;              /* rate_std0 [rad/s] */
     /* Filter tuning overrides (< 0 = propid_config_default). */
     double filter_rate_noise;           /* rate_process_noise [rad/s^2/sqrt(Hz)] */
     double filter_coeff_walk;           /* thrust_ and drag_coeff_rel_walk [1/sqrt(s)] */

@@ -150,8 +150,16 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
     f->plant.ground_enabled = o->ground_enabled;
 
     double origin[3] = {0.0, 0.0, o->start_height_m};
-    if (sitl_trajectory_init(&f->trajectory, o->trajectory, o->duration_s, origin) != 0) {
+    if (sitl_trajectory_init(&f->trajectory, o->trajectory, o->trajectory_period_s, origin) != 0) {
         return fail(r, SITL_EXIT_USAGE, "bad trajectory");
+    }
+    if (o->trajectory == SITL_TRAJ_CIRCLE || o->trajectory == SITL_TRAJ_LISSAJOUS) {
+        if (o->yaw_amplitude_rad >= 0.0) {
+            f->trajectory.yaw_amplitude_rad = o->yaw_amplitude_rad;
+        }
+        if (o->yaw_cycles >= 0.0) {
+            f->trajectory.yaw_cycles = o->yaw_cycles;
+        }
     }
     sitl_flat_output_t flat0;
     sitl_trajectory_eval(&f->trajectory, 0.0, &flat0);
@@ -375,7 +383,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
 
     schedule_t control, imu, esc, physics, logsched, live;
     schedule_init(&control, 0.0, o->control_rate_hz);
-    schedule_init(&imu, 1.0 / o->imu.rate_hz, o->imu.rate_hz);
+    schedule_init(&imu, o->imu_sample_at_start ? 0.0 : 1.0 / o->imu.rate_hz, o->imu.rate_hz);
     schedule_init(&esc, o->esc.phase_s, o->esc.rate_hz);
     schedule_init(&physics, 0.0, o->physics_rate_hz);
     schedule_advance(&physics);

@@ -129,6 +129,9 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
     if (opts->prior_bias_std > 0.0) {
         c->gyro_bias_std0 = (float)opts->prior_bias_std;
     }
+    if (opts->prior_rate_std > 0.0) {
+        c->rate_std0 = (float)opts->prior_rate_std;
+    }
     if (opts->filter_rate_noise >= 0.0) {
         c->rate_process_noise = (float)opts->filter_rate_noise;
     }

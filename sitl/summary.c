@@ -77,6 +77,8 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
             (unsigned long long)o->seed, fx, o->paper ? "true" : "false");
     fprintf(f, "  \"duration_s\": ");
     json_number(f, o->duration_s);
+    fprintf(f, ",\n  \"trajectory_period_s\": ");
+    json_number(f, o->trajectory_period_s);
     fprintf(f, ",\n  \"flown_s\": ");
     json_number(f, r->flown_s);
     fprintf(f, ",\n  \"exit_code\": %d,\n  \"stable\": %s,\n", r->exit_code,

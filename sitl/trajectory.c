@@ -33,15 +33,15 @@ const char *sitl_trajectory_name(sitl_trajectory_kind_t kind)
 }
 
 int sitl_trajectory_init(sitl_trajectory_t *traj, sitl_trajectory_kind_t kind,
-                         double duration_s, const double origin[3])
+                         double period_s, const double origin[3])
 {
     if (traj == NULL || (int)kind < 0 || (int)kind >= SITL_TRAJ_KIND_COUNT ||
-        !isfinite(duration_s) || duration_s <= 0.0) {
+        !isfinite(period_s) || period_s <= 0.0) {
         return -1;
     }
     memset(traj, 0, sizeof(*traj));
     traj->kind = kind;
-    traj->duration_s = duration_s;
+    traj->period_s = period_s;
     if (origin != NULL) {
         for (int i = 0; i < 3; i++) {
             traj->origin[i] = origin[i];
@@ -136,7 +136,7 @@ static void add_lissajous(sitl_flat_output_t *flat, const sitl_lissajous_part_t 
 static void add_yaw(sitl_flat_output_t *flat, const sitl_trajectory_t *traj, double t)
 {
     double d[5];
-    sine_derivatives(traj->yaw_amplitude_rad, 2.0 * pi * traj->yaw_cycles / traj->duration_s,
+    sine_derivatives(traj->yaw_amplitude_rad, 2.0 * pi * traj->yaw_cycles / traj->period_s,
                      t, d);
     flat->yaw = d[0];
     flat->yaw_rate = d[1];
@@ -162,7 +162,7 @@ void sitl_trajectory_eval(const sitl_trajectory_t *traj, double t, sitl_flat_out
     case SITL_TRAJ_CIRCLE: {
         /* x = R (cos(phi + w t) - cos phi), y = R (sin(phi + w t) - sin phi):
          * through origin at t = 0; derivatives of cos(a) = sin(a + pi/2). */
-        double omega = 2.0 * pi * traj->circle_cycles / traj->duration_s;
+        double omega = 2.0 * pi * traj->circle_cycles / traj->period_s;
         double phase = traj->circle_start_angle_rad;
         double dx[5], dy[5];
         sine_derivatives(traj->circle_radius_m, omega, t + (phase + 0.5 * pi) / omega, dx);
@@ -175,8 +175,8 @@ void sitl_trajectory_eval(const sitl_trajectory_t *traj, double t, sitl_flat_out
         break;
     }
     case SITL_TRAJ_LISSAJOUS:
-        add_lissajous(flat, &traj->lissajous_slow, traj->duration_s, t);
-        add_lissajous(flat, &traj->lissajous_fast, traj->duration_s, t);
+        add_lissajous(flat, &traj->lissajous_slow, traj->period_s, t);
+        add_lissajous(flat, &traj->lissajous_fast, traj->period_s, t);
         add_yaw(flat, traj, t);
         break;
     }

@@ -6,7 +6,10 @@
  *
  * World frame ENU-like: z up. Every trajectory starts at `origin` (the position
  * passed to sitl_trajectory_init) at t = 0 and is defined for every t (after
- * `duration_s` it keeps following its formula; the SITL stops the flight there).
+ * one period T it keeps following its formula). The period T is a parameter of
+ * the trajectory (the paper's T = 10 s), independent of how long the SITL flies:
+ * a 2 s flight flies the first fifth of the same 10 s trajectory, not a
+ * trajectory five times faster.
  *
  * Kinds:
  *   hover      constant position origin, yaw 0.
@@ -15,7 +18,7 @@
  *              derivatives zero), no yaw. The default step_time_s = 0 steps
  *              right after the start.
  *   circle     horizontal circle of radius circle_radius_m through origin,
- *              circle_cycles turns (counter-clockwise) in duration_s, origin
+ *              circle_cycles turns (counter-clockwise) per period T, origin
  *              at angle circle_start_angle_rad on the circle:
  *                x = R (cos(phi + w t) - cos phi), y = R (sin(phi + w t) - sin phi);
  *              yaw back-and-forth
@@ -24,7 +27,7 @@
  *              large slow and a small fast Lissajous, each axis
  *                x = A_x (1 - cos(2 pi n_x t / T)),  y = A_y sin(2 pi n_y t / T),
  *                z = A_z sin(2 pi n_z t / T),
- *              plus yaw A_psi sin(2 pi n_psi t / T), T = duration_s.
+ *              plus yaw A_psi sin(2 pi n_psi t / T), T = period_s.
  *
  * sitl_trajectory_init() fills documented defaults for a Crazyflie-class
  * vehicle (docs/results.md explains the choice); the parameter fields are
@@ -42,6 +45,9 @@ typedef enum {
 
 #define SITL_TRAJ_KIND_COUNT 4
 
+/* The paper's trajectory period T [s]. */
+#define SITL_TRAJ_DEFAULT_PERIOD_S 10.0
+
 /* One Lissajous component of equation 9 (amplitudes in m, cycles per period T). */
 typedef struct {
     double amplitude_m[3];   /* A_x, A_y, A_z */
@@ -50,7 +56,7 @@ typedef struct {
 
 typedef struct {
     sitl_trajectory_kind_t kind;
-    double duration_s;       /* T */
+    double period_s;         /* T [s] */
     double origin[3];        /* position at t = 0 [m] */
 
     /* step */
@@ -83,10 +89,11 @@ typedef struct {
     double yaw_acceleration; /* [rad/s^2] */
 } sitl_flat_output_t;
 
-/* Fill traj with the defaults of kind. origin may be NULL (= 0,0,0).
- * Returns 0, or -1 for an unknown kind or a non-positive/non-finite duration. */
+/* Fill traj with the defaults of kind and period T = period_s (the paper's
+ * trajectories use SITL_TRAJ_DEFAULT_PERIOD_S). origin may be NULL (= 0,0,0).
+ * Returns 0, or -1 for an unknown kind or a non-positive/non-finite period. */
 int sitl_trajectory_init(sitl_trajectory_t *traj, sitl_trajectory_kind_t kind,
-                         double duration_s, const double origin[3]);
+                         double period_s, const double origin[3]);
 
 /* Evaluate the flat outputs at time t [s] (any t; t < 0 is treated as 0). */
 void sitl_trajectory_eval(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat);

@@ -179,9 +179,9 @@ static void cross3(const float a[3], const float b[3], float out[3])
  * - coefficient columns: A = thrust_torque[i][a] u_i or drag_torque[i][a] u_i,
  *   present only when that torque component is not exactly zero (a diagonal
  *   inertia has no yaw thrust and no roll/pitch drag entries). */
-/* A quad whose structure fits the fixed layout of propid_internal.h (no gyroscopic
- * entry on the rate diagonal, no drag in the roll/pitch rows, no thrust in the yaw
- * row: any diagonal inertia) gets its lists rewritten to exactly that layout and
+/* A quad whose structure fits the fixed layout of propid_internal.h (gyroscopic
+ * entries A_ab that depend on the third rate only, no drag in the roll/pitch rows,
+ * no thrust in the yaw row: any diagonal inertia) gets its lists rewritten to exactly that layout and
  * quad_layout = 1, so the step can use its straight-line quad kernels. The lists
  * then may hold entries that are zero for this frame; they add exact zeros. */
 static void derive_quad_layout(const propid_config_t *config, propid_derived_t *out)
@@ -191,9 +191,14 @@ static void derive_quad_layout(const propid_config_t *config, propid_derived_t *
         return;
     }
     for (uint8_t a = 0; a < 3u; ++a) {
-        const float *self = out->gyro_jacobian[a][a];
-        if (self[0] != 0.0f || self[1] != 0.0f || self[2] != 0.0f) {
-            return;
+        /* Gyroscopic block of a diagonal inertia: A_ab depends on the third rate only. */
+        for (uint8_t b = 0; b < 3u; ++b) {
+            for (uint8_t c = 0; c < 3u; ++c) {
+                const int third = a != b && c != a && c != b;
+                if (!third && out->gyro_jacobian[a][b][c] != 0.0f) {
+                    return;
+                }
+            }
         }
         for (uint8_t i = 0; i < 4u; ++i) {
             if ((a < 2u && out->drag_torque[i][a] != 0.0f) || (a == 2u && out->thrust_torque[i][a] != 0.0f)) {
@@ -213,6 +218,10 @@ static void derive_quad_layout(const propid_config_t *config, propid_derived_t *
             out->jac_column[a][p] = (uint8_t)(PROPID_RATE_STATES + (a < 2u ? 0u : 4u) + i);
             out->jac_rotor[a][p] = i;
             out->jac_torque[a][p] = a < 2u ? out->thrust_torque[i][a] : out->drag_torque[i][a];
+        }
+        for (uint8_t p = 0; p < 2u; ++p) {
+            const uint8_t b = out->jac_column[a][p];
+            out->quad_gyro[a][p] = out->gyro_jacobian[a][b][3u - a - b];
         }
         out->jac_rate_count[a] = 2u;
         out->jac_count[a] = (uint8_t)PROPID_QUAD_JAC_ENTRIES;

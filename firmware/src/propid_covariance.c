@@ -77,13 +77,17 @@ int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, u
     }
     /* The diagonal and the part of the row right of it (the stored triangle):
      * over n samples every element (i, j), i <= j, is visited once. */
-    const float *values = core->cov[row];
-    const float pii = values[row];
+    const float pii = core->cov[row][row];
     int bad = !(pii > 0.0f && pii <= FLT_MAX);
-    for (uint8_t j = (uint8_t)(row + 1u); j < n; ++j) {
-        const float pij = values[j];
+    /* Walk P_ij along the row and P_jj down the diagonal with pointers (no index
+     * arithmetic per element). */
+    const float *pij = &core->cov[row][row];
+    const float *pjj = pij;
+    for (uint32_t count = (uint32_t)(n - 1u - row); count > 0u; --count) {
+        pij += 1;
+        pjj += PROPID_MAX_STATES + 1;
         /* A NaN fails the comparison, so it is caught too. */
-        bad |= !(pij * pij <= pii * core->cov[j][j]);
+        bad |= !(*pij * *pij <= pii * *pjj);
     }
     if (bad) {
         return propid_cov_repair(derived, core);

@@ -8,20 +8,22 @@
  *   T    = F_rate P = P_rate + G P      (3 x n: rate rows of F P; G sparse)
  *   P_rr = T F_rate^T = T_rr + T G^T    (3 x 3 block)
  *   P_rj = T_j for every non-rate j     (F's non-rate rows are identity rows)
- * Cost: (nnz(G) + 3) n + nnz(G) multiply-adds; nnz(G) = 12 for a plus quad,
- * 18 for an X quad (diagonal inertia). */
+ * Cost: nnz(G) n + O(nnz(G)) multiply-adds; nnz(G) = 14 for a plus quad, 18 for
+ * an X quad (diagonal inertia), 18 for both in the fixed quad layout
+ * (propid_internal.h), which has straight-line kernels here. Only the upper
+ * triangle of P is stored (propid_cov_at). */
 #include <math.h>
 
 #include "propid_internal.h"
 
-/* propid_predict_stage for the quad layout (propid_internal.h): the same
- * arithmetic in the same order as the general loop below over the same lists,
- * straight-line. Takes the arrays it reads as separate pointers: offsets from
+/* propid_predict_stage for the quad layout (propid_internal.h): the same values
+ * as the general loop below over the same lists (whose other two gyroscopic
+ * products are exact zeros here), straight-line. Takes the arrays it reads as separate pointers: offsets from
  * the filter's base exceed the 1 KiB reach of a VFP load, each would cost an
  * extra address computation. */
 static __attribute__((noinline)) propid_status_t
 predict_stage_quad(const float *restrict state, const float *restrict input_speed_sq,
-                   const float *restrict latest_speed_sq, const float (*restrict gyro_jacobian)[3][3],
+                   const float *restrict latest_speed_sq, const float (*restrict quad_gyro)[2],
                    const float (*restrict jac_torque)[PROPID_MAX_STATES - 3], float dt,
                    float *restrict rate_next, float (*restrict jacobian_dt)[PROPID_MAX_STATES])
 {
@@ -38,10 +40,10 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
         float *g = jacobian_dt[a];
         const uint8_t other0 = a == 0u ? 1u : 0u;
         const uint8_t other1 = a == 2u ? 1u : 2u;
-        const float *coeff0 = gyro_jacobian[a][other0];
-        const float *coeff1 = gyro_jacobian[a][other1];
-        const float entry0 = dt * (coeff0[0] * rate[0] + coeff0[1] * rate[1] + coeff0[2] * rate[2]);
-        const float entry1 = dt * (coeff1[0] * rate[0] + coeff1[1] * rate[1] + coeff1[2] * rate[2]);
+        /* A_a,other0 depends on the third rate, which is other1, and vice versa
+         * (the general loop's other two products are exact zeros). */
+        const float entry0 = dt * (quad_gyro[a][0] * rate[other1]);
+        const float entry1 = dt * (quad_gyro[a][1] * rate[other0]);
         const float gyroscopic = entry0 * rate[other0] + entry1 * rate[other1];
         g[0] = entry0;
         g[1] = entry1;
@@ -57,10 +59,10 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
         rate_next[a] = rate[a] + (rotors + 0.5f * gyroscopic);
         check += rate_next[a] + gyroscopic + rotors;
     }
-#pragma GCC unroll 14
-    for (uint8_t k = 0; k < PROPID_QUAD_STATES; ++k) {
-        check += state[k];
-    }
+    /* The sums above already hold every rate (rate_next) and, through a product,
+     * every coefficient (each appears in at least one row; a zero entry times a
+     * non-finite coefficient is NaN): only the biases remain. */
+    check += state[PROPID_QUAD_STATES - 3u] + state[PROPID_QUAD_STATES - 2u] + state[PROPID_QUAD_STATES - 1u];
     if (!isfinite(check)) {
         return PROPID_ERR_NUMERIC;
     }
@@ -72,7 +74,7 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
 {
     if (filter->derived.quad_layout) {
         return predict_stage_quad(filter->core.state, filter->core.input_speed_sq,
-                                  filter->core.rotor_speed_sq, filter->derived.gyro_jacobian,
+                                  filter->core.rotor_speed_sq, filter->derived.quad_gyro,
                                   filter->derived.jac_torque, dt, rate_next, jacobian_dt);
     }
     const propid_derived_t *derived = &filter->derived;
@@ -203,9 +205,10 @@ PROPID_DEFINE_PREDICT(predict_covariance_any, PROPID_NO_UNROLL)
  * locals, because the later columns overwrite rows/columns 0..2. The rate block
  * (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp collects its
  * coefficient-column terms during the sweep (upper triangle). */
-static __attribute__((noinline)) void predict_covariance_quad_layout(const propid_derived_t *derived,
-                                           float (*restrict cov)[PROPID_MAX_STATES], float dt,
-                                           const float jacobian_dt[3][PROPID_MAX_STATES])
+/* (Not inlined, for the same reason as predict_stage_quad: its own base registers.) */
+static __attribute__((noinline)) void
+predict_covariance_quad_layout(const propid_derived_t *derived, float (*restrict cov)[PROPID_MAX_STATES],
+                               float dt, const float jacobian_dt[3][PROPID_MAX_STATES])
 {
     /* Row 0: columns 1, 2, 3..6; row 1: 0, 2, 3..6; row 2: 0, 1, 7..10. */
     const float *g0 = jacobian_dt[0];
@@ -214,6 +217,9 @@ static __attribute__((noinline)) void predict_covariance_quad_layout(const propi
     const float g0r0 = g0[0], g0r1 = g0[1], g0c0 = g0[2], g0c1 = g0[3], g0c2 = g0[4], g0c3 = g0[5];
     const float g1r0 = g1[0], g1r1 = g1[1], g1c0 = g1[2], g1c1 = g1[3], g1c2 = g1[4], g1c3 = g1[5];
     const float g2r0 = g2[0], g2r1 = g2[1], g2c0 = g2[2], g2c1 = g2[3], g2c2 = g2[4], g2c3 = g2[5];
+    const float q_thrust = derived->process_psd[3] * dt;
+    const float q_drag = derived->process_psd[7] * dt;
+    const float q_bias = derived->process_psd[11] * dt;
     float rate_cols[3][3]; /* T_ab for the rate columns b */
     float block00 = 0.0f, block01 = 0.0f, block11 = 0.0f; /* thrust-column terms */
     float block02 = 0.0f, block12 = 0.0f, block22 = 0.0f; /* drag-column terms */
@@ -252,7 +258,8 @@ static __attribute__((noinline)) void predict_covariance_quad_layout(const propi
         cov[0][j] = t0;
         cov[1][j] = t1;
         cov[2][j] = t2;
-        cov[j][j] += derived->process_psd[j] * dt;
+        /* Q per kind of state (thrust, drag, bias: propid_config.c). */
+        cov[j][j] += (j < 7u ? q_thrust : (j < 11u ? q_drag : q_bias));
         PROPID_SCHEDULE_BARRIER();
     }
     const float (*t)[3] = (const float (*)[3])rate_cols;

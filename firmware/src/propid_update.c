@@ -13,7 +13,9 @@
  *   P_ij -= sum_a g_a,i h_a,j   (upper triangle),   x_i += sum_a g_a,i nu_a.
  * Cost: ~3 n per axis for the vectors plus one pass of n (n + 1) / 2 elements
  * instead of three. Rare paths (a covariance that fails S >= R, a gate re-open)
- * first apply the pending terms, then work on the updated P. */
+ * first apply the pending terms, then work on the updated P. The usual quad
+ * sample (every axis fused) takes a straight-line copy: fuse_quad_usual, then
+ * apply_three_quad four rows at a time. */
 #include <math.h>
 #include <string.h>
 
@@ -87,7 +89,11 @@ apply_row_group(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
             const uint8_t j = (uint8_t)(first + c);
             cov[i][j] = cov[i][j] - gain[r][0] * h0[j] - gain[r][1] * h1[j] - gain[r][2] * h2[j];
         }
-        outside |= outside_positive_range(cov[i][i], derived->var_floor_bits[i], derived->var_range_bits[i]);
+        /* Floors and ceilings are per kind of state (rate, thrust, drag, bias:
+         * propid_config.c): the first state of its kind stands for each, so
+         * the constants stay in registers across the groups. */
+        const uint8_t kind = i < 3u ? 0u : (i < 7u ? 3u : (i < 11u ? 7u : 11u));
+        outside |= outside_positive_range(cov[i][i], derived->var_floor_bits[kind], derived->var_range_bits[kind]);
     }
 #pragma GCC unroll 10
     for (uint8_t j = (uint8_t)(first + rows); j < PROPID_QUAD_STATES; ++j) {
@@ -291,12 +297,14 @@ fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const 
  * fuse_axis (the scalars S, innovation and projections are formed from the few
  * vector entries they need before the vectors themselves). Returns 1 with the
  * three axes queued in `pending` and their innovations recorded, or 0 without
- * writing anything: the general path then handles the sample. */
-static int fuse_quad_usual(propid_filter_t *filter, pending_t *pending, const float gyro[3])
+ * writing anything: the general path then handles the sample. Not inlined, and
+ * given the covariance as its own pointer: offsets from the filter's base exceed
+ * the 1 KiB reach of a VFP load. */
+static __attribute__((noinline)) int
+fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *restrict core,
+                const propid_derived_t *restrict derived, pending_t *restrict pending,
+                const float *restrict gyro)
 {
-    propid_core_t *core = &filter->core;
-    const propid_derived_t *derived = &filter->derived;
-    const float (*cov)[PROPID_MAX_STATES] = (const float (*)[PROPID_MAX_STATES])core->cov;
 #define PROPID_P(i, j) propid_cov_at(cov, (i), (j))
     const float *state = core->state;
     const float noise_var = derived->gyro_var;
@@ -351,7 +359,9 @@ static int fuse_quad_usual(propid_filter_t *filter, pending_t *pending, const fl
     }
     const float inv2 = 1.0f / var2;
 
-    /* The three vectors, with one finiteness test over all of them. */
+    /* The three vectors, with one finiteness test over all of them: h_2 folds in
+     * h_0 and h_1 (c * Inf is Inf, or NaN when c = 0), so a non-finite element of
+     * any of the three makes that element of h_2 non-finite; summing h_2 covers all. */
     float *h0 = pending->h[0];
     float *h1 = pending->h[1];
     float *h2 = pending->h[2];
@@ -364,7 +374,7 @@ static int fuse_quad_usual(propid_filter_t *filter, pending_t *pending, const fl
         h0[i] = value0;
         h1[i] = value1;
         h2[i] = value2;
-        check += value0 + value1 + value2;
+        check += value2;
     }
 #undef PROPID_P
     if (!isfinite(check)) {
@@ -399,7 +409,8 @@ uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
     pending.count = 0u;
     int repaired = 0; /* at most one repair-and-retry per sample */
     uint32_t gated_mask;
-    if (n == PROPID_QUAD_STATES && fuse_quad_usual(filter, &pending, gyro)) {
+    if (n == PROPID_QUAD_STATES &&
+        fuse_quad_usual((const float (*)[PROPID_MAX_STATES])core->cov, core, derived, &pending, gyro)) {
         gated_mask = 0u;
     } else if (n == PROPID_QUAD_STATES) {
         gated_mask = fuse_axis(filter, &pending, &repaired, 0u, gyro[0], PROPID_QUAD_STATES);
@@ -432,6 +443,17 @@ uint32_t propid_clamp_coefficients(const propid_config_t *config, propid_core_t 
     memcpy(&min_bits, &config->coeff_rel_min, sizeof(min_bits));
     memcpy(&max_bits, &config->coeff_rel_max, sizeof(max_bits));
     const uint32_t range_bits = max_bits - min_bits;
+    if (config->rotor_count == 4u) {
+        /* The quad: one straight-line test of the 8 coefficients' bit patterns. */
+        uint32_t outside = 0u;
+#pragma GCC unroll 8
+        for (uint8_t k = PROPID_RATE_STATES; k < PROPID_RATE_STATES + 8u; ++k) {
+            outside |= outside_positive_range(core->state[k], min_bits, range_bits);
+        }
+        if (outside == 0u) {
+            return 0u;
+        }
+    }
     uint32_t clamped = 0u;
     for (uint8_t k = first; k < end; ++k) {
         if (!outside_positive_range(core->state[k], min_bits, range_bits)) {

@@ -469,6 +469,47 @@ static void test_corrupted_covariance_is_repaired(void)
     TEST_ASSERT_TRUE(positive_definite(view, n));
 }
 
+/* A non-finite element in a row the update vectors read (spread there by the
+ * prediction, before the round-robin check reaches it) must never reach the
+ * state: the step repairs P and fuses the sample on the repaired P. */
+static void check_non_finite_update_vector_never_reaches_state(uint8_t row, uint8_t column, float bad_value)
+{
+    uint64_t t_us = 1000u;
+    run_steps(21u, 50u, &t_us);
+    propid_counters_t before;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &before));
+    filter.core.cov[row][column] = bad_value;
+    filter.core.check_row = 12u; /* the round-robin check is elsewhere */
+    run_steps(22u, 1u, &t_us);
+    const uint8_t n = filter.derived.state_count;
+    for (uint8_t i = 0; i < n; ++i) {
+        TEST_ASSERT_TRUE(isfinite(filter.core.state[i]));
+    }
+    symmetric_view(view); /* every stored element finite again */
+    propid_counters_t after;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &after));
+    TEST_ASSERT_TRUE(after.cov_repairs > before.cov_repairs);
+}
+
+static void test_non_finite_update_vector_never_reaches_state(void)
+{
+    /* Quad layout (straight-line path, plus and X) and the general path; a NaN or
+     * Inf in the coefficient block, in a rate row, on a rate diagonal. The
+     * prediction spreads it; whichever guard meets it first (S >= R, the update
+     * vectors' finiteness test) must keep it out of the state. */
+    const uint8_t cases[4][2] = {{3u, 7u}, {1u, 5u}, {2u, 2u}, {0u, 0u}};
+    for (int c = 0; c < 4; ++c) {
+        init_quad_diag(0.785398f);
+        check_non_finite_update_vector_never_reaches_state(cases[c][0], cases[c][1], NAN);
+        init_quad_diag(0.785398f);
+        check_non_finite_update_vector_never_reaches_state(cases[c][0], cases[c][1], INFINITY);
+        init_quad_diag(0.0f);
+        check_non_finite_update_vector_never_reaches_state(cases[c][0], cases[c][1], INFINITY);
+        init_quad();
+        check_non_finite_update_vector_never_reaches_state(cases[c][0], cases[c][1], INFINITY);
+    }
+}
+
 static void test_coefficients_are_clamped(void)
 {
     init_quad();
@@ -534,6 +575,7 @@ int main(void)
     RUN_TEST(test_first_gyro_sample_only_anchors);
     RUN_TEST(test_gate_rejects_outlier_then_reopens);
     RUN_TEST(test_corrupted_covariance_is_repaired);
+    RUN_TEST(test_non_finite_update_vector_never_reaches_state);
     RUN_TEST(test_coefficients_are_clamped);
     RUN_TEST(test_time_jump_resync_workflow);
     return UNITY_END();

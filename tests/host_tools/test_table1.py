@@ -255,8 +255,12 @@ def test_campaign_command_carries_the_documented_conditions(tmp_path):
     # priors = the truth distribution's std: 0.2/sqrt(3) and 1 deg/s / sqrt(3)
     assert "--prior-kf-std 0.11547" in text and "--prior-km-std 0.11547" in text
     assert "--prior-bias-std 0.0100767" in text
+    assert "--filter-rate-noise 0.0005" in text and "--prior-rate-std" not in text
+    at_rest = CampaignConfig(out_dir=tmp_path, sitl=Path("/bin/true"), prior_rate_std=0.01)
+    assert "--prior-rate-std 0.01" in " ".join(
+        sitl_command(at_rest, Job("circle", "filter", 0, 1), tmp_path / "z.csv"))
     assert "--filter-coeff-walk 0.0" in text and "--incorrect-source nominal" in text
     library = CampaignConfig(out_dir=tmp_path, sitl=Path("/bin/true"), priors_from_truth=False,
-                             filter_rate_noise=None, filter_coeff_walk=None, filter_bias_walk=None)
+                             prior_rate_std=None, filter_rate_noise=None, filter_coeff_walk=None, filter_bias_walk=None)
     text = " ".join(sitl_command(library, Job("step", "oracle", 0, 1), tmp_path / "y.csv"))
     assert "--prior" not in text and "--filter-" not in text

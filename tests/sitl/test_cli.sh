@@ -74,6 +74,12 @@ fi
 # The written vehicle file flies.
 expect_rc 0 "vehicle from file" "$SITL" --vehicle "$WORK/a.vehicle.json" --trajectory hover \
     --mode oracle --duration 2 --quiet
+# A short flight flies the start of the same 10 s trajectory (the period is not
+# the duration): a 2 s Lissajous used to be 5x faster and diverged at 0.4 s.
+expect_rc 0 "short lissajous" "$SITL" --trajectory lissajous --mode filter --duration 2 --quiet
+expect_rc 3 "lissajous squeezed into 2 s diverges" "$SITL" --trajectory lissajous --mode filter \
+    --duration 2 --trajectory-period 2 --quiet
+expect_rc 2 "bad period" "$SITL" --trajectory-period 0
 # Paper sensors and effects parse and fly.
 expect_rc 0 "paper + effects" "$SITL" --paper --effect rotor_drag --effect esc_delay=0.01 \
     --duration 10 --quiet --log-rate 100 --log "$WORK/p.csv"

@@ -192,6 +192,8 @@ typedef struct {
     uint8_t jac_rotor[3][PROPID_MAX_STATES - 3];    /* coefficient entry: its rotor */
     float jac_torque[3][PROPID_MAX_STATES - 3];     /* coefficient entry: A = jac_torque * u_rotor */
     float gyro_jacobian[3][3][3];                   /* A_ab = sum_c gyro_jacobian[a][b][c] omega_c */
+    float quad_gyro[3][2];                          /* quad layout only: A_ab = quad_gyro[a][p] omega_c for
+                                                       entry p (column b) of row a, c the third axis */
 } propid_derived_t;
 
 typedef struct {
