@@ -119,11 +119,13 @@ test-python: setup
 	    echo "pytest: no Python test files in tests/host_tools"; status=0; \
 	fi; exit $$status
 
+# Each stage's output is also kept in build/test-logs/ so the closing line can
+# add up the ctest and pytest counts into one "N passed, N failed".
 test: setup
-	@start=$$(date +%s); failed=""; \
+	@start=$$(date +%s); failed=""; logs=$(BUILD)/test-logs; rm -rf $$logs; mkdir -p $$logs; \
 	stage() { local name=$$1; shift; local t0=$$(date +%s); \
 	    echo; echo "=== make test: $$name"; \
-	    if "$$@"; then echo "=== $$name: ok ($$(( $$(date +%s) - t0 )) s)"; \
+	    if set -o pipefail && "$$@" 2>&1 | tee $$logs/$$name.log; then echo "=== $$name: ok ($$(( $$(date +%s) - t0 )) s)"; \
 	    else echo "=== $$name: FAILED ($$(( $$(date +%s) - t0 )) s)"; failed="$$failed $$name"; fi; }; \
 	stage host-build    $(MAKE) --no-print-directory host; \
 	stage host-tests    $(MAKE) --no-print-directory test-host; \
@@ -131,13 +133,14 @@ test: setup
 	stage target-tests  $(MAKE) --no-print-directory test-target; \
 	stage python-tests  $(MAKE) --no-print-directory test-python; \
 	echo; echo "=== make test: $$(( $$(date +%s) - start )) s"; \
-	if [ -n "$$failed" ]; then echo "=== FAILED:$$failed"; exit 1; fi; \
-	echo "=== all stages passed"
+	if [ -n "$$failed" ]; then echo "=== FAILED:$$failed"; fi; \
+	$(PYTHON) $(REPO)/tests/count_results.py $$logs; \
+	if [ -n "$$failed" ]; then exit 1; fi
 
 clean:
 	rm -rf $(BUILD)
 
 # Room verbs: `sitl` (S1) and `table1` (S2). They may use BUILD_HOST, VENV_PYTHON
 # and the `host` / `setup` verbs above.
--include $(REPO)/sitl/sitl.mk
--include $(REPO)/sitl/table1.mk
+include $(REPO)/sitl/sitl.mk
+include $(REPO)/sitl/table1.mk
