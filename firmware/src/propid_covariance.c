@@ -47,7 +47,8 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
             changed = 1;
         }
     }
-    /* Off-diagonals: finite, and correlation strictly inside [-1, 1]. */
+    /* Off-diagonals: finite, and correlation inside [-1, 1] up to the rounding of
+     * the test itself (PROPID_ROUNDING_TOL: two rounded products). */
     for (uint8_t i = 0; i < n; ++i) {
         for (uint8_t j = (uint8_t)(i + 1u); j < n; ++j) {
             const float pij = core->cov[i][j];
@@ -55,7 +56,7 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
             float fixed = pij;
             if (!isfinite(pij)) {
                 fixed = 0.0f;
-            } else if (pij * pij > limit_sq) {
+            } else if (pij * pij > limit_sq * (1.0f + PROPID_ROUNDING_TOL)) {
                 /* Pull the correlation back to 0.99 (rare path: sqrtf is fine here). */
                 const float limit = 0.99f * sqrtf(limit_sq);
                 fixed = pij > 0.0f ? limit : -limit;
@@ -79,6 +80,9 @@ int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, u
      * over n samples every element (i, j), i <= j, is visited once. */
     const float pii = core->cov[row][row];
     int bad = !(pii > 0.0f && pii <= FLT_MAX);
+    /* |P_ij| <= sqrt(P_ii P_jj) up to the rounding of the two products (a
+     * correlation of 1 within float32 is not a fault; propid_internal.h). */
+    const float pii_tol = pii * (1.0f + PROPID_ROUNDING_TOL);
     /* Walk P_ij along the row and P_jj down the diagonal with pointers (no index
      * arithmetic per element). */
     const float *pij = &core->cov[row][row];
@@ -87,7 +91,7 @@ int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, u
         pij += 1;
         pjj += PROPID_MAX_STATES + 1;
         /* A NaN fails the comparison, so it is caught too. */
-        bad |= !(*pij * *pij <= pii * *pjj);
+        bad |= !(*pij * *pij <= pii_tol * *pjj);
     }
     if (bad) {
         return propid_cov_repair(derived, core);

@@ -43,6 +43,17 @@ static inline float propid_cov_at(const float (*cov)[PROPID_MAX_STATES], uint8_t
  * instructions per kernel). No instruction is emitted. */
 #define PROPID_SCHEDULE_BARRIER() __asm__ volatile("" ::: "memory")
 
+/* Covariance health in float32 (docs/math.md §2 "Rounding loading", design.md
+ * §12). Every prediction multiplies each variance by (1 + PROPID_VAR_LOADING):
+ * a PSD diagonal term of one float32 epsilon of the variance per step, the size
+ * of the rounding each pass makes, so P stays positive definite where the
+ * exact P is nearly singular (constant coefficients: correlations -> 1).
+ * PROPID_ROUNDING_TOL is the rounding of the integrity tests themselves (a
+ * product or a three-term sum of float32 values): differences within it are
+ * not faults. */
+#define PROPID_VAR_LOADING 1.1920929e-7f /* FLT_EPSILON = 2^-23 */
+#define PROPID_ROUNDING_TOL (2.0f * PROPID_VAR_LOADING)
+
 /* Loop annotations for the two copies of the step's kernels: fully unrolled for
  * the quad (GCC and Clang honour the pragma), plain otherwise. */
 #define PROPID_UNROLL_QUAD _Pragma("GCC unroll 14")
@@ -80,13 +91,15 @@ int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, u
 int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core);
 
 /* propid_predict.c */
-/* Euler step of the body rates into rate_next and dt * (the structurally non-zero
- * Jacobian entries of the rate dynamics) into jacobian_dt[a][p], entry p of row a
+/* The rate step (trapezoid input, Heun on the gyroscopic term: docs/math.md §2)
+ * into rate_next and the rate rows of F - I (dt * the structurally non-zero
+ * Jacobian entries, the gyroscopic ones at the midpoint of omega and the Euler
+ * predictor) into jacobian_dt[a][p], entry p of row a
  * being column derived->jac_column[a][p], without touching the filter. Returns
  * PROPID_ERR_NUMERIC when either (or a state) would be non-finite. */
 propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, float rate_next[3],
                                      float jacobian_dt[3][PROPID_MAX_STATES]);
-/* P := F P F^T + Q dt with F = I + G, G the sparse rows from propid_predict_stage
+/* P := F P F^T + Q dt + PROPID_VAR_LOADING diag, F = I + G, G the sparse rows from propid_predict_stage
  * (only the 3 rate rows differ from I). */
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
                                const float jacobian_dt[3][PROPID_MAX_STATES]);

@@ -1,5 +1,7 @@
-/* Prediction: forward-Euler step of the body rates (coefficients and biases are
- * random walks) and the sparse covariance propagation P := F P F^T + Q dt.
+/* Prediction: the body rates' step (the rotor torques, linear in the state, with
+ * the trapezoid input; Heun on the gyroscopic term; coefficients and biases are
+ * random walks) and the sparse covariance propagation
+ * P := F P F^T + Q dt + PROPID_VAR_LOADING diag(F P F^T).
  *
  * F = I + G with G = dt A, and A is zero except for the 3 rate rows, and within
  * them only at the entries propid_config.c found structurally non-zero
@@ -34,6 +36,12 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
     for (uint8_t i = 0; i < 4u; ++i) {
         speed_sq_dt[i] = half_dt * (input_speed_sq[i] + latest_speed_sq[i]);
     }
+    /* Heun on the gyroscopic term (docs/math.md §2): the rotor part is linear in
+     * the state with the trapezoid input already; the gyroscopic acceleration is
+     * evaluated at omega and at the Euler predictor and averaged. */
+    float rotors[3];
+    float gyroscopic[3];
+    float predictor[3];
     float check = 0.0f;
 #pragma GCC unroll 3
     for (uint8_t a = 0; a < 3u; ++a) {
@@ -44,20 +52,33 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
          * (the general loop's other two products are exact zeros). */
         const float entry0 = dt * (quad_gyro[a][0] * rate[other1]);
         const float entry1 = dt * (quad_gyro[a][1] * rate[other0]);
-        const float gyroscopic = entry0 * rate[other0] + entry1 * rate[other1];
-        g[0] = entry0;
-        g[1] = entry1;
+        gyroscopic[a] = entry0 * rate[other0] + entry1 * rate[other1];
         const float *coefficient = state + (a < 2u ? PROPID_RATE_STATES : PROPID_RATE_STATES + 4u);
         const float *torque = jac_torque[a];
-        float rotors = 0.0f;
+        float sum = 0.0f;
 #pragma GCC unroll 4
         for (uint8_t i = 0; i < 4u; ++i) {
             const float entry = torque[2u + i] * speed_sq_dt[i];
-            rotors += entry * coefficient[i];
+            sum += entry * coefficient[i];
             g[2u + i] = entry;
         }
-        rate_next[a] = rate[a] + (rotors + 0.5f * gyroscopic);
-        check += rate_next[a] + gyroscopic + rotors;
+        rotors[a] = sum;
+        predictor[a] = rate[a] + (sum + 0.5f * gyroscopic[a]); /* the Euler step */
+    }
+#pragma GCC unroll 3
+    for (uint8_t a = 0; a < 3u; ++a) {
+        float *g = jacobian_dt[a];
+        const uint8_t other0 = a == 0u ? 1u : 0u;
+        const uint8_t other1 = a == 2u ? 1u : 2u;
+        const float entry0 = dt * (quad_gyro[a][0] * predictor[other1]);
+        const float entry1 = dt * (quad_gyro[a][1] * predictor[other0]);
+        const float corrector = entry0 * predictor[other0] + entry1 * predictor[other1];
+        /* The rate block of F: the gyroscopic Jacobian at the midpoint of omega and
+         * the predictor (it is linear in omega, so this is the mean of the two). */
+        g[0] = 0.5f * (entry0 + dt * (quad_gyro[a][0] * rate[other1]));
+        g[1] = 0.5f * (entry1 + dt * (quad_gyro[a][1] * rate[other0]));
+        rate_next[a] = rate[a] + (rotors[a] + 0.25f * (gyroscopic[a] + corrector));
+        check += rate_next[a] + corrector + rotors[a];
     }
     /* The sums above already hold every rate (rate_next) and, through a product,
      * every coefficient (each appears in at least one row; a zero entry times a
@@ -92,6 +113,9 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
     }
     const uint8_t n = derived->state_count;
     float check = 0.0f;
+    float rotors[3];
+    float gyroscopic[3];
+    float predictor[3];
     for (uint8_t a = 0; a < 3u; ++a) {
         const uint8_t rate_count = derived->jac_rate_count[a];
         const uint8_t count = derived->jac_count[a];
@@ -99,28 +123,46 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
         float *g = jacobian_dt[a];
         /* Gyroscopic part: A_ab = sum_c gyro_jacobian[a][b][c] omega_c, and since the
          * gyroscopic torque is quadratic in omega, its acceleration is A_rr omega / 2. */
-        float gyroscopic = 0.0f;
+        float sum = 0.0f;
         for (uint8_t p = 0; p < rate_count; ++p) {
             const float *coeff = derived->gyro_jacobian[a][column[p]];
             const float entry = dt * (coeff[0] * rate[0] + coeff[1] * rate[1] + coeff[2] * rate[2]);
-            gyroscopic += entry * rate[column[p]];
+            sum += entry * rate[column[p]];
             g[p] = entry;
         }
+        gyroscopic[a] = sum;
         /* Rotor torques: G = torque dt u, velocity change sum G x_coefficient. */
-        float rotors = 0.0f;
+        sum = 0.0f;
         const float *torque = derived->jac_torque[a];
         const uint8_t *rotor = derived->jac_rotor[a];
         for (uint8_t p = rate_count; p < count; ++p) {
             const float entry = torque[p] * speed_sq_dt[rotor[p]];
-            rotors += entry * state[column[p]];
+            sum += entry * state[column[p]];
             g[p] = entry;
         }
-        /* omega + dt f: the G entries already carry dt. */
-        rate_next[a] = rate[a] + (rotors + 0.5f * gyroscopic);
-        /* A non-finite G entry makes its product in `gyroscopic` or `rotors`
-         * non-finite (Inf times anything is Inf or NaN), so testing the sums tests
-         * every entry. */
-        check += rate_next[a] + gyroscopic + rotors;
+        rotors[a] = sum;
+        /* The Euler step omega + dt f (the G entries already carry dt). */
+        predictor[a] = rate[a] + (rotors[a] + 0.5f * gyroscopic[a]);
+    }
+    /* Heun on the gyroscopic term (docs/math.md §2): its acceleration again at
+     * the predictor, averaged; the rate block of F is the gyroscopic Jacobian at
+     * the midpoint (the mean of the two: it is linear in omega). */
+    for (uint8_t a = 0; a < 3u; ++a) {
+        const uint8_t rate_count = derived->jac_rate_count[a];
+        const uint8_t *column = derived->jac_column[a];
+        float *g = jacobian_dt[a];
+        float corrector = 0.0f;
+        for (uint8_t p = 0; p < rate_count; ++p) {
+            const float *coeff = derived->gyro_jacobian[a][column[p]];
+            const float entry = dt * (coeff[0] * predictor[0] + coeff[1] * predictor[1] +
+                                      coeff[2] * predictor[2]);
+            corrector += entry * predictor[column[p]];
+            g[p] = 0.5f * (entry + g[p]);
+        }
+        rate_next[a] = rate[a] + (rotors[a] + 0.25f * (gyroscopic[a] + corrector));
+        /* A non-finite G entry makes its product in a sum non-finite (Inf times
+         * anything is Inf or NaN), so testing the sums tests every entry. */
+        check += rate_next[a] + gyroscopic[a] + corrector + rotors[a];
     }
     /* One finiteness test on a running sum (NaN and Inf propagate through sums),
      * covering every state the step reads. */
@@ -176,8 +218,8 @@ UNROLL                                                                          
             for (uint8_t p = 0; p < count; ++p) {                                               \
                 value += row[column[p]] * g[p];                                                 \
             }                                                                                   \
-            if (a == b) {                                                                       \
-                value += derived->process_psd[b] * dt;                                          \
+            if (a == b) { /* Q dt and the rounding loading (propid_internal.h) */               \
+                value += PROPID_VAR_LOADING * value + derived->process_psd[b] * dt;             \
             }                                                                                   \
             cov[a][b] = value;                                                                  \
         }                                                                                       \
@@ -191,7 +233,7 @@ UNROLL                                                                          
         cov[0][j] = t0;                                                                         \
         cov[1][j] = t1;                                                                         \
         cov[2][j] = t2;                                                                         \
-        cov[j][j] += derived->process_psd[j] * dt;                                              \
+        cov[j][j] += PROPID_VAR_LOADING * cov[j][j] + derived->process_psd[j] * dt;             \
     }                                                                                           \
 }
 
@@ -258,17 +300,25 @@ predict_covariance_quad_layout(const propid_derived_t *derived, float (*restrict
         cov[0][j] = t0;
         cov[1][j] = t1;
         cov[2][j] = t2;
-        /* Q per kind of state (thrust, drag, bias: propid_config.c). */
-        cov[j][j] += (j < 7u ? q_thrust : (j < 11u ? q_drag : q_bias));
+        /* Q per kind of state (thrust, drag, bias: propid_config.c), and the
+         * rounding loading (propid_internal.h); the diagonal of a coefficient
+         * column is already in a register (j is a constant here). */
+        const float own = j == 3u ? k0 : j == 4u ? k1 : j == 5u ? k2 : j == 6u ? k3 :
+                          j == 7u ? d0 : j == 8u ? d1 : j == 9u ? d2 : j == 10u ? d3 : cov[j][j];
+        cov[j][j] = own + (PROPID_VAR_LOADING * own + (j < 7u ? q_thrust : (j < 11u ? q_drag : q_bias)));
         PROPID_SCHEDULE_BARRIER();
     }
     const float (*t)[3] = (const float (*)[3])rate_cols;
-    const float p00 = t[0][0] + t[0][1] * g0r0 + t[0][2] * g0r1 + block00 + derived->process_psd[0] * dt;
+    const float f00 = t[0][0] + t[0][1] * g0r0 + t[0][2] * g0r1 + block00;
     const float p01 = t[0][1] + t[0][0] * g1r0 + t[0][2] * g1r1 + block01;
     const float p02 = t[0][2] + t[0][0] * g2r0 + t[0][1] * g2r1 + block02;
-    const float p11 = t[1][1] + t[1][0] * g1r0 + t[1][2] * g1r1 + block11 + derived->process_psd[1] * dt;
+    const float f11 = t[1][1] + t[1][0] * g1r0 + t[1][2] * g1r1 + block11;
     const float p12 = t[1][2] + t[1][0] * g2r0 + t[1][1] * g2r1 + block12;
-    const float p22 = t[2][2] + t[2][0] * g2r0 + t[2][1] * g2r1 + block22 + derived->process_psd[2] * dt;
+    const float f22 = t[2][2] + t[2][0] * g2r0 + t[2][1] * g2r1 + block22;
+    /* Q dt and the rounding loading (propid_internal.h) on the diagonal. */
+    const float p00 = f00 + (PROPID_VAR_LOADING * f00 + derived->process_psd[0] * dt);
+    const float p11 = f11 + (PROPID_VAR_LOADING * f11 + derived->process_psd[1] * dt);
+    const float p22 = f22 + (PROPID_VAR_LOADING * f22 + derived->process_psd[2] * dt);
     cov[0][0] = p00;
     cov[0][1] = p01;
     cov[0][2] = p02;

@@ -172,9 +172,11 @@ static void reanchor_rate(propid_filter_t *filter, uint8_t axis, uint8_t bias, f
 }
 
 /* One axis: S, innovation, gate (and re-anchor), then its vector queued in
- * `pending`. Returns 1 when the axis was gated out. Always inlined: the quad gets
- * a copy per axis with the axis and n constant. */
-static inline __attribute__((always_inline)) uint32_t
+ * `pending`. Returns 1 when the axis was gated out. One copy, plain loops: for a
+ * quad this is the rare path (the usual sample takes fuse_quad_usual), and the
+ * three unrolled per-axis copies it had cost 5.8 KB of flash for no measured
+ * step. */
+static uint32_t
 fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const uint8_t axis,
           const float measured, const uint8_t n)
 {
@@ -197,7 +199,13 @@ fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const 
         float h_rate = pending_h((const float (*)[PROPID_MAX_STATES])cov, pending, projection, axis, bias, axis);
         float h_bias = pending_h((const float (*)[PROPID_MAX_STATES])cov, pending, projection, axis, bias, bias);
         float innovation_var = h_rate + h_bias + noise_var;
-        if (!(innovation_var >= noise_var)) {
+        /* S >= R up to the rounding of the sum var(omega + b) = P_rr + 2 P_rb + P_bb
+         * (|P_rb| <= (P_rr + P_bb) / 2): within it, var(omega + b) is zero, not a
+         * fault (propid_internal.h, design.md §12). */
+        const float rounding = PROPID_ROUNDING_TOL * (cov[axis][axis] + cov[bias][bias]);
+        if (innovation_var >= noise_var - rounding) {
+            innovation_var = innovation_var > noise_var ? innovation_var : noise_var;
+        } else {
             /* var(omega + b) < 0 or NaN: P is no longer PSD. Repair and recompute. */
             (void)apply_pending(core, derived, pending);
             if (propid_cov_repair(derived, core)) {
@@ -251,26 +259,17 @@ fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const 
         const float *h0 = pending->h[0];
         const float *h1 = pending->h[1];
         float check = 0.0f;
-        if (n == PROPID_QUAD_STATES) {
-            /* Unrolled copies for the quad, one per number of folded-in terms. */
-            if (slot == 0u) {
-                PROPID_FORM_VECTOR(PROPID_QUAD_STATES, PROPID_UNROLL_QUAD, PROPID_PH(i));
-            } else if (slot == 1u) {
-                const float c0 = projection[0];
-                PROPID_FORM_VECTOR(PROPID_QUAD_STATES, PROPID_UNROLL_QUAD, PROPID_PH(i) - c0 * h0[i]);
-            } else {
-                const float c0 = projection[0];
-                const float c1 = projection[1];
-                PROPID_FORM_VECTOR(PROPID_QUAD_STATES, PROPID_UNROLL_QUAD,
-                                   PROPID_PH(i) - c0 * h0[i] - c1 * h1[i]);
-            }
+        /* One loop per number of folded-in terms (plain loops: this is the rare
+         * path for a quad, whose usual sample takes fuse_quad_usual; small code). */
+        if (slot == 0u) {
+            PROPID_FORM_VECTOR(n, PROPID_NO_UNROLL, PROPID_PH(i));
+        } else if (slot == 1u) {
+            const float c0 = projection[0];
+            PROPID_FORM_VECTOR(n, PROPID_NO_UNROLL, PROPID_PH(i) - c0 * h0[i]);
         } else {
-            const float c0 = slot > 0u ? projection[0] : 0.0f;
-            const float c1 = slot > 1u ? projection[1] : 0.0f;
-            /* Unused terms read an already written vector (a row of P) with weight 0. */
-            const float *first = slot > 0u ? h0 : stored[axis];
-            const float *second = slot > 1u ? h1 : first;
-            PROPID_FORM_VECTOR(n, PROPID_NO_UNROLL, PROPID_PH(i) - c0 * first[i] - c1 * second[i]);
+            const float c0 = projection[0];
+            const float c1 = projection[1];
+            PROPID_FORM_VECTOR(n, PROPID_NO_UNROLL, PROPID_PH(i) - c0 * h0[i] - c1 * h1[i]);
         }
 #undef PROPID_PH
         /* A non-finite covariance element in the two rows this axis reads (e.g.
@@ -319,6 +318,7 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float var0 = h0_r0 + h0_b0 + noise_var;
     const float nu0 = gyro[0] - state[0] - state[b0];
     const float nu0_sq = nu0 * nu0;
+    /* S < R (even within rounding: fuse_axis decides) leaves the fast path. */
     if (!(var0 >= noise_var) || (gate_sq > 0.0f && nu0_sq > gate_sq * var0)) {
         return 0;
     }
@@ -412,11 +412,9 @@ uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
     if (n == PROPID_QUAD_STATES &&
         fuse_quad_usual((const float (*)[PROPID_MAX_STATES])core->cov, core, derived, &pending, gyro)) {
         gated_mask = 0u;
-    } else if (n == PROPID_QUAD_STATES) {
-        gated_mask = fuse_axis(filter, &pending, &repaired, 0u, gyro[0], PROPID_QUAD_STATES);
-        gated_mask |= fuse_axis(filter, &pending, &repaired, 1u, gyro[1], PROPID_QUAD_STATES) << 1;
-        gated_mask |= fuse_axis(filter, &pending, &repaired, 2u, gyro[2], PROPID_QUAD_STATES) << 2;
     } else {
+        /* Every other sample (a gated axis, S < R, a non-finite vector) and every
+         * other vehicle: the general per-axis code. */
         gated_mask = 0u;
         for (uint8_t axis = 0; axis < 3u; ++axis) {
             gated_mask |= fuse_axis(filter, &pending, &repaired, axis, gyro[axis], n) << axis;

@@ -1,8 +1,8 @@
 """Float64 numpy reference of the firmware filter (firmware/src/propid_*.c).
 
 The SAME algorithm, step for step: scaled state [rate(3), kf/kf_nom(N), km/km_nom(N),
-gyro bias(3)], forward-Euler prediction with the latest rotor speeds (zero-order
-hold), P := F P F^T + Q dt, three sequential scalar gyro updates (x, y, z) with the
+gyro bias(3)], prediction with the trapezoid input and Heun on the gyroscopic
+term, P := F P F^T + Q dt, three sequential scalar gyro updates (x, y, z) with the
 symmetric rank-one form, innovation gate with re-opening, coefficient clamps,
 variance floors/ceilings, the round-robin covariance integrity check and repair,
 and the same input guards and status codes. Only the arithmetic differs
@@ -23,6 +23,12 @@ import numpy as np
 from propid.cfilter import HEALTH, STATUS, Estimate, FilterConfig, health_names
 
 _F32_MAX = float(np.finfo(np.float32).max)
+# Covariance health constants of the C filter (propid_internal.h): the rounding
+# loading of every variance per prediction, and the rounding tolerance of the
+# integrity tests. Float32 quantities on purpose: the reference mirrors the C
+# algorithm, whose P needs them (docs/math.md §2).
+VAR_LOADING = float(np.finfo(np.float32).eps)
+ROUNDING_TOL = 2.0 * VAR_LOADING
 
 
 def _f32(value: float) -> float:
@@ -185,7 +191,7 @@ class ReferenceFilter:
                 fixed = pij
                 if not math.isfinite(pij):
                     fixed = 0.0
-                elif pij * pij > limit_sq:
+                elif pij * pij > limit_sq * (1.0 + ROUNDING_TOL):
                     limit = 0.99 * math.sqrt(limit_sq)
                     fixed = limit if pij > 0.0 else -limit
                 if fixed != pij or self.cov[j, i] != pij:
@@ -200,7 +206,7 @@ class ReferenceFilter:
             # The part of the row right of the diagonal (C: every element once per n samples).
             r = self.cov[row, row + 1:]
             with np.errstate(invalid="ignore", over="ignore"):
-                bad = bool(np.any(~(r * r <= pii * np.diag(self.cov)[row + 1:]))
+                bad = bool(np.any(~(r * r <= pii * (1.0 + ROUNDING_TOL) * np.diag(self.cov)[row + 1:]))
                            or np.any(self.cov[row + 1:, row] != r))
         return self._repair() if bad else False
 
@@ -265,8 +271,16 @@ class ReferenceFilter:
             # Trapezoid input over the interval, as the C filter (docs/math.md).
             speed_sq = 0.5 * (self.input_speed_sq + self.rotor_speed_sq)
             rate_dot, rows = self.rate_derivative_and_jacobian(self.state, speed_sq)
-            rate_next = self.state[:3] + dt * rate_dot
-            jac_dt = dt * rows
+            # Heun (docs/math.md §2): f again at the Euler predictor, averaged. Only
+            # the gyroscopic part differs between the two (the rotor part does not
+            # depend on omega), so this is the C filter's "Heun on the gyroscopic
+            # term"; the Jacobian is the mean of the two (the gyroscopic Jacobian at
+            # the midpoint, as it is linear in omega; the rotor columns are equal).
+            predicted = self.state.copy()
+            predicted[:3] = self.state[:3] + dt * rate_dot
+            rate_dot_next, rows_next = self.rate_derivative_and_jacobian(predicted, speed_sq)
+            rate_next = self.state[:3] + dt * 0.5 * (rate_dot + rate_dot_next)
+            jac_dt = dt * 0.5 * (rows + rows_next)
             if not (np.all(np.isfinite(rate_next)) and np.all(np.isfinite(jac_dt))
                     and np.all(np.isfinite(self.state))):
                 return self._reject("PROPID_ERR_NUMERIC")
@@ -286,7 +300,9 @@ class ReferenceFilter:
             f[:3, :m] += jac_dt
             self.cov = f @ self.cov @ f.T
             self.cov = 0.5 * (self.cov + self.cov.T)
-            self.cov[np.diag_indices(n)] += self.process_psd * dt
+            # Q dt and the rounding loading (C: PROPID_VAR_LOADING, docs/math.md §2).
+            diag = np.diag_indices(n)
+            self.cov[diag] += VAR_LOADING * self.cov[diag] + self.process_psd * dt
             self.state[:3] = rate_next
 
         gated = False
@@ -316,7 +332,12 @@ class ReferenceFilter:
         bias = self.first_bias + axis
         cov_h = self.cov[:, axis] + self.cov[:, bias]
         innovation_var = cov_h[axis] + cov_h[bias] + self.gyro_var
-        if not innovation_var >= self.gyro_var:
+        # S >= R up to the rounding of the sum (C: PROPID_ROUNDING_TOL): var(omega + b)
+        # within it of zero is zero, not a fault.
+        rounding = ROUNDING_TOL * (self.cov[axis, axis] + self.cov[bias, bias])
+        if innovation_var >= self.gyro_var - rounding:
+            innovation_var = max(innovation_var, self.gyro_var)
+        else:
             if self._repair():
                 self.health |= HEALTH["COV_REPAIRED"]
                 self.counters_data["cov_repairs"] += 1
