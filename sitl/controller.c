@@ -1,5 +1,6 @@
 /* SE(3) geometric tracking controller (Lee, Leok, McClamroch 2010); see controller.h. */
 #include "controller.h"
+#include "sitl_math.h"
 
 #include <math.h>
 #include <string.h>
@@ -55,25 +56,18 @@ static void vee_skew(const mat3 m, vec3 out)
     out[2] = 0.5 * (m[1][0] - m[0][1]);
 }
 
+/* The caller's quaternion need not be unit (or even valid): normalise a copy,
+ * identity when it cannot be, then the shared conversion. */
 static void quat_to_matrix(const double q_in[4], mat3 r)
 {
     double n = sqrt(q_in[0] * q_in[0] + q_in[1] * q_in[1] + q_in[2] * q_in[2] + q_in[3] * q_in[3]);
-    double w = 1.0, x = 0.0, y = 0.0, z = 0.0;
+    double unit[4] = {1.0, 0.0, 0.0, 0.0};
     if (n > 0.0 && isfinite(n)) {
-        w = q_in[0] / n;
-        x = q_in[1] / n;
-        y = q_in[2] / n;
-        z = q_in[3] / n;
+        for (int i = 0; i < 4; ++i) {
+            unit[i] = q_in[i] / n;
+        }
     }
-    r[0][0] = 1.0 - 2.0 * (y * y + z * z);
-    r[0][1] = 2.0 * (x * y - w * z);
-    r[0][2] = 2.0 * (x * z + w * y);
-    r[1][0] = 2.0 * (x * y + w * z);
-    r[1][1] = 1.0 - 2.0 * (x * x + z * z);
-    r[1][2] = 2.0 * (y * z - w * x);
-    r[2][0] = 2.0 * (x * z - w * y);
-    r[2][1] = 2.0 * (y * z + w * x);
-    r[2][2] = 1.0 - 2.0 * (x * x + y * y);
+    sitl_quat_to_matrix(unit, r);
 }
 
 static void matrix_to_quat(const mat3 r, double q[4])

@@ -3,7 +3,7 @@
 # of the Table 1 campaign's Lissajous/Filter cell (docs/results.md: the paper's
 # sensors, start hovering at rest, and the campaign's filter configuration:
 # priors = the truth distribution's std, no random walks, gyro noise = the
-# simulated gyro's, rate process noise 0.0005). Streams MAVLink to
+# simulated gyro's, rate process noise 0.0004, body-rate prior 0.01 rad/s). Streams MAVLink to
 # udp:127.0.0.1:14550 (QGroundControl / `propid listen` can watch), logs the
 # flight and plots the estimates against the truth (docs/sitl.md).
 # Included by the top Makefile; uses its setup/host verbs, BUILD, BUILD_HOST, VENV.
@@ -24,7 +24,8 @@ SITL_ARGS    ?= --paper --vehicle crazyflie-plus --trajectory lissajous --mode f
 # = propid campaign's Filter-mode configuration (host_tools/propid/campaign.py);
 # 0.11547 = 0.2/sqrt(3), 0.0100767 = 0.0174533/sqrt(3).
 SITL_FILTER  ?= --prior-kf-std 0.11547 --prior-km-std 0.11547 --prior-bias-std 0.0100767 \
-                --filter-rate-noise 0.0005 --filter-coeff-walk 0.0 --filter-bias-walk 0.0
+                --prior-rate-std 0.01 \
+                --filter-rate-noise 0.0004 --filter-coeff-walk 0.0 --filter-bias-walk 0.0
 SITL_EXTRA   ?=
 
 sitl: setup host

@@ -255,12 +255,38 @@ def test_campaign_command_carries_the_documented_conditions(tmp_path):
     # priors = the truth distribution's std: 0.2/sqrt(3) and 1 deg/s / sqrt(3)
     assert "--prior-kf-std 0.11547" in text and "--prior-km-std 0.11547" in text
     assert "--prior-bias-std 0.0100767" in text
-    assert "--filter-rate-noise 0.0005" in text and "--prior-rate-std" not in text
-    at_rest = CampaignConfig(out_dir=tmp_path, sitl=Path("/bin/true"), prior_rate_std=0.01)
-    assert "--prior-rate-std 0.01" in " ".join(
-        sitl_command(at_rest, Job("circle", "filter", 0, 1), tmp_path / "z.csv"))
+    assert "--filter-rate-noise 0.0004" in text and "--prior-rate-std 0.01" in text
+    library_rate_prior = CampaignConfig(out_dir=tmp_path, sitl=Path("/bin/true"), prior_rate_std=None)
+    assert "--prior-rate-std" not in " ".join(
+        sitl_command(library_rate_prior, Job("circle", "filter", 0, 1), tmp_path / "z.csv"))
     assert "--filter-coeff-walk 0.0" in text and "--incorrect-source nominal" in text
     library = CampaignConfig(out_dir=tmp_path, sitl=Path("/bin/true"), priors_from_truth=False,
                              prior_rate_std=None, filter_rate_noise=None, filter_coeff_walk=None, filter_bias_walk=None)
     text = " ".join(sitl_command(library, Job("step", "oracle", 0, 1), tmp_path / "y.csv"))
     assert "--prior" not in text and "--filter-" not in text
+
+
+def test_campaign_cli_rate_prior_default_and_library(tmp_path, capsys):
+    import argparse
+
+    from propid.commands import campaign as campaign_command
+
+    fake = tmp_path / "fake_sitl"
+    fake.write_text(FAKE_SITL.format(python=sys.executable, tests_dir=str(Path(__file__).parent),
+                                     kf=KF_NOM, km=KM_NOM))
+    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
+
+    def conditions(name, *extra):
+        parser = argparse.ArgumentParser()
+        campaign_command.add_arguments(parser)
+        out = tmp_path / name
+        args = parser.parse_args(["--out", str(out), "--sitl", str(fake), "--trajectories", "circle",
+                                  "--modes", "oracle", "--trials", "1", "--no-progress", *extra])
+        assert campaign_command.run(args) == 0
+        return json.loads((out / "table1.json").read_text())["_conditions"]
+
+    default = conditions("default")
+    assert default["prior_rate_std"] == 0.01 and default["filter_rate_noise"] == 0.0004
+    assert conditions("library", "--prior-rate-std", "0")["prior_rate_std"] is None  # 0 = library's
+    with pytest.raises(UserError):
+        conditions("negative", "--prior-rate-std", "-1")

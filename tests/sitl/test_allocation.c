@@ -9,18 +9,7 @@
 #include <string.h>
 
 #include "allocation.h"
-
-static int failures;
-
-#define CHECK(cond, ...)                                                                           \
-    do {                                                                                           \
-        if (!(cond)) {                                                                             \
-            failures++;                                                                            \
-            printf("FAIL %s:%d: ", __FILE__, __LINE__);                                            \
-            printf(__VA_ARGS__);                                                                   \
-            printf("\n");                                                                          \
-        }                                                                                          \
-    } while (0)
+#include "check.h"
 
 static const double kf_nom = 2.3e-8, km_nom = 7.8e-10, arm = 0.043;
 static const double speed_max = 2500.0;
