@@ -13,6 +13,7 @@
 
 #include "propid/propid.h"
 #include "unity.h"
+#include "test_rng.h"
 
 #define SIM_PI 3.14159265358979f
 
@@ -20,18 +21,10 @@ void setUp(void) {}
 void tearDown(void) {}
 
 /* ---- PRNG: xorshift32 + Box-Muller -------------------------------------- */
-typedef struct {
-    uint32_t state;
-} rng_t;
-
+/* Open interval (0, 1): Box-Muller takes its logarithm. */
 static float rng_uniform(rng_t *rng)
 {
-    uint32_t x = rng->state;
-    x ^= x << 13;
-    x ^= x >> 17;
-    x ^= x << 5;
-    rng->state = x;
-    return ((float)(x >> 8) + 0.5f) * (1.0f / 16777216.0f);
+    return ((float)(rng_next(rng) >> 8) + 0.5f) * (1.0f / 16777216.0f);
 }
 
 static float rng_normal(rng_t *rng)

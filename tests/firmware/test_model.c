@@ -14,6 +14,7 @@
 
 #include "propid/propid.h"
 #include "unity.h"
+#include "test_rng.h"
 #include "../../firmware/src/propid_model.h"
 
 #define TEST_PI 3.14159265358979f
@@ -23,18 +24,9 @@ void tearDown(void) {}
 
 static propid_filter_t filter;
 
-typedef struct {
-    uint32_t state;
-} rng_t;
-
 static float rng_uniform(rng_t *rng, float lo, float hi)
 {
-    uint32_t x = rng->state;
-    x ^= x << 13;
-    x ^= x >> 17;
-    x ^= x << 5;
-    rng->state = x;
-    return lo + (hi - lo) * ((float)(x >> 8) * (1.0f / 16777216.0f));
+    return rng_range(rng, lo, hi);
 }
 
 static void init_symmetric(uint8_t rotors, float arm, float angle, float kf, float km,

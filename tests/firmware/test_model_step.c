@@ -14,6 +14,7 @@
 
 #include "propid/propid.h"
 #include "unity.h"
+#include "test_rng.h"
 #include "../../firmware/src/propid_internal.h"
 #include "../../firmware/src/propid_model.h"
 
@@ -27,18 +28,9 @@ static float dense_a[N_MAX][N_MAX];
 static float dense_b[N_MAX][N_MAX];
 static float saved_cov[N_MAX][N_MAX];
 
-typedef struct {
-    uint32_t state;
-} rng_t;
-
 static float rng_uniform(rng_t *rng, float lo, float hi)
 {
-    uint32_t x = rng->state;
-    x ^= x << 13;
-    x ^= x >> 17;
-    x ^= x << 5;
-    rng->state = x;
-    return lo + (hi - lo) * ((float)(x >> 8) * (1.0f / 16777216.0f));
+    return rng_range(rng, lo, hi);
 }
 
 static void init_quad(void)
