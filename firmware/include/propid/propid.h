@@ -7,8 +7,9 @@
  *
  *   propid_push_rotor_speeds()  whenever ESC telemetry arrives (any rate),
  *   propid_push_gyro()          for every gyro sample (any rate): the filter
- *                               predicts to the gyro time with the latest
- *                               rotor speeds, then fuses the three axes,
+ *                               predicts to the gyro time with the rotor
+ *                               speeds averaged over the interval (previous
+ *                               and latest), then fuses the three axes,
  *
  * and reads propid_get_estimate() whenever it wants the coefficients.
  *
