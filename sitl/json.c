@@ -279,6 +279,20 @@ static int parse_container(parser_t *ps, sitl_json_t *out, int depth, int is_obj
     }
 }
 
+/* true / false / null: consume the word and fill out; 0 if it is not there. */
+static int match_literal(parser_t *ps, const char *word, sitl_json_type_t type, double number,
+                         sitl_json_t *out)
+{
+    const size_t length = strlen(word);
+    if (strncmp(ps->p, word, length) != 0) {
+        return 0;
+    }
+    out->type = type;
+    out->number = number;
+    ps->p += length;
+    return 1;
+}
+
 static int parse_value(parser_t *ps, sitl_json_t *out, int depth)
 {
     if (depth > JSON_MAX_DEPTH) {
@@ -296,25 +310,17 @@ static int parse_value(parser_t *ps, sitl_json_t *out, int depth)
         out->string = parse_string(ps);
         return out->string == NULL ? -1 : 0;
     case 't':
-        if (strncmp(ps->p, "true", 4) == 0) {
-            out->type = SITL_JSON_BOOL;
-            out->number = 1.0;
-            ps->p += 4;
+        if (match_literal(ps, "true", SITL_JSON_BOOL, 1.0, out)) {
             return 0;
         }
         break;
     case 'f':
-        if (strncmp(ps->p, "false", 5) == 0) {
-            out->type = SITL_JSON_BOOL;
-            out->number = 0.0;
-            ps->p += 5;
+        if (match_literal(ps, "false", SITL_JSON_BOOL, 0.0, out)) {
             return 0;
         }
         break;
     case 'n':
-        if (strncmp(ps->p, "null", 4) == 0) {
-            out->type = SITL_JSON_NULL;
-            ps->p += 4;
+        if (match_literal(ps, "null", SITL_JSON_NULL, 0.0, out)) {
             return 0;
         }
         break;

@@ -13,6 +13,14 @@ static void json_number(FILE *f, double x)
     }
 }
 
+/* One `,\n  "name": number` member of the summary object. */
+static void json_field(FILE *f, const char *name, double value)
+{
+    fprintf(f, ",\n  \"%s\": ", name);
+    json_number(f, value);
+}
+
+
 static void json_time(FILE *f, double t)
 {
     if (t >= 0.0) {
@@ -77,10 +85,8 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
             (unsigned long long)o->seed, fx, o->paper ? "true" : "false");
     fprintf(f, "  \"duration_s\": ");
     json_number(f, o->duration_s);
-    fprintf(f, ",\n  \"trajectory_period_s\": ");
-    json_number(f, o->trajectory_period_s);
-    fprintf(f, ",\n  \"flown_s\": ");
-    json_number(f, r->flown_s);
+    json_field(f, "trajectory_period_s", o->trajectory_period_s);
+    json_field(f, "flown_s", r->flown_s);
     fprintf(f, ",\n  \"exit_code\": %d,\n  \"stable\": %s,\n", r->exit_code,
             r->diverged ? "false" : "true");
     fprintf(f, "  \"diverged_at_s\": ");
@@ -89,24 +95,15 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
     } else {
         fprintf(f, "null");
     }
-    fprintf(f, ",\n  \"rmse_x_m\": ");
-    json_number(f, r->rmse[0]);
-    fprintf(f, ",\n  \"rmse_y_m\": ");
-    json_number(f, r->rmse[1]);
-    fprintf(f, ",\n  \"rmse_z_m\": ");
-    json_number(f, r->rmse[2]);
-    fprintf(f, ",\n  \"rmse_yaw_deg\": ");
-    json_number(f, r->rmse_yaw_deg);
-    fprintf(f, ",\n  \"final_position_error_m\": ");
-    json_number(f, r->final_position_error_m);
-    fprintf(f, ",\n  \"final_yaw_error_deg\": ");
-    json_number(f, r->final_yaw_error_deg);
-    fprintf(f, ",\n  \"kf_rel_error_max\": ");
-    json_number(f, r->kf_rel_error_max);
-    fprintf(f, ",\n  \"km_rel_error_max\": ");
-    json_number(f, r->km_rel_error_max);
-    fprintf(f, ",\n  \"bias_error_max_rad_s\": ");
-    json_number(f, r->bias_error_max);
+    json_field(f, "rmse_x_m", r->rmse[0]);
+    json_field(f, "rmse_y_m", r->rmse[1]);
+    json_field(f, "rmse_z_m", r->rmse[2]);
+    json_field(f, "rmse_yaw_deg", r->rmse_yaw_deg);
+    json_field(f, "final_position_error_m", r->final_position_error_m);
+    json_field(f, "final_yaw_error_deg", r->final_yaw_error_deg);
+    json_field(f, "kf_rel_error_max", r->kf_rel_error_max);
+    json_field(f, "km_rel_error_max", r->km_rel_error_max);
+    json_field(f, "bias_error_max_rad_s", r->bias_error_max);
     fprintf(f, ",\n  \"convergence_coeff_s\": ");
     json_time(f, r->coeff_converged_s);
     fprintf(f, ",\n  \"convergence_bias_s\": ");
