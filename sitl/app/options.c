@@ -1,5 +1,11 @@
-/* propid_sitl command-line parsing (see options.h; docs/sitl.md lists everything). */
+/* propid_sitl command-line parsing (see options.h; docs/sitl.md lists everything).
+ * Every option is described once, in the table below: getopt_long's table and
+ * the --help text are built from it. */
+#define _GNU_SOURCE /* getopt_long */
 #include "options.h"
+
+#include <getopt.h>
+#include <stddef.h>
 
 #include <errno.h>
 #include <math.h>
@@ -54,80 +60,26 @@ void sitl_options_default(sitl_options_t *o)
     o->filter_bias_walk = -1.0;
 }
 
-void sitl_options_print_help(const char *prog)
-{
-    printf(
-        "usage: %s [options]\n"
-        "\n"
-        "Closed-loop multirotor simulator with the propid filter in the loop.\n"
-        "The filter runs in every mode; --mode picks the coefficients the controller's\n"
-        "allocation uses. Position/velocity/attitude/rate feedback is the truth.\n"
-        "\n"
-        "Flight:\n"
-        "  --vehicle NAME|FILE.json  crazyflie-plus (default), crazyflie-x, hummingbird-plus,\n"
-        "                            hummingbird-x, or a flight-log v1 vehicle file\n"
-        "  --trajectory KIND         hover | step | circle | lissajous (default)\n"
-        "  --mode MODE               oracle | incorrect | filter (default)\n"
-        "  --seed N                  random seed (default 1); same seed -> same log\n"
-        "  --duration S              flight time [s] (default 10)\n"
-        "  --trajectory-period S     the trajectory's period T [s] (default 10, the paper's;\n"
-        "                            independent of --duration)\n"
-        "  --yaw-amplitude RAD, --yaw-cycles N   circle/lissajous back-and-forth yaw\n"
-        "                            A sin(2 pi N t / T) (default 1.5 rad, 1.5 cycles)\n"
-        "  --start-height M          trajectory origin height [m] (default 1)\n"
-        "  --start-on-ground         start at rest on the ground, rotors stopped\n"
-        "  --start-at-rest           start hovering with zero velocity (default: on the\n"
-        "                            trajectory's initial velocity)\n"
-        "  --no-ground               no ground plane\n"
-        "  --physics-rate HZ         RK4 rate (default 2000, >= control rate)\n"
-        "  --control-rate HZ         controller/allocation rate (default 500)\n"
-        "  --realtime FACTOR         pace at FACTOR x wall clock (default: as fast as possible)\n"
-        "  --divergence-distance M   stop (exit 3) beyond this distance from the reference (2)\n"
-        "  --divergence-tilt DEG     stop (exit 3) beyond this tilt (default 90 = upside down)\n"
-        "\n"
-        "Coefficients:\n"
-        "  --coeff-spread S          true kf, km = nominal x U(1-S, 1+S) per rotor (default 0.2)\n"
-        "  --incorrect-source SRC    nominal (default: catalogue values) | random\n"
-        "  --incorrect-spread S      random: truth x (1 + N(0, S)) (default 0.1)\n"
-        "  --prior-kf-std R, --prior-km-std R   filter prior relative std (default: library)\n"
-        "  --prior-bias-std RAD_S    filter prior gyro-bias std (default: library)\n"
-        "  --prior-rate-std RAD_S    filter prior body-rate std (rate_std0; default: library).\n"
-        "                            The filter's rate starts at 0: a small value says the\n"
-        "                            vehicle is known to be at rest at the first gyro sample\n"
-        "  --filter-rate-noise X     filter rate_process_noise [rad/s^2/sqrt(Hz)] (default: library)\n"
-        "  --filter-coeff-walk X     filter kf/km relative random walk [1/sqrt(s)] (default: library)\n"
-        "  --filter-bias-walk X      filter gyro-bias random walk [rad/s/sqrt(s)] (default: library)\n"
-        "\n"
-        "Vehicle overrides:\n"
-        "  --motor-tau S, --rotor-speed-min RAD_S, --rotor-speed-max RAD_S\n"
-        "\n"
-        "Effects (all off by default = the paper's conditions), repeatable:\n"
-        "  --effect NAME[=STRENGTH]  rotor_inertia rotor_gyroscopic rotor_drag\n"
-        "                            translational_lift ground_effect com_offset inertia_error\n"
-        "                            esc_delay thrust_nonlinearity gyro_scale aero_damping\n"
-        "\n"
-        "Sensors (defaults: Bosch BMI088 IMU, bidirectional-DShot telemetry; docs/sitl.md):\n"
-        "  --paper                   the paper's sensors: 500 Hz gyro (noise + constant bias\n"
-        "                            only), exact rotor speeds at the control rate\n"
-        "  --imu-rate HZ (1000)      --gyro-noise RAD_S_SQRT_HZ   --gyro-bias-max RAD_S\n"
-        "  --gyro-bias-walk X        --gyro-range RAD_S (0 = none) --gyro-resolution RAD_S\n"
-        "  --accel-noise X           --accel-bias-max M_S2\n"
-        "  --imu-sample-at-start     first IMU sample at t = 0 (default: one period later)\n"
-        "  --esc-rate HZ (500)       --esc-latency S (0.001)  --esc-phase S (0.00025)\n"
-        "  --esc-dropout P (0.01)    --esc-quantisation dshot|none   --esc-pole-pairs N (7)\n"
-        "\n"
-        "Output:\n"
-        "  --log FILE.csv            flight log v1 + FILE.vehicle.json\n"
-        "  --log-rate HZ             log rows per second (default: every control step)\n"
-        "  --summary-json FILE       final metrics as JSON\n"
-        "  --mavlink udp:HOST:PORT   MAVLink 2 telemetry (off unless given)\n"
-        "  --quiet                   no live summary\n"
-        "  --help\n"
-        "\n"
-        "Exit codes: 0 ok, 1 run-time error, 2 usage error, 3 flight diverged,\n"
-        "130 interrupted (Ctrl-C; the log is kept).\n",
-        prog);
-}
+
+/* How an option's value is stored. */
+typedef enum {
+    OPT_SET_INT,  /* no value: the int at `offset` becomes `flag_value` */
+    OPT_DOUBLE,   /* number in [lo, hi] into the double at `offset` */
+    OPT_PATH,     /* string into the SITL_PATH_MAX buffer at `offset` */
+    OPT_CUSTOM,   /* `parse` handles the value */
+} opt_kind_t;
+
+typedef struct {
+    const char *section;  /* non-NULL: a --help heading printed before this option */
+    const char *name;     /* long name without "--" */
+    opt_kind_t kind;
+    size_t offset;        /* offsetof(sitl_options_t, ...) for all but OPT_CUSTOM */
+    double lo, hi;        /* OPT_DOUBLE range */
+    int flag_value;       /* OPT_SET_INT */
+    int (*parse)(sitl_options_t *o, const char *opt, const char *val); /* OPT_CUSTOM */
+    const char *metavar;  /* value placeholder in --help, NULL for flags */
+    const char *help;     /* may hold '\n' for continuation lines */
+} opt_t;
 
 static int parse_double(const char *opt, const char *text, double lo, double hi, double *out)
 {
@@ -152,193 +104,313 @@ static int parse_path(const char *opt, const char *text, char *out)
     return 0;
 }
 
-/* Options that take a value, for the "--opt value" / "--opt=value" split. */
-static const char *const valued[] = {
-    "--vehicle", "--trajectory", "--mode", "--seed", "--duration", "--log", "--log-rate",
-    "--mavlink", "--realtime", "--physics-rate", "--control-rate", "--coeff-spread",
-    "--incorrect-source", "--incorrect-spread", "--gyro-bias-max", "--effect", "--summary-json",
-    "--start-height", "--divergence-distance", "--divergence-tilt", "--imu-rate", "--gyro-noise",
-    "--gyro-bias-walk", "--gyro-range", "--gyro-resolution", "--accel-noise", "--accel-bias-max",
-    "--esc-rate", "--esc-latency", "--esc-phase", "--esc-dropout", "--esc-quantisation",
-    "--esc-pole-pairs", "--motor-tau", "--rotor-speed-min", "--rotor-speed-max",
-    "--prior-kf-std", "--prior-km-std", "--prior-bias-std", "--prior-rate-std",
-    "--filter-rate-noise", "--trajectory-period", "--yaw-amplitude", "--yaw-cycles",
-    "--filter-coeff-walk", "--filter-bias-walk", NULL};
-
-static int takes_value(const char *name)
+static int parse_trajectory(sitl_options_t *o, const char *opt, const char *val)
 {
-    for (int i = 0; valued[i] != NULL; i++) {
-        if (strcmp(name, valued[i]) == 0) {
-            return 1;
-        }
+    if (sitl_trajectory_from_name(val, &o->trajectory) != 0) {
+        fprintf(stderr, "propid_sitl: %s: unknown '%s' (hover|step|circle|lissajous)\n", opt, val);
+        return -1;
     }
     return 0;
 }
 
-static int apply(sitl_options_t *o, const char *name, const char *val)
+static int parse_mode(sitl_options_t *o, const char *opt, const char *val)
 {
-    double d;
-    const double big = 1e9;
-#define NUM(lo, hi, field)                                      \
-    do {                                                        \
-        if (parse_double(name, val, (lo), (hi), &d) != 0) {     \
-            return -1;                                          \
-        }                                                       \
-        (field) = d;                                            \
-    } while (0)
+    for (int i = 0; i < 3; i++) {
+        if (strcmp(val, mode_names[i]) == 0) {
+            o->mode = (sitl_mode_t)i;
+            return 0;
+        }
+    }
+    fprintf(stderr, "propid_sitl: %s: unknown '%s' (oracle|incorrect|filter)\n", opt, val);
+    return -1;
+}
 
-    if (strcmp(name, "--vehicle") == 0) {
-        return parse_path(name, val, o->vehicle);
-    } else if (strcmp(name, "--trajectory") == 0) {
-        if (sitl_trajectory_from_name(val, &o->trajectory) != 0) {
-            fprintf(stderr, "propid_sitl: --trajectory: unknown '%s' (hover|step|circle|lissajous)\n",
-                    val);
-            return -1;
-        }
-    } else if (strcmp(name, "--mode") == 0) {
-        int found = 0;
-        for (int i = 0; i < 3; i++) {
-            if (strcmp(val, mode_names[i]) == 0) {
-                o->mode = (sitl_mode_t)i;
-                found = 1;
-            }
-        }
-        if (!found) {
-            fprintf(stderr, "propid_sitl: --mode: unknown '%s' (oracle|incorrect|filter)\n", val);
-            return -1;
-        }
-    } else if (strcmp(name, "--seed") == 0) {
-        char *end = NULL;
-        errno = 0;
-        unsigned long long s = strtoull(val, &end, 10);
-        if (end == val || *end != '\0' || errno != 0 || val[0] == '-') {
-            fprintf(stderr, "propid_sitl: --seed: '%s' is not a non-negative integer\n", val);
-            return -1;
-        }
-        o->seed = (uint64_t)s;
-    } else if (strcmp(name, "--duration") == 0) {
-        NUM(1e-3, 1e6, o->duration_s);
-    } else if (strcmp(name, "--trajectory-period") == 0) {
-        NUM(1e-2, 1e6, o->trajectory_period_s);
-    } else if (strcmp(name, "--yaw-amplitude") == 0) {
-        NUM(0.0, 3.0, o->yaw_amplitude_rad);
-    } else if (strcmp(name, "--yaw-cycles") == 0) {
-        NUM(0.0, 1e3, o->yaw_cycles);
-    } else if (strcmp(name, "--log") == 0) {
-        return parse_path(name, val, o->log_path);
-    } else if (strcmp(name, "--log-rate") == 0) {
-        NUM(0.0, 1e6, o->log_rate_hz);
-    } else if (strcmp(name, "--mavlink") == 0) {
-        return parse_path(name, val, o->mavlink_url);
-    } else if (strcmp(name, "--realtime") == 0) {
-        NUM(0.0, 1e6, o->realtime);
-    } else if (strcmp(name, "--physics-rate") == 0) {
-        NUM(1.0, 1e6, o->physics_rate_hz);
-    } else if (strcmp(name, "--control-rate") == 0) {
-        NUM(1.0, 1e5, o->control_rate_hz);
-    } else if (strcmp(name, "--coeff-spread") == 0) {
-        NUM(0.0, 0.95, o->coeff_spread);
-    } else if (strcmp(name, "--incorrect-source") == 0) {
-        if (strcmp(val, "nominal") == 0) {
-            o->incorrect_random = 0;
-        } else if (strcmp(val, "random") == 0) {
-            o->incorrect_random = 1;
-        } else {
-            fprintf(stderr, "propid_sitl: --incorrect-source: '%s' (nominal|random)\n", val);
-            return -1;
-        }
-    } else if (strcmp(name, "--incorrect-spread") == 0) {
-        NUM(0.0, 0.9, o->incorrect_spread);
-    } else if (strcmp(name, "--gyro-bias-max") == 0) {
-        NUM(0.0, 10.0, o->imu.gyro.bias_max);
-    } else if (strcmp(name, "--effect") == 0) {
-        char err[512];
-        if (sitl_effects_parse(&o->effects, val, err, (int)sizeof(err)) != 0) {
-            fprintf(stderr, "propid_sitl: %s\n", err);
-            return -1;
-        }
-    } else if (strcmp(name, "--summary-json") == 0) {
-        return parse_path(name, val, o->summary_json);
-    } else if (strcmp(name, "--start-height") == 0) {
-        NUM(0.0, 1e4, o->start_height_m);
-    } else if (strcmp(name, "--divergence-distance") == 0) {
-        NUM(1e-3, big, o->divergence_distance_m);
-    } else if (strcmp(name, "--divergence-tilt") == 0) {
-        NUM(1.0, 180.0, o->divergence_tilt_deg);
-    } else if (strcmp(name, "--imu-rate") == 0) {
-        NUM(1.0, 1e5, o->imu.rate_hz);
-    } else if (strcmp(name, "--gyro-noise") == 0) {
-        NUM(0.0, 1.0, o->imu.gyro.noise_density);
-    } else if (strcmp(name, "--gyro-bias-walk") == 0) {
-        NUM(0.0, 1.0, o->imu.gyro.bias_walk);
-    } else if (strcmp(name, "--gyro-range") == 0) {
-        NUM(0.0, 1e3, o->imu.gyro.range);
-    } else if (strcmp(name, "--gyro-resolution") == 0) {
-        NUM(0.0, 1.0, o->imu.gyro.resolution);
-    } else if (strcmp(name, "--accel-noise") == 0) {
-        NUM(0.0, 10.0, o->imu.accel.noise_density);
-    } else if (strcmp(name, "--accel-bias-max") == 0) {
-        NUM(0.0, 10.0, o->imu.accel.bias_max);
-    } else if (strcmp(name, "--esc-rate") == 0) {
-        NUM(1.0, 1e5, o->esc.rate_hz);
-    } else if (strcmp(name, "--esc-latency") == 0) {
-        NUM(0.0, 0.5, o->esc.latency_s);
-    } else if (strcmp(name, "--esc-phase") == 0) {
-        NUM(0.0, 1.0, o->esc.phase_s);
-    } else if (strcmp(name, "--esc-dropout") == 0) {
-        NUM(0.0, 1.0, o->esc.dropout_prob);
-    } else if (strcmp(name, "--esc-quantisation") == 0) {
-        if (strcmp(val, "dshot") == 0) {
-            o->esc.quantise_dshot = 1;
-        } else if (strcmp(val, "none") == 0) {
-            o->esc.quantise_dshot = 0;
-        } else {
-            fprintf(stderr, "propid_sitl: --esc-quantisation: '%s' (dshot|none)\n", val);
-            return -1;
-        }
-    } else if (strcmp(name, "--esc-pole-pairs") == 0) {
-        NUM(1.0, 100.0, d);
-        o->esc.pole_pairs = (int)d;
-    } else if (strcmp(name, "--motor-tau") == 0) {
-        NUM(1e-5, 10.0, o->motor_time_constant);
-    } else if (strcmp(name, "--rotor-speed-min") == 0) {
-        NUM(0.0, 1e5, o->rotor_speed_min);
-    } else if (strcmp(name, "--rotor-speed-max") == 0) {
-        NUM(1.0, 1e5, o->rotor_speed_max);
-    } else if (strcmp(name, "--prior-kf-std") == 0) {
-        NUM(1e-6, 10.0, o->prior_kf_rel_std);
-    } else if (strcmp(name, "--prior-km-std") == 0) {
-        NUM(1e-6, 10.0, o->prior_km_rel_std);
-    } else if (strcmp(name, "--prior-bias-std") == 0) {
-        NUM(1e-9, 10.0, o->prior_bias_std);
-    } else if (strcmp(name, "--prior-rate-std") == 0) {
-        NUM(1e-9, 100.0, o->prior_rate_std);
-    } else if (strcmp(name, "--filter-rate-noise") == 0) {
-        NUM(0.0, 1e4, o->filter_rate_noise);
-    } else if (strcmp(name, "--filter-coeff-walk") == 0) {
-        NUM(0.0, 10.0, o->filter_coeff_walk);
-    } else if (strcmp(name, "--filter-bias-walk") == 0) {
-        NUM(0.0, 10.0, o->filter_bias_walk);
-    } else {
-        fprintf(stderr, "propid_sitl: unknown option '%s' (see --help)\n", name);
+static int parse_seed(sitl_options_t *o, const char *opt, const char *val)
+{
+    char *end = NULL;
+    errno = 0;
+    unsigned long long s = strtoull(val, &end, 10);
+    if (end == val || *end != '\0' || errno != 0 || val[0] == '-') {
+        fprintf(stderr, "propid_sitl: %s: '%s' is not a non-negative integer\n", opt, val);
         return -1;
     }
-#undef NUM
+    o->seed = (uint64_t)s;
+    return 0;
+}
+
+static int parse_incorrect_source(sitl_options_t *o, const char *opt, const char *val)
+{
+    if (strcmp(val, "nominal") == 0) {
+        o->incorrect_random = 0;
+    } else if (strcmp(val, "random") == 0) {
+        o->incorrect_random = 1;
+    } else {
+        fprintf(stderr, "propid_sitl: %s: '%s' (nominal|random)\n", opt, val);
+        return -1;
+    }
+    return 0;
+}
+
+static int parse_effect(sitl_options_t *o, const char *opt, const char *val)
+{
+    (void)opt;
+    char err[512];
+    if (sitl_effects_parse(&o->effects, val, err, (int)sizeof(err)) != 0) {
+        fprintf(stderr, "propid_sitl: %s\n", err);
+        return -1;
+    }
+    return 0;
+}
+
+static int parse_esc_quantisation(sitl_options_t *o, const char *opt, const char *val)
+{
+    if (strcmp(val, "dshot") == 0) {
+        o->esc.quantise_dshot = 1;
+    } else if (strcmp(val, "none") == 0) {
+        o->esc.quantise_dshot = 0;
+    } else {
+        fprintf(stderr, "propid_sitl: %s: '%s' (dshot|none)\n", opt, val);
+        return -1;
+    }
+    return 0;
+}
+
+static int parse_pole_pairs(sitl_options_t *o, const char *opt, const char *val)
+{
+    double d;
+    if (parse_double(opt, val, 1.0, 100.0, &d) != 0) {
+        return -1;
+    }
+    o->esc.pole_pairs = (int)d;
+    return 0;
+}
+
+#define OFF(field) offsetof(sitl_options_t, field)
+#define FLAG(sec, name, field, value, help) {sec, name, OPT_SET_INT, OFF(field), 0, 0, value, NULL, NULL, help}
+#define NUMBER(sec, name, field, lo, hi, metavar, help) \
+    {sec, name, OPT_DOUBLE, OFF(field), lo, hi, 0, NULL, metavar, help}
+#define PATH(sec, name, field, metavar, help) {sec, name, OPT_PATH, OFF(field), 0, 0, 0, NULL, metavar, help}
+#define CUSTOM(sec, name, fn, metavar, help) {sec, name, OPT_CUSTOM, 0, 0, 0, 0, fn, metavar, help}
+
+static const opt_t options[] = {
+    PATH("Flight", "vehicle", vehicle, "NAME|FILE.json",
+         "crazyflie-plus (default), crazyflie-x, hummingbird-plus,\n"
+         "hummingbird-x, or a flight-log v1 vehicle file"),
+    CUSTOM(NULL, "trajectory", parse_trajectory, "KIND", "hover | step | circle | lissajous (default)"),
+    CUSTOM(NULL, "mode", parse_mode, "MODE", "oracle | incorrect | filter (default)"),
+    CUSTOM(NULL, "seed", parse_seed, "N", "random seed (default 1); same seed -> same log"),
+    NUMBER(NULL, "duration", duration_s, 1e-3, 1e6, "S", "flight time [s] (default 10)"),
+    NUMBER(NULL, "trajectory-period", trajectory_period_s, 1e-2, 1e6, "S",
+           "the trajectory's period T [s] (default 10, the paper's;\n"
+           "independent of --duration)"),
+    NUMBER(NULL, "yaw-amplitude", yaw_amplitude_rad, 0.0, 3.0, "RAD",
+           "circle/lissajous back-and-forth yaw A sin(2 pi N t / T)\n(default 1.5 rad)"),
+    NUMBER(NULL, "yaw-cycles", yaw_cycles, 0.0, 1e3, "N", "N of that yaw (default 1.5 cycles)"),
+    NUMBER(NULL, "start-height", start_height_m, 0.0, 1e4, "M",
+           "trajectory origin height [m] (default 1)"),
+    FLAG(NULL, "start-on-ground", start_on_ground, 1, "start at rest on the ground, rotors stopped"),
+    FLAG(NULL, "start-at-rest", start_at_rest, 1,
+         "start hovering with zero velocity (default: on the\n"
+         "trajectory's initial velocity)"),
+    FLAG(NULL, "no-ground", ground_enabled, 0, "no ground plane"),
+    NUMBER(NULL, "physics-rate", physics_rate_hz, 1.0, 1e6, "HZ", "RK4 rate (default 2000, >= control rate)"),
+    NUMBER(NULL, "control-rate", control_rate_hz, 1.0, 1e5, "HZ", "controller/allocation rate (default 500)"),
+    NUMBER(NULL, "realtime", realtime, 0.0, 1e6, "FACTOR",
+           "pace at FACTOR x wall clock (default: as fast as possible)"),
+    NUMBER(NULL, "divergence-distance", divergence_distance_m, 1e-3, 1e9, "M",
+           "stop (exit 3) beyond this distance from the reference (2)"),
+    NUMBER(NULL, "divergence-tilt", divergence_tilt_deg, 1.0, 180.0, "DEG",
+           "stop (exit 3) beyond this tilt (default 90 = upside down)"),
+
+    NUMBER("Coefficients", "coeff-spread", coeff_spread, 0.0, 0.95, "S",
+           "true kf, km = nominal x U(1-S, 1+S) per rotor (default 0.2)"),
+    CUSTOM(NULL, "incorrect-source", parse_incorrect_source, "SRC",
+           "nominal (default: catalogue values) | random"),
+    NUMBER(NULL, "incorrect-spread", incorrect_spread, 0.0, 0.9, "S",
+           "random: truth x (1 + N(0, S)) (default 0.1)"),
+    NUMBER(NULL, "prior-kf-std", prior_kf_rel_std, 1e-6, 10.0, "R",
+           "filter prior relative std of kf (default: library)"),
+    NUMBER(NULL, "prior-km-std", prior_km_rel_std, 1e-6, 10.0, "R",
+           "filter prior relative std of km (default: library)"),
+    NUMBER(NULL, "prior-bias-std", prior_bias_std, 1e-9, 10.0, "RAD_S",
+           "filter prior gyro-bias std (default: library)"),
+    NUMBER(NULL, "prior-rate-std", prior_rate_std, 1e-9, 100.0, "RAD_S",
+           "filter prior body-rate std (rate_std0; default: library).\n"
+           "The filter's rate starts at 0: a small value says the\n"
+           "vehicle is known to be at rest at the first gyro sample"),
+    NUMBER(NULL, "filter-rate-noise", filter_rate_noise, 0.0, 1e4, "X",
+           "filter rate_process_noise [rad/s^2/sqrt(Hz)] (default: library)"),
+    NUMBER(NULL, "filter-coeff-walk", filter_coeff_walk, 0.0, 10.0, "X",
+           "filter kf/km relative random walk [1/sqrt(s)] (default: library)"),
+    NUMBER(NULL, "filter-bias-walk", filter_bias_walk, 0.0, 10.0, "X",
+           "filter gyro-bias random walk [rad/s/sqrt(s)] (default: library)"),
+
+    NUMBER("Vehicle overrides", "motor-tau", motor_time_constant, 1e-5, 10.0, "S",
+           "motor time constant [s]"),
+    NUMBER(NULL, "rotor-speed-min", rotor_speed_min, 0.0, 1e5, "RAD_S", "minimum rotor speed"),
+    NUMBER(NULL, "rotor-speed-max", rotor_speed_max, 1.0, 1e5, "RAD_S", "maximum rotor speed"),
+
+    CUSTOM("Effects (all off by default = the paper's conditions), repeatable", "effect",
+           parse_effect, "NAME[=STRENGTH]",
+           "rotor_inertia rotor_gyroscopic rotor_drag\n"
+           "translational_lift ground_effect com_offset inertia_error\n"
+           "esc_delay thrust_nonlinearity gyro_scale aero_damping"),
+
+    FLAG("Sensors (defaults: Bosch BMI088 IMU, bidirectional-DShot telemetry; docs/sitl.md)",
+         "paper", paper, 1,
+         "the paper's sensors: 500 Hz gyro (noise + constant bias\n"
+         "only), exact rotor speeds at the control rate"),
+    NUMBER(NULL, "imu-rate", imu.rate_hz, 1.0, 1e5, "HZ", "IMU sample rate (1000)"),
+    NUMBER(NULL, "gyro-noise", imu.gyro.noise_density, 0.0, 1.0, "RAD_S_SQRT_HZ", "gyro noise density"),
+    NUMBER(NULL, "gyro-bias-max", imu.gyro.bias_max, 0.0, 10.0, "RAD_S",
+           "gyro bias drawn from U(-X, X) per axis"),
+    NUMBER(NULL, "gyro-bias-walk", imu.gyro.bias_walk, 0.0, 1.0, "X", "gyro bias random walk"),
+    NUMBER(NULL, "gyro-range", imu.gyro.range, 0.0, 1e3, "RAD_S", "gyro full scale (0 = none)"),
+    NUMBER(NULL, "gyro-resolution", imu.gyro.resolution, 0.0, 1.0, "RAD_S", "gyro LSB (0 = none)"),
+    NUMBER(NULL, "accel-noise", imu.accel.noise_density, 0.0, 10.0, "X", "accelerometer noise density"),
+    NUMBER(NULL, "accel-bias-max", imu.accel.bias_max, 0.0, 10.0, "M_S2",
+           "accelerometer bias drawn from U(-X, X) per axis"),
+    FLAG(NULL, "imu-sample-at-start", imu_sample_at_start, 1,
+         "first IMU sample at t = 0 (default: one period later)"),
+    NUMBER(NULL, "esc-rate", esc.rate_hz, 1.0, 1e5, "HZ", "ESC telemetry rate (500)"),
+    NUMBER(NULL, "esc-latency", esc.latency_s, 0.0, 0.5, "S", "ESC telemetry latency (0.001)"),
+    NUMBER(NULL, "esc-phase", esc.phase_s, 0.0, 1.0, "S", "time of the first report (0.00025)"),
+    NUMBER(NULL, "esc-dropout", esc.dropout_prob, 0.0, 1.0, "P", "probability a report is lost (0.01)"),
+    CUSTOM(NULL, "esc-quantisation", parse_esc_quantisation, "dshot|none",
+           "DShot eRPM quantisation (default dshot)"),
+    CUSTOM(NULL, "esc-pole-pairs", parse_pole_pairs, "N", "motor pole pairs (7)"),
+
+    PATH("Output", "log", log_path, "FILE.csv", "flight log v1 + FILE.vehicle.json"),
+    NUMBER(NULL, "log-rate", log_rate_hz, 0.0, 1e6, "HZ",
+           "log rows per second (default: every control step)"),
+    PATH(NULL, "summary-json", summary_json, "FILE", "final metrics as JSON"),
+    PATH(NULL, "mavlink", mavlink_url, "udp:HOST:PORT", "MAVLink 2 telemetry (off unless given)"),
+    FLAG(NULL, "quiet", quiet, 1, "no live summary"),
+    FLAG(NULL, "help", help, 1, "this text (also -h)"),
+};
+
+#define OPTION_COUNT ((int)(sizeof(options) / sizeof(options[0])))
+
+void sitl_options_print_help(const char *prog)
+{
+    printf("usage: %s [options]\n"
+           "\n"
+           "Closed-loop multirotor simulator with the propid filter in the loop.\n"
+           "The filter runs in every mode; --mode picks the coefficients the controller's\n"
+           "allocation uses. Position/velocity/attitude/rate feedback is the truth.\n"
+           "Every option also takes its value as --option=VALUE.\n",
+           prog);
+    for (int i = 0; i < OPTION_COUNT; i++) {
+        const opt_t *opt = &options[i];
+        if (opt->section != NULL) {
+            printf("\n%s:\n", opt->section);
+        }
+        char left[64];
+        int n = snprintf(left, sizeof(left), "  --%s%s%s", opt->name, opt->metavar ? " " : "",
+                         opt->metavar ? opt->metavar : "");
+        const char *line = opt->help;
+        int first = 1;
+        while (line != NULL && *line != '\0') {
+            const char *nl = strchr(line, '\n');
+            int len = nl != NULL ? (int)(nl - line) : (int)strlen(line);
+            if (first && n < 28) {
+                printf("%-28s%.*s\n", left, len, line);
+            } else {
+                if (first) {
+                    printf("%s\n", left);
+                }
+                printf("%-28s%.*s\n", "", len, line);
+            }
+            first = 0;
+            line = nl != NULL ? nl + 1 : NULL;
+        }
+    }
+    printf("\nExit codes: 0 ok, 1 run-time error, 2 usage error, 3 flight diverged,\n"
+           "130 interrupted (Ctrl-C; the log is kept).\n");
+}
+
+static int apply(sitl_options_t *o, const opt_t *opt, const char *val)
+{
+    char name[64];
+    snprintf(name, sizeof(name), "--%s", opt->name);
+    char *field = (char *)o + opt->offset;
+    switch (opt->kind) {
+    case OPT_SET_INT:
+        *(int *)(void *)field = opt->flag_value;
+        return 0;
+    case OPT_DOUBLE:
+        return parse_double(name, val, opt->lo, opt->hi, (double *)(void *)field);
+    case OPT_PATH:
+        return parse_path(name, val, field);
+    case OPT_CUSTOM:
+        return opt->parse(o, name, val);
+    }
+    return -1;
+}
+
+/* One getopt_long pass over argv. paper_pass: only --help and --paper are
+ * acted on, errors are left to the full pass. */
+static int scan(sitl_options_t *o, int argc, char **argv, const struct option *longopts,
+                int paper_pass)
+{
+    optind = 0; /* full re-initialisation (GNU): the parser may run more than once */
+    opterr = 0;
+    for (;;) {
+        int index = -1;
+        int c = getopt_long(argc, argv, ":h", longopts, &index);
+        if (c == -1) {
+            break;
+        }
+        if (c == 'h') {
+            o->help = 1;
+            continue;
+        }
+        if (c == '?' || c == ':') {
+            if (paper_pass) {
+                continue;
+            }
+            const char *arg = argv[optind - 1];
+            if (c == ':') {
+                fprintf(stderr, "propid_sitl: %s needs a value\n", arg);
+            } else {
+                fprintf(stderr, "propid_sitl: unknown option '%s' (see --help)\n", arg);
+            }
+            return SITL_EXIT_USAGE;
+        }
+        const opt_t *opt = &options[c - 256];
+        int is_paper_or_help = opt->kind == OPT_SET_INT &&
+                               (opt->offset == OFF(paper) || opt->offset == OFF(help));
+        if (paper_pass != is_paper_or_help) {
+            continue;
+        }
+        if (apply(o, opt, optarg) != 0) {
+            return SITL_EXIT_USAGE;
+        }
+    }
+    if (!paper_pass && optind < argc) {
+        fprintf(stderr, "propid_sitl: unexpected argument '%s' (see --help)\n", argv[optind]);
+        return SITL_EXIT_USAGE;
+    }
     return 0;
 }
 
 int sitl_options_parse(sitl_options_t *o, int argc, char **argv)
 {
     const char *prog = argc > 0 ? argv[0] : "propid_sitl";
+    struct option longopts[OPTION_COUNT + 1];
+    for (int i = 0; i < OPTION_COUNT; i++) {
+        longopts[i].name = options[i].name;
+        longopts[i].has_arg = options[i].kind == OPT_SET_INT ? no_argument : required_argument;
+        longopts[i].flag = NULL;
+        longopts[i].val = 256 + i;
+    }
+    memset(&longopts[OPTION_COUNT], 0, sizeof(longopts[OPTION_COUNT]));
+
     /* --paper first: it resets the sensor models, later options refine them. */
-    for (int i = 1; i < argc; i++) {
-        if (strcmp(argv[i], "--help") == 0 || strcmp(argv[i], "-h") == 0) {
-            sitl_options_print_help(prog);
-            return 1;
-        }
-        if (strcmp(argv[i], "--paper") == 0) {
-            o->paper = 1;
-        }
+    scan(o, argc, argv, longopts, 1);
+    if (o->help) {
+        sitl_options_print_help(prog);
+        return 1;
     }
     double paper_bias_max = o->imu.gyro.bias_max;
     if (o->paper) {
@@ -346,60 +418,9 @@ int sitl_options_parse(sitl_options_t *o, int argc, char **argv)
         o->imu.gyro.bias_max = paper_bias_max;
         sitl_esc_paper_params(&o->esc, 0.0); /* rate 0 = the control rate, set below */
     }
-    for (int i = 1; i < argc; i++) {
-        char name[64];
-        const char *arg = argv[i];
-        const char *val = NULL;
-        if (strncmp(arg, "--", 2) != 0) {
-            fprintf(stderr, "propid_sitl: unexpected argument '%s' (see --help)\n", arg);
-            return SITL_EXIT_USAGE;
-        }
-        const char *eq = strchr(arg, '=');
-        size_t len = eq != NULL ? (size_t)(eq - arg) : strlen(arg);
-        if (len >= sizeof(name)) {
-            fprintf(stderr, "propid_sitl: unknown option '%s'\n", arg);
-            return SITL_EXIT_USAGE;
-        }
-        memcpy(name, arg, len);
-        name[len] = '\0';
-        if (strcmp(name, "--paper") == 0) {
-            continue;
-        }
-        if (strcmp(name, "--quiet") == 0) {
-            o->quiet = 1;
-            continue;
-        }
-        if (strcmp(name, "--start-on-ground") == 0) {
-            o->start_on_ground = 1;
-            continue;
-        }
-        if (strcmp(name, "--start-at-rest") == 0) {
-            o->start_at_rest = 1;
-            continue;
-        }
-        if (strcmp(name, "--imu-sample-at-start") == 0) {
-            o->imu_sample_at_start = 1;
-            continue;
-        }
-        if (strcmp(name, "--no-ground") == 0) {
-            o->ground_enabled = 0;
-            continue;
-        }
-        if (!takes_value(name)) {
-            fprintf(stderr, "propid_sitl: unknown option '%s' (see --help)\n", name);
-            return SITL_EXIT_USAGE;
-        }
-        if (eq != NULL) {
-            val = eq + 1;
-        } else if (i + 1 < argc) {
-            val = argv[++i];
-        } else {
-            fprintf(stderr, "propid_sitl: %s needs a value\n", name);
-            return SITL_EXIT_USAGE;
-        }
-        if (apply(o, name, val) != 0) {
-            return SITL_EXIT_USAGE;
-        }
+    int status = scan(o, argc, argv, longopts, 0);
+    if (status != 0) {
+        return status;
     }
     if (o->esc.rate_hz == 0.0) {
         o->esc.rate_hz = o->control_rate_hz;

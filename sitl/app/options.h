@@ -51,6 +51,7 @@ typedef struct {
     int quiet;
     char summary_json[SITL_PATH_MAX];   /* "" = none */
     int paper;                          /* --paper was given */
+    int help;                           /* --help or -h was given */
     double start_height_m;              /* trajectory origin z */
     int start_on_ground;                /* start at rest on the ground below the origin */
     int start_at_rest;                  /* start at the origin with zero velocity */
