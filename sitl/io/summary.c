@@ -2,32 +2,29 @@
 #include <math.h>
 #include <stdio.h>
 
+#include "json_file.h"
 #include "sim.h"
 
-static void json_number(FILE *f, double x)
+/* %.9g: every float estimate reads back exactly; non-finite -> null. */
+static cJSON *number9(double x)
 {
-    if (isfinite(x)) {
-        fprintf(f, "%.9g", x);
-    } else {
-        fprintf(f, "null");
+    char buf[32];
+    if (!isfinite(x)) {
+        return cJSON_CreateNull();
     }
+    snprintf(buf, sizeof(buf), "%.9g", x);
+    return cJSON_CreateRaw(buf);
 }
 
-/* One `,\n  "name": number` member of the summary object. */
-static void json_field(FILE *f, const char *name, double value)
+static void add_number(cJSON *object, const char *name, double value)
 {
-    fprintf(f, ",\n  \"%s\": ", name);
-    json_number(f, value);
+    cJSON_AddItemToObject(object, name, number9(value));
 }
 
-
-static void json_time(FILE *f, double t)
+/* A convergence time; "never" (< 0) -> null. */
+static void add_time(cJSON *object, const char *name, double t)
 {
-    if (t >= 0.0) {
-        fprintf(f, "%.9g", t);
-    } else {
-        fprintf(f, "null");
-    }
+    cJSON_AddItemToObject(object, name, t >= 0.0 ? number9(t) : cJSON_CreateNull());
 }
 
 void sitl_print_final_summary(FILE *out, const sitl_options_t *o, const sitl_result_t *r)
@@ -73,62 +70,56 @@ void sitl_print_final_summary(FILE *out, const sitl_options_t *o, const sitl_res
 
 int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sitl_result_t *r)
 {
-    FILE *f = fopen(path, "w");
-    if (f == NULL) {
-        return -1;
-    }
-    char fx[256];
+    char fx[256], text[32];
     sitl_effects_describe(&o->effects, fx, (int)sizeof(fx));
-    fprintf(f, "{\n  \"vehicle\": \"%s\",\n  \"trajectory\": \"%s\",\n  \"mode\": \"%s\",\n",
-            o->vehicle, sitl_trajectory_name(o->trajectory), sitl_mode_name(o->mode));
-    fprintf(f, "  \"seed\": %llu,\n  \"effects\": \"%s\",\n  \"paper_sensors\": %s,\n",
-            (unsigned long long)o->seed, fx, o->paper ? "true" : "false");
-    fprintf(f, "  \"duration_s\": ");
-    json_number(f, o->duration_s);
-    json_field(f, "trajectory_period_s", o->trajectory_period_s);
-    json_field(f, "flown_s", r->flown_s);
-    fprintf(f, ",\n  \"exit_code\": %d,\n  \"stable\": %s,\n", r->exit_code,
-            r->diverged ? "false" : "true");
-    fprintf(f, "  \"diverged_at_s\": ");
-    if (r->diverged) {
-        json_number(f, r->diverged_at_s);
-    } else {
-        fprintf(f, "null");
-    }
-    json_field(f, "rmse_x_m", r->rmse[0]);
-    json_field(f, "rmse_y_m", r->rmse[1]);
-    json_field(f, "rmse_z_m", r->rmse[2]);
-    json_field(f, "rmse_yaw_deg", r->rmse_yaw_deg);
-    json_field(f, "final_position_error_m", r->final_position_error_m);
-    json_field(f, "final_yaw_error_deg", r->final_yaw_error_deg);
-    json_field(f, "kf_rel_error_max", r->kf_rel_error_max);
-    json_field(f, "km_rel_error_max", r->km_rel_error_max);
-    json_field(f, "bias_error_max_rad_s", r->bias_error_max);
-    fprintf(f, ",\n  \"convergence_coeff_s\": ");
-    json_time(f, r->coeff_converged_s);
-    fprintf(f, ",\n  \"convergence_bias_s\": ");
-    json_time(f, r->bias_converged_s);
-    fprintf(f, ",\n  \"health\": %lu,\n", (unsigned long)r->estimate.health);
+    cJSON *root = cJSON_CreateObject();
+    cJSON_AddStringToObject(root, "vehicle", o->vehicle);
+    cJSON_AddStringToObject(root, "trajectory", sitl_trajectory_name(o->trajectory));
+    cJSON_AddStringToObject(root, "mode", sitl_mode_name(o->mode));
+    snprintf(text, sizeof(text), "%llu", (unsigned long long)o->seed); /* exact beyond 2^53 */
+    cJSON_AddRawToObject(root, "seed", text);
+    cJSON_AddStringToObject(root, "effects", fx);
+    cJSON_AddBoolToObject(root, "paper_sensors", o->paper);
+    add_number(root, "duration_s", o->duration_s);
+    add_number(root, "trajectory_period_s", o->trajectory_period_s);
+    add_number(root, "flown_s", r->flown_s);
+    cJSON_AddNumberToObject(root, "exit_code", r->exit_code);
+    cJSON_AddBoolToObject(root, "stable", !r->diverged);
+    cJSON_AddItemToObject(root, "diverged_at_s",
+                          r->diverged ? number9(r->diverged_at_s) : cJSON_CreateNull());
+    add_number(root, "rmse_x_m", r->rmse[0]);
+    add_number(root, "rmse_y_m", r->rmse[1]);
+    add_number(root, "rmse_z_m", r->rmse[2]);
+    add_number(root, "rmse_yaw_deg", r->rmse_yaw_deg);
+    add_number(root, "final_position_error_m", r->final_position_error_m);
+    add_number(root, "final_yaw_error_deg", r->final_yaw_error_deg);
+    add_number(root, "kf_rel_error_max", r->kf_rel_error_max);
+    add_number(root, "km_rel_error_max", r->km_rel_error_max);
+    add_number(root, "bias_error_max_rad_s", r->bias_error_max);
+    add_time(root, "convergence_coeff_s", r->coeff_converged_s);
+    add_time(root, "convergence_bias_s", r->bias_converged_s);
+    cJSON_AddNumberToObject(root, "health", (double)r->estimate.health);
     const char *names[4] = {"true_kf", "est_kf", "true_km", "est_km"};
     for (int k = 0; k < 4; k++) {
-        fprintf(f, "  \"%s\": [", names[k]);
+        cJSON *list = cJSON_AddArrayToObject(root, names[k]);
         for (int i = 0; i < r->rotor_count; i++) {
             double v = k == 0   ? r->true_kf[i]
                        : k == 1 ? (double)r->estimate.thrust_coeff[i]
                        : k == 2 ? r->true_km[i]
                                 : (double)r->estimate.drag_coeff[i];
-            fprintf(f, "%s", i ? ", " : "");
-            json_number(f, v);
+            cJSON_AddItemToArray(list, number9(v));
         }
-        fprintf(f, "],\n");
     }
-    fprintf(f, "  \"true_bias\": [%.9g, %.9g, %.9g],\n", r->true_bias[0], r->true_bias[1],
-            r->true_bias[2]);
-    fprintf(f, "  \"est_bias\": [%.9g, %.9g, %.9g],\n", (double)r->estimate.gyro_bias[0],
-            (double)r->estimate.gyro_bias[1], (double)r->estimate.gyro_bias[2]);
-    fprintf(f, "  \"gyro_accepted\": %lu,\n  \"rotor_accepted\": %lu,\n",
-            (unsigned long)r->counters.gyro_accepted, (unsigned long)r->counters.rotor_accepted);
-    fprintf(f, "  \"control_steps\": %ld,\n  \"wall_time_s\": %.6g\n}\n", r->control_steps,
-            r->wall_time_s);
-    return fclose(f) == 0 ? 0 : -1;
+    cJSON *true_bias = cJSON_AddArrayToObject(root, "true_bias");
+    cJSON *est_bias = cJSON_AddArrayToObject(root, "est_bias");
+    for (int a = 0; a < 3; a++) {
+        cJSON_AddItemToArray(true_bias, number9(r->true_bias[a]));
+        cJSON_AddItemToArray(est_bias, number9((double)r->estimate.gyro_bias[a]));
+    }
+    cJSON_AddNumberToObject(root, "gyro_accepted", (double)r->counters.gyro_accepted);
+    cJSON_AddNumberToObject(root, "rotor_accepted", (double)r->counters.rotor_accepted);
+    cJSON_AddNumberToObject(root, "control_steps", (double)r->control_steps);
+    snprintf(text, sizeof(text), "%.6g", r->wall_time_s);
+    cJSON_AddRawToObject(root, "wall_time_s", text);
+    return sitl_write_json_file(path, root);
 }

@@ -1,11 +1,13 @@
-/* Flight-log v1 vehicle file (spec/flightlog-v1.md) reader and writer. */
+/* Flight-log v1 vehicle file (docs/flightlog.md) reader and writer on cJSON. */
+#include <cjson/cJSON.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "json.h"
+#include "json_file.h"
+#include "text_file.h"
 #include "vehicle.h"
 
 static int set_err(char *err, int err_size, const char *fmt, ...)
@@ -19,30 +21,41 @@ static int set_err(char *err, int err_size, const char *fmt, ...)
     return -1;
 }
 
-static int is_number(const sitl_json_t *n)
+static int is_number(const cJSON *n)
 {
-    return n != NULL && n->type == SITL_JSON_NUMBER && isfinite(n->number);
+    return cJSON_IsNumber(n) && isfinite(n->valuedouble);
 }
 
-/* A required positive number (or, with list_ok, one per rotor). */
-static int read_coeff(const sitl_json_t *root, const char *key, int rotor_count, double *out,
+static const cJSON *member(const cJSON *object, const char *key)
+{
+    return cJSON_GetObjectItemCaseSensitive(object, key);
+}
+
+static int is_array_of(const cJSON *n, int count)
+{
+    return cJSON_IsArray(n) && cJSON_GetArraySize(n) == count;
+}
+
+/* A required positive number (or one per rotor). */
+static int read_coeff(const cJSON *root, const char *key, int rotor_count, double *out,
                       const char *path, char *err, int err_size)
 {
-    const sitl_json_t *n = sitl_json_get(root, key);
-    if (n == NULL || n->type == SITL_JSON_NULL) {
+    const cJSON *n = member(root, key);
+    if (n == NULL || cJSON_IsNull(n)) {
         return set_err(err, err_size, "%s: '%s' is missing or null; propid_sitl needs it", path,
                        key);
     }
     if (is_number(n)) {
         for (int i = 0; i < rotor_count; i++) {
-            out[i] = n->number;
+            out[i] = n->valuedouble;
         }
-    } else if (n->type == SITL_JSON_ARRAY && (int)n->count == rotor_count) {
+    } else if (is_array_of(n, rotor_count)) {
         for (int i = 0; i < rotor_count; i++) {
-            if (!is_number(&n->children[i])) {
+            const cJSON *item = cJSON_GetArrayItem(n, i);
+            if (!is_number(item)) {
                 return set_err(err, err_size, "%s: '%s'[%d] is not a number", path, key, i);
             }
-            out[i] = n->children[i].number;
+            out[i] = item->valuedouble;
         }
     } else {
         return set_err(err, err_size, "%s: '%s' must be a number or a list of %d numbers", path,
@@ -56,84 +69,105 @@ static int read_coeff(const sitl_json_t *root, const char *key, int rotor_count,
     return 0;
 }
 
-static int load_tree(const sitl_json_t *root, const char *path, sitl_vehicle_t *v, char *err,
+/* Three finite numbers into out; 0, or -1 if n is not such a list. */
+static int read_vec3(const cJSON *n, double out[3])
+{
+    if (!is_array_of(n, 3)) {
+        return -1;
+    }
+    for (int k = 0; k < 3; k++) {
+        const cJSON *item = cJSON_GetArrayItem(n, k);
+        if (!is_number(item)) {
+            return -1;
+        }
+        out[k] = item->valuedouble;
+    }
+    return 0;
+}
+
+static int read_inertia(const cJSON *inertia, const char *path, sitl_vehicle_t *v, char *err,
+                        int err_size)
+{
+    memset(v->inertia, 0, sizeof(v->inertia));
+    if (!is_array_of(inertia, 3)) {
+        return set_err(err, err_size, "%s: 'inertia' must be [Jxx,Jyy,Jzz] or a 3x3 list", path);
+    }
+    if (is_number(cJSON_GetArrayItem(inertia, 0))) {
+        double diagonal[3];
+        if (read_vec3(inertia, diagonal) != 0) {
+            return set_err(err, err_size, "%s: 'inertia' diagonal must be 3 numbers", path);
+        }
+        for (int i = 0; i < 3; i++) {
+            v->inertia[i][i] = diagonal[i];
+        }
+        return 0;
+    }
+    for (int i = 0; i < 3; i++) {
+        const cJSON *row = cJSON_GetArrayItem(inertia, i);
+        if (!is_array_of(row, 3)) {
+            return set_err(err, err_size, "%s: 'inertia' must be [Jxx,Jyy,Jzz] or 3x3", path);
+        }
+        for (int j = 0; j < 3; j++) {
+            const cJSON *item = cJSON_GetArrayItem(row, j);
+            if (!is_number(item)) {
+                return set_err(err, err_size, "%s: 'inertia'[%d][%d] is not a number", path, i,
+                               j);
+            }
+            v->inertia[i][j] = item->valuedouble;
+        }
+    }
+    return 0;
+}
+
+static int load_tree(const cJSON *root, const char *path, sitl_vehicle_t *v, char *err,
                      int err_size)
 {
-    if (root->type != SITL_JSON_OBJECT) {
+    if (!cJSON_IsObject(root)) {
         return set_err(err, err_size, "%s: the vehicle file must be a JSON object", path);
     }
-    const sitl_json_t *name = sitl_json_get(root, "name");
-    if (name != NULL && name->type == SITL_JSON_STRING) {
-        snprintf(v->name, sizeof(v->name), "%s", name->string);
+    const cJSON *name = member(root, "name");
+    if (cJSON_IsString(name)) {
+        snprintf(v->name, sizeof(v->name), "%s", name->valuestring);
     } else {
         snprintf(v->name, sizeof(v->name), "%s", path);
     }
 
-    const sitl_json_t *mass = sitl_json_get(root, "mass");
-    if (mass == NULL || mass->type == SITL_JSON_NULL) {
+    const cJSON *mass = member(root, "mass");
+    if (mass == NULL || cJSON_IsNull(mass)) {
         return set_err(err, err_size, "%s: 'mass' is missing or null; propid_sitl needs it", path);
     }
-    if (!is_number(mass) || mass->number <= 0.0) {
+    if (!is_number(mass) || mass->valuedouble <= 0.0) {
         return set_err(err, err_size, "%s: 'mass' must be a positive number", path);
     }
-    v->mass = mass->number;
+    v->mass = mass->valuedouble;
 
-    const sitl_json_t *inertia = sitl_json_get(root, "inertia");
-    if (inertia == NULL || inertia->type == SITL_JSON_NULL) {
+    const cJSON *inertia = member(root, "inertia");
+    if (inertia == NULL || cJSON_IsNull(inertia)) {
         return set_err(err, err_size, "%s: 'inertia' is missing or null; propid_sitl needs it",
                        path);
     }
-    memset(v->inertia, 0, sizeof(v->inertia));
-    if (inertia->type == SITL_JSON_ARRAY && inertia->count == 3 &&
-        is_number(&inertia->children[0])) {
-        for (int i = 0; i < 3; i++) {
-            if (!is_number(&inertia->children[i])) {
-                return set_err(err, err_size, "%s: 'inertia' diagonal must be 3 numbers", path);
-            }
-            v->inertia[i][i] = inertia->children[i].number;
-        }
-    } else if (inertia->type == SITL_JSON_ARRAY && inertia->count == 3) {
-        for (int i = 0; i < 3; i++) {
-            const sitl_json_t *row = &inertia->children[i];
-            if (row->type != SITL_JSON_ARRAY || row->count != 3) {
-                return set_err(err, err_size, "%s: 'inertia' must be [Jxx,Jyy,Jzz] or 3x3", path);
-            }
-            for (int j = 0; j < 3; j++) {
-                if (!is_number(&row->children[j])) {
-                    return set_err(err, err_size, "%s: 'inertia'[%d][%d] is not a number", path,
-                                   i, j);
-                }
-                v->inertia[i][j] = row->children[j].number;
-            }
-        }
-    } else {
-        return set_err(err, err_size, "%s: 'inertia' must be [Jxx,Jyy,Jzz] or a 3x3 list", path);
+    if (read_inertia(inertia, path, v, err, err_size) != 0) {
+        return -1;
     }
 
-    const sitl_json_t *rotors = sitl_json_get(root, "rotors");
-    if (rotors == NULL || rotors->type != SITL_JSON_ARRAY || rotors->count < 1 ||
-        rotors->count > SITL_MAX_ROTORS) {
+    const cJSON *rotors = member(root, "rotors");
+    int rotor_count = cJSON_IsArray(rotors) ? cJSON_GetArraySize(rotors) : 0;
+    if (rotor_count < 1 || rotor_count > SITL_MAX_ROTORS) {
         return set_err(err, err_size, "%s: 'rotors' must be a list of 1..%d rotors", path,
                        SITL_MAX_ROTORS);
     }
-    v->rotor_count = (int)rotors->count;
+    v->rotor_count = rotor_count;
     double arm_sum = 0.0;
     for (int i = 0; i < v->rotor_count; i++) {
-        const sitl_json_t *r = &rotors->children[i];
-        const sitl_json_t *pos = sitl_json_get(r, "position");
-        const sitl_json_t *sign = sitl_json_get(r, "yaw_sign");
-        if (pos == NULL || pos->type != SITL_JSON_ARRAY || pos->count != 3 ||
-            !is_number(&pos->children[0]) || !is_number(&pos->children[1]) ||
-            !is_number(&pos->children[2])) {
+        const cJSON *r = cJSON_GetArrayItem(rotors, i);
+        const cJSON *sign = member(r, "yaw_sign");
+        if (read_vec3(member(r, "position"), v->rotor[i].position) != 0) {
             return set_err(err, err_size, "%s: rotor %d needs 'position' [x, y, z]", path, i + 1);
         }
-        if (!is_number(sign) || fabs(fabs(sign->number) - 1.0) > 0.0) {
+        if (!is_number(sign) || fabs(fabs(sign->valuedouble) - 1.0) > 0.0) {
             return set_err(err, err_size, "%s: rotor %d 'yaw_sign' must be 1 or -1", path, i + 1);
         }
-        for (int k = 0; k < 3; k++) {
-            v->rotor[i].position[k] = pos->children[k].number;
-        }
-        v->rotor[i].yaw_sign = sign->number;
+        v->rotor[i].yaw_sign = sign->valuedouble;
         arm_sum += hypot(v->rotor[i].position[0], v->rotor[i].position[1]);
     }
     v->arm_length = arm_sum / (double)v->rotor_count;
@@ -149,15 +183,25 @@ static int load_tree(const sitl_json_t *root, const char *path, sitl_vehicle_t *
     }
 
     /* Optional: a present number overrides the caller's default. */
-    const sitl_json_t *radius = sitl_json_get(root, "rotor_radius");
-    if (is_number(radius) && radius->number > 0.0) {
-        v->rotor_radius = radius->number;
+    const cJSON *radius = member(root, "rotor_radius");
+    if (is_number(radius) && radius->valuedouble > 0.0) {
+        v->rotor_radius = radius->valuedouble;
     }
-    const sitl_json_t *rotor_inertia = sitl_json_get(root, "rotor_inertia");
-    if (is_number(rotor_inertia) && rotor_inertia->number >= 0.0) {
-        v->rotor_inertia = rotor_inertia->number;
+    const cJSON *rotor_inertia = member(root, "rotor_inertia");
+    if (is_number(rotor_inertia) && rotor_inertia->valuedouble >= 0.0) {
+        v->rotor_inertia = rotor_inertia->valuedouble;
     }
     return 0;
+}
+
+/* 1-based line of position `at` in text. */
+static int line_of(const char *text, const char *at)
+{
+    int line = 1;
+    for (const char *p = text; p < at && *p != '\0'; p++) {
+        line += *p == '\n';
+    }
+    return line;
 }
 
 int sitl_vehicle_load_json(const char *path, sitl_vehicle_t *v, char *err, int err_size)
@@ -166,14 +210,16 @@ int sitl_vehicle_load_json(const char *path, sitl_vehicle_t *v, char *err, int e
     if (text == NULL) {
         return set_err(err, err_size, "%s: cannot read the vehicle file", path);
     }
-    char jerr[160];
-    sitl_json_t *root = sitl_json_parse(text, jerr, (int)sizeof(jerr));
-    free(text);
+    const char *error_at = NULL;
+    cJSON *root = cJSON_ParseWithOpts(text, &error_at, 1);
     if (root == NULL) {
-        return set_err(err, err_size, "%s: %s", path, jerr);
+        int line = error_at != NULL ? line_of(text, error_at) : 1;
+        free(text);
+        return set_err(err, err_size, "%s: not valid JSON (JSON line %d)", path, line);
     }
+    free(text);
     int rc = load_tree(root, path, v, err, err_size);
-    sitl_json_free(root);
+    cJSON_Delete(root);
     if (rc == 0) {
         return sitl_vehicle_check(v, err, err_size);
     }
@@ -192,28 +238,42 @@ static const char *num(char *buf, double x)
     return buf;
 }
 
-static void write_json_string(FILE *f, const char *s)
+/* A number member written with the shortest round-trip digits (cJSON's own
+ * printer rounds to 15 digits when that is within an epsilon). */
+static cJSON *exact_number(double x)
 {
-    fputc('"', f);
-    for (; *s != '\0'; s++) {
-        unsigned char c = (unsigned char)*s;
-        if (c == '"' || c == '\\') {
-            fprintf(f, "\\%c", c);
-        } else if (c < 0x20) {
-            fprintf(f, "\\u%04x", c);
-        } else {
-            fputc(c, f);
-        }
+    char buf[32];
+    return cJSON_CreateRaw(num(buf, x));
+}
+
+static cJSON *exact_array(const double *x, int count, int stride)
+{
+    cJSON *array = cJSON_CreateArray();
+    for (int i = 0; array != NULL && i < count; i++) {
+        cJSON_AddItemToArray(array, exact_number(x[i * stride]));
     }
-    fputc('"', f);
+    return array;
+}
+
+static cJSON *positive_or_null(double x)
+{
+    return x > 0.0 ? exact_number(x) : cJSON_CreateNull();
+}
+
+/* One number when every rotor has the same value, else one per rotor. */
+static cJSON *per_rotor(const sitl_vehicle_t *v, int drag)
+{
+    double values[SITL_MAX_ROTORS] = {0};
+    int same = 1;
+    for (int i = 0; i < v->rotor_count; i++) {
+        values[i] = drag ? v->rotor[i].drag_coeff : v->rotor[i].thrust_coeff;
+        same &= values[i] == values[0];
+    }
+    return same ? exact_number(values[0]) : exact_array(values, v->rotor_count, 1);
 }
 
 int sitl_vehicle_write_json(const char *path, const sitl_vehicle_t *v, const char *notes)
 {
-    FILE *f = fopen(path, "w");
-    if (f == NULL) {
-        return -1;
-    }
     int diagonal = 1;
     for (int i = 0; i < 3; i++) {
         for (int j = 0; j < 3; j++) {
@@ -222,64 +282,30 @@ int sitl_vehicle_write_json(const char *path, const sitl_vehicle_t *v, const cha
             }
         }
     }
-    int same_kf = 1, same_km = 1;
-    for (int i = 1; i < v->rotor_count; i++) {
-        same_kf &= v->rotor[i].thrust_coeff == v->rotor[0].thrust_coeff;
-        same_km &= v->rotor[i].drag_coeff == v->rotor[0].drag_coeff;
-    }
-    fprintf(f, "{\n  \"name\": ");
-    write_json_string(f, v->name);
-    char b[9][32];
-    fprintf(f, ",\n  \"mass\": %s,\n", num(b[0], v->mass));
+    cJSON *root = cJSON_CreateObject();
+    cJSON_AddItemToObject(root, "name", cJSON_CreateString(v->name));
+    cJSON_AddItemToObject(root, "mass", exact_number(v->mass));
     if (diagonal) {
-        fprintf(f, "  \"inertia\": [%s, %s, %s],\n", num(b[0], v->inertia[0][0]),
-                num(b[1], v->inertia[1][1]), num(b[2], v->inertia[2][2]));
+        cJSON_AddItemToObject(root, "inertia", exact_array(&v->inertia[0][0], 3, 4));
     } else {
+        cJSON *rows = cJSON_CreateArray();
         for (int i = 0; i < 3; i++) {
-            for (int j = 0; j < 3; j++) {
-                num(b[3 * i + j], v->inertia[i][j]);
-            }
+            cJSON_AddItemToArray(rows, exact_array(v->inertia[i], 3, 1));
         }
-        fprintf(f, "  \"inertia\": [[%s, %s, %s], [%s, %s, %s], [%s, %s, %s]],\n", b[0], b[1],
-                b[2], b[3], b[4], b[5], b[6], b[7], b[8]);
+        cJSON_AddItemToObject(root, "inertia", rows);
     }
-    fprintf(f, "  \"rotors\": [\n");
+    cJSON *rotors = cJSON_CreateArray();
     for (int i = 0; i < v->rotor_count; i++) {
-        const sitl_rotor_t *r = &v->rotor[i];
-        fprintf(f, "    {\"position\": [%s, %s, %s], \"yaw_sign\": %d}%s\n",
-                num(b[0], r->position[0]), num(b[1], r->position[1]), num(b[2], r->position[2]),
-                r->yaw_sign > 0 ? 1 : -1,
-                i + 1 < v->rotor_count ? "," : "");
+        cJSON *rotor = cJSON_CreateObject();
+        cJSON_AddItemToObject(rotor, "position", exact_array(v->rotor[i].position, 3, 1));
+        cJSON_AddItemToObject(rotor, "yaw_sign", cJSON_CreateNumber(v->rotor[i].yaw_sign > 0 ? 1 : -1));
+        cJSON_AddItemToArray(rotors, rotor);
     }
-    fprintf(f, "  ],\n");
-    const char *coeff_names[2] = {"kf_nominal", "km_nominal"};
-    for (int k = 0; k < 2; k++) {
-        int same = k == 0 ? same_kf : same_km;
-        fprintf(f, "  \"%s\": ", coeff_names[k]);
-        if (same) {
-            fprintf(f, "%s", num(b[0], k == 0 ? v->rotor[0].thrust_coeff : v->rotor[0].drag_coeff));
-        } else {
-            fputc('[', f);
-            for (int i = 0; i < v->rotor_count; i++) {
-                fprintf(f, "%s%s", i ? ", " : "",
-                        num(b[0], k == 0 ? v->rotor[i].thrust_coeff : v->rotor[i].drag_coeff));
-            }
-            fputc(']', f);
-        }
-        fprintf(f, ",\n");
-    }
-    if (v->rotor_radius > 0.0) {
-        fprintf(f, "  \"rotor_radius\": %s,\n", num(b[0], v->rotor_radius));
-    } else {
-        fprintf(f, "  \"rotor_radius\": null,\n");
-    }
-    if (v->rotor_inertia > 0.0) {
-        fprintf(f, "  \"rotor_inertia\": %s,\n", num(b[0], v->rotor_inertia));
-    } else {
-        fprintf(f, "  \"rotor_inertia\": null,\n");
-    }
-    fprintf(f, "  \"notes\": ");
-    write_json_string(f, notes != NULL ? notes : "");
-    fprintf(f, "\n}\n");
-    return fclose(f) == 0 ? 0 : -1;
+    cJSON_AddItemToObject(root, "rotors", rotors);
+    cJSON_AddItemToObject(root, "kf_nominal", per_rotor(v, 0));
+    cJSON_AddItemToObject(root, "km_nominal", per_rotor(v, 1));
+    cJSON_AddItemToObject(root, "rotor_radius", positive_or_null(v->rotor_radius));
+    cJSON_AddItemToObject(root, "rotor_inertia", positive_or_null(v->rotor_inertia));
+    cJSON_AddItemToObject(root, "notes", cJSON_CreateString(notes != NULL ? notes : ""));
+    return sitl_write_json_file(path, root);
 }

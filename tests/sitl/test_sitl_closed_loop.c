@@ -10,7 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "json.h"
+#include "text_file.h"
 #include "sim.h"
 #include "unity.h"
 

@@ -7,7 +7,6 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "json.h"
 #include "sitl_math.h"
 #include "unity.h"
 #include "vehicle.h"
@@ -166,25 +165,6 @@ static void test_json_errors_are_clear(void)
     TEST_ASSERT_NOT_NULL(strstr(err, "cannot read"));
 }
 
-static void test_json_parser_basics(void)
-{
-    char err[128];
-    sitl_json_t *root = sitl_json_parse(" {\"a\": [1, -2.5e3, true, false, null, \"x\\n\"],"
-                                        " \"b\": {}} ", err, 128);
-    TEST_ASSERT_NOT_NULL(root);
-    const sitl_json_t *a = sitl_json_get(root, "a");
-    TEST_ASSERT_EQUAL_INT(6, (int)a->count);
-    TEST_ASSERT_EQUAL_DOUBLE(-2500.0, a->children[1].number);
-    TEST_ASSERT_EQUAL_INT(SITL_JSON_NULL, a->children[4].type);
-    TEST_ASSERT_EQUAL_STRING("x\n", a->children[5].string);
-    sitl_json_free(root);
-    TEST_ASSERT_NULL(sitl_json_parse("[1, 2", err, 128));
-    TEST_ASSERT_NULL(sitl_json_parse("[01]", err, 128));
-    TEST_ASSERT_NULL(sitl_json_parse("{\"a\": 1} x", err, 128));
-    TEST_ASSERT_NULL(sitl_json_parse("[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[1]]]]]]]]]]]]]]]]]]]]]]]]"
-                                     "]]]]]]]]]]]]", err, 128));
-}
-
 int main(void)
 {
     UNITY_BEGIN();
@@ -193,6 +173,5 @@ int main(void)
     RUN_TEST(test_json_round_trip);
     RUN_TEST(test_json_full_inertia_and_hexa);
     RUN_TEST(test_json_errors_are_clear);
-    RUN_TEST(test_json_parser_basics);
     return UNITY_END();
 }
