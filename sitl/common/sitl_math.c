@@ -1,4 +1,4 @@
-/* Quaternion and 3x3 helpers (see sitl_math.h). */
+/* Quaternion, 3x3 and 4x4 helpers (see sitl_math.h). */
 #include "sitl_math.h"
 
 int sitl_mat3_inverse(const double m[3][3], double inv[3][3])
@@ -23,6 +23,52 @@ int sitl_mat3_inverse(const double m[3][3], double inv[3][3])
     return 0;
 }
 
+int sitl_mat4_solve(double a[4][4], double b[4][4], int columns, double tol)
+{
+    for (int col = 0; col < 4; col++) {
+        int pivot = col;
+        for (int r = col + 1; r < 4; r++) {
+            if (fabs(a[r][col]) > fabs(a[pivot][col])) {
+                pivot = r;
+            }
+        }
+        if (!(fabs(a[pivot][col]) > tol)) {
+            return -1;
+        }
+        if (pivot != col) {
+            for (int j = 0; j < 4; j++) {
+                double t = a[col][j];
+                a[col][j] = a[pivot][j];
+                a[pivot][j] = t;
+            }
+            for (int j = 0; j < columns; j++) {
+                double t = b[col][j];
+                b[col][j] = b[pivot][j];
+                b[pivot][j] = t;
+            }
+        }
+        double p = a[col][col];
+        for (int j = 0; j < 4; j++) {
+            a[col][j] /= p;
+        }
+        for (int j = 0; j < columns; j++) {
+            b[col][j] /= p;
+        }
+        for (int r = 0; r < 4; r++) {
+            if (r != col) {
+                double f = a[r][col];
+                for (int j = 0; j < 4; j++) {
+                    a[r][j] -= f * a[col][j];
+                }
+                for (int j = 0; j < columns; j++) {
+                    b[r][j] -= f * b[col][j];
+                }
+            }
+        }
+    }
+    return 0;
+}
+
 void sitl_quat_to_matrix(const double q[4], double r[3][3])
 {
     double w = q[0], x = q[1], y = q[2], z = q[3];
@@ -35,6 +81,53 @@ void sitl_quat_to_matrix(const double q[4], double r[3][3])
     r[2][0] = 2.0 * (x * z - w * y);
     r[2][1] = 2.0 * (y * z + w * x);
     r[2][2] = 1.0 - 2.0 * (x * x + y * y);
+}
+
+void sitl_quat_to_matrix_any(const double q[4], double r[3][3])
+{
+    double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    double unit[4] = {1.0, 0.0, 0.0, 0.0};
+    if (n > 0.0 && isfinite(n)) {
+        for (int i = 0; i < 4; ++i) {
+            unit[i] = q[i] / n;
+        }
+    }
+    sitl_quat_to_matrix(unit, r);
+}
+
+void sitl_quat_from_matrix(const double r[3][3], double q[4])
+{
+    double trace = r[0][0] + r[1][1] + r[2][2];
+    if (trace > 0.0) {
+        double s = 2.0 * sqrt(1.0 + trace);
+        q[0] = 0.25 * s;
+        q[1] = (r[2][1] - r[1][2]) / s;
+        q[2] = (r[0][2] - r[2][0]) / s;
+        q[3] = (r[1][0] - r[0][1]) / s;
+    } else if (r[0][0] > r[1][1] && r[0][0] > r[2][2]) {
+        double s = 2.0 * sqrt(1.0 + r[0][0] - r[1][1] - r[2][2]);
+        q[0] = (r[2][1] - r[1][2]) / s;
+        q[1] = 0.25 * s;
+        q[2] = (r[0][1] + r[1][0]) / s;
+        q[3] = (r[0][2] + r[2][0]) / s;
+    } else if (r[1][1] > r[2][2]) {
+        double s = 2.0 * sqrt(1.0 + r[1][1] - r[0][0] - r[2][2]);
+        q[0] = (r[0][2] - r[2][0]) / s;
+        q[1] = (r[0][1] + r[1][0]) / s;
+        q[2] = 0.25 * s;
+        q[3] = (r[1][2] + r[2][1]) / s;
+    } else {
+        double s = 2.0 * sqrt(1.0 + r[2][2] - r[0][0] - r[1][1]);
+        q[0] = (r[1][0] - r[0][1]) / s;
+        q[1] = (r[0][2] + r[2][0]) / s;
+        q[2] = (r[1][2] + r[2][1]) / s;
+        q[3] = 0.25 * s;
+    }
+    if (q[0] < 0.0) { /* one hemisphere, for readable logs */
+        for (int i = 0; i < 4; i++) {
+            q[i] = -q[i];
+        }
+    }
 }
 
 void sitl_quat_rotate(const double q[4], const double v_body[3], double v_world[3])

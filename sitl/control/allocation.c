@@ -1,5 +1,6 @@
 /* Control allocation with a saturation priority; see allocation.h. */
 #include "allocation.h"
+#include "sitl_math.h"
 
 #include <math.h>
 #include <string.h>
@@ -24,53 +25,6 @@ int sitl_allocation_init(sitl_allocation_t *alloc, const sitl_allocation_geometr
     }
     memset(alloc, 0, sizeof(*alloc));
     alloc->geometry = *geometry;
-    return 0;
-}
-
-/* In-place inverse of a 4x4 matrix by Gauss-Jordan with partial pivoting.
- * Returns -1 if a pivot is below tol (the rows are pre-scaled to unit norm). */
-static int invert4(double a[4][4], double inv[4][4], double tol)
-{
-    for (int i = 0; i < 4; i++) {
-        for (int j = 0; j < 4; j++) {
-            inv[i][j] = (i == j) ? 1.0 : 0.0;
-        }
-    }
-    for (int col = 0; col < 4; col++) {
-        int pivot = col;
-        for (int r = col + 1; r < 4; r++) {
-            if (fabs(a[r][col]) > fabs(a[pivot][col])) {
-                pivot = r;
-            }
-        }
-        if (!(fabs(a[pivot][col]) > tol)) {
-            return -1;
-        }
-        if (pivot != col) {
-            for (int j = 0; j < 4; j++) {
-                double t = a[col][j];
-                a[col][j] = a[pivot][j];
-                a[pivot][j] = t;
-                t = inv[col][j];
-                inv[col][j] = inv[pivot][j];
-                inv[pivot][j] = t;
-            }
-        }
-        double p = a[col][col];
-        for (int j = 0; j < 4; j++) {
-            a[col][j] /= p;
-            inv[col][j] /= p;
-        }
-        for (int r = 0; r < 4; r++) {
-            if (r != col) {
-                double f = a[r][col];
-                for (int j = 0; j < 4; j++) {
-                    a[r][j] -= f * a[col][j];
-                    inv[r][j] -= f * inv[col][j];
-                }
-            }
-        }
-    }
     return 0;
 }
 
@@ -123,7 +77,12 @@ int sitl_allocation_set_coefficients(sitl_allocation_t *alloc, const double *thr
             gram[a][b] = s;
         }
     }
-    if (invert4(gram, gram_inv, 1e-9) != 0) {
+    for (int i = 0; i < 4; i++) {
+        for (int j = 0; j < 4; j++) {
+            gram_inv[i][j] = (i == j) ? 1.0 : 0.0;
+        }
+    }
+    if (sitl_mat4_solve(gram, gram_inv, 4, 1e-9) != 0) {
         return -1;
     }
     for (int i = 0; i < n; i++) {

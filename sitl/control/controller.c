@@ -8,100 +8,14 @@
 typedef double vec3[3];
 typedef double mat3[3][3];
 
-static double dot3(const vec3 a, const vec3 b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-
-static void cross3(const vec3 a, const vec3 b, vec3 out)
-{
-    double x = a[1] * b[2] - a[2] * b[1];
-    double y = a[2] * b[0] - a[0] * b[2];
-    double z = a[0] * b[1] - a[1] * b[0];
-    out[0] = x;
-    out[1] = y;
-    out[2] = z;
-}
-
 /* out = a x b + c x d (product-rule derivatives of cross products) */
 static void cross_sum(const vec3 a, const vec3 b, const vec3 c, const vec3 d, vec3 out)
 {
     vec3 p, q;
-    cross3(a, b, p);
-    cross3(c, d, q);
+    sitl_vec3_cross(p, a, b);
+    sitl_vec3_cross(q, c, d);
     for (int i = 0; i < 3; i++) {
         out[i] = p[i] + q[i];
-    }
-}
-
-static void mat_vec(const mat3 m, const vec3 v, vec3 out)
-{
-    for (int i = 0; i < 3; i++) {
-        out[i] = m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2];
-    }
-}
-
-/* out = a^T b */
-static void mat_t_mat(const mat3 a, const mat3 b, mat3 out)
-{
-    for (int i = 0; i < 3; i++) {
-        for (int j = 0; j < 3; j++) {
-            out[i][j] = a[0][i] * b[0][j] + a[1][i] * b[1][j] + a[2][i] * b[2][j];
-        }
-    }
-}
-
-/* vee of the skew part of m: for m = hat(v) it returns v. */
-static void vee_skew(const mat3 m, vec3 out)
-{
-    out[0] = 0.5 * (m[2][1] - m[1][2]);
-    out[1] = 0.5 * (m[0][2] - m[2][0]);
-    out[2] = 0.5 * (m[1][0] - m[0][1]);
-}
-
-/* The caller's quaternion need not be unit (or even valid): normalise a copy,
- * identity when it cannot be, then the shared conversion. */
-static void quat_to_matrix(const double q_in[4], mat3 r)
-{
-    double n = sqrt(q_in[0] * q_in[0] + q_in[1] * q_in[1] + q_in[2] * q_in[2] + q_in[3] * q_in[3]);
-    double unit[4] = {1.0, 0.0, 0.0, 0.0};
-    if (n > 0.0 && isfinite(n)) {
-        for (int i = 0; i < 4; ++i) {
-            unit[i] = q_in[i] / n;
-        }
-    }
-    sitl_quat_to_matrix(unit, r);
-}
-
-static void matrix_to_quat(const mat3 r, double q[4])
-{
-    double trace = r[0][0] + r[1][1] + r[2][2];
-    if (trace > 0.0) {
-        double s = 2.0 * sqrt(1.0 + trace);
-        q[0] = 0.25 * s;
-        q[1] = (r[2][1] - r[1][2]) / s;
-        q[2] = (r[0][2] - r[2][0]) / s;
-        q[3] = (r[1][0] - r[0][1]) / s;
-    } else if (r[0][0] > r[1][1] && r[0][0] > r[2][2]) {
-        double s = 2.0 * sqrt(1.0 + r[0][0] - r[1][1] - r[2][2]);
-        q[0] = (r[2][1] - r[1][2]) / s;
-        q[1] = 0.25 * s;
-        q[2] = (r[0][1] + r[1][0]) / s;
-        q[3] = (r[0][2] + r[2][0]) / s;
-    } else if (r[1][1] > r[2][2]) {
-        double s = 2.0 * sqrt(1.0 + r[1][1] - r[0][0] - r[2][2]);
-        q[0] = (r[0][2] - r[2][0]) / s;
-        q[1] = (r[0][1] + r[1][0]) / s;
-        q[2] = 0.25 * s;
-        q[3] = (r[1][2] + r[2][1]) / s;
-    } else {
-        double s = 2.0 * sqrt(1.0 + r[2][2] - r[0][0] - r[1][1]);
-        q[0] = (r[1][0] - r[0][1]) / s;
-        q[1] = (r[0][2] + r[2][0]) / s;
-        q[2] = (r[1][2] + r[2][1]) / s;
-        q[3] = 0.25 * s;
-    }
-    if (q[0] < 0.0) { /* one hemisphere, for readable logs */
-        for (int i = 0; i < 4; i++) {
-            q[i] = -q[i];
-        }
     }
 }
 
@@ -114,18 +28,18 @@ static void matrix_to_quat(const mat3 r, double q[4])
 static int normalise_with_derivatives(const vec3 v, const vec3 dv, const vec3 ddv, vec3 u, vec3 du,
                                       vec3 ddu)
 {
-    double n = sqrt(dot3(v, v));
+    double n = sqrt(sitl_vec3_dot(v, v));
     if (!(n > 1e-12)) {
         return -1;
     }
     for (int i = 0; i < 3; i++) {
         u[i] = v[i] / n;
     }
-    double dn = dot3(u, dv);
+    double dn = sitl_vec3_dot(u, dv);
     for (int i = 0; i < 3; i++) {
         du[i] = (dv[i] - u[i] * dn) / n;
     }
-    double ddn = dot3(du, dv) + dot3(u, ddv);
+    double ddn = sitl_vec3_dot(du, dv) + sitl_vec3_dot(u, ddv);
     for (int i = 0; i < 3; i++) {
         ddu[i] = (ddv[i] - 2.0 * du[i] * dn - u[i] * ddn) / n;
     }
@@ -206,9 +120,9 @@ void sitl_controller_update(const sitl_controller_t *ctl, const sitl_vehicle_sta
     force[2] += m * ctl->gravity;
 
     mat3 rot;
-    quat_to_matrix(state->quat_wxyz, rot);
+    sitl_quat_to_matrix_any(state->quat_wxyz, rot);
     vec3 body_z = {rot[0][2], rot[1][2], rot[2][2]};
-    double thrust = dot3(force, body_z);
+    double thrust = sitl_vec3_dot(force, body_z);
     out->thrust = thrust > 0.0 ? thrust : 0.0;
 
     /* Desired attitude and its derivatives: b3 along the force, b1 from yaw. */
@@ -232,10 +146,10 @@ void sitl_controller_update(const sitl_controller_t *ctl, const sitl_vehicle_sta
     vec3 ddyc = {-cy * ra + sy * r * r, -sy * ra - cy * r * r, 0.0};
 
     vec3 c, dc, ddc, tmp;
-    cross3(yc, b3, c);
+    sitl_vec3_cross(c, yc, b3);
     cross_sum(dyc, b3, yc, db3, dc);
     cross_sum(ddyc, b3, yc, ddb3, ddc);
-    cross3(dyc, db3, tmp);
+    sitl_vec3_cross(tmp, dyc, db3);
     for (int i = 0; i < 3; i++) {
         ddc[i] += 2.0 * tmp[i];
     }
@@ -249,10 +163,10 @@ void sitl_controller_update(const sitl_controller_t *ctl, const sitl_vehicle_sta
         }
     }
     vec3 b2, db2, ddb2;
-    cross3(b3, b1, b2);
+    sitl_vec3_cross(b2, b3, b1);
     cross_sum(db3, b1, b3, db1, db2);
     cross_sum(ddb3, b1, b3, ddb1, ddb2);
-    cross3(db3, db1, tmp);
+    sitl_vec3_cross(tmp, db3, db1);
     for (int i = 0; i < 3; i++) {
         ddb2[i] += 2.0 * tmp[i];
     }
@@ -273,17 +187,17 @@ void sitl_controller_update(const sitl_controller_t *ctl, const sitl_vehicle_sta
     /* dR_d = R_d hat(w_d); ddR_d = R_d (hat(w_d)^2 + hat(dw_d)). */
     mat3 m1, m2;
     vec3 rate_d, accel_d;
-    mat_t_mat(rd, drd, m1);
-    vee_skew(m1, rate_d);
-    mat_t_mat(rd, ddrd, m2);
+    sitl_mat3_transpose_mul(m1, rd, drd);
+    sitl_mat3_vee_skew(rate_d, m1);
+    sitl_mat3_transpose_mul(m2, rd, ddrd);
     /* R_d^T ddR_d = hat(w_d)^2 + hat(dw_d); hat(w_d)^2 is symmetric, so the
      * skew part alone gives dw_d. */
-    vee_skew(m2, accel_d);
+    sitl_mat3_vee_skew(accel_d, m2);
 
     /* Attitude errors. */
     mat3 rd_t_r, r_t_rd;
-    mat_t_mat(rd, rot, rd_t_r);
-    mat_t_mat(rot, rd, r_t_rd);
+    sitl_mat3_transpose_mul(rd_t_r, rd, rot);
+    sitl_mat3_transpose_mul(r_t_rd, rot, rd);
     mat3 skew;
     for (int i = 0; i < 3; i++) {
         for (int j = 0; j < 3; j++) {
@@ -291,28 +205,28 @@ void sitl_controller_update(const sitl_controller_t *ctl, const sitl_vehicle_sta
         }
     }
     vec3 e_rot;
-    vee_skew(skew, e_rot); /* vee_skew halves: 0.5 vee(Rd^T R - R^T Rd) */
+    sitl_mat3_vee_skew(e_rot, skew); /* sitl_mat3_vee_skew halves: 0.5 vee(Rd^T R - R^T Rd) */
     vec3 rate_d_body, accel_d_body, e_rate;
-    mat_vec(r_t_rd, rate_d, rate_d_body);
-    mat_vec(r_t_rd, accel_d, accel_d_body);
+    sitl_mat3_mul_vec(rate_d_body, r_t_rd, rate_d);
+    sitl_mat3_mul_vec(accel_d_body, r_t_rd, accel_d);
     for (int i = 0; i < 3; i++) {
         e_rate[i] = state->body_rate[i] - rate_d_body[i];
     }
 
     /* M = -kR eR - kw ew + w x J w - J (w x (R^T Rd wd) - R^T Rd dwd) */
     vec3 jw, gyro, w_cross_wd, feed, jfeed;
-    mat_vec(ctl->inertia, state->body_rate, jw);
-    cross3(state->body_rate, jw, gyro);
-    cross3(state->body_rate, rate_d_body, w_cross_wd);
+    sitl_mat3_mul_vec(jw, ctl->inertia, state->body_rate);
+    sitl_vec3_cross(gyro, state->body_rate, jw);
+    sitl_vec3_cross(w_cross_wd, state->body_rate, rate_d_body);
     for (int i = 0; i < 3; i++) {
         feed[i] = w_cross_wd[i] - accel_d_body[i];
     }
-    mat_vec(ctl->inertia, feed, jfeed);
+    sitl_mat3_mul_vec(jfeed, ctl->inertia, feed);
     for (int i = 0; i < 3; i++) {
         out->moment[i] = -ctl->kR[i] * e_rot[i] - ctl->kw[i] * e_rate[i] + gyro[i] - jfeed[i];
         out->attitude_error[i] = e_rot[i];
         out->desired_body_rate[i] = rate_d[i];
         out->desired_body_accel[i] = accel_d[i];
     }
-    matrix_to_quat(rd, out->desired_quat_wxyz);
+    sitl_quat_from_matrix(rd, out->desired_quat_wxyz);
 }
