@@ -188,46 +188,6 @@ void sitl_plant_step(const sitl_plant_t *plant, sitl_state_t *state, const doubl
     }
 }
 
-/* Solve the 4x4 system m x = b by Gauss-Jordan with partial pivoting. */
-static int solve4(double m[4][4], double b[4], double x[4])
-{
-    for (int c = 0; c < 4; c++) {
-        int p = c;
-        for (int r = c + 1; r < 4; r++) {
-            if (fabs(m[r][c]) > fabs(m[p][c])) {
-                p = r;
-            }
-        }
-        if (fabs(m[p][c]) < 1e-12) { /* rows are normalised: entries ~1 */
-            return -1;
-        }
-        if (p != c) {
-            for (int k = 0; k < 4; k++) {
-                double t = m[c][k];
-                m[c][k] = m[p][k];
-                m[p][k] = t;
-            }
-            double t = b[c];
-            b[c] = b[p];
-            b[p] = t;
-        }
-        for (int r = 0; r < 4; r++) {
-            if (r == c) {
-                continue;
-            }
-            double f = m[r][c] / m[c][c];
-            for (int k = c; k < 4; k++) {
-                m[r][k] -= f * m[c][k];
-            }
-            b[r] -= f * b[c];
-        }
-    }
-    for (int c = 0; c < 4; c++) {
-        x[c] = b[c] / m[c][c];
-    }
-    return 0;
-}
-
 int sitl_plant_hover_speeds(const sitl_plant_t *plant, double *rotor_speed)
 {
     const int n = plant->rotor_count;
@@ -252,7 +212,7 @@ int sitl_plant_hover_speeds(const sitl_plant_t *plant, double *rotor_speed)
             a[r][i] *= scale[r];
         }
     }
-    double aat[4][4], y[4], b[4] = {plant->mass * plant->gravity * scale[0], 0.0, 0.0, 0.0};
+    double aat[4][4], y[4][4] = {{plant->mass * plant->gravity * scale[0]}};
     for (int r = 0; r < 4; r++) {
         for (int c = 0; c < 4; c++) {
             double s = 0.0;
@@ -262,22 +222,24 @@ int sitl_plant_hover_speeds(const sitl_plant_t *plant, double *rotor_speed)
             aat[r][c] = s;
         }
     }
-    double aat_copy[4][4], b_copy[4];
+    double aat_copy[4][4], y_copy[4][4];
     memcpy(aat_copy, aat, sizeof(aat));
-    memcpy(b_copy, b, sizeof(b));
-    int ok = solve4(aat, b, y) == 0;
+    memcpy(y_copy, y, sizeof(y));
+    /* Rows are normalised: entries ~1, so the pivot tolerance is absolute. */
+    int ok = sitl_mat4_solve(aat, y, 1, 1e-12) == 0;
     if (!ok) {
         /* N < 4 (or a degenerate layout): a tiny ridge gives the closest try. */
         for (int r = 0; r < 4; r++) {
             aat_copy[r][r] += 1e-9;
         }
-        ok = solve4(aat_copy, b_copy, y) == 0;
+        memcpy(y, y_copy, sizeof(y));
+        ok = sitl_mat4_solve(aat_copy, y, 1, 1e-12) == 0;
     }
     int feasible = ok;
     for (int i = 0; i < n; i++) {
         double u = 0.0;
         for (int r = 0; r < 4; r++) {
-            u += a[r][i] * y[r];
+            u += a[r][i] * y[r][0];
         }
         if (!ok || !(u >= 0.0)) {
             u = ok ? 0.0 : plant->mass * plant->gravity / ((double)n * plant->thrust_coeff[i]);
