@@ -79,6 +79,7 @@ typedef struct {
     int (*parse)(sitl_options_t *o, const char *opt, const char *val); /* OPT_CUSTOM */
     const char *metavar;  /* value placeholder in --help, NULL for flags */
     const char *help;     /* may hold '\n' for continuation lines */
+    void (*names)(char *out, int out_size, const char *separator); /* registry to list */
 } opt_t;
 
 static int parse_double(const char *opt, const char *text, double lo, double hi, double *out)
@@ -107,7 +108,9 @@ static int parse_path(const char *opt, const char *text, char *out)
 static int parse_trajectory(sitl_options_t *o, const char *opt, const char *val)
 {
     if (sitl_trajectory_from_name(val, &o->trajectory) != 0) {
-        fprintf(stderr, "propid_sitl: %s: unknown '%s' (hover|step|circle|lissajous)\n", opt, val);
+        char names[256];
+        sitl_trajectory_names(names, (int)sizeof(names), "|");
+        fprintf(stderr, "propid_sitl: %s: unknown '%s' (%s)\n", opt, val, names);
         return -1;
     }
     return 0;
@@ -186,17 +189,18 @@ static int parse_pole_pairs(sitl_options_t *o, const char *opt, const char *val)
 }
 
 #define OFF(field) offsetof(sitl_options_t, field)
-#define FLAG(sec, name, field, value, help) {sec, name, OPT_SET_INT, OFF(field), 0, 0, value, NULL, NULL, help}
+#define FLAG(sec, name, field, value, help) {sec, name, OPT_SET_INT, OFF(field), 0, 0, value, NULL, NULL, help, NULL}
 #define NUMBER(sec, name, field, lo, hi, metavar, help) \
-    {sec, name, OPT_DOUBLE, OFF(field), lo, hi, 0, NULL, metavar, help}
-#define PATH(sec, name, field, metavar, help) {sec, name, OPT_PATH, OFF(field), 0, 0, 0, NULL, metavar, help}
-#define CUSTOM(sec, name, fn, metavar, help) {sec, name, OPT_CUSTOM, 0, 0, 0, 0, fn, metavar, help}
+    {sec, name, OPT_DOUBLE, OFF(field), lo, hi, 0, NULL, metavar, help, NULL}
+#define PATH(sec, name, field, metavar, help) {sec, name, OPT_PATH, OFF(field), 0, 0, 0, NULL, metavar, help, NULL}
+#define CUSTOM(sec, name, fn, metavar, help) {sec, name, OPT_CUSTOM, 0, 0, 0, 0, fn, metavar, help, NULL}
 
 static const opt_t options[] = {
     PATH("Flight", "vehicle", vehicle, "NAME|FILE.json",
          "crazyflie-plus (default), crazyflie-x, hummingbird-plus,\n"
          "hummingbird-x, or a flight-log v1 vehicle file"),
-    CUSTOM(NULL, "trajectory", parse_trajectory, "KIND", "hover | step | circle | lissajous (default)"),
+    {NULL, "trajectory", OPT_CUSTOM, 0, 0, 0, 0, parse_trajectory, "KIND",
+     "one of (default lissajous):", sitl_trajectory_names},
     CUSTOM(NULL, "mode", parse_mode, "MODE", "oracle | incorrect | filter (default)"),
     CUSTOM(NULL, "seed", parse_seed, "N", "random seed (default 1); same seed -> same log"),
     NUMBER(NULL, "duration", duration_s, 1e-3, 1e6, "S", "flight time [s] (default 10)"),
@@ -250,11 +254,9 @@ static const opt_t options[] = {
     NUMBER(NULL, "rotor-speed-min", rotor_speed_min, 0.0, 1e5, "RAD_S", "minimum rotor speed"),
     NUMBER(NULL, "rotor-speed-max", rotor_speed_max, 1.0, 1e5, "RAD_S", "maximum rotor speed"),
 
-    CUSTOM("Effects (all off by default = the paper's conditions), repeatable", "effect",
-           parse_effect, "NAME[=STRENGTH]",
-           "rotor_inertia rotor_gyroscopic rotor_drag\n"
-           "translational_lift ground_effect com_offset inertia_error\n"
-           "esc_delay thrust_nonlinearity gyro_scale aero_damping"),
+    {"Effects (all off by default = the paper's conditions), repeatable", "effect", OPT_CUSTOM,
+     0, 0, 0, 0, parse_effect, "NAME[=STRENGTH]", "NAME one of (none = all off):",
+     sitl_effects_names},
 
     FLAG("Sensors (defaults: Bosch BMI088 IMU, bidirectional-DShot telemetry; docs/sitl.md)",
          "paper", paper, 1,
@@ -291,6 +293,35 @@ static const opt_t options[] = {
 
 #define OPTION_COUNT ((int)(sizeof(options) / sizeof(options[0])))
 
+/* A registry's names as help continuation lines, wrapped at 80 columns. */
+static void print_names(void (*names)(char *out, int out_size, const char *separator))
+{
+    char all[1024];
+    names(all, (int)sizeof(all), " ");
+    const char *word = all;
+    int column = 0;
+    while (*word != '\0') {
+        const char *end = strchr(word, ' ');
+        int len = end != NULL ? (int)(end - word) : (int)strlen(word);
+        if (column > 0 && column + 1 + len > 80) {
+            printf("\n");
+            column = 0;
+        }
+        if (column == 0) {
+            column = printf("%-28s%.*s", "", len, word);
+        } else {
+            column += printf(" %.*s", len, word);
+        }
+        word += len;
+        while (*word == ' ') {
+            word++;
+        }
+    }
+    if (column > 0) {
+        printf("\n");
+    }
+}
+
 void sitl_options_print_help(const char *prog)
 {
     printf("usage: %s [options]\n"
@@ -323,6 +354,9 @@ void sitl_options_print_help(const char *prog)
             }
             first = 0;
             line = nl != NULL ? nl + 1 : NULL;
+        }
+        if (opt->names != NULL) {
+            print_names(opt->names);
         }
     }
     printf("\nExit codes: 0 ok, 1 run-time error, 2 usage error, 3 flight diverged,\n"

@@ -91,6 +91,15 @@ int sitl_effects_parse(sitl_effects_t *effects, const char *arg, char *err, int 
     return -1;
 }
 
+void sitl_effects_names(char *out, int out_size, const char *separator)
+{
+    int n = 0;
+    out[0] = '\0';
+    for (int i = 0; i < SITL_EFFECT_COUNT && n >= 0 && n < out_size; i++) {
+        n += snprintf(out + n, (size_t)(out_size - n), "%s%s", i ? separator : "", infos[i].name);
+    }
+}
+
 double sitl_effect_strength(const sitl_effects_t *effects, sitl_effect_id_t id)
 {
     if (effects == NULL || (int)id < 0 || id >= SITL_EFFECT_COUNT || !effects->enabled[id]) {

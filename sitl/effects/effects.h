@@ -1,5 +1,5 @@
 /*
- * Switchable unmodelled effects (GUIDE §6 vocabulary). All are OFF by default,
+ * Switchable unmodelled effects (the effect ids shared with `propid gap`). All are OFF by default,
  * which gives the paper's conditions (the filter's model is then exact up to
  * sensor imperfections). Each has a strength; 1 means "the documented typical
  * value" for multiplicative effects, or is the physical quantity itself (see
@@ -30,7 +30,7 @@ typedef enum {
 } sitl_effect_id_t;
 
 typedef struct {
-    const char *name;            /* GUIDE §6 id */
+    const char *name;            /* effect id (--effect NAME, propid gap) */
     double default_strength;     /* used by --effect NAME without =STRENGTH */
     const char *meaning;         /* what the strength is, one line */
 } sitl_effect_info_t;
@@ -47,6 +47,9 @@ void sitl_effects_clear(sitl_effects_t *effects);
 
 /* Parse "NAME" or "NAME=STRENGTH" and enable it. Returns 0, or -1 with a message. */
 int sitl_effects_parse(sitl_effects_t *effects, const char *arg, char *err, int err_size);
+
+/* Every registered effect name joined by separator (for help and messages). */
+void sitl_effects_names(char *out, int out_size, const char *separator);
 
 /* Strength if enabled, else 0. */
 double sitl_effect_strength(const sitl_effects_t *effects, sitl_effect_id_t id);

@@ -2,13 +2,32 @@
 #include "trajectory.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 
 /* M_PI is not in strict C11. */
 static const double pi = 3.14159265358979323846;
 
-static const char *const kind_names[SITL_TRAJ_KIND_COUNT] = {"hover", "step", "circle",
-                                                             "lissajous"};
+static void eval_hover(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat);
+static void eval_step(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat);
+static void eval_circle(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat);
+static void eval_lissajous(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat);
+
+/* The registry: one row per kind (docs/sitl.md "Adding a trajectory"). */
+static const sitl_trajectory_info_t registry[SITL_TRAJ_KIND_COUNT] = {
+    [SITL_TRAJ_HOVER] = {"hover", 0, eval_hover},
+    [SITL_TRAJ_STEP] = {"step", 0, eval_step},
+    [SITL_TRAJ_CIRCLE] = {"circle", 1, eval_circle},
+    [SITL_TRAJ_LISSAJOUS] = {"lissajous", 1, eval_lissajous},
+};
+
+const sitl_trajectory_info_t *sitl_trajectory_info(sitl_trajectory_kind_t kind)
+{
+    if ((int)kind < 0 || (int)kind >= SITL_TRAJ_KIND_COUNT) {
+        return NULL;
+    }
+    return &registry[kind];
+}
 
 int sitl_trajectory_from_name(const char *name, sitl_trajectory_kind_t *kind)
 {
@@ -16,7 +35,7 @@ int sitl_trajectory_from_name(const char *name, sitl_trajectory_kind_t *kind)
         return -1;
     }
     for (int i = 0; i < SITL_TRAJ_KIND_COUNT; i++) {
-        if (strcmp(name, kind_names[i]) == 0) {
+        if (strcmp(name, registry[i].name) == 0) {
             *kind = (sitl_trajectory_kind_t)i;
             return 0;
         }
@@ -26,10 +45,18 @@ int sitl_trajectory_from_name(const char *name, sitl_trajectory_kind_t *kind)
 
 const char *sitl_trajectory_name(sitl_trajectory_kind_t kind)
 {
-    if ((int)kind < 0 || (int)kind >= SITL_TRAJ_KIND_COUNT) {
-        return "?";
+    const sitl_trajectory_info_t *info = sitl_trajectory_info(kind);
+    return info != NULL ? info->name : "?";
+}
+
+void sitl_trajectory_names(char *out, int out_size, const char *separator)
+{
+    int n = 0;
+    out[0] = '\0';
+    for (int i = 0; i < SITL_TRAJ_KIND_COUNT && n >= 0 && n < out_size; i++) {
+        n += snprintf(out + n, (size_t)(out_size - n), "%s%s", i ? separator : "",
+                      registry[i].name);
     }
-    return kind_names[kind];
 }
 
 int sitl_trajectory_init(sitl_trajectory_t *traj, sitl_trajectory_kind_t kind,
@@ -74,7 +101,7 @@ int sitl_trajectory_init(sitl_trajectory_t *traj, sitl_trajectory_kind_t kind,
     traj->lissajous_fast.cycles[1] = 9.0;
     traj->lissajous_fast.cycles[2] = 8.0;
 
-    if (kind == SITL_TRAJ_CIRCLE || kind == SITL_TRAJ_LISSAJOUS) {
+    if (registry[kind].yaws) {
         /* Large slow yaw swings (+-86 deg, 1.5 cycles): the gyro biases are only
          * observable through the gyroscopic coupling, whose signal grows with the
          * yaw excursion. */
@@ -143,42 +170,54 @@ static void add_yaw(sitl_flat_output_t *flat, const sitl_trajectory_t *traj, dou
     flat->yaw_acceleration = d[2];
 }
 
+static void eval_hover(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat)
+{
+    (void)traj;
+    (void)t;
+    (void)flat;
+}
+
+static void eval_step(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat)
+{
+    /* A true step: the controller sees the full error at once. Strictly
+     * after step_time_s, so a step at 0 still starts at the origin. */
+    if (t > traj->step_time_s) {
+        flat->position[0] = traj->step_amplitude_m;
+    }
+}
+
+static void eval_circle(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat)
+{
+    /* x = R (cos(phi + w t) - cos phi), y = R (sin(phi + w t) - sin phi):
+     * through origin at t = 0; derivatives of cos(a) = sin(a + pi/2). */
+    double omega = 2.0 * pi * traj->circle_cycles / traj->period_s;
+    double phase = traj->circle_start_angle_rad;
+    double dx[5], dy[5];
+    sine_derivatives(traj->circle_radius_m, omega, t + (phase + 0.5 * pi) / omega, dx);
+    sine_derivatives(traj->circle_radius_m, omega, t + phase / omega, dy);
+    dx[0] -= traj->circle_radius_m * cos(phase);
+    dy[0] -= traj->circle_radius_m * sin(phase);
+    add_axis(flat, 0, dx);
+    add_axis(flat, 1, dy);
+    add_yaw(flat, traj, t);
+}
+
+static void eval_lissajous(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat)
+{
+    add_lissajous(flat, &traj->lissajous_slow, traj->period_s, t);
+    add_lissajous(flat, &traj->lissajous_fast, traj->period_s, t);
+    add_yaw(flat, traj, t);
+}
+
 void sitl_trajectory_eval(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat)
 {
     memset(flat, 0, sizeof(*flat));
     if (t < 0.0) {
         t = 0.0;
     }
-    switch (traj->kind) {
-    case SITL_TRAJ_HOVER:
-        break;
-    case SITL_TRAJ_STEP:
-        /* A true step: the controller sees the full error at once. Strictly
-         * after step_time_s, so a step at 0 still starts at the origin. */
-        if (t > traj->step_time_s) {
-            flat->position[0] = traj->step_amplitude_m;
-        }
-        break;
-    case SITL_TRAJ_CIRCLE: {
-        /* x = R (cos(phi + w t) - cos phi), y = R (sin(phi + w t) - sin phi):
-         * through origin at t = 0; derivatives of cos(a) = sin(a + pi/2). */
-        double omega = 2.0 * pi * traj->circle_cycles / traj->period_s;
-        double phase = traj->circle_start_angle_rad;
-        double dx[5], dy[5];
-        sine_derivatives(traj->circle_radius_m, omega, t + (phase + 0.5 * pi) / omega, dx);
-        sine_derivatives(traj->circle_radius_m, omega, t + phase / omega, dy);
-        dx[0] -= traj->circle_radius_m * cos(phase);
-        dy[0] -= traj->circle_radius_m * sin(phase);
-        add_axis(flat, 0, dx);
-        add_axis(flat, 1, dy);
-        add_yaw(flat, traj, t);
-        break;
-    }
-    case SITL_TRAJ_LISSAJOUS:
-        add_lissajous(flat, &traj->lissajous_slow, traj->period_s, t);
-        add_lissajous(flat, &traj->lissajous_fast, traj->period_s, t);
-        add_yaw(flat, traj, t);
-        break;
+    const sitl_trajectory_info_t *info = sitl_trajectory_info(traj->kind);
+    if (info != NULL) {
+        info->eval(traj, t, flat);
     }
     for (int i = 0; i < 3; i++) {
         flat->position[i] += traj->origin[i];

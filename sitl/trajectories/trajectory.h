@@ -36,14 +36,16 @@
 #ifndef SITL_TRAJECTORY_H
 #define SITL_TRAJECTORY_H
 
+/* A new kind: a value here (before the count), its parameters in
+ * sitl_trajectory_t, defaults in sitl_trajectory_init(), an eval function and
+ * a registry row in trajectory.c (docs/sitl.md "Adding a trajectory"). */
 typedef enum {
     SITL_TRAJ_HOVER = 0,
     SITL_TRAJ_STEP = 1,
     SITL_TRAJ_CIRCLE = 2,
     SITL_TRAJ_LISSAJOUS = 3,
+    SITL_TRAJ_KIND_COUNT
 } sitl_trajectory_kind_t;
-
-#define SITL_TRAJ_KIND_COUNT 4
 
 /* The paper's trajectory period T [s]. */
 #define SITL_TRAJ_DEFAULT_PERIOD_S 10.0
@@ -89,6 +91,21 @@ typedef struct {
     double yaw_acceleration; /* [rad/s^2] */
 } sitl_flat_output_t;
 
+/* One registry row: the --trajectory name, whether the yaw swing
+ * (yaw_amplitude_rad, yaw_cycles) applies, and the flat outputs relative to
+ * the origin (flat arrives zeroed; t >= 0). */
+typedef struct {
+    const char *name;
+    int yaws;
+    void (*eval)(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat);
+} sitl_trajectory_info_t;
+
+/* The registry row of kind, or NULL when out of range. */
+const sitl_trajectory_info_t *sitl_trajectory_info(sitl_trajectory_kind_t kind);
+
+/* Every registered name joined by separator (for help and error messages). */
+void sitl_trajectory_names(char *out, int out_size, const char *separator);
+
 /* Fill traj with the defaults of kind and period T = period_s (the paper's
  * trajectories use SITL_TRAJ_DEFAULT_PERIOD_S). origin may be NULL (= 0,0,0).
  * Returns 0, or -1 for an unknown kind or a non-positive/non-finite period. */
@@ -98,7 +115,7 @@ int sitl_trajectory_init(sitl_trajectory_t *traj, sitl_trajectory_kind_t kind,
 /* Evaluate the flat outputs at time t [s] (any t; t < 0 is treated as 0). */
 void sitl_trajectory_eval(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat);
 
-/* "hover", "step", "circle", "lissajous" -> kind. Returns 0, or -1 if unknown. */
+/* Registered name -> kind. Returns 0, or -1 if unknown. */
 int sitl_trajectory_from_name(const char *name, sitl_trajectory_kind_t *kind);
 
 /* kind -> its name ("?" when out of range). */

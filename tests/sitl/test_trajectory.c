@@ -4,6 +4,7 @@
  * Plain C (no framework): prints each failure, exit status = failure count.
  */
 #include <math.h>
+#include <string.h>
 #include <stdio.h>
 
 #include "trajectory.h"
@@ -144,6 +145,14 @@ static void test_names_and_bad_input(void)
         CHECK(sitl_trajectory_from_name(name, &back) == 0 && back == (sitl_trajectory_kind_t)k,
               "name round trip %s", name);
     }
+    char names[256];
+    sitl_trajectory_names(names, (int)sizeof(names), "|");
+    CHECK(strcmp(names, "hover|step|circle|lissajous") == 0, "registry names: %s", names);
+    for (int k = 0; k < SITL_TRAJ_KIND_COUNT; k++) {
+        const sitl_trajectory_info_t *info = sitl_trajectory_info((sitl_trajectory_kind_t)k);
+        CHECK(info != NULL && info->name != NULL && info->eval != NULL, "registry row %d", k);
+    }
+    CHECK(sitl_trajectory_info(SITL_TRAJ_KIND_COUNT) == NULL, "row past the registry");
     sitl_trajectory_kind_t kind;
     CHECK(sitl_trajectory_from_name("loop-de-loop", &kind) == -1, "unknown name accepted");
     CHECK(sitl_trajectory_from_name(NULL, &kind) == -1, "NULL name accepted");
