@@ -3,7 +3,7 @@
 The same C code that flies on the MCU, driven from Python::
 
     from propid.cfilter import CFilter, FilterConfig
-    config = FilterConfig.from_vehicle(vehicle_dict, gyro_sample_rate_hz=500.0)
+    config = FilterConfig.from_vehicle(read_vehicle(path), gyro_sample_rate_hz=500.0)
     f = CFilter(config)
     f.push_rotor_speeds(t_us, speeds_rad_s)      # -> status code (int)
     status = f.push_gyro(t_us, gyro_rad_s)      # -> status code (int)
@@ -29,11 +29,14 @@ import math
 import os
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import TYPE_CHECKING, Any, Optional, Sequence
 
 import numpy as np
 
 from propid.errors import UserError
+
+if TYPE_CHECKING:
+    from propid.flightlog import Vehicle
 
 # Compile-time limit the layout below is built for (propid_config.h default).
 MAX_ROTORS = 8
@@ -256,30 +259,27 @@ class FilterConfig:
         return config.with_overrides(**overrides)
 
     @classmethod
-    def from_vehicle(cls, vehicle: dict, **overrides: Any) -> "FilterConfig":
-        """From a vehicle description as in spec/flightlog-v1.md (the parsed JSON dict)."""
-        name = vehicle.get("name", "vehicle")
-        rotors = vehicle.get("rotors")
-        if not isinstance(rotors, list) or not rotors:
-            raise UserError(f"{name}: 'rotors' must be a non-empty list")
-        if len(rotors) > MAX_ROTORS:
-            raise UserError(f"{name}: {len(rotors)} rotors, the filter is built for at most {MAX_ROTORS}")
-        positions, yaw_signs = [], []
-        for i, rotor in enumerate(rotors):
-            position = rotor.get("position") if isinstance(rotor, dict) else None
-            if not isinstance(position, (list, tuple)) or len(position) != 3:
-                raise UserError(f"{name}: rotor {i + 1} needs a 3-element 'position'")
-            yaw_sign = rotor.get("yaw_sign")
-            if yaw_sign not in (1, -1, 1.0, -1.0):
-                raise UserError(f"{name}: rotor {i + 1} 'yaw_sign' must be +1 or -1, got {yaw_sign!r}")
-            positions.append([float(v) for v in position])
-            yaw_signs.append(float(yaw_sign))
-        if vehicle.get("inertia") is None:
+    def from_vehicle(cls, vehicle: Vehicle, **overrides: Any) -> "FilterConfig":
+        """From a parsed vehicle (propid.flightlog.Vehicle, read by read_vehicle: the one
+        reader of the vehicle file, docs/flightlog.md)."""
+        name = vehicle.name or "vehicle"
+        if vehicle.rotor_count > MAX_ROTORS:
+            raise UserError(f"{name}: {vehicle.rotor_count} rotors, the filter is built for at most {MAX_ROTORS}")
+        if vehicle.inertia is None:
             raise UserError(f"{name}: 'inertia' is null; the filter needs the body inertia")
-        inertia = _inertia_matrix(vehicle["inertia"], name)
-        kf = _per_rotor(vehicle, "kf_nominal", len(rotors), name)
-        km = _per_rotor(vehicle, "km_nominal", len(rotors), name)
-        return cls(positions, yaw_signs, kf, km, inertia).with_overrides(**overrides)
+        for key, values in (("kf_nominal", vehicle.kf_nominal), ("km_nominal", vehicle.km_nominal)):
+            if values is None:
+                raise UserError(f"{name}: '{key}' is null; the filter needs a nominal value "
+                                f"(a catalogue or thrust-stand figure) to scale its estimate")
+            if len(values) != vehicle.rotor_count:
+                raise UserError(f"{name}: '{key}' has {len(values)} values for {vehicle.rotor_count} rotors")
+            if not all(math.isfinite(v) and v > 0.0 for v in values):
+                raise UserError(f"{name}: '{key}' must be positive")
+        positions = [[float(v) for v in rotor.position] for rotor in vehicle.rotors]
+        yaw_signs = [float(rotor.yaw_sign) for rotor in vehicle.rotors]
+        inertia = _inertia_matrix(vehicle.inertia, name)
+        return cls(positions, yaw_signs, [float(v) for v in vehicle.kf_nominal],
+                   [float(v) for v in vehicle.km_nominal], inertia).with_overrides(**overrides)
 
     def to_struct(self) -> ConfigStruct:
         if not 1 <= self.rotor_count <= MAX_ROTORS:
@@ -311,19 +311,6 @@ def _inertia_matrix(inertia: Any, name: str = "vehicle") -> list:
     if values.shape == (3, 3):
         return values.tolist()
     raise UserError(f"{name}: 'inertia' must be [Jxx, Jyy, Jzz] or a 3x3 matrix")
-
-
-def _per_rotor(vehicle: dict, key: str, count: int, name: str) -> list:
-    value = vehicle.get(key)
-    if value is None:
-        raise UserError(f"{name}: '{key}' is null; the filter needs a nominal value "
-                        f"(a catalogue or thrust-stand figure) to scale its estimate")
-    values = [float(value)] * count if isinstance(value, (int, float)) else [float(v) for v in value]
-    if len(values) != count:
-        raise UserError(f"{name}: '{key}' has {len(values)} values for {count} rotors")
-    if not all(math.isfinite(v) and v > 0.0 for v in values):
-        raise UserError(f"{name}: '{key}' must be positive")
-    return values
 
 
 # ---------------------------------------------------------------------------

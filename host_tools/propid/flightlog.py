@@ -57,7 +57,12 @@ class Vehicle:
     kf_nominal: list[float] | None = None  # per rotor [N/(rad/s)^2]
     km_nominal: list[float] | None = None  # per rotor [N m/(rad/s)^2]
     rotor_radius: float | None = None
-    rotor_inertia: float | None = None
+    rotor_inertia: float | list[float] | None = None  # [kg m^2], one for all rotors or one per rotor
+    # Optional extension keys (docs/flightlog.md): None means "not modelled".
+    esc_delay_s: float | None = None  # logged rotor speed lags the physical one by this [s]
+    gyro_scale: tuple[float, float, float] | None = None  # gyro reads scale * true rate, per axis
+    aero_damping: tuple[float, float, float] | None = None  # body torque -d_a * omega_a [N m s/rad]
+    com_offset: tuple[float, float, float] | None = None  # CoM offset already applied to positions [m]
     notes: str = ""
     path: Path | None = None
 
@@ -73,6 +78,15 @@ class Vehicle:
     def yaw_signs(self) -> np.ndarray:
         return np.array([r.yaw_sign for r in self.rotors], dtype=float)
 
+    @property
+    def rotor_inertias(self) -> list[float] | None:
+        """rotor_inertia per rotor [kg m^2], or None when not given."""
+        if self.rotor_inertia is None:
+            return None
+        if isinstance(self.rotor_inertia, list):
+            return list(self.rotor_inertia)
+        return [float(self.rotor_inertia)] * self.rotor_count
+
     def to_json_dict(self) -> dict:
         inertia = None
         if self.inertia is not None:
@@ -85,7 +99,7 @@ class Vehicle:
                 return None
             return values[0] if all(v == values[0] for v in values) else list(values)
 
-        return {
+        data = {
             "name": self.name,
             "mass": self.mass,
             "inertia": inertia,
@@ -96,6 +110,35 @@ class Vehicle:
             "rotor_inertia": self.rotor_inertia,
             "notes": self.notes,
         }
+        # Extension keys are written only when set, so a file without them reads back unchanged.
+        for key in EXTENSION_KEYS:
+            value = getattr(self, key)
+            if value is not None:
+                data[key] = list(value) if isinstance(value, tuple) else value
+        return data
+
+
+EXTENSION_KEYS = ("esc_delay_s", "gyro_scale", "aero_damping", "com_offset")
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _vector3_or_null(data: dict, key: str, where: str, unit: str, positive: bool = False,
+                     non_negative: bool = False) -> tuple[float, float, float] | None:
+    value = data.get(key)
+    if value is None:
+        return None
+    ok = isinstance(value, list) and len(value) == 3 and all(_is_number(v) for v in value)
+    if ok and positive:
+        ok = all(v > 0 for v in value)
+    if ok and non_negative:
+        ok = all(v >= 0 for v in value)
+    if not ok:
+        need = "positive " if positive else ("non-negative " if non_negative else "finite ")
+        raise UserError(f"{where}: '{key}' must be 3 {need}numbers{unit} or null, got {value!r}")
+    return (float(value[0]), float(value[1]), float(value[2]))
 
 
 def _positive_or_null(data: dict, key: str, where: str) -> float | None:
@@ -165,17 +208,44 @@ def parse_vehicle(data: dict, where: str = "vehicle") -> Vehicle:
         kf_nominal=_per_rotor_coeff(data, "kf_nominal", len(rotors), where),
         km_nominal=_per_rotor_coeff(data, "km_nominal", len(rotors), where),
         rotor_radius=_positive_or_null(data, "rotor_radius", where),
-        rotor_inertia=_positive_or_null(data, "rotor_inertia", where),
+        rotor_inertia=_rotor_inertia(data, len(rotors), where),
+        esc_delay_s=_non_negative_or_null(data, "esc_delay_s", where),
+        gyro_scale=_vector3_or_null(data, "gyro_scale", where, "", positive=True),
+        aero_damping=_vector3_or_null(data, "aero_damping", where, " [N m s/rad]", non_negative=True),
+        com_offset=_vector3_or_null(data, "com_offset", where, " [m]"),
         notes=str(data.get("notes", "") or ""),
     )
+
+
+def _non_negative_or_null(data: dict, key: str, where: str) -> float | None:
+    value = data.get(key)
+    if value is None:
+        return None
+    if not _is_number(value) or value < 0:
+        raise UserError(f"{where}: '{key}' must be a number >= 0 or null, got {value!r}")
+    return float(value)
+
+
+def _rotor_inertia(data: dict, count: int, where: str) -> float | list[float] | None:
+    if isinstance(data.get("rotor_inertia"), list):
+        return _per_rotor_coeff(data, "rotor_inertia", count, where)
+    return _positive_or_null(data, "rotor_inertia", where)
 
 
 def read_vehicle(path: str | Path) -> Vehicle:
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
+    except IsADirectoryError:
+        raise UserError(f"{path}: a directory, not a vehicle file") from None
     except OSError as exc:
         raise UserError(f"cannot read vehicle file {path}: {exc.strerror or exc}") from None
+    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise UserError(f"{path}: UTF-16 text; a vehicle file must be UTF-8 JSON (re-save it as UTF-8)")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise UserError(f"{path}: not a UTF-8 text file (byte {exc.start}): a vehicle file is UTF-8 JSON") from None
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -186,7 +256,9 @@ def read_vehicle(path: str | Path) -> Vehicle:
 
 
 def write_vehicle(path: str | Path, vehicle: Vehicle) -> None:
-    Path(path).write_text(json.dumps(vehicle.to_json_dict(), indent=2) + "\n", encoding="utf-8")
+    from propid.outputs import write_text
+
+    write_text(path, json.dumps(vehicle.to_json_dict(), indent=2) + "\n")
 
 
 def vehicle_path_for(log_path: str | Path) -> Path:
@@ -405,17 +477,33 @@ def flightlog_from_columns(
     return FlightLog(t=t, gyro=gyro, rotor_speed=rotor_speed, extra=extra)
 
 
+def _read_text(path: Path, what: str) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise UserError(f"{path}: not a text CSV file (is it a binary log? try `propid convert`)") from None
+    except IsADirectoryError:
+        raise UserError(f"{path}: a directory, not a {what}") from None
+    except OSError as exc:
+        raise UserError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+
+
+def read_table(path: str | Path, require_rows: bool = True) -> dict[str, np.ndarray]:
+    """Any CSV of this format's syntax (header of unique names, numbers, empty = missing)
+    as {column: float array}, without the flight-log v1 semantics: the reader for files
+    that carry more than a flight log (SITL logs with estimates and truth, `propid log
+    --csv` estimates). UserError naming the line and column on anything malformed."""
+    path = Path(path)
+    header, data = _parse_table(_read_text(path, "CSV file"), str(path))
+    if require_rows and data.shape[0] == 0:
+        raise UserError(f"{path}: header only, no samples")
+    return {name: data[:, i] for i, name in enumerate(header)}
+
+
 def read_flightlog(path: str | Path, vehicle: Vehicle | None = None) -> FlightLog:
     """Read and validate a flight-log v1 CSV. With `vehicle`, the rotor count must match."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise UserError(f"{path}: not a text CSV file (is it a binary log? try `propid convert`)") from None
-    except OSError as exc:
-        raise UserError(f"cannot read flight log {path}: {exc.strerror or exc}") from None
-    header, data = _parse_table(text, str(path))
-    columns = {name: data[:, i] for i, name in enumerate(header)}
+    columns = read_table(path, require_rows=False)
     log = flightlog_from_columns(columns, str(path), None if vehicle is None else vehicle.rotor_count)
     log.path = path
     return log
@@ -431,6 +519,6 @@ def write_flightlog(path: str | Path, log: FlightLog) -> None:
     body = buffer.getvalue()
     # numpy writes NaN as 'nan'; the spec prefers an empty field for a missing value.
     body = _NAN_FIELD_RE.sub(r"\1", body)
-    with open(path, "w", encoding="utf-8", newline="\n") as handle:
-        handle.write(",".join(names) + "\n")
-        handle.write(body)
+    from propid.outputs import write_text
+
+    write_text(path, ",".join(names) + "\n" + body)

@@ -28,10 +28,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import hashlib
 import io
 import importlib.util
-import math
 import os
 import shutil
 import socket
@@ -44,6 +44,7 @@ from types import ModuleType
 from typing import Any, Iterable, Iterator
 
 from propid.errors import UserError
+from propid.units import frd_to_flu, ned_to_enu, rpm_to_rad_s  # noqa: F401 (part of this module's API)
 
 DIALECT_NAME = "propid"
 # Bump when the way the module is generated changes, to force regeneration.
@@ -193,8 +194,9 @@ def connect(url: str, *, source_system: int = GCS_SYSTEM_ID,
     install_for_mavutil()
     from pymavlink import mavutil
 
-    if ":" not in url:
-        raise UserError(f"bad connection '{url}': expected e.g. udp:0.0.0.0:14550")
+    listen_address = check_connection(url)
+    if listen_address is not None:
+        ensure_udp_port_free(*listen_address)
     try:
         conn = mavutil.mavlink_connection(url, source_system=source_system,
                                           source_component=source_component,
@@ -209,6 +211,49 @@ def connect(url: str, *, source_system: int = GCS_SYSTEM_ID,
         except OSError:
             pass
     return conn
+
+
+_UDP_LISTEN = ("udp", "udpin")
+_NETWORK_SCHEMES = _UDP_LISTEN + ("udpout", "udpbcast", "tcp", "tcpin")
+
+
+def check_connection(url: str) -> tuple[str, int] | None:
+    """Check a connection string before opening it; UserError naming what is wrong.
+    Returns (host, port) for a UDP link we listen on, else None."""
+    usage = ("expected udp:HOST:PORT or udpin:HOST:PORT (listen), udpout:HOST:PORT, tcp:HOST:PORT, "
+             "tcpin:HOST:PORT, or a serial device such as /dev/ttyACM0[,BAUD]")
+    scheme, _, rest = url.partition(":")
+    if scheme not in _NETWORK_SCHEMES:
+        if url.startswith("/") or url.upper().startswith("COM"):
+            return None  # a serial device: pymavlink names the problem if it cannot open it
+        raise UserError(f"bad connection '{url}': {usage}")
+    host, sep, port_text = rest.rpartition(":")
+    if not sep or not host:
+        raise UserError(f"bad connection '{url}': {usage}")
+    try:
+        port = int(port_text)
+    except ValueError:
+        raise UserError(f"bad connection '{url}': port '{port_text}' is not a number ({usage})") from None
+    if not 0 < port < 65536:
+        raise UserError(f"bad connection '{url}': port {port} outside 1..65535")
+    return (host, port) if scheme in _UDP_LISTEN else None
+
+
+def ensure_udp_port_free(host: str, port: int) -> None:
+    """pymavlink binds a listening UDP socket with SO_REUSEADDR, so on Linux a second
+    listener on the same port binds too and takes the traffic from the first, which then
+    silently sees nothing. A bind without SO_REUSEADDR fails if anyone holds the port:
+    try that first and refuse to share."""
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        probe.bind((host, port))
+    except OSError as exc:
+        if exc.errno == errno.EADDRINUSE:
+            raise UserError(f"UDP port {port} on {host} is already in use (another propid listen/log or a "
+                            "ground station?): stop it, or forward the stream to another port") from None
+        raise UserError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+    finally:
+        probe.close()
 
 
 def _check_file(path: str | os.PathLike) -> Path:
@@ -389,20 +434,6 @@ def message_to_dict(msg) -> dict[str, Any]:
     out["_sysid"] = msg.get_srcSystem()
     out["_compid"] = msg.get_srcComponent()
     return out
-
-
-def frd_to_flu(vector) -> list[float]:
-    """MAVLink body FRD -> our body FLU (y and z change sign)."""
-    return [float(vector[0]), -float(vector[1]), -float(vector[2])]
-
-
-def ned_to_enu(vector) -> list[float]:
-    """MAVLink world NED -> our world ENU."""
-    return [float(vector[1]), float(vector[0]), -float(vector[2])]
-
-
-def rpm_to_rad_s(rpm: float) -> float:
-    return float(rpm) * 2.0 * math.pi / 60.0
 
 
 def estimate_columns(rotor_count: int) -> list[str]:

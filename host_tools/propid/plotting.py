@@ -13,7 +13,6 @@ All series are SI, body FLU (MAVLink FRD values are converted back on reading).
 
 from __future__ import annotations
 
-import csv
 import math
 import os
 import re
@@ -23,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from propid.errors import UserError
+from propid.units import FRD_TO_FLU
 
 # Files bigger than this get a progress bar while they are read.
 PROGRESS_BYTES = 4 << 20
@@ -59,69 +59,13 @@ class FlightData:
 # --------------------------------------------------------------------------
 # Reading
 # --------------------------------------------------------------------------
-def _parse_float(text: str) -> float:
-    text = text.strip()
-    if text == "":
-        return math.nan
-    return float(text)
-
-
 def read_csv_columns(path: Path, progress: bool | None = None) -> dict[str, np.ndarray]:
-    """A CSV with a header line -> name -> float array (empty or 'nan' = NaN).
-    UserError with the line number on anything malformed."""
-    size = path.stat().st_size
-    if size == 0:
-        raise UserError(f"{path}: empty file")
-    if progress is None:
-        progress = size > PROGRESS_BYTES
-    try:
-        handle = open(path, newline="", encoding="utf-8")
-    except OSError as exc:
-        raise UserError(f"{path}: cannot open: {exc}") from exc
-    bar = None
-    if progress:
-        from tqdm import tqdm
+    """A CSV with a header line -> name -> float array (empty = NaN), by the one CSV reader
+    (propid.flightlog.read_table). `progress` is accepted for compatibility; the C parser
+    needs no bar."""
+    from propid.flightlog import read_table
 
-        bar = tqdm(total=size, unit="B", unit_scale=True, desc=path.name, leave=False,
-                   disable=None)  # None: no bar when stderr is not a terminal
-
-    def counted_lines():
-        for line in handle:
-            if bar is not None:
-                bar.update(len(line))
-            yield line
-
-    with handle:
-        try:
-            reader = csv.reader(counted_lines())
-            header = next(reader, None)
-            if not header or not any(h.strip() for h in header):
-                raise UserError(f"{path}: no header line")
-            names = [h.strip() for h in header]
-            if len(set(names)) != len(names):
-                raise UserError(f"{path}: duplicate column names in the header")
-            rows: list[list[float]] = []
-            for line_number, record in enumerate(reader, start=2):
-                if not record:
-                    continue
-                if len(record) != len(names):
-                    raise UserError(f"{path}:{line_number}: {len(record)} fields, header has "
-                                    f"{len(names)} (truncated or corrupt file?)")
-                try:
-                    rows.append([_parse_float(v) for v in record])
-                except ValueError as exc:
-                    raise UserError(f"{path}:{line_number}: not a number: {exc}") from exc
-        except UnicodeDecodeError as exc:
-            raise UserError(f"{path}: not a text CSV file ({exc.reason})") from exc
-        except csv.Error as exc:
-            raise UserError(f"{path}: malformed CSV: {exc}") from exc
-        finally:
-            if bar is not None:
-                bar.close()
-    if not rows:
-        raise UserError(f"{path}: header only, no samples")
-    data = np.asarray(rows, dtype=float)
-    return {name: data[:, i] for i, name in enumerate(names)}
+    return read_table(path)
 
 
 def _count_rotors(names, prefix: str) -> int:
@@ -170,55 +114,30 @@ def _flight_from_columns(path: Path, columns: dict[str, np.ndarray]) -> FlightDa
 
 def _flight_from_tlog(path: Path, progress: bool | None) -> FlightData:
     from propid import mavlink_io
+    from propid.importers.tlog import read_tlog_streams
 
     if progress is None:
         progress = path.stat().st_size > PROGRESS_BYTES
-    assembler = mavlink_io.EstimateRows()
-    estimate_rows: list[dict] = []
-    rotor_t: list[float] = []
-    rotor_rows: dict[int, list[float]] = {}
-    rate_t: list[float] = []
-    rate_rows: list[list[float]] = []
-    esc_latest: dict[int, float] = {}
-    wanted = {mavlink_io.MSG_COEFFICIENTS, mavlink_io.MSG_GYRO, mavlink_io.MSG_STATUS,
-              "ESC_STATUS", "HIGHRES_IMU"}
-    for msg in mavlink_io.read_tlog(path, types=wanted, progress=progress):
-        kind = msg.get_type()
-        if kind == "ESC_STATUS":
-            # One message per 4 ESCs: a sample is complete when the first block arrives again.
-            for k, rpm in enumerate(msg.rpm):
-                esc_latest[msg.index + k] = mavlink_io.rpm_to_rad_s(rpm)
-            if msg.index == 0:
-                rotor_t.append(msg.time_usec * 1e-6)
-                for k in range(8):
-                    rotor_rows.setdefault(k, []).append(esc_latest.get(k, math.nan))
-        elif kind == "HIGHRES_IMU":
-            rate_t.append(msg.time_usec * 1e-6)
-            rate_rows.append(mavlink_io.frd_to_flu((msg.xgyro, msg.ygyro, msg.zgyro)))
-        else:
-            row = assembler.feed(msg)
-            if row is not None:
-                estimate_rows.append(row)
-    rotor_count = assembler.rotor_count or 0
-    if rotor_count == 0:
-        # No estimates: count the ESCs that ever reported a speed.
-        rotor_count = sum(1 for k, v in rotor_rows.items() if np.any(np.asarray(v) > 0))
+    streams = read_tlog_streams(path, estimates=True, progress=progress)
+    rotor_count = streams.estimate_rotor_count or streams.esc_count()
     if rotor_count == 0:
         raise UserError(f"{path}: no PROPID_COEFFICIENTS or ESC_STATUS messages: nothing to plot")
     flight = FlightData(source=path, rotor_count=rotor_count)
-    if estimate_rows:
+    if streams.estimates:
         names = mavlink_io.estimate_columns(rotor_count)
-        t = np.array([r["t"] for r in estimate_rows])
+        t = np.array([r["t"] for r in streams.estimates])
         flight.estimates = Series(t=t, columns={
-            n: np.array([float(r.get(n, math.nan)) for r in estimate_rows])
+            n: np.array([float(r.get(n, math.nan)) for r in streams.estimates])
             for n in names if n != "t"})
-    if rotor_t:
-        flight.rotors = Series(t=np.array(rotor_t), columns={
-            f"omega_{k + 1}": np.array(rotor_rows[k]) for k in range(rotor_count)})
-    if rate_t:
-        rates = np.array(rate_rows)
-        flight.rates = Series(t=np.array(rate_t), columns={
-            f"gyro_{a}": rates[:, i] for i, a in enumerate(_AXES)})
+    if streams.esc:
+        times = sorted(streams.esc)
+        flight.rotors = Series(t=np.array(times) * 1e-6, columns={
+            f"omega_{k + 1}": np.array([streams.esc[t].get(k, math.nan) for t in times])
+            for k in range(rotor_count)})
+    if streams.imu:
+        imu = np.array(sorted(streams.imu, key=lambda r: r[0]), dtype=float)
+        flight.rates = Series(t=imu[:, 0] * 1e-6, columns={
+            f"gyro_{a}": imu[:, 1 + i] * FRD_TO_FLU[i] for i, a in enumerate(_AXES)})
     return flight
 
 
@@ -340,3 +259,76 @@ def plot_flight(flight: FlightData, out: str | os.PathLike, title: str | None = 
     finally:
         plt.close(fig)
     return out
+
+
+# --------------------------------------------------------------------------
+# Replays (propid.replay results)
+# --------------------------------------------------------------------------
+def plot_replay(result, path: str, title: str = "", reference_kf: float | None = None) -> None:
+    """PNG: kf and km per rotor with +-1 sigma bands, gyro biases, over time."""
+    plt = _pyplot()
+
+    s = result.series
+    fig, axes = plt.subplots(3, 1, figsize=(7.5, 7.0), sharex=True, dpi=80)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for ax, key, label in ((axes[0], "kf", "kf"), (axes[1], "km", "km")):
+        for k in range(s[key].shape[1]):
+            c = colors[k % len(colors)]
+            ax.plot(s["t"], s[key][:, k], color=c, lw=1.0, label=f"rotor {k + 1}")
+            ax.fill_between(s["t"], s[key][:, k] - s[f"{key}_std"][:, k], s[key][:, k] + s[f"{key}_std"][:, k],
+                            color=c, alpha=0.15, lw=0)
+        nominal = result.summary["config"]["thrust_coeff_nominal" if key == "kf" else "drag_coeff_nominal"]
+        ax.axhline(float(np.mean(nominal)), color="k", ls=":", lw=1, label="prior mean")
+        ax.set_ylabel(f"{label} [{result.summary['units'][key].split(':')[0]}]")
+        ax.grid(alpha=0.3)
+    if reference_kf is not None:
+        axes[0].axhline(reference_kf, color="r", ls="--", lw=1, label="independent (thrust)")
+    axes[0].legend(fontsize=7, ncol=3, loc="lower right")
+    for k, axis in enumerate("xyz"):
+        c = colors[k]
+        axes[2].plot(s["t"], s["gyro_bias"][:, k], color=c, lw=1.0, label=f"b_{axis}")
+        axes[2].fill_between(s["t"], s["gyro_bias"][:, k] - s["gyro_bias_std"][:, k],
+                             s["gyro_bias"][:, k] + s["gyro_bias_std"][:, k], color=c, alpha=0.15, lw=0)
+    axes[2].set_ylabel("gyro bias [rad/s]")
+    axes[2].set_xlabel("log time [s]")
+    axes[2].legend(fontsize=7, ncol=3)
+    axes[2].grid(alpha=0.3)
+    if title:
+        axes[0].set_title(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+def plot_fleet(summaries: list[dict], path: str, reference_kf: float) -> None:
+    """Bar chart per run: the filter's kf and the least-squares checks, relative to the
+    independent kf."""
+    plt = _pyplot()
+
+    names = [Path(s["log"]).stem.replace("_20251017", "") if s.get("log") else "?" for s in summaries]
+    series = {"filter (mean of rotors)": [np.mean(s["kf_mean"]) / reference_kf for s in summaries]}
+
+    def check(band, key):
+        return [((s.get("checks") or {}).get("bands", {}).get(band, {}).get(key, {}) or {}).get("kf", np.nan)
+                / reference_kf for s in summaries]
+
+    if all(s.get("checks") for s in summaries):
+        series["LS thrust from acc_z"] = check("raw", "thrust_kf")
+        series["LS torque raw (roll+pitch)/2"] = list(0.5 * (np.array(check("raw", "roll_kf")) + np.array(check("raw", "pitch_kf"))))
+        series["LS torque 2-10 Hz (roll+pitch)/2"] = list(
+            0.5 * (np.array(check("2-10Hz", "roll_kf")) + np.array(check("2-10Hz", "pitch_kf"))))
+    fig, ax = plt.subplots(figsize=(9, 3.6), dpi=80)
+    width = 0.8 / len(series)
+    x = np.arange(len(names))
+    for k, (label, values) in enumerate(series.items()):
+        ax.bar(x + (k - (len(series) - 1) / 2) * width, values, width, label=label)
+    ax.axhline(1.0, color="k", lw=1, ls="--")
+    ax.set_xticks(x)
+    ax.set_xticklabels(names, rotation=45, ha="right", fontsize=7)
+    ax.set_ylabel("kf / independent kf")
+    ax.set_ylim(0, 1.25)
+    ax.legend(fontsize=7, ncol=4, loc="upper center")
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+

@@ -29,6 +29,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
+from propid.signals import measured_torque, segments
 
 GRAVITY = 9.80665
 
@@ -94,14 +95,6 @@ def clean_rotor_speeds(speeds: np.ndarray, limit: float) -> tuple[np.ndarray, in
         if bad.any() and (~bad).sum() >= 2:
             col[bad] = np.interp(idx[bad], idx[~bad], col[~bad])
     return out, bad_total
-
-
-def segments(mask: np.ndarray, min_length: int) -> list[tuple[int, int]]:
-    """[start, stop) index ranges of contiguous True runs at least min_length long."""
-    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    starts = np.flatnonzero(edges == 1)
-    stops = np.flatnonzero(edges == -1)
-    return [(int(a), int(b)) for a, b in zip(starts, stops) if b - a >= min_length]
 
 
 def bandpass(x: np.ndarray, rate_hz: float, low_hz: float | None, high_hz: float | None) -> np.ndarray:
@@ -268,7 +261,7 @@ def check_log(
     inertia = np.eye(3) if use_unit else np.asarray(vehicle.inertia)
     result["inertia_used"] = "unit" if use_unit else "vehicle"
     rate_dot = np.gradient(gyro, log.t, axis=0)
-    torque = rate_dot @ inertia.T + np.cross(gyro, gyro @ inertia.T)
+    torque = measured_torque(gyro, rate_dot, inertia)
     reg_roll = (u * pos[:, 1]).sum(axis=1, keepdims=True)
     reg_pitch = (-u * pos[:, 0]).sum(axis=1, keepdims=True)
     reg_yaw = (u * signs).sum(axis=1, keepdims=True)

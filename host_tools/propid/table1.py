@@ -89,33 +89,11 @@ class ConvergenceSpec:
 
 
 # --------------------------------------------------------------------------- reading
-def _field_to_float(text: str) -> float:
-    text = text.strip()
-    return float(text) if text else math.nan
-
-
 def read_log_columns(path: str | Path) -> dict[str, np.ndarray]:
     """A SITL log CSV (flight log v1 + SITL columns) as {column: float array}."""
-    path = Path(path)
-    try:
-        with path.open("r", encoding="utf-8") as handle:
-            header = handle.readline().strip()
-            if not header:
-                raise UserError(f"{path}: empty file, expected a CSV header line")
-            names = [name.strip() for name in header.split(",")]
-            try:
-                # an empty field is a missing value (flight-log v1), e.g. the gyro
-                # before its first sample
-                data = np.loadtxt(handle, delimiter=",", ndmin=2, converters=_field_to_float)
-            except ValueError as exc:
-                raise UserError(f"{path}: not a numeric CSV after the header ({exc})") from None
-    except OSError as exc:
-        raise UserError(f"{path}: cannot read ({exc.strerror})") from None
-    if data.size == 0:
-        raise UserError(f"{path}: no samples after the header")
-    if data.shape[1] != len(names):
-        raise UserError(f"{path}: {data.shape[1]} fields per row but {len(names)} column names")
-    return {name: data[:, i] for i, name in enumerate(names)}
+    from propid.flightlog import read_table
+
+    return read_table(path)
 
 
 def rotor_count(columns: dict[str, np.ndarray]) -> int:
@@ -126,25 +104,16 @@ def rotor_count(columns: dict[str, np.ndarray]) -> int:
 
 
 def read_nominal_coefficients(vehicle_json: str | Path, count: int) -> tuple[np.ndarray, np.ndarray]:
-    """kf_nominal, km_nominal per rotor from a flight-log v1 vehicle file."""
-    path = Path(vehicle_json)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise UserError(f"{path}: cannot read ({exc.strerror})") from None
-    except json.JSONDecodeError as exc:
-        raise UserError(f"{path}: not JSON ({exc.msg} at line {exc.lineno})") from None
-    out = []
-    for key in ("kf_nominal", "km_nominal"):
-        value = data.get(key)
-        if isinstance(value, (int, float)) and value > 0:
-            out.append(np.full(count, float(value)))
-        elif isinstance(value, list) and len(value) == count and all(
-                isinstance(v, (int, float)) and v > 0 for v in value):
-            out.append(np.asarray(value, dtype=float))
-        else:
-            raise UserError(f"{path}: {key} must be a positive number or a list of {count}")
-    return out[0], out[1]
+    """kf_nominal, km_nominal per rotor from a vehicle file (propid.flightlog.read_vehicle)."""
+    from propid.flightlog import read_vehicle
+
+    vehicle = read_vehicle(vehicle_json)
+    if vehicle.rotor_count != count:
+        raise UserError(f"{vehicle_json}: {vehicle.rotor_count} rotors, the log has {count}")
+    for key, values in (("kf_nominal", vehicle.kf_nominal), ("km_nominal", vehicle.km_nominal)):
+        if values is None:
+            raise UserError(f"{vehicle_json}: {key} must be a positive number or a list of {count}")
+    return np.asarray(vehicle.kf_nominal, dtype=float), np.asarray(vehicle.km_nominal, dtype=float)
 
 
 # --------------------------------------------------------------------------- metrics

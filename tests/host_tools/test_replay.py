@@ -332,9 +332,8 @@ def test_filter_input_probe_reads_the_library(cfilter_available):
     full step (zero-order hold) or half of it (trapezoid), nothing in between."""
     from propid import replay as replay_module
 
-    replay_module._INPUT_RULE.clear()
     rule = replay_module.filter_input_rule()
-    ratio = replay_module._INPUT_RULE["ratio"]
+    ratio = replay_module.probe_input_ratio()
     assert min(abs(ratio - 1.0), abs(ratio - 0.5)) < 0.02
     assert rule == ("zoh" if ratio > 0.75 else "trapezoid")
 

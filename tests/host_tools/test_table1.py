@@ -164,7 +164,7 @@ def test_missing_columns_and_bad_files(tmp_path):
         metrics(cols)
     garbage = tmp_path / "bad.csv"
     garbage.write_text("t,px\n0.0,abc\n")
-    with pytest.raises(UserError, match="numeric"):
+    with pytest.raises(UserError, match="not a number"):
         table1.read_log_columns(garbage)
     with pytest.raises(UserError, match="cannot read"):
         table1.read_log_columns(tmp_path / "missing.csv")
@@ -183,7 +183,9 @@ def write_csv(path: Path, cols: dict[str, np.ndarray]) -> None:
 def test_csv_round_trip_and_nominals(tmp_path):
     cols = synthetic_columns(x_err=0.05)
     write_csv(tmp_path / "f.csv", cols)
-    (tmp_path / "f.vehicle.json").write_text(json.dumps({"kf_nominal": KF_NOM,
+    rotors = [{"position": [0.1 * x, 0.1 * y, 0.0], "yaw_sign": s}
+              for x, y, s in ((1, -1, 1), (-1, -1, -1), (-1, 1, 1), (1, 1, -1))]
+    (tmp_path / "f.vehicle.json").write_text(json.dumps({"rotors": rotors, "kf_nominal": KF_NOM,
                                                          "km_nominal": [KM_NOM] * 4}))
     back = table1.read_log_columns(tmp_path / "f.csv")
     kf, km = table1.read_nominal_coefficients(tmp_path / "f.vehicle.json", table1.rotor_count(back))
@@ -216,7 +218,8 @@ mode, seed, log = value("--mode"), int(value("--seed")), value("--log")
 x_err = {{"oracle": 0.01, "incorrect": 0.2, "filter": 0.02}}[mode] * seed
 cols = synthetic_columns(x_err=x_err, jump_at=5.0 if (mode == "incorrect" and seed == 2) else None)
 write_csv(log, cols)
-json.dump({{"kf_nominal": {kf}, "km_nominal": {km}}}, open(log[:-4] + ".vehicle.json", "w"))
+rotors = [{{"position": [0.1 * x, 0.1 * y, 0.0], "yaw_sign": s}} for x, y, s in ((1, -1, 1), (-1, -1, -1), (-1, 1, 1), (1, 1, -1))]
+json.dump({{"rotors": rotors, "kf_nominal": {kf}, "km_nominal": {km}}}, open(log[:-4] + ".vehicle.json", "w"))
 sys.exit(3 if (mode == "incorrect" and seed == 2) else 0)
 """
 

@@ -144,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
     frames = 0
     got_propid = False
     reset_pending = args.reset is not None
+    reset_result = None
+    interrupted = False
     try:
         while True:
             now = time.monotonic()
@@ -169,8 +171,8 @@ def run(args: argparse.Namespace) -> int:
                     result = mavlink_io.send_reset(conn, args.reset,
                                                    target_system=msg.get_srcSystem(),
                                                    target_component=msg.get_srcComponent())
-                    name = mavlink_io.dialect().enums["MAV_RESULT"][result].name
-                    print(f"MAV_CMD_PROPID_RESET rotor {args.reset}: {name}", flush=True)
+                    reset_result = mavlink_io.dialect().enums["MAV_RESULT"][result].name
+                    print(f"MAV_CMD_PROPID_RESET rotor {args.reset}: {reset_result}", flush=True)
             if now - last_draw >= REFRESH_S:
                 last_draw = now
                 view = format_view(coeffs, gyro, status, frames, args.connect)
@@ -181,8 +183,16 @@ def run(args: argparse.Namespace) -> int:
                 if live_plot is not None:
                     live_plot.draw()
     except KeyboardInterrupt:
-        pass
+        interrupted = True
     finally:
         conn.close()
     print(format_view(coeffs, gyro, status, frames, args.connect))
+    if not got_propid and not interrupted:
+        what = "MAVLink data" if frames == 0 else "propid messages (other MAVLink did arrive)"
+        raise UserError(f"no {what} on {args.connect} within --duration {args.duration:g} s")
+    if args.reset is not None:
+        if reset_result is None:
+            raise UserError("MAV_CMD_PROPID_RESET was not sent: no HEARTBEAT arrived to address it to")
+        if reset_result != "MAV_RESULT_ACCEPTED":
+            raise UserError(f"MAV_CMD_PROPID_RESET rotor {args.reset} refused: {reset_result}")
     return 0

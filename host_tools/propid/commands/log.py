@@ -12,6 +12,7 @@ from pathlib import Path
 
 from propid import mavlink_io
 from propid.errors import UserError
+from propid.outputs import check_writable
 
 NAME = "log"
 HELP = "record MAVLink telemetry to a .tlog (raw frames) and/or a CSV of the estimates"
@@ -39,19 +40,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 class Recorder:
-    """Writes what arrives; closing flushes both files."""
+    """Writes what arrives; closing flushes both files. The files are opened when the
+    first frame arrives, so a recording that receives nothing leaves existing files as
+    they were (a failed `propid log` must not wipe yesterday's recording)."""
 
     def __init__(self, tlog: Path | None, csv_path: Path | None):
-        self.tlog = mavlink_io.TlogWriter(tlog) if tlog else None
+        for path in (tlog, csv_path):
+            if path is not None:
+                check_writable(path)
+        self.tlog_path = tlog
+        self.tlog = None
         self.csv_path = csv_path
         self._csv_file = None
         self._csv_writer = None
         self._columns: list[str] | None = None
-        if csv_path is not None:
-            try:
-                self._csv_file = open(csv_path, "w", newline="")
-            except OSError as exc:
-                raise UserError(f"cannot write {csv_path}: {exc}") from exc
         self.rows = EstimateCounter()
         self.assembler = mavlink_io.EstimateRows()
         self.frames = 0
@@ -59,11 +61,22 @@ class Recorder:
         self.interrupted = False
         self.by_type: dict[str, int] = {}
 
+    def _open(self) -> None:
+        if self.tlog_path is not None:
+            self.tlog = mavlink_io.TlogWriter(self.tlog_path)
+        if self.csv_path is not None:
+            try:
+                self._csv_file = open(self.csv_path, "w", newline="")
+            except OSError as exc:
+                raise UserError(f"cannot write {self.csv_path}: {exc}") from exc
+
     def handle(self, msg, receive_time: float) -> None:
         kind = msg.get_type()
         if kind == "BAD_DATA":
             self.bad += 1
             return
+        if self.frames == 0:
+            self._open()
         self.frames += 1
         self.by_type[kind] = self.by_type.get(kind, 0) + 1
         if self.tlog is not None:
@@ -88,7 +101,7 @@ class Recorder:
         if self.tlog is not None:
             self.tlog.close()
         if self._csv_file is not None:
-            if self._csv_writer is None:  # nothing estimated: still a valid (header) file
+            if self._csv_writer is None:  # frames but no estimate: still a valid (header) file
                 csv.writer(self._csv_file).writerow(mavlink_io.estimate_columns(0))
             self._csv_file.close()
 

@@ -125,7 +125,8 @@ def _finite_json(value):
 
 
 def run(args: argparse.Namespace) -> int:
-    from propid.replay import ReplayOptions, fleet_summary, plot_fleet, plot_replay, replay, validation_table
+    from propid.plotting import plot_fleet, plot_replay
+    from propid.replay import ReplayOptions, fleet_summary, replay, validation_table
 
     log_paths = [Path(p) for p in args.log]
     vehicle_path = Path(args.vehicle) if args.vehicle else vehicle_path_for(log_paths[0])

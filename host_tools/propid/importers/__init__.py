@@ -46,7 +46,7 @@ def import_log(
     path: str | Path,
     fmt: str = "auto",
     vehicle: Vehicle | None = None,
-    log_index: int = 1,
+    log_index: int | None = None,
     motor_map: list[int] | None = None,
     gyro_topic: str = "sensor_combined",
     progress: bool = False,

@@ -28,6 +28,7 @@ import numpy as np
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle, flightlog_from_columns
 from propid.importers.motor_order import BETAFLIGHT_QUADX, quadrant_map
+from propid.units import erpm_to_rad_s_factor
 
 GRAVITY = 9.80665
 DSHOT_MIN = 48  # DShot command values 48..2047 are throttle 0..1
@@ -90,7 +91,7 @@ def convert_betaflight(
     columns: dict[str, np.ndarray] = {"t": (time_us - time_us[0]) * 1e-6}
     for axis, name in enumerate("xyz"):
         columns[f"gyro_{name}"] = np.asarray(fields[f"gyroADC[{axis}]"], dtype=float) * rate_scale * deg
-    erpm_to_rad_s = 100.0 / pole_pairs * 2.0 * math.pi / 60.0
+    erpm_to_rad_s = erpm_to_rad_s_factor(pole_pairs, erpm_scale=100.0)  # the log stores eRPM/100
     for rotor, motor in enumerate(motor_map, start=1):
         columns[f"omega_{rotor}"] = np.asarray(fields[f"eRPM[{motor}]"], dtype=float) * erpm_to_rad_s
     if acc_1g and all(f"accSmooth[{a}]" in fields for a in range(3)):
@@ -133,10 +134,11 @@ def convert_betaflight(
 
 
 def decode_blackbox(
-    path: str | Path, log_index: int = 1, progress: bool = False
+    path: str | Path, log_index: int | None = None, progress: bool = False
 ) -> tuple[dict, dict[str, np.ndarray], dict]:
-    """Decode main frames of log `log_index` (1-based, as Betaflight's explorer counts)
-    of a .bbl/.bfl file with orangebox: (headers, field table, info)."""
+    """Decode main frames of log `log_index` (1-based, as Betaflight's explorer counts;
+    None: the first) of a .bbl/.bfl file with orangebox: (headers, field table, info).
+    info lists every log of the file with its size, so a caller can say which was taken."""
     try:
         from orangebox import Parser
     except ImportError:  # pragma: no cover - dependency of the package
@@ -153,6 +155,9 @@ def decode_blackbox(
     except Exception as exc:  # orangebox raises assorted errors on foreign files
         raise UserError(f"{path}: not a readable Betaflight blackbox log ({exc})") from None
     count = parser.reader.log_count
+    pointers = list(parser.reader.log_pointers) + [path.stat().st_size]
+    logs = [{"index": k + 1, "bytes": int(pointers[k + 1] - pointers[k])} for k in range(count)]
+    log_index = 1 if log_index is None else log_index
     if not 1 <= log_index <= count:
         raise UserError(f"{path}: --log-index {log_index} out of range: the file holds {count} log(s), numbered 1..{count}")
     if log_index != 1:
@@ -182,7 +187,7 @@ def decode_blackbox(
     fields = {names[i]: table[:, j] for j, i in enumerate(wanted)}
     headers = dict(parser.headers)
     events = [e.type.name for e in parser.events]
-    info = {"log_index": log_index, "log_count": count, "frames": len(rows), "events": events,
+    info = {"log_index": log_index, "log_count": count, "logs": logs, "frames": len(rows), "events": events,
             "firmware": headers.get("Firmware revision")}
     return headers, fields, info
 
@@ -196,11 +201,11 @@ _WANTED_BASES = {
 def import_betaflight(
     path: str | Path,
     vehicle: Vehicle | None = None,
-    log_index: int = 1,
+    log_index: int | None = None,
     motor_map: list[int] | None = None,
     progress: bool = False,
 ) -> tuple[FlightLog, dict]:
     headers, fields, decode_info = decode_blackbox(path, log_index, progress)
-    log, info = convert_betaflight(headers, fields, vehicle, motor_map, where=f"{path} log {log_index}")
+    log, info = convert_betaflight(headers, fields, vehicle, motor_map, where=f"{path} log {decode_info['log_index']}")
     info.update(decode_info)
     return log, info

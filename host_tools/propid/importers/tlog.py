@@ -16,40 +16,66 @@ their own time base: the output is event-style like the ULog importer's.
 
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle, flightlog_from_columns
-from propid.importers.ulog import FRD_TO_FLU, merge_streams
-
-RPM_TO_RAD_S = 2.0 * math.pi / 60.0
-
-
-def _messages(path: Path):
-    """HIGHRES_IMU and ESC_STATUS messages of the tlog, read with engineer M's
-    propid.mavlink_io (our dialect: pymavlink 2.4.50's common.xml lacks ESC_STATUS, the
-    propid dialect declares it with the standard id and wire format)."""
-    from propid.mavlink_io import read_tlog
-
-    yield from read_tlog(path, types=["HIGHRES_IMU", "ESC_STATUS"])
+from propid.importers.ulog import merge_streams
+from propid.units import FRD_TO_FLU, RPM_TO_RAD_S
 
 
-def read_tlog_streams(path: Path) -> tuple[list[tuple], dict[int, dict[int, float]]]:
-    """(imu rows [(time_us, gx, gy, gz, ax, ay, az)], esc {time_us: {esc_index: rpm}})."""
-    imu = []
-    esc: dict[int, dict[int, float]] = {}
-    for msg in _messages(path):
+@dataclass
+class TlogStreams:
+    """What a tlog holds, each stream on the vehicle's own time stamps (time_usec), in
+    the units found on the wire except the rotor speeds (already rad/s):
+    - imu: rows (time_us, gx, gy, gz, ax, ay, az), body FRD, rad/s and m/s^2;
+    - esc: {time_us: {esc_index: rotor speed [rad/s]}}: ESC_STATUS messages with the same
+      time_usec are one rotor sample (a hexa/octo needs two messages); the sign of the
+      rpm (spin direction on some ESCs) is dropped, rotor speeds are magnitudes;
+    - estimates: rows of propid's own PROPID_* telemetry (columns of
+      mavlink_io.estimate_columns), only when asked for."""
+
+    imu: list[tuple] = field(default_factory=list)
+    esc: dict[int, dict[int, float]] = field(default_factory=dict)
+    estimates: list[dict] = field(default_factory=list)
+    estimate_rotor_count: int | None = None
+
+    def esc_count(self) -> int:
+        """Highest ESC index that ever reported a non-zero speed, plus one (0 if none)."""
+        used = [i for slots in self.esc.values() for i, speed in slots.items() if speed > 0]
+        return max(used) + 1 if used else 0
+
+
+def read_tlog_streams(path: str | Path, estimates: bool = False, progress: bool = False) -> TlogStreams:
+    """Read a tlog once: HIGHRES_IMU, ESC_STATUS and (with estimates=True) PROPID_*.
+    Our dialect is used to decode (pymavlink's bundled common.xml may lack ESC_STATUS;
+    the propid dialect declares it with the standard id and wire format)."""
+    from propid import mavlink_io
+
+    streams = TlogStreams()
+    types = {"HIGHRES_IMU", "ESC_STATUS"}
+    assembler = None
+    if estimates:
+        assembler = mavlink_io.EstimateRows()
+        types |= {mavlink_io.MSG_COEFFICIENTS, mavlink_io.MSG_GYRO, mavlink_io.MSG_STATUS}
+    for msg in mavlink_io.read_tlog(path, types=types, progress=progress):
         kind = msg.get_type()
         if kind == "HIGHRES_IMU":
-            imu.append((int(msg.time_usec), msg.xgyro, msg.ygyro, msg.zgyro, msg.xacc, msg.yacc, msg.zacc))
+            streams.imu.append((int(msg.time_usec), msg.xgyro, msg.ygyro, msg.zgyro, msg.xacc, msg.yacc, msg.zacc))
         elif kind == "ESC_STATUS":
-            slots = esc.setdefault(int(msg.time_usec), {})
+            slots = streams.esc.setdefault(int(msg.time_usec), {})
             for k, rpm in enumerate(msg.rpm):
-                slots[int(msg.index) + k] = abs(float(rpm))
-    return imu, esc
+                slots[int(msg.index) + k] = abs(float(rpm)) * RPM_TO_RAD_S
+        elif assembler is not None:
+            row = assembler.feed(msg)
+            if row is not None:
+                streams.estimates.append(row)
+    if assembler is not None:
+        streams.estimate_rotor_count = assembler.rotor_count
+    return streams
 
 
 def import_tlog(
@@ -59,20 +85,20 @@ def import_tlog(
     if not path.is_file():
         raise UserError(f"cannot read {path}: no such file")
     try:
-        imu, esc = read_tlog_streams(path)
+        streams = read_tlog_streams(path)
     except UserError:
         raise
     except Exception as exc:  # pymavlink raises assorted errors on foreign files
         raise UserError(f"{path}: not a readable MAVLink tlog ({exc})") from None
+    imu, esc = streams.imu, streams.esc
     if not imu:
         raise UserError(f"{path}: no HIGHRES_IMU messages: no gyro samples (stream HIGHRES_IMU from the vehicle)")
     if not esc:
         raise UserError(f"{path}: no ESC_STATUS messages: no rotor speeds (needs ESC RPM telemetry)")
     if vehicle is not None:
         count = vehicle.rotor_count
-    else:  # highest ESC index that ever reported a non-zero speed
-        used = [i for slots in esc.values() for i, rpm in slots.items() if rpm > 0]
-        count = max(used) + 1 if used else 4
+    else:
+        count = streams.esc_count() or 4
     if motor_map is None:
         motor_map = list(range(count))
         map_note = "ESC i -> vehicle rotor i (identity)"
@@ -81,7 +107,7 @@ def import_tlog(
     imu_arr = np.array(sorted(imu, key=lambda r: r[0]), dtype=float)
     esc_times = np.array(sorted(esc), dtype=np.int64)
     rotor_cols = {
-        f"omega_{rotor}": np.array([esc[t].get(motor, np.nan) for t in esc_times]) * RPM_TO_RAD_S
+        f"omega_{rotor}": np.array([esc[t].get(motor, np.nan) for t in esc_times])
         for rotor, motor in enumerate(motor_map, start=1)
     }
     gyro_cols = {f"gyro_{a}": imu_arr[:, 1 + i] * FRD_TO_FLU[i] for i, a in enumerate("xyz")}

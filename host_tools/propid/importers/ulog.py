@@ -18,7 +18,6 @@ its own times.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -26,13 +25,12 @@ import numpy as np
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle, flightlog_from_columns
 from propid.importers.motor_order import PX4_QUADX, quadrant_map
+from propid.units import FRD_TO_FLU, RPM_TO_RAD_S
 
 GYRO_TOPICS = {
     "sensor_combined": "gyro_rad[{}]",
     "vehicle_angular_velocity": "xyz[{}]",
 }
-FRD_TO_FLU = np.array([1.0, -1.0, -1.0])
-RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 
 
 def merge_streams(

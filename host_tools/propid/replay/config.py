@@ -1,0 +1,76 @@
+"""The filter configuration a replay runs with (propid_config_t fields, SI) and notes on
+where each value came from."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from propid.errors import UserError
+from propid.flightlog import FlightLog, Vehicle
+from propid.realdata_checks import absurd_speed_limit, check_log, flying_mask
+from propid.replay.noise import estimate_noise
+from propid.replay.options import ReplayOptions
+
+def _nominals(vehicle: Vehicle, options: ReplayOptions, log: FlightLog) -> tuple[list[float], list[float], str]:
+    n = vehicle.rotor_count
+    if options.unit_inertia:
+        if options.kf_nominal is not None and options.km_nominal is not None:
+            return [options.kf_nominal] * n, [options.km_nominal] * n, "given"
+        # Start from the log's own band-limited torque fit (J = 1): a data-driven prior.
+        checks = check_log(log, vehicle, bands={"band": (1.0, 10.0)}, unit_inertia=True)
+        entry = checks["bands"].get("band")
+        if not entry:
+            raise UserError("unit-inertia mode: no flying segment to initialise kf/J and km/J from; give --kf-nominal/--km-nominal")
+        kf = 0.5 * (entry["roll_kf"]["kf"] + entry["pitch_kf"]["kf"])
+        km = entry["yaw_km_rotor_inertia"]["km"]
+        if not (kf > 0 and km > 0):
+            raise UserError(
+                f"unit-inertia mode: the log's torque fit gives kf/J = {kf:.3g}, km/J = {km:.3g}: not positive, "
+                "so the vehicle file's geometry or yaw signs disagree with the data; give --kf-nominal/--km-nominal"
+            )
+        kf = options.kf_nominal if options.kf_nominal is not None else kf
+        km = options.km_nominal if options.km_nominal is not None else km
+        return [kf] * n, [km] * n, "band-limited least-squares torque fit of this log (1-10 Hz, J = 1)"
+    kf = [options.kf_nominal] * n if options.kf_nominal is not None else vehicle.kf_nominal
+    km = [options.km_nominal] * n if options.km_nominal is not None else vehicle.km_nominal
+    if kf is None or km is None:
+        raise UserError(
+            f"vehicle file {vehicle.path or vehicle.name}: kf_nominal/km_nominal are null: give --kf-nominal and "
+            "--km-nominal (the filter needs a prior mean)"
+        )
+    return list(kf), list(km), "vehicle file" if options.kf_nominal is None else "given"
+
+
+def build_config(vehicle: Vehicle, log: FlightLog, options: ReplayOptions) -> tuple[dict, dict]:
+    """Filter configuration fields (propid_config_t names, SI) and notes on where they came from."""
+    if vehicle.inertia is None and not options.unit_inertia:
+        raise UserError(
+            f"vehicle file {vehicle.path or vehicle.name}: inertia is null. The filter turns torques into angular "
+            "acceleration with J, so without it kf and km cannot be estimated in SI units. Run with --unit-inertia "
+            "to estimate kf/J and km/Jzz ratios instead (see docs/real-data.md)"
+        )
+    inertia = np.eye(3) if options.unit_inertia else np.asarray(vehicle.inertia, dtype=float)
+    kf, km, nominal_source = _nominals(vehicle, options, log)
+    limit = options.max_rotor_speed or absurd_speed_limit(log.rotor_speed)
+    config = {
+        "rotor_count": vehicle.rotor_count,
+        "positions": vehicle.positions.tolist(),
+        "yaw_signs": vehicle.yaw_signs.tolist(),
+        "thrust_coeff_nominal": kf,
+        "drag_coeff_nominal": km,
+        "inertia": inertia.tolist(),
+        "max_rotor_speed": float(limit),
+    }
+    notes = {"nominals": nominal_source, "max_rotor_speed": "given" if options.max_rotor_speed else
+             "2x the 99.9th percentile of the log's finite rotor speeds"}
+    if options.noise == "auto":
+        mask = flying_mask(log)
+        auto = estimate_noise(log, inertia, vehicle.positions, vehicle.yaw_signs, mask)
+        config.update(auto)
+        notes["noise"] = ("auto: gyro noise and unmodelled angular acceleration measured on the log "
+                          "(residual of a least-squares fit of the filter's torque model)")
+    else:
+        notes["noise"] = "library defaults"
+    config.update(options.overrides)
+    return config, notes
+

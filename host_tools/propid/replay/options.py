@@ -1,0 +1,32 @@
+"""What a replay is asked to do (ReplayOptions) and what it returns (ReplayResult)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+US = 1_000_000  # microseconds per second: the C API takes time stamps in us
+
+
+@dataclass
+class ReplayOptions:
+    segment: str = "all"  # "all" or "flying"
+    streams: str = "auto"  # "auto", "rows" or "events"
+    unit_inertia: bool = False
+    kf_nominal: float | None = None  # override (unit-inertia mode: kf/J)
+    km_nominal: float | None = None
+    noise: str = "auto"  # "auto": from the log; "default": the library defaults
+    max_rotor_speed: float | None = None  # None: 2x the 99.9th percentile of finite speeds
+    overrides: dict = field(default_factory=dict)  # any other propid_config_t field
+    skip_repeats: bool = False  # a row whose gyro (or rotor speeds) exactly repeat the previous row is no new sample
+    rotor_delay_s: float | str = 0.0  # push rotor speeds this much later than logged, or "auto"
+    prefilter_hz: float | str | None = None  # matched causal low-pass of gyro and rotor speed^2: Hz, "auto" or None
+    diagnostic_highpass_hz: float | None = None  # diagnostic only: emulate removing slow content (docs/real-data.md)
+    record_every: int = 1  # keep every k-th estimate for the time series
+    progress: bool = True
+
+
+@dataclass
+class ReplayResult:
+    summary: dict
+    series: dict  # time series of the estimates (numpy arrays)
+

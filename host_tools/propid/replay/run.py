@@ -1,0 +1,196 @@
+"""Run a flight log through the C filter, sample by sample at the log's own times."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from propid.errors import UserError
+from propid.flightlog import FlightLog, Vehicle
+from propid.replay.alignment import detect_streams, estimate_rotor_delay, filter_input_rule
+from propid.replay.config import build_config
+from propid.replay.noise import nis_mean, replay_nis
+from propid.replay.options import US, ReplayOptions, ReplayResult
+from propid.replay.prefilter import highpass_emulation_log, prefilter_log
+from propid.replay.session import FilterSession, segment_mask
+
+
+def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = None) -> ReplayResult:
+    """Run the log through the C filter; return the summary (JSON-ready) and time series."""
+    options = options or ReplayOptions()
+    if log.rotor_count != vehicle.rotor_count:
+        raise UserError(f"the log has {log.rotor_count} rotors, the vehicle file {vehicle.rotor_count}")
+    if options.noise == "nis":
+        return replay_nis(log, vehicle, options)
+    streams = detect_streams(log) if options.streams == "auto" else options.streams
+    logged_streams = streams  # --skip-repeats turns a rows log into events below; the time base stays the rows'
+    mask = segment_mask(log, options.segment)
+    rows = np.flatnonzero(mask)
+    if rows.size == 0:
+        raise UserError("no rows to replay (is the vehicle ever flying? try --segment all)")
+    recorded = log
+    prefilter_info = None
+    if options.prefilter_hz is not None:
+        if streams != "rows" or options.skip_repeats:
+            raise UserError("the matched pre-filter needs a rows log (one gyro and one rotor sample per row, uniform "
+                            "time) and cannot be combined with --skip-repeats")
+        inertia = np.eye(3) if options.unit_inertia or vehicle.inertia is None else np.asarray(vehicle.inertia)
+        log, prefilter_info = prefilter_log(log, vehicle, mask, options.prefilter_hz, inertia)
+    highpass_info = None
+    if options.diagnostic_highpass_hz is not None:
+        if streams != "rows" or options.skip_repeats:
+            raise UserError("--diagnostic-highpass needs a rows log and cannot be combined with --skip-repeats")
+        log, highpass_info = highpass_emulation_log(log, vehicle, mask, float(options.diagnostic_highpass_hz))
+    config_fields, notes = build_config(vehicle, log, options)
+    if prefilter_info is not None:
+        notes["prefilter"] = prefilter_info
+    if highpass_info is not None:
+        notes["diagnostic_highpass"] = highpass_info
+    filt = FilterSession(vehicle, config_fields)
+    t_us = np.round((log.t - log.t[0]) * US).astype(np.int64) + US  # start at 1 s: time 0 is 'no time yet'
+    speeds = np.ascontiguousarray(log.rotor_speed, dtype=np.float32)
+    gyro = np.ascontiguousarray(log.gyro, dtype=np.float32)
+    has_gyro = np.any(np.isfinite(log.gyro), axis=1)
+    has_rotor = np.any(np.isfinite(log.rotor_speed), axis=1)
+    repeats = {"gyro": 0, "rotor": 0}
+    if options.skip_repeats:
+        same_gyro = np.zeros(len(log), dtype=bool)
+        same_gyro[1:] = np.all(log.gyro[1:] == log.gyro[:-1], axis=1)
+        same_rotor = np.zeros(len(log), dtype=bool)
+        same_rotor[1:] = np.all(log.rotor_speed[1:] == log.rotor_speed[:-1], axis=1)
+        repeats = {"gyro": int(np.sum(same_gyro[mask])), "rotor": int(np.sum(same_rotor[mask]))}
+        has_gyro &= ~same_gyro
+        has_rotor &= ~same_rotor
+        if streams == "rows":
+            streams = "events"  # rows now carry one stream or the other
+    if options.rotor_delay_s == "auto" and logged_streams == "rows":
+        rotor_delay_s = estimate_rotor_delay(log, vehicle, mask, unit_inertia=options.unit_inertia)
+        delay_rule = ("auto: whole-sample lag (0-50 ms) maximising the 2-10 Hz R^2 of measured vs modelled "
+                      "roll/pitch torque in the filter's Euler step")
+    elif options.rotor_delay_s == "auto":
+        rotor_delay_s = 0.0  # event-style logs carry each stream's own time stamps
+        delay_rule = "auto: 0 for an event-style log (each stream keeps its own time stamps)"
+    else:
+        rotor_delay_s = float(options.rotor_delay_s)
+        delay_rule = "given"
+    delay_us = int(round(rotor_delay_s * US))
+    status_counts: dict[str, int] = {}
+    n = vehicle.rotor_count
+    rec_t, rec_kf, rec_kfs, rec_km, rec_kms, rec_bg, rec_bgs, rec_conv_kf, rec_conv_km, rec_nis = ([] for _ in range(10))
+    from propid.cfilter import DEFAULT_TUNING
+
+    gate = float(config_fields.get("gate_sigma", DEFAULT_TUNING["gate_sigma"]))
+    resyncs = 0
+    gyro_pushes = 0
+    iterator = rows
+    if options.progress:
+        from tqdm import tqdm
+
+        iterator = tqdm(rows, desc="replay", unit="row", mininterval=0.5, leave=False)
+    # Rotor rows are pushed at t + delay: interleave the two streams in time order.
+    rotor_rows = [i for i in rows if streams == "rows" or has_rotor[i]]
+    next_rotor = 0
+    for i in iterator:
+        while next_rotor < len(rotor_rows) and t_us[rotor_rows[next_rotor]] + delay_us <= t_us[i]:
+            j = rotor_rows[next_rotor]
+            next_rotor += 1
+            status = filt.push_rotor_speeds(int(t_us[j] + delay_us), speeds[j])
+            if status < 0:
+                name = filt.status_name(status)
+                status_counts[name] = status_counts.get(name, 0) + 1
+        if streams == "rows" or has_gyro[i]:
+            status = filt.push_gyro(int(t_us[i]), gyro[i])
+            if status == filt.TIME_JUMP:
+                filt.resync(int(t_us[i]))
+                resyncs += 1
+                status = filt.push_gyro(int(t_us[i]), gyro[i])
+            if status < 0:
+                name = filt.status_name(status)
+                status_counts[name] = status_counts.get(name, 0) + 1
+            gyro_pushes += 1
+            if gyro_pushes % options.record_every == 0:
+                est = filt.estimate()
+                rec_t.append(log.t[i])
+                rec_kf.append(est["thrust_coeff"][:n])
+                rec_kfs.append(est["thrust_coeff_std"][:n])
+                rec_km.append(est["drag_coeff"][:n])
+                rec_kms.append(est["drag_coeff_std"][:n])
+                rec_bg.append(est["gyro_bias"])
+                rec_bgs.append(est["gyro_bias_std"])
+                rec_conv_kf.append([(est["thrust_coeff_converged"] >> k) & 1 for k in range(n)])
+                rec_conv_km.append([(est["drag_coeff_converged"] >> k) & 1 for k in range(n)])
+                rec_nis.append(est["innovation_test_ratio"] if status >= 0 else [np.nan] * 3)
+    if not rec_t:
+        raise UserError("no gyro sample was replayed")
+    series = {
+        "t": np.array(rec_t),
+        "kf": np.array(rec_kf, dtype=float),
+        "kf_std": np.array(rec_kfs, dtype=float),
+        "km": np.array(rec_km, dtype=float),
+        "km_std": np.array(rec_kms, dtype=float),
+        "gyro_bias": np.array(rec_bg, dtype=float),
+        "gyro_bias_std": np.array(rec_bgs, dtype=float),
+        "kf_converged": np.array(rec_conv_kf, dtype=bool),
+        "km_converged": np.array(rec_conv_km, dtype=bool),
+        "nis": np.array(rec_nis, dtype=float) * (gate * gate if gate > 0 else np.nan),
+    }
+    final = filt.estimate()
+    counters = filt.counters()
+
+    def converged_mean(values: np.ndarray, flags: np.ndarray) -> tuple[list[float], list[bool], list[float]]:
+        means, conv, starts = [], [], []
+        half = values.shape[0] // 2
+        for k in range(values.shape[1]):
+            on = np.flatnonzero(flags[:, k])
+            start = int(on[0]) if on.size else half
+            means.append(float(np.mean(values[start:, k])))
+            conv.append(bool(on.size) and bool(flags[-1, k]))
+            starts.append(float(series["t"][start]) if on.size else float("nan"))
+        return means, conv, starts
+
+    kf_mean, kf_conv, kf_start = converged_mean(series["kf"], series["kf_converged"])
+    km_mean, km_conv, km_start = converged_mean(series["km"], series["km_converged"])
+    finite = all(np.all(np.isfinite(series[k])) for k in ("kf", "kf_std", "km", "km_std", "gyro_bias"))
+    summary = {
+        "log": str(log.path) if log.path else None,
+        "vehicle": str(vehicle.path) if vehicle.path else vehicle.name,
+        "mode": "unit_inertia" if options.unit_inertia else "si",
+        "units": {
+            "kf": "N/(rad/s)^2" if not options.unit_inertia else "kf/J: (rad/s^2)/(rad/s)^2 per metre of arm, J = 1 kg m^2",
+            "km": "N m/(rad/s)^2" if not options.unit_inertia else "km/Jzz: (rad/s^2)/(rad/s)^2",
+            "gyro_bias": "rad/s",
+        },
+        "segment": options.segment,
+        "streams": streams,
+        "rows_replayed": int(rows.size),
+        "repeated_rows_skipped": repeats,
+        "rotor_delay_s": rotor_delay_s,
+        "rotor_delay_rule": delay_rule,
+        "filter_rotor_input": filter_input_rule(),
+        "duration_s": float(log.t[rows[-1]] - log.t[rows[0]]),
+        "kf": [float(v) for v in final["thrust_coeff"][:n]],
+        "kf_std": [float(v) for v in final["thrust_coeff_std"][:n]],
+        "km": [float(v) for v in final["drag_coeff"][:n]],
+        "km_std": [float(v) for v in final["drag_coeff_std"][:n]],
+        "kf_mean": kf_mean,
+        "km_mean": km_mean,
+        "kf_converged_from_s": kf_start,
+        "km_converged_from_s": km_start,
+        "converged": {"kf": kf_conv, "km": km_conv},
+        "gyro_bias": [float(v) for v in final["gyro_bias"]],
+        "gyro_bias_std": [float(v) for v in final["gyro_bias_std"]],
+        "rejected": dict(sorted(status_counts.items())),
+        "nis_mean": nis_mean(series),
+        "counters": counters,
+        "resyncs_by_replay": resyncs,
+        "health": int(final["health"]),
+        "finite": bool(finite),
+        "config": config_fields,
+        "config_notes": notes,
+        "definitions": {
+            "kf_mean": "mean of the estimate from the first sample flagged converged (rel std < converged_rel_std) "
+                       "to the end; second half of the replay if never converged",
+            "converged": "converged flag set at the end of the replay",
+        },
+    }
+    return ReplayResult(summary=summary, series=series)
+

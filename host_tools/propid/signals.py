@@ -1,0 +1,54 @@
+"""Signal-processing helpers shared by the replay, its pre-filters and the least-squares
+checks: sample interval, contiguous segments, gap holding and the measured body torque.
+
+The measured torque is the rigid-body equation read backwards: with the body rate w
+from the gyro and its derivative dw/dt, tau = J dw/dt + w x (J w). Callers choose the
+derivative (central differences, np.gradient or one Euler step), because each must
+match the discretisation it is compared with.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def median_dt(t: np.ndarray) -> float:
+    """Median of the positive time steps [s]: the log's nominal sample interval."""
+    steps = np.diff(t)
+    return float(np.median(steps[steps > 0]))
+
+
+def measured_torque(rate: np.ndarray, rate_dot: np.ndarray, inertia: np.ndarray) -> np.ndarray:
+    """Body torque (n, 3) [N m] that explains the body rate: J dw/dt + w x (J w)."""
+    inertia = np.asarray(inertia, dtype=float)
+    return rate_dot @ inertia.T + np.cross(rate, rate @ inertia.T)
+
+
+def segments(mask: np.ndarray, min_length: int) -> list[tuple[int, int]]:
+    """[start, stop) index ranges of contiguous True runs at least min_length long."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    starts = np.flatnonzero(edges == 1)
+    stops = np.flatnonzero(edges == -1)
+    return [(int(a), int(b)) for a, b in zip(starts, stops) if b - a >= min_length]
+
+
+def hold_gaps(x: np.ndarray, bad: np.ndarray) -> np.ndarray:
+    """Replace bad samples by the last good one before them (the next good one at the start),
+    i.e. what the filter itself does with a rejected rotor sample (zero-order hold)."""
+    out = x.copy()
+    for k in range(x.shape[1]):
+        good = np.flatnonzero(~bad[:, k])
+        if good.size == 0:
+            continue
+        idx = np.searchsorted(good, np.arange(x.shape[0]), side="right") - 1
+        idx = np.where(idx < 0, 0, idx)
+        out[:, k] = x[good[idx], k]
+    return out
+
+
+def segment_starts(mask: np.ndarray, t: np.ndarray, dt: float) -> np.ndarray:
+    """Indices where a recursive filter over the masked rows must restart: the first row
+    of every contiguous masked run, and every row after a time gap (> 1.5 dt)."""
+    steps = np.diff(t)
+    gap = np.concatenate([[True], (steps > 1.5 * dt)])
+    return np.flatnonzero(mask & (gap | ~np.concatenate([[False], mask[:-1]])))
