@@ -60,9 +60,9 @@ class Vehicle:
     rotor_inertia: float | list[float] | None = None  # [kg m^2], one for all rotors or one per rotor
     # Optional extension keys (docs/flightlog.md): None means "not modelled".
     esc_delay_s: float | None = None  # logged rotor speed lags the physical one by this [s]
-    gyro_scale: tuple[float, float, float] | None = None  # gyro reads scale * true rate, per axis
-    aero_damping: tuple[float, float, float] | None = None  # body torque -d_a * omega_a [N m s/rad]
-    com_offset: tuple[float, float, float] | None = None  # CoM offset already applied to positions [m]
+    gyro_scale: list[float] | None = None  # gyro reads scale * true rate, per axis
+    aero_damping: list[float] | None = None  # body torque -d_a * omega_a [N m s/rad]
+    com_offset: list[float] | None = None  # CoM offset already applied to the rotor positions [m]
     notes: str = ""
     path: Path | None = None
 
@@ -114,7 +114,7 @@ class Vehicle:
         for key in EXTENSION_KEYS:
             value = getattr(self, key)
             if value is not None:
-                data[key] = list(value) if isinstance(value, tuple) else value
+                data[key] = list(value) if isinstance(value, (list, tuple)) else value
         return data
 
 
@@ -126,7 +126,7 @@ def _is_number(value) -> bool:
 
 
 def _vector3_or_null(data: dict, key: str, where: str, unit: str, positive: bool = False,
-                     non_negative: bool = False) -> tuple[float, float, float] | None:
+                     non_negative: bool = False) -> list[float] | None:
     value = data.get(key)
     if value is None:
         return None
@@ -138,7 +138,7 @@ def _vector3_or_null(data: dict, key: str, where: str, unit: str, positive: bool
     if not ok:
         need = "positive " if positive else ("non-negative " if non_negative else "finite ")
         raise UserError(f"{where}: '{key}' must be 3 {need}numbers{unit} or null, got {value!r}")
-    return (float(value[0]), float(value[1]), float(value[2]))
+    return [float(v) for v in value]
 
 
 def _positive_or_null(data: dict, key: str, where: str) -> float | None:
@@ -211,7 +211,7 @@ def parse_vehicle(data: dict, where: str = "vehicle") -> Vehicle:
         rotor_inertia=_rotor_inertia(data, len(rotors), where),
         esc_delay_s=_non_negative_or_null(data, "esc_delay_s", where),
         gyro_scale=_vector3_or_null(data, "gyro_scale", where, "", positive=True),
-        aero_damping=_vector3_or_null(data, "aero_damping", where, " [N m s/rad]", non_negative=True),
+        aero_damping=_vector3_or_null(data, "aero_damping", where, " [N m s/rad]"),
         com_offset=_vector3_or_null(data, "com_offset", where, " [m]"),
         notes=str(data.get("notes", "") or ""),
     )
