@@ -13,4 +13,5 @@ COMMAND_MODULES = [
     "convert",
     "replay",
     "campaign",
+    "gap",
 ]

@@ -1,0 +1,98 @@
+"""`propid gap`: diagnose the sim-to-real gap of flight logs (docs/gap.md)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from propid.errors import UserError
+from propid.flightlog import read_flightlog, read_vehicle, vehicle_path_for, write_vehicle
+
+NAME = "gap"
+HELP = ("diagnose the sim-to-real gap: base fit, where the model misses, which unmodelled effect, "
+        "how far it shrinks; corrected vehicle file")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--log", required=True, action="extend", nargs="+", metavar="A.csv",
+                        help="flight-log v1 CSV(s) of one vehicle to fit on (repeatable)")
+    parser.add_argument("--vehicle", metavar="V.json", help="vehicle file (default: beside the first log)")
+    parser.add_argument("--holdout", action="extend", nargs="+", default=[], metavar="C.csv",
+                        help="logs never used to fit: the before/after figures are measured on them")
+    parser.add_argument("--json", metavar="OUT.json", help="write the result here (default: print it)")
+    parser.add_argument("--report", metavar="DIR", help="write DIR/index.html with plots")
+    parser.add_argument("--vehicle-out", metavar="CORRECTED.json",
+                        help="write the vehicle file corrected with the significant effects' parameters")
+    parser.add_argument("--highpass", type=float, default=1.0, metavar="HZ",
+                        help="torque axes: slow disturbance torques below this are a nuisance (default 1 Hz)")
+    parser.add_argument("--lowpass", type=float, default=25.0, metavar="HZ",
+                        help="upper band edge (default 25 Hz, at most a quarter of the sample rate)")
+    parser.add_argument("--no-filter", action="store_true",
+                        help="skip the firmware-filter replay before/after (faster)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _clean(obj):
+    """JSON-ready: numpy scalars to Python, NaN/Inf to null."""
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.ndarray):
+        return _clean(obj.tolist())
+    return obj
+
+
+def run(args: argparse.Namespace) -> int:
+    from propid.gap import analysis
+    from propid.gap.prep import Band
+
+    if not (args.highpass >= 0 and args.lowpass > args.highpass):
+        raise UserError("--lowpass must be above --highpass (both in Hz, >= 0)")
+    vehicle_path = Path(args.vehicle) if args.vehicle else vehicle_path_for(args.log[0])
+    if not vehicle_path.exists():
+        raise UserError(f"no vehicle file: {vehicle_path} (give --vehicle V.json)")
+    vehicle = read_vehicle(vehicle_path)
+    logs = [read_flightlog(p, vehicle) for p in args.log]
+    holdout = [read_flightlog(p, vehicle) for p in args.holdout]
+    options = analysis.Options(Band(args.highpass, args.lowpass), progress=not args.quiet)
+    try:
+        result = analysis.run(logs, vehicle, holdout, options)
+    except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
+        raise UserError(f"cannot analyse these logs: {exc}") from None
+    internal = result.pop("_internal")
+    corrected = internal["corrected"]
+    progress = internal["progress"]
+    if not args.no_filter:
+        from propid.gap.filtercheck import filter_before_after
+
+        try:
+            result["filter"] = filter_before_after(holdout or logs, vehicle, corrected, progress=lambda: progress(1))
+        except UserError as exc:
+            result["filter"] = {"error": str(exc)}
+    progress.close()
+    if args.vehicle_out:
+        write_vehicle(args.vehicle_out, corrected)
+    result = _clean(result)
+    if args.report:
+        from propid.gap.report import write_report
+
+        write_report(result, args.report)
+    text = json.dumps(result, indent=1)
+    if args.json:
+        Path(args.json).write_text(text + "\n", encoding="utf-8")
+        print(f"verdict: {result['verdict']} (significant: {', '.join(result['significant']) or 'none'})")
+    else:
+        print(text)
+    return 0

@@ -1,0 +1,127 @@
+"""Stream alignment = the `esc_delay` effect: how much the logged rotor speeds lag
+(positive) or lead (negative) the gyro.
+
+Rule (docs/gap.md): the roll/pitch base model (per-rotor kf) is fitted with the rotor
+stream shifted by d on a grid from -MAX_LEAD_S to +MAX_LAG_S (step: one sample, at
+most 2 ms; sub-sample by a parabola through the best three). Cross-validated: each
+fold picks its own d on its training blocks and is scored on its held-out blocks,
+against d = 0 (the vehicle file's esc_delay_s, if any, is already applied).
+Rate damping (-D w on roll and pitch) is fitted with every lag: on a narrow-band
+signal a damping torque and a lag look alike, and the lag must not absorb it.
+A shift commutes with the band-pass, so the band-passed rotor regressors are shifted,
+not refiltered.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from propid.gap import scoring
+from propid.gap.design import Design, responses, segment_rows
+from propid.gap.prep import Flight
+
+MAX_LAG_S = 0.08
+MAX_LEAD_S = 0.05
+
+
+def _grid(flights: list[Flight]) -> np.ndarray:
+    rate = max(f.rate_hz for f in flights)
+    step = min(1.0 / rate, 0.002)
+    return np.arange(-MAX_LEAD_S, MAX_LAG_S + 0.5 * step, step)
+
+
+def _shift_rows(f: Flight, x: np.ndarray, delay: float) -> np.ndarray:
+    out = np.empty_like(x)
+    for a, b in f.segs:
+        tt = f.t[a:b]
+        for k in range(x.shape[1]):
+            out[a:b, k] = np.interp(tt + delay, tt, x[a:b, k])
+    return out
+
+
+def delay_designs(flights: list[Flight], positions: np.ndarray, grid: np.ndarray) -> list[Design]:
+    filtered_u = [f.filtered(f.speed**2) for f in flights]
+    # rate damping is searched with the lag: for a narrow-band signal -D w looks like a lag
+    damping = np.concatenate([f.filtered(-f.gyro[:, :2])[segment_rows(f)] for f in flights])
+    resp = [responses(f, None) for f in flights]
+    ys = {a: np.concatenate([f.filtered(r[a])[segment_rows(f)] for f, r in zip(flights, resp)])
+          for a in ("roll", "pitch")}
+    blocks, block_flight, offset = [], [], 0
+    for fi, f in enumerate(flights):
+        b_of_row = np.full(len(f.t), -1)
+        for k, (s, e) in enumerate(f.blocks):
+            b_of_row[s:e] = offset + k
+        blocks.append(b_of_row[segment_rows(f)])
+        block_flight += [fi] * len(f.blocks)
+        offset += len(f.blocks)
+    block = np.concatenate(blocks)
+    designs = []
+    for d in grid:
+        us = [(_shift_rows(f, fu, d) if d != 0 else fu)[segment_rows(f)] for f, fu in zip(flights, filtered_u)]
+        u = np.concatenate(us)
+        zero = np.zeros((u.shape[0], 1))
+        x = {"roll": np.column_stack([u * positions[:, 1][None, :], damping[:, [0]], zero]),
+             "pitch": np.column_stack([-u * positions[:, 0][None, :], zero, damping[:, [1]]])}
+        scale = np.sqrt((x["roll"] ** 2 + x["pitch"] ** 2).mean(axis=0) / 2)
+        scale[scale == 0] = 1
+        x = {a: v / scale for a, v in x.items()}
+        designs.append(Design(axes=["roll", "pitch"], names=[f"kf_{i + 1}" for i in range(u.shape[1])] + ["d_x", "d_y"],
+                              groups={"base": list(range(u.shape[1] + 2))}, y=ys, x=x, scale=scale, block=block,
+                              flight=np.zeros(u.shape[0], dtype=int), block_flight=np.array(block_flight),
+                              time=np.zeros(u.shape[0])))
+    return designs
+
+
+def search(flights: list[Flight], positions: np.ndarray, progress=None) -> dict:
+    grid = _grid(flights)
+    designs = delay_designs(flights, positions, grid)
+    grs = []
+    for d in designs:
+        gr = scoring.grams(d)
+        grs.append(gr)
+        if progress:
+            progress()
+    cols = list(range(len(designs[0].names)))
+    weight = None
+    zero = int(np.argmin(np.abs(grid)))
+    # axis weights from the d = 0 fit
+    all_blocks = np.arange(grs[zero].s.shape[0])
+    theta0 = scoring.solve(grs[zero], cols, all_blocks)
+    sse0 = scoring.block_sse(grs[zero], cols, theta0, all_blocks).sum(axis=0)
+    weight = 1.0 / np.maximum(sse0 / max(grs[zero].count.sum(), 1), 1e-300)
+    for gr in grs:
+        gr.weight = weight
+    folds = np.unique(grs[zero].fold)
+    held_best = np.zeros_like(grs[zero].s)
+    fold_delay = {}
+    for k in folds:
+        test = all_blocks[grs[zero].fold == k]
+        train = all_blocks[grs[zero].fold != k]
+        if train.size == 0:
+            train = test
+        train_sse = []
+        for gr in grs:
+            th = scoring.solve(gr, cols, train)
+            train_sse.append(float((scoring.block_sse(gr, cols, th, train) * weight).sum()))
+        best = int(np.argmin(train_sse))
+        fold_delay[int(k)] = float(grid[best])
+        th = scoring.solve(grs[best], cols, train)
+        held_best[test] = scoring.block_sse(grs[best], cols, th, test)
+    held_zero = scoring.cv_sse(grs[zero], cols)
+    total = []
+    for gr in grs:
+        th = scoring.solve(gr, cols, all_blocks)
+        total.append(float((scoring.block_sse(gr, cols, th, all_blocks) * weight).sum()))
+    total = np.array(total)
+    best = int(np.argmin(total))
+    delay = float(grid[best])
+    if 0 < best < len(grid) - 1:  # parabola through the best three
+        y0, y1, y2 = total[best - 1: best + 2]
+        denom = y0 - 2 * y1 + y2
+        if denom > 0:
+            delay += 0.5 * (y0 - y2) / denom * (grid[1] - grid[0])
+    frac, ci = scoring.explained(held_zero, held_best, [0, 1])
+    return {"delay_s": delay, "grid_s": [float(grid[0]), float(grid[-1]), float(grid[1] - grid[0])],
+            "explained_fraction": frac, "ci": ci, "fold_delays_s": fold_delay,
+            "sse_curve": {"delay_s": grid.tolist(), "weighted_sse": (total / total[zero]).tolist()},
+            "held_zero": held_zero, "held_best": held_best}

@@ -1,0 +1,239 @@
+"""The gap diagnosis, start to end: prepare, align, base fit, select effects, where,
+how far, corrected vehicle. Returns the OUT.json dictionary (plus arrays for plots)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from propid.errors import UserError
+from propid.flightlog import FlightLog, Vehicle
+from propid.gap import alignment, basefit, scoring, selection, shrink, where
+from propid.gap.vehicle_out import corrected_vehicle
+from propid.gap.design import build_design
+from propid.gap.effects import ALL_IDS, EFFECTS, ESC_DELAY, Context, by_id
+from propid.gap.prep import Band, Flight, columns_present, prepare_flight
+
+NEEDS_TEXT = {"acc": "acc_x/y/z", "mass": "vehicle mass", "attitude": "qw/qx/qy/qz", "velocity": "vx/vy/vz",
+              "height": "pz", "rotor_radius": "vehicle rotor_radius", "cmd": "cmd_i", "vbat": "vbat"}
+
+
+MIN_REPORTED_DELAY_S = 0.005  # shorter lags are sampling conventions (latest-sample logging), not a delay
+
+
+@dataclass
+class Options:
+    band: Band
+    progress: bool = True
+
+
+class Progress:
+    def __init__(self, enabled: bool, total: int):
+        self.bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, desc="gap", unit="step", leave=False)
+
+    def __call__(self, n: int = 1):
+        if self.bar is not None:
+            self.bar.update(n)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+def shifted_flight(f: Flight, delay: float) -> Flight:
+    if delay == 0:
+        return f
+    return replace(f, speed=f.shifted(f.speed, delay), speed_dot=f.shifted(f.speed_dot, delay))
+
+
+def make_context(flights: list[Flight], vehicle: Vehicle, kf: np.ndarray, km: np.ndarray) -> Context:
+    speeds = np.concatenate([f.speed[np.concatenate([np.arange(a, b) for a, b in f.segs])] for f in flights])
+    return Context(positions=vehicle.positions, yaw_signs=vehicle.yaw_signs, kf=kf, km=km, mass=vehicle.mass,
+                   inertia=np.asarray(vehicle.inertia, dtype=float), rotor_radius=vehicle.rotor_radius,
+                   speed_ref=float(np.median(speeds)))
+
+
+def testable(present: dict, vehicle: Vehicle) -> tuple[list[str], list[dict]]:
+    ok, missing = [], []
+    for e in EFFECTS:
+        lacking = [NEEDS_TEXT[n] for n in e.needs if not present.get(n)]
+        if lacking:
+            missing.append({"id": e.id, "missing": lacking})
+        else:
+            ok.append(e.id)
+    return ok, missing
+
+
+def _physical(design, theta_scaled, effect_id, ctx):
+    cols = design.groups[effect_id]
+    coef = np.asarray(theta_scaled) / design.scale[cols]
+    e = by_id(effect_id)
+    return e.physical(coef, ctx) if e.physical else {p: float(v) for p, v in zip(e.params, coef)}
+
+
+def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], options: Options) -> dict:
+    if vehicle.inertia is None:
+        raise UserError(f"{vehicle.path or 'vehicle'}: 'inertia' is null; the torque model needs it")
+    progress = Progress(options.progress, total=60 + 12 * 6)
+    flights = [prepare_flight(log, vehicle, options.band) for log in logs]
+    held_flights = [prepare_flight(log, vehicle, options.band) for log in holdout]
+    progress(5)
+    present = columns_present(logs + holdout, vehicle)
+    with_thrust = bool(present["acc"] and present["mass"])
+    candidates, untestable = testable(present, vehicle)
+
+    # 1. stream alignment (esc_delay)
+    align = alignment.search(flights, vehicle.positions, progress=lambda: progress(0))
+    progress(20)
+    # the alignment is always applied (stream misalignment is part of the base fit); it is
+    # reported as esc_delay when it is significant and longer than the log's sample period
+    sample_period = 1.0 / min(f.rate_hz for f in flights)
+    delay_significant = bool(align["ci"][0] > 0 and align["explained_fraction"] >= scoring.MIN_EXPLAINED
+                             and abs(align["delay_s"]) >= max(2.0 * sample_period, MIN_REPORTED_DELAY_S))
+    delay = align["delay_s"] if align["ci"][0] > 0 else 0.0
+    work = [shifted_flight(f, delay) for f in flights]
+    work_held = [shifted_flight(f, delay) for f in held_flights]
+
+    # 2. base model: per-rotor kf (shared by thrust and torques), per-rotor km
+    count = vehicle.rotor_count
+    kf0 = np.full(count, 1.0)
+    km0 = np.full(count, 1.0)
+    ctx0 = make_context(work, vehicle, kf0, km0)
+    base_design = build_design(work, ctx0, [], vehicle.mass, with_thrust)
+    gr0 = scoring.grams(base_design)
+    base_cols = base_design.groups["base"]
+    gr0.weight = scoring.axis_weights(base_design, base_cols)
+    theta = scoring.solve(gr0, base_cols, np.arange(base_design.n_blocks)) / base_design.scale[base_cols]
+    kf_rotor, km_rotor = theta[:count], theta[count:]
+    progress(5)
+
+    # 3. candidate effects on top of the base model
+    ctx = make_context(work, vehicle, kf_rotor, km_rotor)
+    effects = [by_id(e) for e in candidates]
+    design = build_design(work, ctx, effects, vehicle.mass, with_thrust)
+    gr = scoring.grams(design)
+    gr.weight = gr0.weight
+    progress(10)
+    sel = selection.forward_select(design, gr, candidates, base_cols, progress=lambda n: progress(n))
+
+    # final model on all training data
+    final_cols = sel["columns"]
+    theta_final = scoring.solve(gr, final_cols, np.arange(design.n_blocks))
+    pos_of = {c: k for k, c in enumerate(final_cols)}
+
+    entries = []
+    esc_entry = {"id": ESC_DELAY, "explained_fraction": align["explained_fraction"], "ci": align["ci"],
+                 "axes": ["roll", "pitch"], "params": {"delay_s": align["delay_s"]},
+                 "significant": delay_significant}
+    entries.append(esc_entry)
+    for s in sel["selected"] + sel["others"]:
+        cols = design.groups[s["id"]]
+        if s["significant"]:
+            th = np.array([theta_final[pos_of[c]] for c in cols])
+        else:
+            cols_all = final_cols + cols
+            th_all = scoring.solve(gr, cols_all, np.arange(design.n_blocks))
+            th = th_all[len(final_cols):]
+        entries.append({"id": s["id"], "explained_fraction": s["explained_fraction"], "ci": s["ci"],
+                        "axes": s["axes"], "params": _physical(design, th, s["id"], ctx),
+                        "effect_size": s["effect_size"], "per_axis": s["per_axis"],
+                        "significant": s["significant"], **({"step": s["step"]} if "step" in s else {})})
+    entries.sort(key=lambda e: (not e["significant"], -e["explained_fraction"]))
+    significant = [e["id"] for e in entries if e["significant"]]
+    verdict = significant[0] if significant else "none"
+    for e in untestable:
+        pass
+
+    result = {
+        "verdict": verdict,
+        "significant": significant,
+        "effects": entries,
+        "untestable": untestable,
+        "ambiguous": [{"candidates": a["candidates"], "kept": a["kept"], "reason": a["reason"],
+                       "score_difference_ci": a["score_difference_ci"]} for a in sel["ambiguous"]],
+        "inputs": {"logs": [str(l.path) for l in logs], "holdout": [str(l.path) for l in holdout],
+                   "vehicle": str(vehicle.path) if vehicle.path else vehicle.name, "columns_present": present,
+                   "band_hz": [options.band.highpass_hz, options.band.lowpass_hz],
+                   "rows": int(sum(f.rows for f in flights)), "blocks": int(design.n_blocks),
+                   "rate_hz": [f.rate_hz for f in flights]},
+        "alignment": {k: v for k, v in align.items() if k not in ("held_zero", "held_best")},
+        "base_model": {"kf_per_rotor": kf_rotor.tolist(), "km_per_rotor": km_rotor.tolist(),
+                       "axis_sigma": dict(zip(design.axes, (1 / np.sqrt(gr.weight)).tolist()))},
+    }
+    progress(5)
+
+    # base fit before / after
+    shape = {"kf": (kf_rotor / np.mean(kf_rotor)).tolist() if np.mean(kf_rotor) > 0 else None,
+             "km": (km_rotor / np.mean(km_rotor)).tolist() if np.mean(km_rotor) > 0 else None}
+    if shape["kf"] is None or shape["km"] is None or min(shape["kf"] + shape["km"]) <= 0:
+        shape = None  # a non-physical per-rotor split: plain fleet regressors
+    base_shape, base_details = basefit.base_fit(work, vehicle.positions, vehicle.yaw_signs, vehicle.mass,
+                                                shape=shape)
+    extras, scales = {}, {}
+    selected_ids = [e for e in significant if e != ESC_DELAY]
+    by_entry = {e["id"]: e for e in entries}
+    for eid in selected_ids:
+        if eid == "inertia_error":
+            scales["roll"] = by_entry[eid]["params"]["inertia_scale_xx"]
+            scales["pitch"] = by_entry[eid]["params"]["inertia_scale_yy"]
+        elif eid == "gyro_scale":
+            m = by_entry[eid]["params"]["scale"]
+            scales["roll"], scales["pitch"] = 1.0 / m[0], 1.0 / m[1]
+        else:
+            for axis in by_id(eid).axes:
+                per_flight = [by_id(eid).build(f, ctx).get(axis) for f in work]
+                extras.setdefault(axis, [None] * len(work))
+                extras[axis] = [c if old is None else (old if c is None else np.column_stack([old, c]))
+                                for old, c in zip(extras[axis], per_flight)]
+    after_shape, after_details = basefit.base_fit(work, vehicle.positions, vehicle.yaw_signs, vehicle.mass,
+                                                  extras, scales, shape=shape)
+    result["base_fit"] = base_shape
+    result["base_fit_after"] = after_shape
+    result["base_fit_details"] = {"before": base_details, "after": after_details,
+                                  "agreement_before": _agreement(base_shape),
+                                  "agreement_after": _agreement(after_shape)}
+    progress(10)
+
+    # where (base model, held-out residual)
+    base_res = scoring.cv_residuals(design, gr, base_cols)
+    final_res = scoring.cv_residuals(design, gr, final_cols)
+    per_axis, per_regime = where.per_axis_regime(design, base_res, vehicle.rotor_radius)
+    result["where"] = {"per_axis": per_axis, "per_regime": per_regime,
+                       "per_band": where.per_band(work, vehicle.positions, vehicle.yaw_signs, kf_rotor, km_rotor,
+                                                  vehicle.mass),
+                       "per_rotor": where.per_rotor(kf_rotor, km_rotor)}
+    progress(5)
+
+    # how far
+    inertia = np.asarray(vehicle.inertia, dtype=float)
+    if work_held:
+        hd = build_design(work_held, ctx, effects, vehicle.mass, with_thrust, scale=design.scale)
+        theta_base = scoring.solve(gr, base_cols, np.arange(design.n_blocks))
+        before = scoring.residuals(hd, base_cols, theta_base)
+        after = scoring.residuals(hd, final_cols, theta_final)
+        result["shrink"] = shrink.shrink_table(hd, before, after, inertia, vehicle.mass)
+        result["shrink_on"] = "hold-out logs"
+    else:
+        result["shrink"] = shrink.shrink_table(design, base_res, final_res, inertia, vehicle.mass)
+        result["shrink_on"] = "cross-validation held-out blocks" if len(flights) < 3 else "cross-validation held-out flights"
+    corrected, carried = corrected_vehicle(vehicle, entries)
+    result["vehicle_out"] = carried
+    result["_internal"] = {"corrected": corrected, "design": design, "base_res": base_res, "final_res": final_res,
+                           "progress": progress}
+    return result
+
+
+def _agreement(shape: dict) -> dict:
+    thrust = shape.get("kf_thrust")
+    if not thrust:
+        return {}
+    out = {}
+    for key in ("kf_roll", "kf_pitch"):
+        if shape.get(key):
+            out[key + "_over_thrust"] = shape[key]["value"] / thrust["value"]
+    return out

@@ -1,0 +1,157 @@
+"""Base fit: the fleet thrust coefficient from the accelerometer and the fleet torque
+coefficients from the gyro, each with a block-bootstrap 95 % interval.
+
+    kf_thrust: m acc_z = kf sum_i Omega_i^2            (low-passed only, through the origin)
+    kf_roll:   tau_x   = kf sum_i y_i Omega_i^2        (band-passed)
+    kf_pitch:  tau_y   = kf sum_i -x_i Omega_i^2       (band-passed)
+    km_yaw:    tau_z   = km sum_i s_i Omega_i^2        (band-passed)
+
+`after`: the same with the significant effects in: their columns on that axis as extra
+regressors, the rotor stream shifted by the fitted delay, and the measured torque
+recomputed with the fitted inertia / gyro scale.
+
+Errors in variables: the rotor-speed regressor is noisy (telemetry quantisation,
+jitter, sample-and-hold). When every log has motor commands, the coefficient is
+estimated by instrumental variables: the instrument is the same regressor built from
+the rotor speeds predicted by the commands alone (first stage: per flight and rotor,
+least squares of the band-passed Omega_i^2 on band-passed cmd_i and cmd_i^2 delayed by
+INSTRUMENT_LAGS samples; lags of 2 or more keep the controller's reaction to the
+current gyro noise out). Command noise is independent of telemetry noise, so the
+attenuation goes; the band-pass keeps the slow disturbance out as for least squares.
+Without commands: least squares (an attenuated lower bound), said in `method`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from propid.gap import scoring
+from propid.gap.design import responses, segment_rows
+from propid.gap.prep import Flight
+
+INSTRUMENT_LAGS = (2, 3, 5, 8, 13)
+QUANTITIES = {"kf_thrust": "thrust", "kf_roll": "roll", "kf_pitch": "pitch", "km_yaw": "yaw"}
+
+
+def main_regressor(axis: str, u: np.ndarray, positions: np.ndarray, signs: np.ndarray,
+                   shape: dict | None = None) -> np.ndarray:
+    """The fleet regressor; `shape` (kf, km: per-rotor value / fleet mean, from the joint
+    base model) weights each rotor so a fleet value from any axis is the rotors' mean."""
+    if shape is not None:
+        u = u * np.asarray(shape["km" if axis == "yaw" else "kf"])[None, :]
+    if axis == "roll":
+        return u @ positions[:, 1]
+    if axis == "pitch":
+        return -(u @ positions[:, 0])
+    if axis == "yaw":
+        return u @ signs
+    return u.sum(axis=1)
+
+
+def _delayed(x: np.ndarray, lag: int) -> np.ndarray:
+    out = np.empty_like(x)
+    out[lag:] = x[:-lag] if lag else x
+    out[:lag] = x[0]
+    return out
+
+
+def predicted_u(f: Flight, lowpass_only: bool) -> np.ndarray | None:
+    """First-stage rotor speed squared from the commands (filtered domain), or None."""
+    if f.cmd is None:
+        return None
+    rows = segment_rows(f)
+    u_f = f.filtered(f.speed**2, lowpass_only)
+    out = np.zeros_like(u_f)
+    for i in range(f.speed.shape[1]):
+        feats = []
+        for lag in INSTRUMENT_LAGS:
+            c = _delayed(f.cmd[:, i], lag)
+            feats += [c, c * c]
+        feats = f.filtered(np.column_stack(feats), lowpass_only)
+        coef, *_ = np.linalg.lstsq(feats[rows], u_f[rows, i], rcond=None)
+        out[:, i] = feats @ coef
+    return out
+
+
+def fleet_fit(flights: list[Flight], axis: str, positions: np.ndarray, signs: np.ndarray, mass: float | None,
+              extra: list[np.ndarray] | None = None, response_scale: float = 1.0,
+              use_instrument: bool = True, rng_seed: int = 7, shape: dict | None = None) -> dict | None:
+    """One fleet coefficient on `axis` (+ extra nuisance/effect columns): value, CI, method."""
+    lowpass_only = axis == "thrust"
+    ys, xs, zs, blocks = [], [], [], []
+    offset = 0
+    instrumented = use_instrument and all(f.cmd is not None for f in flights)
+    for fi, f in enumerate(flights):
+        resp = responses(f, mass)
+        if axis not in resp:
+            return None
+        rows = segment_rows(f)
+        main = main_regressor(axis, f.speed**2, positions, signs, shape)
+        cols = [main[:, None]] + ([extra[fi]] if extra is not None and extra[fi] is not None else [])
+        x = f.filtered(np.column_stack(cols), lowpass_only)
+        y = f.filtered(resp[axis] * response_scale, lowpass_only)
+        z = x.copy()
+        if instrumented:
+            u_hat = predicted_u(f, lowpass_only)
+            z[:, 0] = main_regressor(axis, u_hat, positions, signs, shape)
+        b_of_row = np.full(len(f.t), -1)
+        for k, (s, e) in enumerate(f.blocks):
+            b_of_row[s:e] = offset + k
+        offset += len(f.blocks)
+        ys.append(y[rows])
+        xs.append(x[rows])
+        zs.append(z[rows])
+        blocks.append(b_of_row[rows])
+    y = np.concatenate(ys)
+    x = np.concatenate(xs)
+    z = np.concatenate(zs)
+    block = np.concatenate(blocks)
+    scale = np.sqrt(np.mean(x**2, axis=0))
+    scale[scale == 0] = 1
+    x = x / scale
+    z = z / np.where(np.sqrt(np.mean(z**2, axis=0)) > 0, np.sqrt(np.mean(z**2, axis=0)), 1)
+    nb = offset
+    p = x.shape[1]
+    zx = np.zeros((nb, p, p))
+    zy = np.zeros((nb, p))
+    xx = np.zeros((nb, p, p))
+    xy = np.zeros((nb, p))
+    order = np.argsort(block, kind="stable")
+    bounds = np.searchsorted(block[order], np.arange(nb + 1))
+    x, y, z = x[order], y[order], z[order]
+    for b in range(nb):
+        lo, hi = bounds[b], bounds[b + 1]
+        zx[b] = z[lo:hi].T @ x[lo:hi]
+        zy[b] = z[lo:hi].T @ y[lo:hi]
+        xx[b] = x[lo:hi].T @ x[lo:hi]
+        xy[b] = x[lo:hi].T @ y[lo:hi]
+
+    def solve(rows, a, rhs):
+        m = a[rows].sum(axis=0)
+        return np.linalg.lstsq(m, rhs[rows].sum(axis=0), rcond=None)[0][0] / scale[0]
+
+    all_rows = np.arange(nb)
+    value = solve(all_rows, zx, zy)
+    ls_value = solve(all_rows, xx, xy)
+    rng = np.random.default_rng(rng_seed)
+    boot = [solve(rng.integers(0, nb, nb), zx, zy) for _ in range(scoring.BOOTSTRAP)]
+    resid = y - x @ np.linalg.lstsq(x, y, rcond=None)[0]
+    r2 = 1.0 - float(resid @ resid) / float(y @ y) if y @ y > 0 else float("nan")
+    return {"value": float(value), "ci": [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))],
+            "method": "instrumental variables (motor commands)" if instrumented else "least squares",
+            "least_squares_value": float(ls_value), "r2": r2, "rows": int(y.size)}
+
+
+def base_fit(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, mass: float | None,
+             extras: dict | None = None, response_scales: dict | None = None,
+             shape: dict | None = None) -> tuple[dict, dict]:
+    """(base_fit in the issue's shape, details). extras: axis -> per-flight columns."""
+    extras = extras or {}
+    response_scales = response_scales or {}
+    out, details = {}, {}
+    for key, axis in QUANTITIES.items():
+        fit = fleet_fit(flights, axis, positions, signs, mass, extras.get(axis), response_scales.get(axis, 1.0),
+                        shape=shape)
+        out[key] = None if fit is None else {"value": fit["value"], "ci": fit["ci"]}
+        details[key] = fit
+    return out, details

@@ -1,0 +1,241 @@
+"""The library of candidate effects: each one a set of physics regressors with
+physical parameters (no black box).
+
+Every effect adds columns to the axes it acts on. A column is the torque [N m]
+(roll, pitch, yaw) or force [N] (thrust, along body z) the effect produces per unit
+of one physical parameter, computed from the measured signals and the base model's
+per-rotor coefficients (T_i = kf_i Omega_i^2 thrust, Q_i = km_i Omega_i^2 drag torque).
+Frames: body FLU; r_i rotor hub position; s_i yaw_sign (the sign of rotor i's drag
+torque on the body; the rotor spins about -s_i z).
+
+`esc_delay` is not a column set: it is a time shift of the rotor stream, searched
+before the others (alignment.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from propid.gap.prep import Flight
+
+AXES = ("roll", "pitch", "yaw", "thrust")
+
+
+@dataclass
+class Context:
+    """What the regressors need besides the flight: geometry and base coefficients."""
+
+    positions: np.ndarray  # (N,3)
+    yaw_signs: np.ndarray  # (N,)
+    kf: np.ndarray  # (N,) base per-rotor thrust coefficients
+    km: np.ndarray  # (N,)
+    mass: float | None
+    inertia: np.ndarray
+    rotor_radius: float | None
+    speed_ref: float  # median flying rotor speed over all flights [rad/s]
+
+
+@dataclass
+class Effect:
+    id: str
+    params: tuple[str, ...]
+    units: tuple[str, ...]
+    needs: tuple[str, ...]  # inputs it needs (prep.columns_present keys)
+    axes: tuple[str, ...]
+    build: Callable[[Flight, Context], dict[str, np.ndarray]]  # axis -> (n, len(params)) raw columns
+    physical: Callable[[np.ndarray, Context], dict] | None = None  # fitted coefficients -> physical params
+    description: str = ""
+
+
+def _thrusts(f: Flight, c: Context) -> np.ndarray:
+    return f.speed**2 * c.kf[None, :]
+
+
+def _moments_of(per_rotor: np.ndarray, c: Context) -> tuple[np.ndarray, np.ndarray]:
+    """Roll and pitch torque of per-rotor forces along body z."""
+    return per_rotor @ c.positions[:, 1], -(per_rotor @ c.positions[:, 0])
+
+
+def _rotor_inertia(f: Flight, c: Context) -> dict:
+    return {"yaw": (f.speed_dot @ c.yaw_signs)[:, None]}
+
+
+def _rotor_gyroscopic(f: Flight, c: Context) -> dict:
+    spin = f.speed @ c.yaw_signs  # sum s_i Omega_i
+    return {"roll": (f.gyro[:, 1] * spin)[:, None], "pitch": (-f.gyro[:, 0] * spin)[:, None]}
+
+
+def _base_predictions(f: Flight, c: Context) -> np.ndarray:
+    thrusts = _thrusts(f, c)
+    roll, pitch = _moments_of(thrusts, c)
+    yaw = (f.speed**2 * c.km[None, :]) @ c.yaw_signs
+    return np.column_stack([roll, pitch, yaw])
+
+
+def _inertia_error(f: Flight, c: Context) -> dict:
+    p = _base_predictions(f, c)
+    zero = np.zeros(p.shape[0])
+    return {"roll": np.column_stack([p[:, 0], zero]), "pitch": np.column_stack([zero, p[:, 1]])}
+
+
+def _inertia_physical(coef: np.ndarray, c: Context) -> dict:
+    # J_file dw/dt = P / (1 + s)  =>  response = P + alpha P with 1 + alpha = 1/(1 + s)
+    scale = [1.0 / (1.0 + a) if 1.0 + a > 0 else float("nan") for a in coef]
+    return {"inertia_scale_xx": scale[0], "inertia_scale_yy": scale[1]}
+
+
+def _gyro_scale(f: Flight, c: Context) -> dict:
+    # A (3x3) on the base torque predictions P, without A_zz: km has no independent
+    # reference, so a yaw scale is absorbed by the fitted km
+    p = _base_predictions(f, c)
+    zero = np.zeros((p.shape[0], 3))
+    return {"roll": np.column_stack([p, zero, zero[:, :2]]), "pitch": np.column_stack([zero, p, zero[:, :2]]),
+            "yaw": np.column_stack([zero, zero, p[:, :2]])}
+
+
+def _gyro_scale_physical(coef: np.ndarray, c: Context) -> dict:
+    # measured w = M w_true  =>  J M J^-1 P = P + A P, A the fitted 3x3 (A_zz = 0: not identifiable)
+    a = np.append(np.asarray(coef), 0.0).reshape(3, 3)
+    j = c.inertia
+    m = np.linalg.inv(j) @ (np.eye(3) + a) @ j
+    return {"matrix": m.tolist(), "scale": np.diag(m).tolist()}
+
+
+def _com_offset(f: Flight, c: Context) -> dict:
+    total = _thrusts(f, c).sum(axis=1)
+    # (r_i - d) x T_i z summed: roll gets -d_y T, pitch +d_x T
+    zero = np.zeros_like(total)
+    return {"roll": np.column_stack([zero, -total]), "pitch": np.column_stack([total, zero])}
+
+
+def _aero_damping(f: Flight, c: Context) -> dict:
+    # inflow damping grows with rotor speed: -D w (sum Omega / sum Omega at the reference speed),
+    # D the damping at the reference (hover) speed
+    n = f.gyro.shape[0]
+    speed_factor = f.speed.sum(axis=1) / (c.speed_ref * f.speed.shape[1])
+    out = {}
+    for k, axis in enumerate(("roll", "pitch", "yaw")):
+        col = np.zeros((n, 3))
+        col[:, k] = -f.gyro[:, k] * speed_factor
+        out[axis] = col
+    return out
+
+
+def _rotor_drag(f: Flight, c: Context) -> dict:
+    v = f.body_velocity
+    omega = f.speed  # (n,N)
+    pos = c.positions
+    # params: k_d (in-plane drag per rotor, F = -k_d Omega v_xy), k_z (axial, F = -k_z Omega v_z),
+    # k_flap (flapping moment M = -k_flap Omega (z x v))
+    n = v.shape[0]
+    torque_d = np.zeros((n, 3))
+    torque_z = np.zeros((n, 3))
+    for i in range(pos.shape[0]):
+        force_d = -omega[:, [i]] * np.column_stack([v[:, 0], v[:, 1], np.zeros(n)])
+        force_z = -omega[:, [i]] * np.column_stack([np.zeros(n), np.zeros(n), v[:, 2]])
+        torque_d += np.cross(pos[i][None, :], force_d)
+        torque_z += np.cross(pos[i][None, :], force_z)
+    total_speed = omega.sum(axis=1)
+    flap = -total_speed[:, None] * np.column_stack([-v[:, 1], v[:, 0], np.zeros(n)])
+    out = {axis: np.column_stack([torque_d[:, k], torque_z[:, k], flap[:, k]])
+           for k, axis in enumerate(("roll", "pitch", "yaw"))}
+    out["thrust"] = np.column_stack([np.zeros(n), -total_speed * v[:, 2], np.zeros(n)])
+    return out
+
+
+def _translational_lift(f: Flight, c: Context) -> dict:
+    v = f.body_velocity
+    return {"thrust": (len(c.kf) * (v[:, 0] ** 2 + v[:, 1] ** 2))[:, None]}
+
+
+def ground_gain(height: np.ndarray, radius: float) -> np.ndarray:
+    """Cheeseman-Bennett gain minus 1 at hub height h (clamped at R/2, where it is 1/3)."""
+    h = np.maximum(height, 0.5 * radius)
+    return 1.0 / (1.0 - (radius / (4.0 * h)) ** 2) - 1.0
+
+
+def _ground_effect(f: Flight, c: Context) -> dict:
+    gain = ground_gain(f.height, c.rotor_radius)
+    thrusts = _thrusts(f, c) * gain[:, None]
+    roll, pitch = _moments_of(thrusts, c)
+    return {"roll": roll[:, None], "pitch": pitch[:, None], "thrust": thrusts.sum(axis=1)[:, None]}
+
+
+def _thrust_nonlinearity(f: Flight, c: Context) -> dict:
+    log_ratio = np.log(np.maximum(f.speed, 1e-3) / c.speed_ref)
+    thrusts = _thrusts(f, c) * log_ratio
+    roll, pitch = _moments_of(thrusts, c)
+    yaw = (f.speed**2 * c.km[None, :] * log_ratio) @ c.yaw_signs
+    return {"roll": roll[:, None], "pitch": pitch[:, None], "yaw": yaw[:, None],
+            "thrust": thrusts.sum(axis=1)[:, None]}
+
+
+def _identity_physical(names):
+    def physical(coef, c):
+        return {n: float(v) for n, v in zip(names, coef)}
+    return physical
+
+
+def _com_physical(coef, c):
+    return {"com_offset_x": float(coef[0]), "com_offset_y": float(coef[1])}
+
+
+EFFECTS: list[Effect] = [
+    Effect("rotor_inertia", ("rotor_inertia",), ("kg m^2",), (), ("yaw",), _rotor_inertia,
+           _identity_physical(("rotor_inertia",)),
+           "yaw reaction of spinning rotors up/down: J_r sum s_i dOmega_i/dt"),
+    Effect("rotor_gyroscopic", ("rotor_inertia",), ("kg m^2",), (), ("roll", "pitch"), _rotor_gyroscopic,
+           _identity_physical(("rotor_inertia",)),
+           "gyroscopic torque of the rotors' angular momentum: J_r sum s_i Omega_i (w x z)"),
+    Effect("inertia_error", ("alpha_roll", "alpha_pitch"), ("1", "1"), ("acc", "mass"), ("roll", "pitch"),
+           _inertia_error, _inertia_physical,
+           "body inertia differs from the file's: roll/pitch torque scale (needs the accelerometer kf)"),
+    Effect("gyro_scale", tuple(f"a_{i}{j}" for i in "xyz" for j in "xyz")[:8], ("1",) * 8, ("acc", "mass"),
+           ("roll", "pitch", "yaw"), _gyro_scale, _gyro_scale_physical,
+           "gyro scale and axis misalignment: measured rate M w, cross-axis coupling is its signature"),
+    Effect("com_offset", ("com_offset_x", "com_offset_y"), ("m", "m"), (), ("roll", "pitch"), _com_offset,
+           _com_physical, "centre of mass off the described centre: torque d x (total thrust)"),
+    Effect("aero_damping", ("damping_x", "damping_y", "damping_z"), ("N m s/rad",) * 3, (),
+           ("roll", "pitch", "yaw"), _aero_damping, _identity_physical(("damping_x", "damping_y", "damping_z")),
+           "aerodynamic rate damping: torque -D w, D proportional to rotor speed (D at the median speed)"),
+    Effect("rotor_drag", ("k_drag", "k_drag_axial", "k_flap"), ("N/(rad/s m/s)", "N/(rad/s m/s)", "N m/(rad/s m/s)"),
+           ("velocity", "attitude"), ("roll", "pitch", "yaw", "thrust"), _rotor_drag,
+           _identity_physical(("k_drag", "k_drag_axial", "k_flap")),
+           "velocity-dependent rotor drag and blade flapping (body velocity from attitude + velocity)"),
+    Effect("translational_lift", ("k_lift",), ("N/(m/s)^2 per rotor",), ("velocity", "attitude", "acc", "mass"),
+           ("thrust",), _translational_lift, _identity_physical(("k_lift",)),
+           "extra thrust in horizontal flight: k_h (v_x^2 + v_y^2) per rotor"),
+    Effect("ground_effect", ("ground_gain",), ("1",), ("height", "rotor_radius"), ("roll", "pitch", "thrust"),
+           _ground_effect, _identity_physical(("ground_gain",)),
+           "thrust gain near the ground: T (1 + s (1/(1 - (R/4h)^2) - 1))"),
+    Effect("thrust_nonlinearity", ("exponent",), ("1",), (), ("roll", "pitch", "yaw", "thrust"),
+           _thrust_nonlinearity, _identity_physical(("exponent",)),
+           "thrust/drag not exactly quadratic: T = kf Omega^2 (Omega/Omega_ref)^s"),
+]
+
+ESC_DELAY = "esc_delay"
+ALL_IDS = [ESC_DELAY] + [e.id for e in EFFECTS]
+EFFECT_AXES = {e.id: e.axes for e in EFFECTS} | {ESC_DELAY: ("roll", "pitch")}
+ESC_DELAY_NEEDS: tuple[str, ...] = ()
+
+# Look-alikes: effects whose signatures overlap; told apart by the axes/terms that differ,
+# else reported as ambiguous.
+LOOK_ALIKES = [
+    ("inertia_error", "gyro_scale"),
+    ("inertia_error", "thrust_nonlinearity"),
+    ("esc_delay", "rotor_inertia"),
+    ("rotor_drag", "aero_damping"),
+    ("translational_lift", "rotor_drag"),
+    ("ground_effect", "thrust_nonlinearity"),
+    ("com_offset", "thrust_nonlinearity"),
+]
+
+
+def by_id(effect_id: str) -> Effect:
+    for e in EFFECTS:
+        if e.id == effect_id:
+            return e
+    raise KeyError(effect_id)

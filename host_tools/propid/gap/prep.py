@@ -1,0 +1,202 @@
+"""Data preparation for the gap diagnosis: one Flight per log, every signal the
+regressors need, on the log's own time base, with the flying segments and the
+time blocks used for cross-validation.
+
+Rules (docs/gap.md, "Data preparation"):
+- rows: the flying rows of `realdata_checks.flying_mask` (is_flying column, else every
+  rotor spinning; off the ground when the height is logged), cut into segments of
+  uniform timing at least MIN_SEGMENT_S long;
+- event-style logs (rotor rows and gyro rows apart): rotor speeds are held to the
+  gyro rows, rows without a gyro sample are dropped;
+- missing or absurd rotor speeds (above 2x the 99.9th percentile) and isolated
+  missing gyro samples are interpolated for the fits;
+- derivatives by central differences on the log's time stamps;
+- measured torque tau = J dw/dt + w x J w with the vehicle file's J (and its
+  `gyro_scale`, if given, undone first);
+- each segment is band-passed (zero phase) per `band`: torque axes high-passed at
+  `highpass_hz` (the slow disturbance torque the controller cancels is a nuisance:
+  removing it keeps the closed loop from dragging coefficients to 0) and low-passed
+  at `lowpass_hz`; the thrust axis is only low-passed (no constant may absorb gravity).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from propid.errors import UserError
+from propid.flightlog import FlightLog, Vehicle
+from propid.realdata_checks import _body_velocity, _hold_rotor_rows, absurd_speed_limit, bandpass, \
+    clean_rotor_speeds, flying_mask, segments
+
+MIN_SEGMENT_S = 2.0
+BLOCK_S = 2.0
+GROUND_CONTACT_M = 0.03  # cross-validation / bootstrap block length
+
+
+@dataclass
+class Band:
+    highpass_hz: float = 1.0
+    lowpass_hz: float = 25.0
+
+    def for_rate(self, rate_hz: float) -> "Band":
+        """The low-pass never above a quarter of the sample rate."""
+        return Band(self.highpass_hz, min(self.lowpass_hz, 0.25 * rate_hz))
+
+
+@dataclass
+class Flight:
+    name: str
+    path: Path | None
+    rate_hz: float
+    t: np.ndarray
+    gyro: np.ndarray  # (n,3) rad/s, gyro_scale undone
+    rate_dot: np.ndarray  # (n,3)
+    speed: np.ndarray  # (n,N) rad/s, cleaned
+    speed_dot: np.ndarray
+    torque: np.ndarray  # (n,3) measured J dw/dt + w x Jw [N m]
+    specific_force_z: np.ndarray | None  # acc_z [m/s^2]
+    acc: np.ndarray | None
+    body_velocity: np.ndarray | None  # (n,3) m/s
+    height: np.ndarray | None  # (n,) m
+    cmd: np.ndarray | None  # (n,N)
+    vbat: np.ndarray | None
+    segs: list[tuple[int, int]]
+    band: Band
+    repaired_rotor_samples: int = 0
+    blocks: list[tuple[int, int]] = field(default_factory=list)  # [start, stop) inside segments
+
+    @property
+    def rows(self) -> int:
+        return sum(b - a for a, b in self.segs)
+
+    def filtered(self, x: np.ndarray, lowpass_only: bool = False) -> np.ndarray:
+        """Band-pass columns of x per segment; rows outside segments are 0."""
+        two_d = x.ndim == 2
+        xx = x if two_d else x[:, None]
+        out = np.zeros_like(xx, dtype=float)
+        lo = None if lowpass_only else self.band.highpass_hz
+        for a, b in self.segs:
+            out[a:b] = bandpass(np.nan_to_num(xx[a:b]), self.rate_hz, lo, self.band.lowpass_hz)
+        return out if two_d else out[:, 0]
+
+    def shifted(self, x: np.ndarray, delay_s: float) -> np.ndarray:
+        """x(t + delay) per segment by linear interpolation (ends held): undoes a
+        telemetry lag of `delay_s` (negative: the stream was stamped early)."""
+        if delay_s == 0.0:
+            return x
+        out = np.array(x, dtype=float, copy=True)
+        two_d = out.ndim == 2
+        cols = out if two_d else out[:, None]
+        for a, b in self.segs:
+            tt = self.t[a:b]
+            for k in range(cols.shape[1]):
+                cols[a:b, k] = np.interp(tt + delay_s, tt, x[a:b, k] if two_d else x[a:b])
+        return out
+
+
+def _interp_missing(x: np.ndarray) -> np.ndarray:
+    x = np.array(x, dtype=float, copy=True)
+    idx = np.arange(x.shape[0])
+    cols = x if x.ndim == 2 else x[:, None]
+    for k in range(cols.shape[1]):
+        bad = ~np.isfinite(cols[:, k])
+        if bad.any() and (~bad).sum() >= 2:
+            cols[bad, k] = np.interp(idx[bad], idx[~bad], cols[~bad, k])
+        elif bad.all():
+            cols[:, k] = 0.0
+    return x
+
+
+def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | None = None) -> Flight:
+    """Build a Flight from a validated log. Raises UserError if nothing usable. What the
+    vehicle file already models (gyro_scale, aero_damping, esc_delay_s) is applied here, so
+    the base model includes it."""
+    where = str(log.path) if log.path else (name or "log")
+    if vehicle.inertia is None:
+        raise UserError(f"{vehicle.path or 'vehicle'}: 'inertia' is null; the torque model needs it "
+                        "(give a CAD or pendulum value)")
+    speeds = _hold_rotor_rows(log.rotor_speed)
+    has_gyro = np.any(np.isfinite(log.gyro), axis=1)
+    if not has_gyro.all():
+        log = log.select(has_gyro)
+        speeds = speeds[has_gyro]
+    if len(log) < 10:
+        raise UserError(f"{where}: fewer than 10 gyro samples")
+    dt = np.diff(log.t)
+    positive = dt[dt > 0]
+    if positive.size == 0:
+        raise UserError(f"{where}: the time never advances")
+    dt_med = float(np.median(positive))
+    rate = 1.0 / dt_med
+    limit = absurd_speed_limit(speeds)
+    speeds, repaired = clean_rotor_speeds(speeds, limit)
+    speeds = _interp_missing(speeds)
+    gyro = _interp_missing(log.gyro)
+    if vehicle.gyro_scale is not None:
+        gyro = gyro / np.asarray(vehicle.gyro_scale)[None, :]
+    # flying: is_flying column, else every rotor spinning; off the ground where the height is
+    # logged (pz is height above flat ground: contact below GROUND_CONTACT_M)
+    no_height = {k: v for k, v in log.extra.items() if k != "pz"}
+    fly = flying_mask(FlightLog(t=log.t, gyro=gyro, rotor_speed=speeds, extra=no_height, path=log.path))
+    if "pz" in log.extra:
+        fly &= np.nan_to_num(log.extra["pz"], nan=np.inf) > GROUND_CONTACT_M
+    uniform = np.ones(len(log), dtype=bool)
+    bad_dt = np.abs(dt - dt_med) > 0.5 * dt_med
+    uniform[1:] &= ~bad_dt
+    uniform[:-1] &= ~bad_dt
+    segs = segments(fly & uniform, min_length=int(max(MIN_SEGMENT_S * rate, 50)))
+    if not segs:
+        raise UserError(f"{where}: no flying segment of {MIN_SEGMENT_S:.0f} s or more with uniform timing")
+    inertia = np.asarray(vehicle.inertia, dtype=float)
+    rate_dot = np.gradient(gyro, log.t, axis=0)
+    torque = rate_dot @ inertia.T + np.cross(gyro, gyro @ inertia.T)
+    if vehicle.aero_damping is not None:
+        torque = torque + gyro * np.asarray(vehicle.aero_damping)[None, :]  # the model's -D w moved to the left
+    speed_dot = np.gradient(speeds, log.t, axis=0)
+    acc = log.acc
+    acc = _interp_missing(acc) if acc is not None and np.isfinite(acc).any() else None
+    vel = _body_velocity(log)
+    height = log.extra.get("pz")
+    height = _interp_missing(height) if height is not None and np.isfinite(height).any() else None
+    cmd = log.group(tuple(f"cmd_{i + 1}" for i in range(log.rotor_count)))
+    cmd = _interp_missing(cmd) if cmd is not None and np.isfinite(cmd).mean() > 0.5 else None
+    vbat = log.extra.get("vbat")
+    vbat = _interp_missing(vbat) if vbat is not None and np.isfinite(vbat).mean() > 0.5 else None
+    flight = Flight(
+        name=name or (log.path.stem if log.path else "log"), path=log.path, rate_hz=rate, t=log.t,
+        gyro=gyro, rate_dot=rate_dot, speed=speeds, speed_dot=speed_dot, torque=torque,
+        specific_force_z=None if acc is None else acc[:, 2], acc=acc, body_velocity=vel, height=height,
+        cmd=cmd, vbat=vbat, segs=segs, band=band.for_rate(rate), repaired_rotor_samples=repaired)
+    block = max(int(round(BLOCK_S * rate)), 20)
+    for a, b in segs:
+        starts = list(range(a, b, block))
+        for s in starts:
+            e = min(s + block, b)
+            if e - s >= block // 2 or not flight.blocks or flight.blocks[-1][1] != s:
+                flight.blocks.append((s, e))
+            else:  # a short tail joins the previous block
+                flight.blocks[-1] = (flight.blocks[-1][0], e)
+    if vehicle.esc_delay_s:
+        flight.speed = flight.shifted(flight.speed, vehicle.esc_delay_s)
+        flight.speed_dot = flight.shifted(flight.speed_dot, vehicle.esc_delay_s)
+    return flight
+
+
+def columns_present(logs: list[FlightLog], vehicle: Vehicle) -> dict[str, bool]:
+    """Which optional inputs every log (and the vehicle) has."""
+    def every(pred):
+        return all(pred(log) for log in logs)
+
+    return {
+        "acc": every(lambda l: l.acc is not None and np.isfinite(l.acc).any()),
+        "mass": vehicle.mass is not None,
+        "attitude": every(lambda l: l.quat is not None and np.isfinite(l.quat).any()),
+        "velocity": every(lambda l: l.group(("vx", "vy", "vz")) is not None),
+        "height": every(lambda l: "pz" in l.extra and np.isfinite(l.extra["pz"]).any()),
+        "rotor_radius": vehicle.rotor_radius is not None,
+        "cmd": every(lambda l: l.group(tuple(f"cmd_{i + 1}" for i in range(l.rotor_count))) is not None),
+        "vbat": every(lambda l: "vbat" in l.extra and np.isfinite(l.extra["vbat"]).any()),
+    }

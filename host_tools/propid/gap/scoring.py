@@ -1,0 +1,191 @@
+"""Cross-validated scoring: least squares on training blocks, residual on held-out
+blocks, confidence by block bootstrap.
+
+Rules (docs/gap.md, "Scoring"):
+- folds: with 3 or more flights, whole flights (flight index mod 5); otherwise the
+  2 s time blocks, block index mod 5;
+- each axis is weighted by 1/sigma_a^2, sigma_a the base model's residual RMS on it
+  (so torque [N m] and thrust [N] rows count alike);
+- an effect's explained fraction = mean over ALL modelled axes of 1 - SSE_with / SSE_without,
+  both summed over held-out blocks (every block held out exactly once); so effects on
+  one axis and on four compete on one scale; `per_axis` gives the fractions by axis;
+- its 95 % interval: percentiles of the same fraction over B = 300 block-bootstrap
+  resamples of the held-out blocks;
+- effect size: RMS of what the effect adds to the fit (all data, beyond the current
+  model) over the response's variation, largest over its axes;
+- significant: interval lower bound > 0 AND explained fraction >= MIN_EXPLAINED AND
+  effect size >= MIN_EFFECT_SIZE (a clean log makes the base residual tiny, so a
+  fraction alone would flag sensor-chain details worth < 3 % of the signal).
+Everything runs on per-block Gram matrices, so a model (any column subset) costs a
+few small solves, whatever the log length.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from propid.gap.design import Design
+
+MIN_EXPLAINED = 0.02
+MIN_EFFECT_SIZE = 0.03
+FOLDS = 5
+BOOTSTRAP = 300
+RIDGE = 1e-9
+
+
+@dataclass
+class Grams:
+    axes: list[str]
+    g: np.ndarray  # (B, A, P, P)
+    h: np.ndarray  # (B, A, P)
+    s: np.ndarray  # (B, A)
+    m: np.ndarray  # (B, A) sum of the response
+    count: np.ndarray  # (B,) rows per block
+    weight: np.ndarray  # (A,)
+    fold: np.ndarray  # (B,)
+
+
+def grams(design: Design, weight: np.ndarray | None = None) -> Grams:
+    axes = design.axes
+    nb = design.n_blocks
+    p = len(design.names)
+    g = np.zeros((nb, len(axes), p, p))
+    h = np.zeros((nb, len(axes), p))
+    s = np.zeros((nb, len(axes)))
+    m = np.zeros((nb, len(axes)))
+    order = np.argsort(design.block, kind="stable")
+    bounds = np.searchsorted(design.block[order], np.arange(nb + 1))
+    count = np.diff(bounds)
+    for k, a in enumerate(axes):
+        x = design.x[a][order]
+        y = design.y[a][order]
+        for b in range(nb):
+            lo, hi = bounds[b], bounds[b + 1]
+            if hi <= lo:
+                continue
+            xb = x[lo:hi]
+            g[b, k] = xb.T @ xb
+            h[b, k] = xb.T @ y[lo:hi]
+            s[b, k] = y[lo:hi] @ y[lo:hi]
+            m[b, k] = y[lo:hi].sum()
+    flights = design.block_flight
+    n_flights = int(flights.max()) + 1 if flights.size else 1
+    fold = flights % FOLDS if n_flights >= 3 else np.arange(nb) % FOLDS
+    w = np.ones(len(axes)) if weight is None else weight
+    return Grams(axes, g, h, s, m, count, w, fold)
+
+
+def solve(gr: Grams, cols: list[int], blocks: np.ndarray) -> np.ndarray:
+    """Weighted LS coefficients (scaled columns) on the given blocks."""
+    idx = np.ix_(cols, cols)
+    a = np.einsum("a,bapq->pq", gr.weight, gr.g[blocks][:, :, cols][:, :, :, cols]) if len(blocks) else None
+    if a is None:
+        return np.zeros(len(cols))
+    rhs = np.einsum("a,bap->p", gr.weight, gr.h[blocks][:, :, cols])
+    ridge = RIDGE * max(np.trace(a) / max(len(cols), 1), 1e-300)
+    del idx
+    return np.linalg.solve(a + ridge * np.eye(len(cols)), rhs)
+
+
+def block_sse(gr: Grams, cols: list[int], theta: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+    """(len(blocks), A) residual sum of squares of the model theta on those blocks."""
+    g = gr.g[blocks][:, :, cols][:, :, :, cols]
+    h = gr.h[blocks][:, :, cols]
+    return gr.s[blocks] - 2.0 * h @ theta + np.einsum("bapq,p,q->ba", g, theta, theta)
+
+
+def cv_sse(gr: Grams, cols: list[int]) -> np.ndarray:
+    """(B, A) held-out SSE: each block predicted by the fit on the other folds."""
+    out = np.zeros_like(gr.s)
+    all_blocks = np.arange(gr.s.shape[0])
+    for k in np.unique(gr.fold):
+        test = all_blocks[gr.fold == k]
+        train = all_blocks[gr.fold != k]
+        if train.size == 0:
+            train = test
+        theta = solve(gr, cols, train)
+        out[test] = block_sse(gr, cols, theta, test)
+    return out
+
+
+def _resample_counts(nb: int, seed: int) -> np.ndarray:
+    """(BOOTSTRAP, nb) how often each block is drawn in each resample."""
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, nb, (BOOTSTRAP, nb))
+    counts = np.zeros((BOOTSTRAP, nb))
+    np.add.at(counts, (np.repeat(np.arange(BOOTSTRAP), nb), draws.ravel()), 1.0)
+    return counts
+
+
+def _fractions(without: np.ndarray, with_: np.ndarray) -> np.ndarray:
+    """Rows of per-axis sums -> mean over axes of 1 - with/without (axes with 0 skipped)."""
+    ok = without > 0
+    ratio = np.where(ok, 1.0 - with_ / np.where(ok, without, 1.0), 0.0)
+    return ratio.sum(axis=-1) / np.maximum(ok.sum(axis=-1), 1)
+
+
+def explained(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[int],
+              bootstrap: bool = True, seed: int = 12345) -> tuple[float, list[float]]:
+    """Explained fraction (mean over the given axes of 1 - SSE_with/SSE_without) and its
+    bootstrap CI (None without bootstrap)."""
+    a = sse_without[:, axis_idx]
+    b = sse_with[:, axis_idx]
+    value = float(_fractions(a.sum(axis=0), b.sum(axis=0)))
+    if not bootstrap:
+        return value, None
+    counts = _resample_counts(a.shape[0], seed)
+    boot = _fractions(counts @ a, counts @ b)
+    return value, [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))]
+
+
+def difference_ci(sse_base: np.ndarray, sse_a: np.ndarray, sse_b: np.ndarray, axis_idx: list[int],
+                  seed: int = 54321) -> list[float]:
+    """95 % bootstrap interval of explained(a) - explained(b) (same resamples)."""
+    counts = _resample_counts(sse_base.shape[0], seed)
+    base = counts @ sse_base[:, axis_idx]
+    diff = _fractions(base, counts @ sse_a[:, axis_idx]) - _fractions(base, counts @ sse_b[:, axis_idx])
+    return [float(np.percentile(diff, 2.5)), float(np.percentile(diff, 97.5))]
+
+
+def axis_weights(design: Design, cols: list[int]) -> np.ndarray:
+    """1/sigma^2 per axis from an unweighted all-data fit of `cols`."""
+    gr = grams(design)
+    theta = solve(gr, cols, np.arange(design.n_blocks))
+    sse = block_sse(gr, cols, theta, np.arange(design.n_blocks)).sum(axis=0)
+    n = gr.count.sum()
+    sigma2 = np.maximum(sse / max(n, 1), 1e-300)
+    return 1.0 / sigma2
+
+
+def effect_size(gr: Grams, current: list[int], effect_cols: list[int], axis_idx: list[int]) -> float:
+    """Largest over the effect's axes of sqrt(what the effect adds to the in-sample fit /
+    variance of the response about its mean): the RMS of its own contribution relative to
+    the signal's variation. Collinear columns add nothing, so they get no size."""
+    blocks = np.arange(gr.s.shape[0])
+    before = block_sse(gr, current, solve(gr, current, blocks), blocks).sum(axis=0)
+    cols = current + effect_cols
+    after = block_sse(gr, cols, solve(gr, cols, blocks), blocks).sum(axis=0)
+    n = gr.count.sum()
+    variation = gr.s.sum(axis=0) - gr.m.sum(axis=0) ** 2 / max(n, 1)
+    ratios = [np.sqrt(max(before[a] - after[a], 0.0) / variation[a]) for a in axis_idx if variation[a] > 0]
+    return float(max(ratios)) if ratios else 0.0
+
+
+def cv_residuals(design: Design, gr: Grams, cols: list[int]) -> dict:
+    """Held-out residual series per axis: each row predicted by its fold's fit."""
+    all_blocks = np.arange(gr.s.shape[0])
+    fold_of_row = gr.fold[design.block]
+    out = {a: np.zeros_like(design.y[a]) for a in design.axes}
+    for k in np.unique(gr.fold):
+        train = all_blocks[gr.fold != k]
+        theta = solve(gr, cols, train if train.size else all_blocks)
+        rows = fold_of_row == k
+        for a in design.axes:
+            out[a][rows] = design.y[a][rows] - design.x[a][rows][:, cols] @ theta
+    return out
+
+
+def residuals(design: Design, cols: list[int], theta: np.ndarray) -> dict:
+    return {a: design.y[a] - design.x[a][:, cols] @ theta for a in design.axes}

@@ -1,0 +1,98 @@
+"""Which effects: forward selection on held-out residual, look-alikes, ambiguity.
+
+Rule (docs/gap.md, "Which"):
+1. start from the base model (plus the stream alignment if esc_delay was significant);
+2. score every remaining testable effect added to the current model (held-out
+   explained fraction of the current residual on the effect's axes, bootstrap CI);
+3. among the significant ones take the best; if a look-alike of it is also
+   significant and the bootstrap CI of their score difference contains 0, the two
+   cannot be told apart: if one's columns contain the other's (nested), the one with
+   fewer parameters is kept, else the best is kept; both are listed in `ambiguous`;
+4. repeat until nothing significant is left (at most MAX_EFFECTS effects).
+An effect not selected is reported with its score added to the final model.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from propid.gap import scoring
+from propid.gap.design import Design
+from propid.gap.effects import LOOK_ALIKES, by_id
+
+MAX_EFFECTS = 4
+NESTED = {("inertia_error", "gyro_scale")}  # (smaller, larger): the larger's columns span the smaller's
+
+
+def _axis_idx(design: Design, axes: tuple[str, ...]) -> list[int]:
+    return [design.axes.index(a) for a in axes if a in design.axes]
+
+
+def _look_alike(a: str, b: str) -> bool:
+    return (a, b) in LOOK_ALIKES or (b, a) in LOOK_ALIKES
+
+
+def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
+          held_current: np.ndarray) -> dict:
+    cols = current + design.groups[effect_id]
+    held = scoring.cv_sse(gr, cols)
+    axes = by_id(effect_id).axes
+    idx = _axis_idx(design, axes)
+    all_idx = list(range(len(design.axes)))
+    frac, ci = scoring.explained(held_current, held, all_idx)
+    per_axis = {a: scoring.explained(held_current, held, [k], bootstrap=False)[0] for k, a in enumerate(design.axes)}
+    size = scoring.effect_size(gr, current, design.groups[effect_id], idx)
+    return {"id": effect_id, "explained_fraction": frac, "ci": ci, "held": held, "effect_size": size,
+            "per_axis": per_axis,
+            "axes": [a for a in axes if a in design.axes],
+            "significant": bool(ci[0] > 0 and frac >= scoring.MIN_EXPLAINED and size >= scoring.MIN_EFFECT_SIZE)}
+
+
+def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], base_cols: list[int],
+                   progress=None) -> dict:
+    current = list(base_cols)
+    held_current = scoring.cv_sse(gr, current)
+    held_base = held_current
+    selected: list[dict] = []
+    ambiguous: list[dict] = []
+    remaining = list(candidates)
+    while remaining and len(selected) < MAX_EFFECTS:
+        scores = [score(design, gr, current, e, held_current) for e in remaining]
+        if progress:
+            progress(len(scores))
+        good = sorted([s for s in scores if s["significant"]], key=lambda s: -s["explained_fraction"])
+        if not good:
+            break
+        best = good[0]
+        for other in good[1:]:
+            if not _look_alike(best["id"], other["id"]):
+                continue
+            idx = list(range(len(design.axes)))
+            diff = scoring.difference_ci(held_current, best["held"], other["held"], idx)
+            if diff[0] <= 0:
+                pair = (best["id"], other["id"])
+                keep = best
+                if (other["id"], best["id"]) in NESTED:
+                    keep = other  # the smaller model explains as much
+                ambiguous.append({"candidates": [keep["id"], best["id"] if keep is other else other["id"]],
+                                  "kept": keep["id"], "score_difference_ci": diff,
+                                  "reason": "look-alike effects whose held-out scores do not differ significantly"
+                                            + (" (nested: the one with fewer parameters kept)"
+                                               if (other["id"], best["id"]) in NESTED or pair in NESTED else "")})
+                best = keep
+                break
+        best["step"] = len(selected) + 1
+        selected.append(best)
+        current = current + design.groups[best["id"]]
+        held_current = best["held"]
+        remaining.remove(best["id"])
+        for amb in ambiguous:  # an ambiguous runner-up is not selected on its own afterwards
+            for cand in amb["candidates"]:
+                if cand in remaining and amb["kept"] == best["id"]:
+                    remaining.remove(cand)
+    others = [score(design, gr, current, e, held_current) for e in candidates
+              if e not in {s["id"] for s in selected}]
+    for o in others:
+        o["significant"] = False
+    return {"selected": selected, "others": others, "ambiguous": ambiguous, "columns": current,
+            "held_base": held_base, "held_final": held_current}

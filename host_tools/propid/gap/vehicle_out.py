@@ -1,0 +1,68 @@
+"""The corrected vehicle file: the significant effects' fitted parameters written into
+the vehicle JSON where the model can carry them (flight-log v1 extension keys, docs/flightlog.md).
+
+| effect | written as |
+|---|---|
+| esc_delay | `esc_delay_s` = file's + fitted delay (only when the total is >= 0) |
+| inertia_error | `inertia` Jxx, Jyy times the fitted scale (Jzz kept: no independent yaw reference) |
+| gyro_scale | `gyro_scale` = file's times the fitted diagonal (the off-diagonal part is reported, not carried) |
+| com_offset | rotor positions minus the fitted offset (x, y); `com_offset` = file's + offset |
+| aero_damping | `aero_damping` = file's + fitted [dx, dy, dz] |
+| rotor_inertia, rotor_gyroscopic | `rotor_inertia` = fitted J_r |
+Others (rotor_drag, translational_lift, ground_effect, thrust_nonlinearity) have no key:
+listed in `not_carried`.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from propid.flightlog import Rotor, Vehicle
+
+
+def corrected_vehicle(vehicle: Vehicle, effects: list[dict]) -> tuple[Vehicle, dict]:
+    out = copy.deepcopy(vehicle)
+    applied, not_carried = {}, []
+    for e in effects:
+        if not e["significant"]:
+            continue
+        p = e["params"]
+        eid = e["id"]
+        if eid == "esc_delay":
+            total = (vehicle.esc_delay_s or 0.0) + p["delay_s"]
+            if total >= 0:
+                out.esc_delay_s = float(total)
+                applied[eid] = {"esc_delay_s": out.esc_delay_s}
+            else:
+                not_carried.append({"id": eid, "why": "the rotor stream leads the gyro (negative delay): "
+                                                      "use propid replay --rotor-delay"})
+        elif eid == "inertia_error":
+            j = np.array(out.inertia, dtype=float)
+            j[0, 0] *= p["inertia_scale_xx"]
+            j[1, 1] *= p["inertia_scale_yy"]
+            out.inertia = j
+            applied[eid] = {"inertia": np.diag(j).tolist()}
+        elif eid == "gyro_scale":
+            old = np.array(vehicle.gyro_scale or [1.0, 1.0, 1.0])
+            out.gyro_scale = (old * np.array(p["scale"])).tolist()
+            applied[eid] = {"gyro_scale": out.gyro_scale}
+        elif eid == "com_offset":
+            d = np.array([p["com_offset_x"], p["com_offset_y"], 0.0])
+            out.rotors = [Rotor(tuple(float(v) for v in np.array(r.position) - d), r.yaw_sign) for r in out.rotors]
+            out.com_offset = (np.array(vehicle.com_offset or [0.0, 0.0, 0.0]) + d).tolist()
+            applied[eid] = {"com_offset": out.com_offset}
+        elif eid == "aero_damping":
+            d = np.array([p["damping_x"], p["damping_y"], p["damping_z"]])
+            out.aero_damping = (np.array(vehicle.aero_damping or [0.0, 0.0, 0.0]) + d).tolist()
+            applied[eid] = {"aero_damping": out.aero_damping}
+        elif eid in ("rotor_inertia", "rotor_gyroscopic"):
+            if p["rotor_inertia"] > 0 and "rotor_inertia" not in {k for a in applied.values() for k in a}:
+                out.rotor_inertia = float(p["rotor_inertia"])
+                applied[eid] = {"rotor_inertia": out.rotor_inertia}
+        else:
+            not_carried.append({"id": eid, "why": "no vehicle-file key for this effect"})
+    notes = (" Corrected by propid gap: " + "; ".join(f"{k}: {v}" for k, v in applied.items())) if applied else ""
+    out.notes = (vehicle.notes or "") + notes
+    return out, {"applied": applied, "not_carried": not_carried}

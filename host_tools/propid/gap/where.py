@@ -1,0 +1,89 @@
+"""Where the base model misses: residual per axis, per flight regime, per frequency
+band and per rotor.
+
+Regimes (rows may be in several; a regime needs the columns it is defined on):
+- hover: |w| < 0.3 rad/s and (horizontal speed < 0.2 m/s when velocity is logged);
+- fast_translation: horizontal speed > 1 m/s (velocity + attitude);
+- aggressive_yaw: |w_z| > 1 rad/s;
+- near_ground: height < 4 rotor radii (pz + rotor_radius), else < 0.2 m (pz);
+- rapid_throttle: |d(sum Omega^2)/dt| > 2 /s relative to its median.
+Per band: the base model's residual on the raw (not band-passed) torque, band-passed
+to each band, RMS over the response's RMS in the same band (1 = the model explains
+nothing there); bands up to 0.4 x the sample rate.
+Per rotor: the base model's per-rotor kf and km relative to their fleet mean.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from propid.gap.design import Design, base_columns, responses, segment_rows
+from propid.gap.prep import Flight
+from propid.realdata_checks import bandpass
+
+BANDS = ((0.2, 1.0), (1.0, 2.0), (2.0, 5.0), (5.0, 10.0), (10.0, 20.0))
+
+
+def regimes(design: Design, rotor_radius: float | None) -> dict:
+    gyro = design.extra["gyro"]
+    speed = design.extra["speed_h"]
+    height = design.extra["height"]
+    throttle = np.abs(design.extra["throttle_rate"])
+    have_v = np.isfinite(speed).all()
+    out = {"hover": (np.linalg.norm(gyro, axis=1) < 0.3) & ((speed < 0.2) if have_v else True),
+           "aggressive_yaw": np.abs(gyro[:, 2]) > 1.0,
+           "rapid_throttle": throttle > 2.0}
+    if have_v:
+        out["fast_translation"] = speed > 1.0
+    if np.isfinite(height).all():
+        out["near_ground"] = height < (4.0 * rotor_radius if rotor_radius else 0.2)
+    return out
+
+
+def per_axis_regime(design: Design, residual: dict, rotor_radius: float | None) -> tuple[dict, dict]:
+    per_axis = {}
+    for a in design.axes:
+        y = design.y[a]
+        r = residual[a]
+        per_axis[a] = {"residual_rms": float(np.sqrt(np.mean(r**2))), "response_rms": float(np.sqrt(np.mean(y**2))),
+                       "unexplained_fraction": float(np.sum(r**2) / np.sum(y**2)) if np.sum(y**2) > 0 else None}
+    per_regime = {}
+    for name, mask in regimes(design, rotor_radius).items():
+        mask = np.asarray(mask, dtype=bool)
+        entry = {"fraction_of_rows": float(mask.mean())}
+        for a in design.axes:
+            if mask.sum() >= 20:
+                entry[a] = float(np.sqrt(np.mean(residual[a][mask] ** 2)))
+            else:
+                entry[a] = None
+        per_regime[name] = entry
+    return per_axis, per_regime
+
+
+def per_band(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, kf: np.ndarray, km: np.ndarray,
+             mass: float | None) -> dict:
+    theta = np.concatenate([kf, km])
+    out = {}
+    top = 0.4 * min(f.rate_hz for f in flights)
+    for lo, hi in BANDS:
+        if hi > top:
+            continue
+        key = f"{lo:g}-{hi:g}Hz"
+        res = {"roll": [0.0, 0.0], "pitch": [0.0, 0.0], "yaw": [0.0, 0.0]}
+        for f in flights:
+            cols = base_columns(f, positions, signs)
+            resp = responses(f, mass)
+            for a in res:
+                model = cols[a] @ theta
+                for s, e in f.segs:
+                    y = bandpass(resp[a][s:e, None], f.rate_hz, lo, hi)[:, 0]
+                    m = bandpass(model[s:e, None], f.rate_hz, lo, hi)[:, 0]
+                    res[a][0] += float(np.sum((y - m) ** 2))
+                    res[a][1] += float(np.sum(y**2))
+        out[key] = {a: (float(np.sqrt(v[0] / v[1])) if v[1] > 0 else None) for a, v in res.items()}
+    return out
+
+
+def per_rotor(kf: np.ndarray, km: np.ndarray) -> dict:
+    return {"kf_relative": (kf / np.mean(kf)).tolist(), "km_relative": (km / np.mean(km)).tolist(),
+            "kf": kf.tolist(), "km": km.tolist()}

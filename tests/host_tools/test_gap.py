@@ -1,0 +1,226 @@
+"""propid gap: regressors against the SITL's effects (sign and size), verdicts on short
+SITL flights with one known effect, `none` on an effect-free flight, clean errors.
+
+Each SITL flight is 12 s of the default closed-loop Lissajous (crazyflie-plus, default
+sensors); the analysis runs once per flight (module fixture) and every test reads it."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from propid.flightlog import read_flightlog, read_vehicle
+
+DURATION = "12"
+
+
+def _sitl_binary() -> Path | None:
+    build = Path(os.environ.get("PROPID_BUILD_DIR", Path(__file__).resolve().parents[2] / "build" / "host"))
+    binary = build / "sitl" / "propid_sitl"
+    return binary if binary.is_file() else None
+
+
+needs_sitl = pytest.mark.skipif(_sitl_binary() is None, reason="propid_sitl not built")
+
+
+@pytest.fixture(scope="module")
+def flights(tmp_path_factory):
+    """effect id -> (log path, analysis result)."""
+    from propid.gap import analysis
+    from propid.gap.prep import Band
+
+    root = tmp_path_factory.mktemp("gap")
+    cache = {}
+
+    def get(effect: str, strength: str | None = None, seed: int = 5):
+        key = (effect, strength, seed)
+        if key not in cache:
+            log_path = root / f"{effect}_{strength}_{seed}.csv"
+            cmd = [str(_sitl_binary()), "--quiet", "--duration", DURATION, "--seed", str(seed), "--log", str(log_path)]
+            if effect != "none":
+                cmd += ["--effect", effect if strength is None else f"{effect}={strength}"]
+            subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120, check=True)
+            vehicle = read_vehicle(log_path.with_name(log_path.stem + ".vehicle.json"))
+            log = read_flightlog(log_path, vehicle)
+            result = analysis.run([log], vehicle, [], analysis.Options(Band(), progress=False))
+            cache[key] = (log_path, vehicle, result)
+        return cache[key]
+
+    return get
+
+
+def _entry(result: dict, effect_id: str) -> dict:
+    return next(e for e in result["effects"] if e["id"] == effect_id)
+
+
+# ------------------------------------------------------------------ regressors: sign and size
+@needs_sitl
+@pytest.mark.parametrize("strength", ["1", "2"])
+def test_rotor_inertia_regressor_recovers_the_sitl_rotor_inertia(flights, strength):
+    """SITL: tau_z += s * J_r * sum_i yaw_sign_i dOmega_i/dt; the fitted J_r is s * J_r."""
+    _, vehicle, result = flights("rotor_inertia", strength)
+    fitted = _entry(result, "rotor_inertia")["params"]["rotor_inertia"]
+    assert fitted == pytest.approx(float(strength) * vehicle.rotor_inertia, rel=0.15)
+    assert result["verdict"] == "rotor_inertia"
+
+
+@needs_sitl
+def test_rotor_gyroscopic_regressor_recovers_the_rotor_inertia(flights):
+    _, vehicle, result = flights("rotor_gyroscopic", "3")
+    fitted = _entry(result, "rotor_gyroscopic")["params"]["rotor_inertia"]
+    assert fitted == pytest.approx(3 * vehicle.rotor_inertia, rel=0.2)
+    assert result["verdict"] == "rotor_gyroscopic"
+
+
+@needs_sitl
+def test_esc_delay_is_the_fitted_stream_lag(flights):
+    """SITL: telemetry reports Omega(t - 1 ms latency - s); the fitted lag is s plus the
+    sensor chain's own few ms (never more than 4 ms off)."""
+    _, _, result = flights("esc_delay", "0.02")
+    assert _entry(result, "esc_delay")["params"]["delay_s"] == pytest.approx(0.022, abs=0.004)
+    assert result["verdict"] == "esc_delay"
+
+
+@needs_sitl
+def test_inertia_error_gives_the_true_to_file_inertia_ratio(flights):
+    """SITL: J_true = 1.1 J_file; the accelerometer's zero-g offset (up to 2 %) limits it."""
+    _, _, result = flights("inertia_error", "0.1")
+    p = _entry(result, "inertia_error")["params"]
+    assert p["inertia_scale_xx"] == pytest.approx(1.1, abs=0.04)
+    assert p["inertia_scale_yy"] == pytest.approx(1.1, abs=0.04)
+    assert result["verdict"] == "inertia_error"
+
+
+@needs_sitl
+def test_com_offset_regressor_recovers_the_offset(flights):
+    """SITL: d = s * arm * (0.6, 0.8, -0.5) with arm 0.043 m (crazyflie-plus)."""
+    _, vehicle, result = flights("com_offset", "0.1")
+    arm = float(np.max(np.linalg.norm(vehicle.positions[:, :2], axis=1)))
+    p = _entry(result, "com_offset")["params"]
+    assert p["com_offset_x"] == pytest.approx(0.1 * arm * 0.6, rel=0.2)
+    assert p["com_offset_y"] == pytest.approx(0.1 * arm * 0.8, rel=0.2)
+    assert result["verdict"] == "com_offset"
+
+
+@needs_sitl
+def test_thrust_nonlinearity_exponent_has_the_sitl_sign_and_size(flights):
+    _, _, result = flights("thrust_nonlinearity", "0.2")
+    assert _entry(result, "thrust_nonlinearity")["params"]["exponent"] == pytest.approx(0.2, abs=0.08)
+    assert "thrust_nonlinearity" in result["significant"]
+
+
+@needs_sitl
+def test_aero_damping_is_positive_damping(flights):
+    _, _, result = flights("aero_damping", "3")
+    p = _entry(result, "aero_damping")["params"]
+    assert p["damping_x"] > 0 and p["damping_y"] > 0 and p["damping_z"] > 0
+    assert result["verdict"] in ("aero_damping",) or any(
+        "aero_damping" in a["candidates"] for a in result["ambiguous"])
+
+
+# ------------------------------------------------------------------ verdicts
+@needs_sitl
+def test_effect_free_flight_gives_none(flights):
+    _, _, result = flights("none")
+    assert result["verdict"] == "none", [(e["id"], e["explained_fraction"], e.get("effect_size")) for e in result["effects"]]
+    assert result["significant"] == []
+    base = result["base_fit"]
+    # the accelerometer and the gyro torques agree on kf within the accelerometer's offset
+    for key in ("kf_roll", "kf_pitch"):
+        assert base[key]["value"] == pytest.approx(base["kf_thrust"]["value"], rel=0.05)
+
+
+@needs_sitl
+def test_out_json_has_the_issue_keys_and_shapes(flights):
+    _, _, result = flights("inertia_error", "0.1")
+    for key in ("verdict", "effects", "base_fit", "base_fit_after", "where", "shrink", "untestable", "ambiguous"):
+        assert key in result
+    for shape in (result["base_fit"], result["base_fit_after"]):
+        assert set(shape) == {"kf_thrust", "kf_roll", "kf_pitch", "km_yaw"}
+        for v in shape.values():
+            assert set(v) == {"value", "ci"} and v["ci"][0] <= v["value"] <= v["ci"][1]
+    for e in result["effects"]:
+        assert {"id", "explained_fraction", "ci", "axes", "params", "significant"} <= set(e)
+    for axis, v in result["shrink"].items():
+        assert {"rms_before", "rms_after", "pred_0.1s_before", "pred_0.1s_after", "pred_0.5s_before",
+                "pred_0.5s_after"} <= set(v)
+    # the inertia error is what the roll/pitch residual was: most of it goes
+    assert result["shrink"]["roll"]["rms_after"] < 0.6 * result["shrink"]["roll"]["rms_before"]
+    # and with it the torque kf agrees with the accelerometer kf
+    after = result["base_fit_after"]
+    assert after["kf_roll"]["value"] == pytest.approx(after["kf_thrust"]["value"], rel=0.05)
+
+
+# ------------------------------------------------------------------ CLI: vehicle-out, report, errors
+@needs_sitl
+def test_cli_writes_json_report_and_a_corrected_vehicle_that_replays(flights, tmp_path):
+    from propid.cli import main
+    from propid.replay import ReplayOptions, replay
+
+    log_path, _, _ = flights("inertia_error", "0.1")
+    out, corrected = tmp_path / "out.json", tmp_path / "corrected.json"
+    code = main(["gap", "--log", str(log_path), "--json", str(out), "--report", str(tmp_path / "rep"),
+                 "--vehicle-out", str(corrected), "--no-filter", "--quiet"])
+    assert code == 0
+    result = json.loads(out.read_text())
+    assert result["verdict"] == "inertia_error"
+    assert (tmp_path / "rep" / "index.html").is_file() and (tmp_path / "rep" / "effects.png").is_file()
+    fixed = read_vehicle(corrected)
+    original = read_vehicle(log_path.with_name(log_path.stem + ".vehicle.json"))
+    assert fixed.inertia[0, 0] == pytest.approx(1.1 * original.inertia[0, 0], rel=0.04)
+    log = read_flightlog(log_path, fixed)
+    summary = replay(log, fixed, ReplayOptions(segment="flying", progress=False)).summary
+    assert summary["finite"]
+
+
+def test_corrupt_log_is_a_one_line_error(tmp_path, capsys):
+    from propid.cli import main
+
+    vehicle = tmp_path / "v.json"
+    vehicle.write_text(json.dumps({"name": "q", "mass": 0.03, "inertia": [1.4e-5, 1.4e-5, 2.2e-5],
+                                   "rotors": [{"position": [0.04, 0, 0], "yaw_sign": 1},
+                                              {"position": [0, 0.04, 0], "yaw_sign": -1},
+                                              {"position": [-0.04, 0, 0], "yaw_sign": 1},
+                                              {"position": [0, -0.04, 0], "yaw_sign": -1}]}))
+    log = tmp_path / "bad.csv"
+    log.write_text("t,gyro_x,gyro_y,gyro_z,omega_1,omega_2,omega_3,omega_4\n0,0,0,0,1,1,1,1\n0.1,abc,0,0,1,1,1,1\n")
+    assert main(["gap", "--log", str(log), "--vehicle", str(vehicle), "--quiet"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "abc" in err and "Traceback" not in err
+    # a valid but tiny log: no flying segment long enough
+    log.write_text("t,gyro_x,gyro_y,gyro_z,omega_1,omega_2,omega_3,omega_4\n"
+                   + "".join(f"{k * 0.01},0,0,0,1000,1000,1000,1000\n" for k in range(20)))
+    assert main(["gap", "--log", str(log), "--vehicle", str(vehicle), "--quiet"]) == 1
+    assert "segment" in capsys.readouterr().err
+
+
+def test_missing_vehicle_fields_are_a_clean_error(tmp_path, capsys):
+    from propid.cli import main
+
+    vehicle = tmp_path / "v.json"
+    vehicle.write_text(json.dumps({"name": "q", "mass": 0.03, "inertia": None,
+                                   "rotors": [{"position": [0.04, 0, 0], "yaw_sign": 1}]}))
+    log = tmp_path / "a.csv"
+    log.write_text("t,gyro_x,gyro_y,gyro_z,omega_1\n" + "".join(f"{k * 0.01},0,0,0,1000\n" for k in range(500)))
+    assert main(["gap", "--log", str(log), "--vehicle", str(vehicle), "--quiet"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "inertia" in err and "\n" not in err
+
+
+def test_untestable_lists_effects_whose_columns_are_missing():
+    from propid.flightlog import FlightLog, Rotor, Vehicle
+    from propid.gap.analysis import testable
+    from propid.gap.prep import columns_present
+
+    n = 100
+    log = FlightLog(t=np.arange(n) * 0.01, gyro=np.zeros((n, 3)), rotor_speed=np.ones((n, 4)))
+    vehicle = Vehicle("q", [Rotor((0.1, 0, 0), 1)] * 4, mass=None, inertia=np.eye(3))
+    ok, missing = testable(columns_present([log], vehicle), vehicle)
+    missing_ids = {m["id"] for m in missing}
+    assert {"inertia_error", "gyro_scale", "rotor_drag", "translational_lift", "ground_effect"} <= missing_ids
+    assert {"rotor_inertia", "rotor_gyroscopic", "com_offset", "aero_damping"} <= set(ok)
