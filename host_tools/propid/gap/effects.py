@@ -173,6 +173,13 @@ def _thrust_nonlinearity(f: Flight, c: Context) -> dict:
             "thrust": thrusts.sum(axis=1)[:, None]}
 
 
+def _gyro_lowpass(f: Flight, c: Context) -> dict:
+    # logged rate = first-order low-pass of the true rate (time constant tau):
+    # w_true = w_m + tau dw_m/dt, so the true torque gains tau J d2w_m/dt2
+    accel = np.gradient(f.rate_dot, f.t, axis=0) @ c.inertia.T
+    return {axis: accel[:, [k]] for k, axis in enumerate(("roll", "pitch", "yaw"))}
+
+
 def _identity_physical(names):
     def physical(coef, c):
         return {n: float(v) for n, v in zip(names, coef)}
@@ -196,6 +203,9 @@ EFFECTS: list[Effect] = [
     Effect("gyro_scale", tuple(f"a_{i}{j}" for i in "xyz" for j in "xyz")[:8], ("1",) * 8, ("acc", "mass"),
            ("roll", "pitch", "yaw"), _gyro_scale, _gyro_scale_physical,
            "gyro scale and axis misalignment: measured rate M w, cross-axis coupling is its signature"),
+    Effect("gyro_lowpass", ("time_constant_s",), ("s",), (), ("roll", "pitch", "yaw"), _gyro_lowpass,
+           _identity_physical(("time_constant_s",)),
+           "the logged rate is low-pass filtered (sensor filter, on-board estimator): first-order lag tau"),
     Effect("com_offset", ("com_offset_x", "com_offset_y"), ("m", "m"), (), ("roll", "pitch"), _com_offset,
            _com_physical, "centre of mass off the described centre: torque d x (total thrust)"),
     Effect("aero_damping", ("damping_x", "damping_y", "damping_z"), ("N m s/rad",) * 3, (),
@@ -227,6 +237,8 @@ LOOK_ALIKES = [
     ("inertia_error", "gyro_scale"),
     ("inertia_error", "thrust_nonlinearity"),
     ("esc_delay", "rotor_inertia"),
+    ("esc_delay", "gyro_lowpass"),
+    ("aero_damping", "gyro_lowpass"),
     ("rotor_drag", "aero_damping"),
     ("translational_lift", "rotor_drag"),
     ("ground_effect", "thrust_nonlinearity"),
