@@ -65,11 +65,6 @@ class Vehicle:
     com_offset: list[float] | None = None  # CoM offset already applied to the rotor positions [m]
     notes: str = ""
     path: Path | None = None
-    # backward-compatible v1 extension (docs/flightlog.md); None = not modelled
-    esc_delay_s: float | None = None  # rotor-speed telemetry lags the gyro by this [s]
-    gyro_scale: list[float] | None = None  # gyro reads scale * true rate, per axis
-    aero_damping: list[float] | None = None  # body torque -d_a * w_a [N m s/rad]
-    com_offset: list[float] | None = None  # CoM offset already applied to the rotor positions [m]
 
     @property
     def rotor_count(self) -> int:
@@ -113,9 +108,6 @@ class Vehicle:
             "km_nominal": per_rotor(self.km_nominal),
             "rotor_radius": self.rotor_radius,
             "rotor_inertia": self.rotor_inertia,
-            **{key: value for key, value in (("esc_delay_s", self.esc_delay_s), ("gyro_scale", self.gyro_scale),
-                                             ("aero_damping", self.aero_damping), ("com_offset", self.com_offset))
-               if value is not None},
             "notes": self.notes,
         }
         # Extension keys are written only when set, so a file without them reads back unchanged.
@@ -158,15 +150,6 @@ def _positive_or_null(data: dict, key: str, where: str) -> float | None:
     return float(value)
 
 
-def _nonnegative_or_null(data: dict, key: str, where: str) -> float | None:
-    value = data.get(key)
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-        raise UserError(f"{where}: '{key}' must be a number >= 0 or null, got {value!r}")
-    return float(value)
-
-
 def _per_rotor_coeff(data: dict, key: str, count: int, where: str) -> list[float] | None:
     value = data.get(key)
     if value is None:
@@ -178,19 +161,6 @@ def _per_rotor_coeff(data: dict, key: str, count: int, where: str) -> list[float
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise UserError(f"{where}: '{key}' values must be positive numbers, got {v!r}")
     return [float(v) for v in values]
-
-
-def _vector3_or_null(data: dict, key: str, where: str, positive: bool = False, nonnegative: bool = False) -> list[float] | None:
-    value = data.get(key)
-    if value is None:
-        return None
-    if not isinstance(value, list) or len(value) != 3 or not all(
-        isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-        and (not positive or v > 0) and (not nonnegative or v >= 0) for v in value
-    ):
-        kind = "positive " if positive else "non-negative " if nonnegative else "finite "
-        raise UserError(f"{where}: '{key}' must be 3 {kind}numbers or null, got {value!r}")
-    return [float(v) for v in value]
 
 
 def parse_vehicle(data: dict, where: str = "vehicle") -> Vehicle:
@@ -244,10 +214,6 @@ def parse_vehicle(data: dict, where: str = "vehicle") -> Vehicle:
         aero_damping=_vector3_or_null(data, "aero_damping", where, " [N m s/rad]"),
         com_offset=_vector3_or_null(data, "com_offset", where, " [m]"),
         notes=str(data.get("notes", "") or ""),
-        esc_delay_s=_nonnegative_or_null(data, "esc_delay_s", where),
-        gyro_scale=_vector3_or_null(data, "gyro_scale", where, positive=True),
-        aero_damping=_vector3_or_null(data, "aero_damping", where),
-        com_offset=_vector3_or_null(data, "com_offset", where),
     )
 
 

@@ -29,7 +29,8 @@ import numpy as np
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.realdata_checks import _body_velocity, _hold_rotor_rows, absurd_speed_limit, bandpass, \
-    clean_rotor_speeds, flying_mask, segments
+    clean_rotor_speeds, flying_mask
+from propid.signals import measured_torque, segments
 
 MIN_SEGMENT_S = 2.0
 BLOCK_S = 2.0
@@ -152,7 +153,7 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
         raise UserError(f"{where}: no flying segment of {MIN_SEGMENT_S:.0f} s or more with uniform timing")
     inertia = np.asarray(vehicle.inertia, dtype=float)
     rate_dot = np.gradient(gyro, log.t, axis=0)
-    torque = rate_dot @ inertia.T + np.cross(gyro, gyro @ inertia.T)
+    torque = measured_torque(gyro, rate_dot, inertia)
     if vehicle.aero_damping is not None:
         torque = torque + gyro * np.asarray(vehicle.aero_damping)[None, :]  # the model's -D w moved to the left
     speed_dot = np.gradient(speeds, log.t, axis=0)
