@@ -47,6 +47,8 @@ help:
 	@echo "  make target   cross-build build/target for Cortex-M4F; print flash/RAM, filter size,"
 	@echo "                worst stack frame"
 	@echo "  make table1   run the Table 1 campaign (see docs/results.md)"
+	@echo "  make gap-bench  blind benchmark of propid gap on SITL flights with known effects,"
+	@echo "                next to a least-squares baseline (see docs/gap-bench.md)"
 	@echo "  make debug    Debug host build in build/debug + host tests"
 	@echo "  make asan     AddressSanitizer + UBSan host build in build/asan + host tests"
 	@echo "  make clean    remove build/ (keeps .venv; rm -rf .venv to redo the venv)"
@@ -144,3 +146,4 @@ clean:
 # and the `host` / `setup` verbs above.
 include $(REPO)/sitl/sitl.mk
 include $(REPO)/sitl/table1.mk
+include $(REPO)/host_tools/gap_bench.mk

@@ -14,4 +14,5 @@ COMMAND_MODULES = [
     "replay",
     "campaign",
     "gap",
+    "gap_bench",
 ]

@@ -1,0 +1,141 @@
+"""Scoring a diagnosis (the tool's or the baseline's OUT.json) against a flight's answer key.
+
+Rules, fixed before any run (docs/gap-bench.md):
+
+- single effect: right when `verdict` is the true effect;
+- pair: right when the two highest-ranked significant effects are the two true ones
+  (in either order);
+- effect-free: right when `verdict` is `none`;
+- false effect: a flight on which some significant effect is not a true one
+  (reported as the fraction of flights);
+- ambiguous: when the tool lists the true effect among `ambiguous` candidates
+  instead of naming it, the flight is not right but counted apart;
+- flights whose true effect is below the detection limit even at its plausible
+  maximum (answer `below_limit`) are scored but kept out of the headline figures;
+- shrink: per flight, the largest relative reduction of the per-axis residual RMS
+  (1 - rms_after / rms_before) over the axes the tool reports.
+A run that fails (no OUT.json, bad JSON) is wrong, counted as failed.
+"""
+
+from __future__ import annotations
+
+import math
+
+from propid.gapbench.magnitudes import EFFECTS
+
+# Bands of the (smallest true effect's) detectability index, for "at which magnitudes".
+DETECTABILITY_BANDS = ((0.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, float("inf")))
+
+
+def significant_ids(result: dict) -> list[str]:
+    """Significant effects in the tool's ranking order."""
+    effects = result.get("effects") or []
+    return [e.get("id") for e in effects if isinstance(e, dict) and e.get("significant")]
+
+
+def _ambiguous_ids(result: dict) -> set[str]:
+    found: set[str] = set()
+    entries = result.get("ambiguous") or []
+    for entry in entries if isinstance(entries, list) else []:
+        if isinstance(entry, str):
+            found.add(entry)
+        elif isinstance(entry, dict):
+            for key in ("candidates", "ids", "effects"):
+                if isinstance(entry.get(key), list):
+                    found.update(str(x) for x in entry[key])
+        elif isinstance(entry, list):
+            found.update(str(x) for x in entry)
+    return found
+
+
+def shrink_of(result: dict) -> float | None:
+    shrink = result.get("shrink")
+    if not isinstance(shrink, dict):
+        return None
+    best = None
+    for values in shrink.values():
+        if not isinstance(values, dict):
+            continue
+        before, after = values.get("rms_before"), values.get("rms_after")
+        if (isinstance(before, (int, float)) and isinstance(after, (int, float))
+                and math.isfinite(before) and math.isfinite(after) and before > 0):
+            value = 1.0 - after / before
+            best = value if best is None else max(best, value)
+    return best
+
+
+def score_flight(answer: dict, result: dict | None) -> dict:
+    truth = [e["id"] for e in answer["effects"]]
+    kind = answer["kind"]
+    below = any(e.get("below_limit") for e in answer["effects"])
+    indices = [e["detectability"] for e in answer["effects"]]
+    record = {"flight_id": answer["flight_id"], "kind": kind, "truth": truth,
+              "below_limit": below, "headline": not below,
+              "detectability": min(indices) if indices else None}
+    if not isinstance(result, dict) or "verdict" not in result:
+        record.update(failed=True, right=False, false_effect=False, verdict=None, named=[],
+                      ambiguous_hit=False, shrink=None)
+        return record
+    verdict = result.get("verdict")
+    named = significant_ids(result)
+    if kind == "single":
+        right = verdict == truth[0]
+    elif kind == "pair":
+        right = len(named) >= 2 and set(named[:2]) == set(truth)
+    else:
+        right = verdict == "none"
+    false_named = [e for e in named if e not in truth]
+    ambiguous_hit = (not right) and bool(set(truth) & _ambiguous_ids(result))
+    record.update(failed=False, right=bool(right), verdict=verdict, named=named,
+                  false_effect=bool(false_named), false_named=false_named,
+                  ambiguous_hit=ambiguous_hit, shrink=shrink_of(result))
+    return record
+
+
+def _fraction(hits: int, total: int) -> float | None:
+    return hits / total if total else None
+
+
+def _median(values: list[float]) -> float | None:
+    values = sorted(v for v in values if v is not None)
+    if not values:
+        return None
+    mid = len(values) // 2
+    return values[mid] if len(values) % 2 else 0.5 * (values[mid - 1] + values[mid])
+
+
+def summarize(records: list[dict]) -> dict:
+    """Headline figures over the flights above the detection limit, plus per effect."""
+    head = [r for r in records if r["headline"]]
+    per_effect = {}
+    for effect in EFFECTS:
+        rows = [r for r in head if r["kind"] == "single" and r["truth"] == [effect]]
+        per_effect[effect] = {"n": len(rows), "right": sum(r["right"] for r in rows),
+                              "accuracy": _fraction(sum(r["right"] for r in rows), len(rows)),
+                              "false_named_elsewhere": sum(effect in r.get("false_named", [])
+                                                           for r in records)}
+    singles = [r for r in head if r["kind"] == "single"]
+    pairs = [r for r in head if r["kind"] == "pair"]
+    nones = [r for r in head if r["kind"] == "none"]
+    below = [r for r in records if not r["headline"]]
+    effectful = [r for r in head if r["kind"] != "none"]
+    return {
+        "flights": len(records),
+        "headline_flights": len(head),
+        "overall": {"n": len(head), "accuracy": _fraction(sum(r["right"] for r in head), len(head))},
+        "singles": {"n": len(singles), "accuracy": _fraction(sum(r["right"] for r in singles), len(singles))},
+        "pairs": {"n": len(pairs), "accuracy": _fraction(sum(r["right"] for r in pairs), len(pairs))},
+        "none": {"n": len(nones), "accuracy": _fraction(sum(r["right"] for r in nones), len(nones))},
+        "false_effect_rate": _fraction(sum(r["false_effect"] for r in head), len(head)),
+        "failed": sum(r["failed"] for r in records),
+        "ambiguous_hits": sum(r["ambiguous_hit"] for r in head),
+        "below_limit": {"n": len(below), "accuracy": _fraction(sum(r["right"] for r in below), len(below))},
+        "shrink_median": _median([r["shrink"] for r in effectful if r["right"]]),
+        "per_effect": per_effect,
+        "by_detectability": {
+            f"{lo:g}-{hi:g}": {"n": len(rows), "accuracy": _fraction(sum(r["right"] for r in rows), len(rows))}
+            for lo, hi in DETECTABILITY_BANDS
+            for rows in [[r for r in records if r["kind"] != "none" and r["detectability"] is not None
+                          and lo <= r["detectability"] < hi]]
+        },
+    }

@@ -1,0 +1,54 @@
+"""The bench's printed table: the tool and the baseline side by side."""
+
+from __future__ import annotations
+
+from propid.gapbench.magnitudes import EFFECTS
+
+
+def _pct(value: float | None) -> str:
+    return "-" if value is None else f"{100.0 * value:.0f} %"
+
+
+def _cell(summary: dict | None, getter) -> str:
+    if summary is None:
+        return "n/a"
+    return getter(summary)
+
+
+def render(result: dict) -> str:
+    tool, base = result["tool"], result["baseline"]
+    rows: list[tuple[str, str, str, str]] = []
+
+    def acc_row(label: str, get):
+        n = get(base)["n"]
+        rows.append((label, str(n), _cell(tool, lambda s: _pct(get(s)["accuracy"])),
+                     _pct(get(base)["accuracy"])))
+
+    for effect in EFFECTS:
+        acc_row(effect, lambda s, e=effect: s["per_effect"][e])
+    rows.append(("", "", "", ""))
+    acc_row("single effects", lambda s: s["singles"])
+    acc_row("pairs (top two)", lambda s: s["pairs"])
+    acc_row("effect-free (none)", lambda s: s["none"])
+    acc_row("all right (target >= 95 %)", lambda s: s["overall"])
+    rows.append(("false-effect rate (<= 5 %)", str(base["headline_flights"]),
+                 _cell(tool, lambda s: _pct(s["false_effect_rate"])), _pct(base["false_effect_rate"])))
+    rows.append(("shrink, median best axis", "", _cell(tool, lambda s: _pct(s["shrink_median"])),
+                 _pct(base["shrink_median"])))
+    for band, stats in base["by_detectability"].items():
+        rows.append((f"detectability {band}", str(stats["n"]),
+                     _cell(tool, lambda s, b=band: _pct(s["by_detectability"][b]["accuracy"])),
+                     _pct(stats["accuracy"])))
+    acc_row("below limit (not in headline)", lambda s: s["below_limit"])
+    rows.append(("failed runs", "", _cell(tool, lambda s: str(s["failed"])), str(base["failed"])))
+    header = ("", "flights", "propid gap", "least squares")
+    widths = [max(len(r[i]) for r in rows + [header]) for i in range(4)]
+    lines = ["  ".join(h.ljust(widths[i]) if i == 0 else h.rjust(widths[i])
+                       for i, h in enumerate(header))]
+    lines.append("  ".join("-" * w for w in widths))
+    for row in rows:
+        lines.append("  ".join(c.ljust(widths[i]) if i == 0 else c.rjust(widths[i])
+                               for i, c in enumerate(row)))
+    if tool is None:
+        lines.append(f"propid gap not run: {result.get('tool_unavailable_reason')}")
+    return "\n".join(lines)

@@ -1,0 +1,170 @@
+"""gap-bench: scoring rules on hand-made answer/result pairs, signal helpers, and a
+three-flight bench end to end with a stand-in diagnosis that records what it was given.
+
+The end-to-end test needs propid_sitl from PROPID_BUILD_DIR (default
+<repo>/build/host): with PROPID_BUILD_DIR set (as `make test` does) a missing
+binary is a failure, otherwise the test skips.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from propid.gapbench.rigid_body import lowpass
+from propid.gapbench.runner import BenchConfig, run_bench
+from propid.gapbench.scoring import score_flight, shrink_of, summarize
+from propid.gapbench.table import render
+
+REPO = Path(__file__).resolve().parents[2]
+BUILD_DIR = Path(os.environ.get("PROPID_BUILD_DIR", REPO / "build" / "host"))
+SITL = BUILD_DIR / "sitl" / "propid_sitl"
+
+
+def answer(flight_id, kind, effects, below=False, index=12.0):
+    return {"flight_id": flight_id, "kind": kind,
+            "effects": [{"id": e, "detectability": index, "below_limit": below} for e in effects]}
+
+
+def result(verdict, significant=(), other=(), ambiguous=None, shrink=None):
+    effects = [{"id": e, "explained_fraction": 0.5, "significant": True} for e in significant]
+    effects += [{"id": e, "explained_fraction": 0.01, "significant": False} for e in other]
+    out = {"verdict": verdict, "effects": effects, "shrink": shrink or {}}
+    if ambiguous is not None:
+        out["ambiguous"] = ambiguous
+    return out
+
+
+def test_single_effect_right_only_when_the_verdict_is_the_truth():
+    a = answer("f0", "single", ["esc_delay"])
+    assert score_flight(a, result("esc_delay", ["esc_delay"]))["right"]
+    wrong = score_flight(a, result("rotor_inertia", ["rotor_inertia", "esc_delay"]))
+    assert not wrong["right"] and wrong["false_effect"] and wrong["false_named"] == ["rotor_inertia"]
+    missed = score_flight(a, result("none", [], ["esc_delay"]))
+    assert not missed["right"] and not missed["false_effect"]
+
+
+def test_pair_needs_both_as_the_top_two_significant_in_any_order():
+    a = answer("f1", "pair", ["com_offset", "gyro_scale"])
+    assert score_flight(a, result("gyro_scale", ["gyro_scale", "com_offset"]))["right"]
+    assert not score_flight(a, result("gyro_scale", ["gyro_scale"], ["com_offset"]))["right"]
+    third = score_flight(a, result("gyro_scale", ["gyro_scale", "esc_delay", "com_offset"]))
+    assert not third["right"] and third["false_effect"]
+
+
+def test_effect_free_and_failed_runs():
+    a = answer("f2", "none", [])
+    assert score_flight(a, result("none"))["right"]
+    false_alarm = score_flight(a, result("aero_damping", ["aero_damping"]))
+    assert not false_alarm["right"] and false_alarm["false_effect"]
+    failed = score_flight(a, None)
+    assert failed["failed"] and not failed["right"]
+    assert score_flight(a, {"effects": []})["failed"]  # no verdict at all
+
+
+def test_ambiguous_is_wrong_but_counted_apart():
+    a = answer("f3", "single", ["inertia_error"])
+    r = result("none", [], ambiguous=[{"candidates": ["inertia_error", "gyro_scale"]}])
+    scored = score_flight(a, r)
+    assert not scored["right"] and scored["ambiguous_hit"]
+
+
+def test_shrink_is_the_best_axis_reduction():
+    r = result("x", shrink={"roll": {"rms_before": 2.0, "rms_after": 1.0},
+                            "yaw": {"rms_before": 4.0, "rms_after": 1.0},
+                            "thrust": {"rms_before": None, "rms_after": 1.0}})
+    assert shrink_of(r) == pytest.approx(0.75)
+    assert shrink_of({"verdict": "none"}) is None
+
+
+def test_summary_counts_and_keeps_sub_limit_flights_out_of_the_headline():
+    records = [
+        score_flight(answer("a", "single", ["esc_delay"]), result("esc_delay", ["esc_delay"])),
+        score_flight(answer("b", "single", ["esc_delay"]), result("none")),
+        score_flight(answer("c", "pair", ["esc_delay", "com_offset"]),
+                     result("com_offset", ["com_offset", "esc_delay"])),
+        score_flight(answer("d", "none", []), result("gyro_scale", ["gyro_scale"])),
+        score_flight(answer("e", "single", ["ground_effect"], below=True, index=2.0), result("none")),
+    ]
+    s = summarize(records)
+    assert s["flights"] == 5 and s["headline_flights"] == 4
+    assert s["per_effect"]["esc_delay"] == {"n": 2, "right": 1, "accuracy": 0.5,
+                                            "false_named_elsewhere": 0}
+    assert s["per_effect"]["gyro_scale"]["false_named_elsewhere"] == 1
+    assert s["singles"]["accuracy"] == 0.5
+    assert s["pairs"]["accuracy"] == 1.0
+    assert s["none"]["accuracy"] == 0.0
+    assert s["overall"]["accuracy"] == pytest.approx(2 / 4)
+    assert s["false_effect_rate"] == pytest.approx(1 / 4)
+    assert s["below_limit"] == {"n": 1, "accuracy": 0.0}
+    assert s["by_detectability"]["0-5"]["n"] == 1
+
+
+def test_lowpass_keeps_a_slow_sine_and_differentiates_it():
+    fs = 500.0
+    t = np.arange(0, 6, 1 / fs)
+    slow = np.sin(2 * np.pi * 1.0 * t) + 0.3 * t
+    fast = 0.5 * np.sin(2 * np.pi * 60.0 * t)
+    filtered, derivative = lowpass(slow + fast, fs, 10.0)
+    inner = slice(250, -250)
+    assert np.max(np.abs(filtered[inner] - slow[inner])) < 0.02
+    expected = 2 * np.pi * np.cos(2 * np.pi * t) + 0.3
+    assert np.max(np.abs(derivative[inner] - expected[inner])) < 0.1
+
+
+FAKE_TOOL = """
+import argparse, json, sys
+p = argparse.ArgumentParser()
+p.add_argument("--log"); p.add_argument("--vehicle"); p.add_argument("--json")
+p.add_argument("--report")
+a = p.parse_args()
+header = open(a.log).readline().strip().split(",")
+vehicle = json.load(open(a.vehicle))
+json.dump({"verdict": "none", "effects": [], "shrink": {}, "seen_columns": header,
+           "seen_notes": vehicle.get("notes")}, open(a.json, "w"))
+"""
+
+
+def test_three_flights_end_to_end_blind_and_scored(tmp_path):
+    if not SITL.is_file():
+        if "PROPID_BUILD_DIR" in os.environ:
+            pytest.fail(f"{SITL} missing although PROPID_BUILD_DIR is set (build it: make host)")
+        pytest.skip(f"{SITL} not built (run `make host`, or set PROPID_BUILD_DIR)")
+    tool = tmp_path / "fake_gap.py"
+    tool.write_text(FAKE_TOOL)
+    config = BenchConfig(out_dir=tmp_path / "bench", result_path=tmp_path / "gap_bench.json",
+                         sitl=SITL, seed=3, singles_per_effect=1, pairs=0, nones=1,
+                         effects=("esc_delay", "com_offset"), duration_s=6.0, workers=2,
+                         tool_command=[sys.executable, str(tool)])
+    out = run_bench(config, progress=False)
+    saved = json.loads(config.result_path.read_text())
+    assert saved["tool_available"] and not saved["errors"]
+    assert len(saved["flights"]) == 3
+    kinds = sorted(f["kind"] for f in saved["flights"])
+    assert kinds == ["none", "single", "single"]
+    for key in ("tool", "baseline"):
+        summary = saved[key]
+        for part in ("overall", "singles", "pairs", "none", "per_effect", "by_detectability"):
+            assert part in summary
+        assert summary["flights"] == 3
+    # The stand-in always says "none": right on the effect-free flight, wrong on the others.
+    assert saved["tool"]["none"]["accuracy"] == 1.0
+    assert saved["tool"]["singles"]["accuracy"] in (0.0, None)
+    # Blind: the tool saw measured columns only, and no notes naming the effects.
+    for flight in saved["flights"]:
+        seen = json.loads((config.out_dir / "tool" / f"{flight['flight_id']}.json").read_text())
+        assert "gyro_x" in seen["seen_columns"] and "omega_4" in seen["seen_columns"]
+        assert not [c for c in seen["seen_columns"]
+                    if c.startswith(("true_", "est_", "std_", "ref_")) or c in ("health", "status")]
+        assert seen["seen_notes"] == ""
+    # The answer key has the truth the tool never saw.
+    for flight in saved["flights"]:
+        key = json.loads((config.out_dir / "answers" / f"{flight['flight_id']}.json").read_text())
+        for effect in key["effects"]:
+            assert effect["strength"] != 0 and effect["detectability"] > 0
+    assert "least squares" in render(out)
