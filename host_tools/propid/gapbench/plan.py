@@ -30,6 +30,11 @@ RATES = (
 )
 
 
+# The SITL's default noise densities (BMI088 typ., docs/sitl.md).
+GYRO_NOISE_DENSITY = math.radians(0.014)  # rad/s/sqrt(Hz)
+ACCEL_NOISE_DENSITY = 175e-6 * 9.80665     # m/s^2/sqrt(Hz)
+
+
 @dataclass
 class Nuisances:
     """Effect-free disturbances of the measurement (none is an unmodelled effect)."""
