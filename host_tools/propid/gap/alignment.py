@@ -1,13 +1,17 @@
 """Stream alignment = the `esc_delay` effect: how much the logged rotor speeds lag
 (positive) or lead (negative) the gyro.
 
-Rule (docs/gap.md): the roll/pitch base model (per-rotor kf) is fitted with the rotor
+Rule (docs/gap.md): the torque base model (per-rotor kf, km) is fitted with the rotor
 stream shifted by d on a grid from -MAX_LEAD_S to +MAX_LAG_S (step: one sample, at
 most 2 ms; sub-sample by a parabola through the best three). Cross-validated: each
 fold picks its own d on its training blocks and is scored on its held-out blocks,
 against d = 0 (the vehicle file's esc_delay_s, if any, is already applied).
-Rate damping (-D w on roll and pitch) is fitted with every lag: on a narrow-band
-signal a damping torque and a lag look alike, and the lag must not absorb it.
+All three torque axes; yaw with per-rotor km and the rotor-acceleration term J_r sum s_i
+dOmega_i/dt (both shifted with the stream: a lag and rotor inertia look alike on yaw, so
+they are fitted together). Rate damping (-D w) and the roll/pitch columns of the effects that do
+not depend on the rotor stream's timing (rotor_gyroscopic, rotor_drag, com_offset,
+aero_damping) are fitted with every lag: on a narrow-band signal these torques and a lag
+look alike, and the lag must not absorb them.
 A shift commutes with the band-pass, so the band-passed rotor regressors are shifted,
 not refiltered.
 """
@@ -39,42 +43,63 @@ def _shift_rows(f: Flight, x: np.ndarray, delay: float) -> np.ndarray:
     return out
 
 
-def delay_designs(flights: list[Flight], positions: np.ndarray, grid: np.ndarray) -> list[Design]:
+def delay_designs(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, grid: np.ndarray,
+                  nuisance: list[dict] | None = None) -> list[Design]:
+    """Per lag: roll/pitch per-rotor kf, yaw per-rotor km and the rotor-acceleration term
+    (shifted with the rotor stream), rate damping on all three axes, and the nuisance
+    effect columns on roll/pitch (not shifted)."""
+    rows = [segment_rows(f) for f in flights]
     filtered_u = [f.filtered(f.speed**2) for f in flights]
-    # rate damping is searched with the lag: for a narrow-band signal -D w looks like a lag
-    damping = np.concatenate([f.filtered(-f.gyro[:, :2])[segment_rows(f)] for f in flights])
+    filtered_spin = [f.filtered((f.speed_dot @ signs)[:, None]) for f in flights]
+    damping = np.concatenate([f.filtered(-f.gyro)[r] for f, r in zip(flights, rows)])
+    n_extra = 0
+    extra = {}
+    if nuisance:
+        for a in ("roll", "pitch"):
+            extra[a] = np.concatenate([f.filtered(n[a])[r] for f, n, r in zip(flights, nuisance, rows)])
+        n_extra = extra["roll"].shape[1]
     resp = [responses(f, None) for f in flights]
-    ys = {a: np.concatenate([f.filtered(r[a])[segment_rows(f)] for f, r in zip(flights, resp)])
-          for a in ("roll", "pitch")}
+    ys = {a: np.concatenate([f.filtered(rr[a])[r] for f, rr, r in zip(flights, resp, rows)])
+          for a in ("roll", "pitch", "yaw")}
     blocks, block_flight, offset = [], [], 0
     for fi, f in enumerate(flights):
         b_of_row = np.full(len(f.t), -1)
-        for k, (s, e) in enumerate(f.blocks):
-            b_of_row[s:e] = offset + k
-        blocks.append(b_of_row[segment_rows(f)])
+        for k, (s0, e0) in enumerate(f.blocks):
+            b_of_row[s0:e0] = offset + k
+        blocks.append(b_of_row[rows[fi]])
         block_flight += [fi] * len(f.blocks)
         offset += len(f.blocks)
     block = np.concatenate(blocks)
     designs = []
+    scale = None
     for d in grid:
-        us = [(_shift_rows(f, fu, d) if d != 0 else fu)[segment_rows(f)] for f, fu in zip(flights, filtered_u)]
-        u = np.concatenate(us)
-        zero = np.zeros((u.shape[0], 1))
-        x = {"roll": np.column_stack([u * positions[:, 1][None, :], damping[:, [0]], zero]),
-             "pitch": np.column_stack([-u * positions[:, 0][None, :], zero, damping[:, [1]]])}
-        scale = np.sqrt((x["roll"] ** 2 + x["pitch"] ** 2).mean(axis=0) / 2)
-        scale[scale == 0] = 1
+        u = np.concatenate([(_shift_rows(f, fu, d) if d != 0 else fu)[r] for f, fu, r in zip(flights, filtered_u, rows)])
+        spin = np.concatenate([(_shift_rows(f, fs, d) if d != 0 else fs)[r]
+                               for f, fs, r in zip(flights, filtered_spin, rows)])
+        n, count = u.shape
+        zu = np.zeros((n, count))
+        z1 = np.zeros((n, 1))
+        zx = np.zeros((n, n_extra))
+        dmp = [np.column_stack([damping[:, k] if j == k else np.zeros(n) for j in range(3)]) for k in range(3)]
+        x = {"roll": np.column_stack([u * positions[:, 1][None, :], zu, z1, dmp[0]] + ([extra["roll"]] if n_extra else [])),
+             "pitch": np.column_stack([-u * positions[:, 0][None, :], zu, z1, dmp[1]] + ([extra["pitch"]] if n_extra else [])),
+             "yaw": np.column_stack([zu, u * signs[None, :], spin, dmp[2]] + ([zx] if n_extra else []))}
+        if scale is None:
+            scale = np.sqrt(sum(v**2 for v in x.values()).mean(axis=0) / 3)
+            scale[scale == 0] = 1
         x = {a: v / scale for a, v in x.items()}
-        designs.append(Design(axes=["roll", "pitch"], names=[f"kf_{i + 1}" for i in range(u.shape[1])] + ["d_x", "d_y"],
-                              groups={"base": list(range(u.shape[1] + 2))}, y=ys, x=x, scale=scale, block=block,
-                              flight=np.zeros(u.shape[0], dtype=int), block_flight=np.array(block_flight),
-                              time=np.zeros(u.shape[0])))
+        p = x["roll"].shape[1]
+        designs.append(Design(axes=["roll", "pitch", "yaw"], names=[f"c_{k}" for k in range(p)],
+                              groups={"base": list(range(p))}, y=ys, x=x, scale=scale, block=block,
+                              flight=np.zeros(n, dtype=int), block_flight=np.array(block_flight),
+                              time=np.zeros(n)))
     return designs
 
 
-def search(flights: list[Flight], positions: np.ndarray, progress=None) -> dict:
+def search(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, progress=None,
+           nuisance: list[dict] | None = None) -> dict:
     grid = _grid(flights)
-    designs = delay_designs(flights, positions, grid)
+    designs = delay_designs(flights, positions, signs, grid, nuisance)
     grs = []
     for d in designs:
         gr = scoring.grams(d)
@@ -120,7 +145,7 @@ def search(flights: list[Flight], positions: np.ndarray, progress=None) -> dict:
         denom = y0 - 2 * y1 + y2
         if denom > 0:
             delay += 0.5 * (y0 - y2) / denom * (grid[1] - grid[0])
-    frac, ci = scoring.explained(held_zero, held_best, [0, 1])
+    frac, ci = scoring.explained(held_zero, held_best, [0, 1, 2])
     return {"delay_s": delay, "grid_s": [float(grid[0]), float(grid[-1]), float(grid[1] - grid[0])],
             "explained_fraction": frac, "ci": ci, "fold_delays_s": fold_delay,
             "sse_curve": {"delay_s": grid.tolist(), "weighted_sse": (total / total[zero]).tolist()},

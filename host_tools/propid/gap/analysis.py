@@ -3,6 +3,7 @@ how far, corrected vehicle. Returns the OUT.json dictionary (plus arrays for plo
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -15,10 +16,12 @@ from propid.gap.design import build_design
 from propid.gap.effects import ALL_IDS, EFFECTS, ESC_DELAY, Context, by_id
 from propid.gap.prep import Band, Flight, columns_present, prepare_flight
 
-NEEDS_TEXT = {"acc": "acc_x/y/z", "mass": "vehicle mass", "attitude": "qw/qx/qy/qz", "velocity": "vx/vy/vz",
+NEEDS_TEXT = {"inertia": "vehicle inertia", "acc": "acc_x/y/z", "mass": "vehicle mass", "attitude": "qw/qx/qy/qz", "velocity": "vx/vy/vz",
               "height": "pz", "rotor_radius": "vehicle rotor_radius", "cmd": "cmd_i", "vbat": "vbat"}
 
 
+ALIGNMENT_NUISANCE = ("rotor_gyroscopic", "rotor_drag", "com_offset", "aero_damping")
+SCALE_LIKE = ("inertia_error", "gyro_scale", "thrust_nonlinearity")  # effects a regressor attenuation mimics
 MIN_REPORTED_DELAY_S = 0.005  # shorter lags are sampling conventions (latest-sample logging), not a delay
 
 
@@ -77,18 +80,36 @@ def _physical(design, theta_scaled, effect_id, ctx):
 
 
 def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], options: Options) -> dict:
-    if vehicle.inertia is None:
-        raise UserError(f"{vehicle.path or 'vehicle'}: 'inertia' is null; the torque model needs it")
+    unit_inertia = vehicle.inertia is None
+    original_vehicle = vehicle
+    if unit_inertia:  # torque coefficients become kf/J-like ratios in the file's geometry
+        vehicle = copy.deepcopy(vehicle)
+        vehicle.inertia = np.eye(3)
     progress = Progress(options.progress, total=60 + 12 * 6)
     flights = [prepare_flight(log, vehicle, options.band) for log in logs]
     held_flights = [prepare_flight(log, vehicle, options.band) for log in holdout]
     progress(5)
     present = columns_present(logs + holdout, vehicle)
     with_thrust = bool(present["acc"] and present["mass"])
+    present["inertia"] = not unit_inertia
     candidates, untestable = testable(present, vehicle)
 
     # 1. stream alignment (esc_delay)
-    align = alignment.search(flights, vehicle.positions, progress=lambda: progress(0))
+    ctx_align = make_context(flights, vehicle, np.ones(vehicle.rotor_count), np.ones(vehicle.rotor_count))
+    nuisance = []
+    for f in flights:
+        cols = {"roll": [], "pitch": []}
+        for eid in ALIGNMENT_NUISANCE:
+            if eid not in candidates:
+                continue
+            built = by_id(eid).build(f, ctx_align)
+            for a in cols:
+                if a in built:
+                    cols[a].append(built[a])
+                else:
+                    cols[a].append(np.zeros((len(f.t), len(by_id(eid).params))))
+        nuisance.append({a: np.column_stack(v) if v else np.zeros((len(f.t), 0)) for a, v in cols.items()})
+    align = alignment.search(flights, vehicle.positions, vehicle.yaw_signs, progress=lambda: progress(0), nuisance=nuisance)
     progress(20)
     # the alignment is always applied (stream misalignment is part of the base fit); it is
     # reported as esc_delay when it is significant and longer than the log's sample period
@@ -128,7 +149,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
 
     entries = []
     esc_entry = {"id": ESC_DELAY, "explained_fraction": align["explained_fraction"], "ci": align["ci"],
-                 "axes": ["roll", "pitch"], "params": {"delay_s": align["delay_s"]},
+                 "axes": ["roll", "pitch", "yaw"], "params": {"delay_s": align["delay_s"]},
                  "significant": delay_significant}
     entries.append(esc_entry)
     for s in sel["selected"] + sel["others"]:
@@ -160,7 +181,10 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                    "vehicle": str(vehicle.path) if vehicle.path else vehicle.name, "columns_present": present,
                    "band_hz": [options.band.highpass_hz, options.band.lowpass_hz],
                    "rows": int(sum(f.rows for f in flights)), "blocks": int(design.n_blocks),
-                   "rate_hz": [f.rate_hz for f in flights]},
+                   "rate_hz": [f.rate_hz for f in flights],
+                   "inertia": ("unit: the vehicle file has no inertia, so torque coefficients (kf_roll, kf_pitch, "
+                               "km_yaw, rotor_inertia, damping) are divided by the axis inertia [1/(kg m^2)]"
+                               if unit_inertia else "vehicle file")},
         "alignment": {k: v for k, v in align.items() if k not in ("held_zero", "held_best")},
         "base_model": {"kf_per_rotor": kf_rotor.tolist(), "km_per_rotor": km_rotor.tolist(),
                        "axis_sigma": dict(zip(design.axes, (1 / np.sqrt(gr.weight)).tolist()))},
@@ -203,7 +227,18 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     base_res = scoring.cv_residuals(design, gr, base_cols)
     final_res = scoring.cv_residuals(design, gr, final_cols)
     per_axis, per_regime = where.per_axis_regime(design, base_res, vehicle.rotor_radius)
-    result["where"] = {"per_axis": per_axis, "per_regime": per_regime,
+    theta_base_all = scoring.solve(gr, base_cols, np.arange(design.n_blocks))
+    eiv = where.errors_in_variables(gr, base_cols, theta_base_all,
+                                    [design.axes.index(a) for a in ("roll", "pitch")])
+    if eiv.get("flag"):
+        scale_like = [e for e in significant if e in SCALE_LIKE]
+        if scale_like:
+            result["ambiguous"].append({
+                "candidates": scale_like + ["errors_in_variables"], "kept": scale_like[0],
+                "reason": "the roll/pitch gain grows with excitation (where.errors_in_variables): noise on the "
+                          "rotor-speed regressor attenuates every torque fit, which a torque scale also fits",
+                "score_difference_ci": None})
+    result["where"] = {"per_axis": per_axis, "per_regime": per_regime, "errors_in_variables": eiv,
                        "per_band": where.per_band(work, vehicle.positions, vehicle.yaw_signs, kf_rotor, km_rotor,
                                                   vehicle.mass),
                        "per_rotor": where.per_rotor(kf_rotor, km_rotor)}
@@ -221,7 +256,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     else:
         result["shrink"] = shrink.shrink_table(design, base_res, final_res, inertia, vehicle.mass)
         result["shrink_on"] = "cross-validation held-out blocks" if len(flights) < 3 else "cross-validation held-out flights"
-    corrected, carried = corrected_vehicle(vehicle, entries)
+    corrected, carried = corrected_vehicle(original_vehicle, entries)
     result["vehicle_out"] = carried
     result["_internal"] = {"corrected": corrected, "design": design, "base_res": base_res, "final_res": final_res,
                            "progress": progress}

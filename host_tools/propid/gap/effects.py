@@ -197,10 +197,10 @@ EFFECTS: list[Effect] = [
     Effect("rotor_gyroscopic", ("rotor_inertia",), ("kg m^2",), (), ("roll", "pitch"), _rotor_gyroscopic,
            _identity_physical(("rotor_inertia",)),
            "gyroscopic torque of the rotors' angular momentum: J_r sum s_i Omega_i (w x z)"),
-    Effect("inertia_error", ("alpha_roll", "alpha_pitch"), ("1", "1"), ("acc", "mass"), ("roll", "pitch"),
+    Effect("inertia_error", ("alpha_roll", "alpha_pitch"), ("1", "1"), ("acc", "mass", "inertia"), ("roll", "pitch"),
            _inertia_error, _inertia_physical,
            "body inertia differs from the file's: roll/pitch torque scale (needs the accelerometer kf)"),
-    Effect("gyro_scale", tuple(f"a_{i}{j}" for i in "xyz" for j in "xyz")[:8], ("1",) * 8, ("acc", "mass"),
+    Effect("gyro_scale", tuple(f"a_{i}{j}" for i in "xyz" for j in "xyz")[:8], ("1",) * 8, ("acc", "mass", "inertia"),
            ("roll", "pitch", "yaw"), _gyro_scale, _gyro_scale_physical,
            "gyro scale and axis misalignment: measured rate M w, cross-axis coupling is its signature"),
     Effect("gyro_lowpass", ("time_constant_s",), ("s",), (), ("roll", "pitch", "yaw"), _gyro_lowpass,
@@ -228,7 +228,7 @@ EFFECTS: list[Effect] = [
 
 ESC_DELAY = "esc_delay"
 ALL_IDS = [ESC_DELAY] + [e.id for e in EFFECTS]
-EFFECT_AXES = {e.id: e.axes for e in EFFECTS} | {ESC_DELAY: ("roll", "pitch")}
+EFFECT_AXES = {e.id: e.axes for e in EFFECTS} | {ESC_DELAY: ("roll", "pitch", "yaw")}
 ESC_DELAY_NEEDS: tuple[str, ...] = ()
 
 # Look-alikes: effects whose signatures overlap; told apart by the axes/terms that differ,

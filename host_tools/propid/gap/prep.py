@@ -117,8 +117,7 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
     the base model includes it."""
     where = str(log.path) if log.path else (name or "log")
     if vehicle.inertia is None:
-        raise UserError(f"{vehicle.path or 'vehicle'}: 'inertia' is null; the torque model needs it "
-                        "(give a CAD or pendulum value)")
+        raise UserError(f"{vehicle.path or 'vehicle'}: 'inertia' is null (the caller runs unit inertia)")
     speeds = _hold_rotor_rows(log.rotor_speed)
     has_gyro = np.any(np.isfinite(log.gyro), axis=1)
     if not has_gyro.all():
@@ -194,6 +193,7 @@ def columns_present(logs: list[FlightLog], vehicle: Vehicle) -> dict[str, bool]:
     return {
         "acc": every(lambda l: l.acc is not None and np.isfinite(l.acc).any()),
         "mass": vehicle.mass is not None,
+        "inertia": vehicle.inertia is not None,
         "attitude": every(lambda l: l.quat is not None and np.isfinite(l.quat).any()),
         "velocity": every(lambda l: l.group(("vx", "vy", "vz")) is not None),
         "height": every(lambda l: "pz" in l.extra and np.isfinite(l.extra["pz"]).any()),

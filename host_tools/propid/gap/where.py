@@ -87,3 +87,35 @@ def per_band(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, kf
 def per_rotor(kf: np.ndarray, km: np.ndarray) -> dict:
     return {"kf_relative": (kf / np.mean(kf)).tolist(), "km_relative": (km / np.mean(km)).tolist(),
             "kf": kf.tolist(), "km": km.tolist()}
+
+
+EIV_QUANTILES = 5
+EIV_RISE = 1.5  # forward gain of the most excited fifth over the least excited fifth
+
+
+def errors_in_variables(gr, cols: list[int], theta: np.ndarray, axis_idx: list[int]) -> dict:
+    """Signature of noise on the rotor-speed regressor (docs/gap.md): per 2 s block, the
+    forward least-squares gain of the measured on the modelled torque (sum Py / sum PP)
+    and the reverse gain (sum yy / sum Py), blocks sorted by excitation (RMS of P) into
+    fifths. An output disturbance leaves both gains flat; noise on the regressor makes the
+    forward gain grow with excitation (the attenuation var(u)/(var(u)+var(noise)) shrinks)
+    while the reverse gain stays flat. Flagged when the most excited fifth's forward gain
+    is > EIV_RISE x the least excited fifth's."""
+    g = gr.g[:, axis_idx][:, :, cols][:, :, :, cols].sum(axis=1)
+    h = gr.h[:, axis_idx][:, :, cols].sum(axis=1)
+    s = gr.s[:, axis_idx].sum(axis=1)
+    pp = np.einsum("bpq,p,q->b", g, theta, theta)
+    py = h @ theta
+    n = np.maximum(gr.count, 1)
+    ok = (pp > 0) & (py > 0)
+    if ok.sum() < 2 * EIV_QUANTILES:
+        return {"flag": False, "note": "too few blocks"}
+    excitation = np.sqrt(pp[ok] / n[ok])
+    order = np.argsort(excitation)
+    groups = np.array_split(order, EIV_QUANTILES)
+    fwd = [float(py[ok][gi].sum() / pp[ok][gi].sum()) for gi in groups]
+    rev = [float(s[ok][gi].sum() / py[ok][gi].sum()) for gi in groups]
+    flag = bool(fwd[0] > 0 and fwd[-1] / fwd[0] > EIV_RISE)
+    return {"flag": flag, "forward_gain": fwd, "reverse_gain": rev,
+            "excitation_rms": [float(np.median(excitation[gi])) for gi in groups],
+            "rule": f"forward gain of the most excited fifth > {EIV_RISE} x the least excited fifth's"}
