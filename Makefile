@@ -142,7 +142,7 @@ test: setup
 clean:
 	rm -rf $(BUILD)
 
-# Room verbs: `sitl` (S1) and `table1` (S2). They may use BUILD_HOST, VENV_PYTHON
+# Simulator verbs: `sitl` and `table1`. They may use BUILD_HOST, VENV_PYTHON
 # and the `host` / `setup` verbs above.
 include $(REPO)/sitl/sitl.mk
 include $(REPO)/sitl/table1.mk

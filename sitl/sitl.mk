@@ -52,7 +52,8 @@ sitl: setup host
 	    --log $(SITL_OUT)/flight.csv --summary-json $(SITL_OUT)/summary.json \
 	    $(if $(SITL_MAVLINK),--mavlink $(SITL_MAVLINK)) || status=$$?; \
 	if [ $$status -ne 0 ] && [ $$status -ne 3 ]; then exit $$status; fi; \
-	cd $(REPO) && $(VENV)/bin/propid plot --log $(SITL_OUT)/flight.csv --out $(SITL_OUT)/estimates.png \
+	cd $(REPO) && $(VENV)/bin/propid plot --log $(SITL_OUT)/flight.csv --summary $(SITL_OUT)/summary.json \
+	    --out $(SITL_OUT)/estimates.png \
 	    || exit $$?; \
 	echo "sitl: log      $(SITL_OUT)/flight.csv (+ flight.vehicle.json)"; \
 	echo "sitl: summary  $(SITL_OUT)/summary.json"; \

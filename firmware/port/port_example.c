@@ -10,7 +10,7 @@
 
 #define PORT_TWO_PI 6.28318530717958647692f
 
-/* Hummingbird-class quad (GUIDE §3): nominal coefficients the allocation starts from. */
+/* Hummingbird-class quad (docs/sitl.md, vehicles): nominal coefficients the allocation starts from. */
 #define PORT_ARM_M 0.17f
 #define PORT_THRUST_COEFF 5.57e-6f
 #define PORT_DRAG_COEFF 1.36e-7f

@@ -1,6 +1,6 @@
 /*
  * Flight metrics (Table 1 style): tracking RMSE per axis and yaw, final
- * errors, and filter convergence times. Convergence time (GUIDE §3): the
+ * errors, and filter convergence times. Convergence time (as Table 1): the
  * first time after which EVERY later estimate stays within 0.1 prior
  * standard deviation of the truth — for all kf and km together, and for all
  * three gyro biases together. Never reached (the last sample is outside) = -1.

@@ -1,5 +1,5 @@
 /*
- * Flight log v1 CSV writer for the SITL (TEAM.md contract 4): the v1 columns
+ * Flight log v1 CSV writer for the SITL (docs/flightlog.md): the v1 columns
  * (t, gyro_*, omega_i, acc_*, q*, v*, p*, cmd_i) plus reference, truth and
  * filter columns, then true_omega_i (extra, for gap diagnosis). A missing
  * value (no sample yet) is an empty field. Numbers are printed with %.9g so

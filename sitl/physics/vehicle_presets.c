@@ -1,6 +1,6 @@
 /*
- * Built-in vehicles. Inertial, coefficient and motor numbers are GUIDE §3's
- * (the MEAM 620 / RotorPy "crazyflie" and "hummingbird" sets); the rotor
+ * Built-in vehicles. Inertial, coefficient and motor numbers are those of
+ * the MEAM 620 / RotorPy "crazyflie" and "hummingbird" sets; the rotor
  * aerodynamic numbers used by the optional effects are documented with their
  * sources in docs/sitl.md.
  */

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Command-line checks of propid_sitl: help, usage errors and exit codes, log
-# columns (TEAM.md contract 4), the vehicle file beside the log, summary JSON,
+# columns (docs/flightlog.md), the vehicle file beside the log, summary JSON,
 # byte-identical logs from one seed, vehicle files as input, divergence exit 3.
 # usage: test_cli.sh PATH/TO/propid_sitl WORKDIR
 set -u

@@ -74,7 +74,7 @@ static void test_hover_holds_with_oracle(void)
 }
 
 /* Oracle RMSE bounds [m, m, m, deg] per trajectory: a few percent of the
- * trajectory's size (S2 tunes the trajectories; measured values are 2-10x
+ * trajectory's size (the trajectories are tuned; measured values are 2-10x
  * below, docs/sitl.md). A broken loop or allocation is far outside. */
 static void test_oracle_tracks_every_trajectory(void)
 {
