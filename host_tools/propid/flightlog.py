@@ -1,6 +1,6 @@
 """Flight-log interchange format v1: read, validate and write (CSV + vehicle JSON).
 
-The format is specified in shared/spec/flightlog-v1.md: a CSV of samples (SI units,
+The format is specified in docs/flightlog.md: a CSV of samples (SI units,
 body FLU, rotor speeds in rad/s) and a JSON description of the vehicle. Every
 importer produces a FlightLog, every analysis consumes one.
 

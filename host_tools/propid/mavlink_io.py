@@ -9,7 +9,7 @@ pymavlink version changes) into a git-ignored cache directory:
     <repo>/build/mavlink/python/                 if writable, else
     ~/.cache/propid/mavlink/
 
-Public helpers (engineer R's importers use these):
+Public helpers (the tlog importer and the commands use these):
 
     dialect()                 the generated module (MAVLink_*_message classes, enums)
     connect(url)              live link, e.g. "udp:0.0.0.0:14550" (listen) or "udpout:host:port"
@@ -244,16 +244,19 @@ def ensure_udp_port_free(host: str, port: int) -> None:
     listener on the same port binds too and takes the traffic from the first, which then
     silently sees nothing. A bind without SO_REUSEADDR fails if anyone holds the port:
     try that first and refuse to share."""
-    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
-        probe.bind((host, port))
-    except OSError as exc:
-        if exc.errno == errno.EADDRINUSE:
-            raise UserError(f"UDP port {port} on {host} is already in use (another propid listen/log or a "
-                            "ground station?): stop it, or forward the stream to another port") from None
-        raise UserError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
-    finally:
-        probe.close()
+    for attempt in range(3):  # a port held only for an instant (another tool's probe) is not "in use"
+        probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            probe.bind((host, port))
+            return
+        except OSError as exc:
+            if exc.errno != errno.EADDRINUSE:
+                raise UserError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+        finally:
+            probe.close()
+        time.sleep(0.1)
+    raise UserError(f"UDP port {port} on {host} is already in use (another propid listen/log or a "
+                    "ground station?): stop it, or forward the stream to another port")
 
 
 def _check_file(path: str | os.PathLike) -> Path:

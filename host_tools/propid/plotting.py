@@ -4,7 +4,7 @@ Agg backend (no display needed).
 
 Two sources give the same picture:
 - a CSV with the SITL flight log's column names (t, est_kf_i, std_kf_i, true_kf_i,
-  omega_i, gyro_x..., see TEAM.md contract 4), which is also what `propid log --csv`
+  omega_i, gyro_x..., docs/flightlog.md), which is also what `propid log --csv`
   writes for the estimates;
 - a .tlog recorded from propid telemetry (PROPID_* + ESC_STATUS + HIGHRES_IMU).
 
@@ -54,6 +54,7 @@ class FlightData:
     truth: Series | None = None       # true_kf_i, true_km_i, true_bg_*
     rotors: Series | None = None      # omega_i [rad/s]
     rates: Series | None = None       # gyro_x..z (measured) and/or true_wx..z [rad/s]
+    context: dict = field(default_factory=dict)  # vehicle, trajectory, effects when known
 
 
 # --------------------------------------------------------------------------
@@ -152,8 +153,66 @@ def load_flight(path: str | os.PathLike, progress: bool | None = None) -> Flight
     if suffix == ".tlog":
         return _flight_from_tlog(path, progress)
     if suffix == ".csv":
-        return _flight_from_columns(path, read_csv_columns(path, progress))
+        flight = _flight_from_columns(path, read_csv_columns(path, progress))
+        flight.context = run_context(path)
+        return flight
     raise UserError(f"{path}: unknown log type '{suffix}' (expected .tlog or .csv)")
+
+
+def run_context(log_path: Path, summary_path: Path | None = None) -> dict:
+    """What flew: the vehicle name from X.vehicle.json beside the log X.csv, and the
+    trajectory, effects and mode from the simulator's summary (given, or X.summary.json
+    beside the log). Only files that belong to this log by name are read; unreadable ones
+    are ignored (the plot is still useful without its title)."""
+    import json
+
+    context: dict = {}
+    vehicle_file = log_path.with_name(log_path.stem + ".vehicle.json")
+    if vehicle_file.is_file():
+        from propid.flightlog import read_vehicle
+
+        try:
+            context["vehicle"] = read_vehicle(vehicle_file).name or vehicle_file.name
+        except UserError:
+            pass
+    summary_path = summary_path or log_path.with_name(log_path.stem + ".summary.json")
+    if summary_path.is_file():
+        try:
+            summary = json.loads(summary_path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            summary = {}
+        if isinstance(summary, dict):
+            for key in ("vehicle", "trajectory", "effects", "mode"):
+                if isinstance(summary.get(key), str) and summary[key]:
+                    context.setdefault(key, summary[key])
+    return context
+
+
+def context_title(name: str, context: dict) -> str:
+    parts = [name]
+    for key in ("vehicle", "trajectory", "mode"):
+        if context.get(key):
+            parts.append(f"{key} {context[key]}")
+    if "effects" in context:
+        parts.append(f"effects {context['effects'] or 'none'}")
+    return ", ".join(parts)
+
+
+def broken_at_gaps(t: np.ndarray, *ys: np.ndarray, factor: float = 5.0):
+    """(t, *ys) with a NaN row inserted wherever a time step exceeds `factor` x the median
+    step, so a line is not drawn across a skipped segment."""
+    t = np.asarray(t, dtype=float)
+    if t.size < 3:
+        return (t, *ys)
+    steps = np.diff(t)
+    positive = steps[steps > 0]
+    if positive.size == 0:
+        return (t, *ys)
+    gaps = np.flatnonzero(steps > factor * float(np.median(positive))) + 1
+    if gaps.size == 0:
+        return (t, *ys)
+    out_t = np.insert(t, gaps, np.nan)
+    return (out_t, *(np.insert(np.asarray(y, dtype=float), gaps, np.nan, axis=0) for y in ys))
 
 
 def add_truth(flight: FlightData, truth_source: FlightData) -> None:
@@ -176,9 +235,25 @@ def _pyplot():
 
 
 def _band(ax, t, mean, std, color, label):
+    if std is None:
+        t, mean = broken_at_gaps(t, mean)
+    else:
+        t, mean, std = broken_at_gaps(t, mean, std)
     ax.plot(t, mean, color=color, lw=1.2, label=label)
     if std is not None and np.any(np.isfinite(std)):
         ax.fill_between(t, mean - std, mean + std, color=color, alpha=0.2, lw=0)
+
+
+def _line(ax, t, y, **style):
+    ax.plot(*broken_at_gaps(t, y), **style)
+
+
+# Body-rate sources a log may hold, how each is drawn and what it is.
+RATE_SOURCES = (
+    ("gyro_", "-", "gyro (measured, bias included)"),
+    ("true_w", "--", "truth (simulator)"),
+    ("est_w", ":", "filter estimate"),
+)
 
 
 def plot_flight(flight: FlightData, out: str | os.PathLike, title: str | None = None,
@@ -212,7 +287,7 @@ def plot_flight(flight: FlightData, out: str | os.PathLike, title: str | None = 
                 std = est.columns.get(f"std_{panel}_{i}")
                 _band(ax, est.t, mean, std, c, f"rotor {i}")
                 if truth is not None and truth.has(f"true_{panel}_{i}"):
-                    ax.plot(truth.t, truth.get(f"true_{panel}_{i}"), color=c, ls="--", lw=1.0)
+                    _line(ax, truth.t, truth.get(f"true_{panel}_{i}"), color=c, ls="--", lw=1.0)
             unit = "N/(rad/s)$^2$" if panel == "kf" else "N m/(rad/s)$^2$"
             name = "thrust coeff. $k_f$" if panel == "kf" else "drag coeff. $k_m$"
             ax.set_ylabel(f"{name}\n[{unit}]")
@@ -223,28 +298,32 @@ def plot_flight(flight: FlightData, out: str | os.PathLike, title: str | None = 
                 _band(ax, est.t, est.get(f"est_bg_{a}"), est.columns.get(f"std_bg_{a}"), c,
                       f"$b_{{g,{a}}}$")
                 if truth is not None and truth.has(f"true_bg_{a}"):
-                    ax.plot(truth.t, truth.get(f"true_bg_{a}"), color=c, ls="--", lw=1.0)
+                    _line(ax, truth.t, truth.get(f"true_bg_{a}"), color=c, ls="--", lw=1.0)
             ax.set_ylabel("gyro bias\n[rad/s]")
         elif panel == "rotors":
             for i in range(1, n + 1):
                 name = f"omega_{i}"
                 if name in flight.rotors.columns:
-                    ax.plot(flight.rotors.t, flight.rotors.get(name),
-                            color=colors[(i - 1) % len(colors)], lw=0.8, label=f"rotor {i}")
+                    _line(ax, flight.rotors.t, flight.rotors.get(name),
+                          color=colors[(i - 1) % len(colors)], lw=0.8, label=f"rotor {i}")
             ax.set_ylabel("rotor speed\n[rad/s]")
         elif panel == "rates":
             rates = flight.rates
-            source = "gyro" if rates.has("gyro_x") else ("true_w" if rates.has("true_wx") else "est_w")
-            for k, a in enumerate(_AXES):
-                name = f"gyro_{a}" if source == "gyro" else f"{source}{a}"
-                if name in rates.columns:
-                    ax.plot(rates.t, rates.get(name), color=colors[k], lw=0.8,
-                            label=f"$\\omega_{a}$")
+            drawn = [(prefix, ls, what) for prefix, ls, what in RATE_SOURCES
+                     if rates.has(f"{prefix}x" if prefix != "gyro_" else "gyro_x")]
+            for prefix, ls, what in drawn:
+                for k, a in enumerate(_AXES):
+                    name = f"{prefix}{a}"
+                    if name in rates.columns:
+                        _line(ax, rates.t, rates.get(name), color=colors[k], lw=0.8, ls=ls,
+                              label=f"$\\omega_{a}$ {what}" if len(drawn) > 1 else f"$\\omega_{a}$")
+            what = " / ".join(w for _, _, w in drawn) or "none"
             ax.set_ylabel("body rate (FLU)\n[rad/s]")
+            ax.set_title(f"body rate: {what}", fontsize=8, loc="left")
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper right", fontsize=7, ncol=min(n, 4))
     axes[-1].set_xlabel("time [s]")
-    heading = title or flight.source.name
+    heading = title or context_title(flight.source.name, flight.context)
     if truth is not None:
         heading += "  (dashed: truth, bands: $\\pm1\\sigma$)"
     elif est is not None:
@@ -264,19 +343,19 @@ def plot_flight(flight: FlightData, out: str | os.PathLike, title: str | None = 
 # --------------------------------------------------------------------------
 # Replays (propid.replay results)
 # --------------------------------------------------------------------------
-def plot_replay(result, path: str, title: str = "", reference_kf: float | None = None) -> None:
+def plot_replay(result, path: str, title: str = "", reference_kf: float | None = None, dpi: int = 80) -> None:
     """PNG: kf and km per rotor with +-1 sigma bands, gyro biases, over time."""
     plt = _pyplot()
 
     s = result.series
-    fig, axes = plt.subplots(3, 1, figsize=(7.5, 7.0), sharex=True, dpi=80)
+    fig, axes = plt.subplots(3, 1, figsize=(7.5, 7.0), sharex=True, dpi=dpi)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for ax, key, label in ((axes[0], "kf", "kf"), (axes[1], "km", "km")):
         for k in range(s[key].shape[1]):
             c = colors[k % len(colors)]
-            ax.plot(s["t"], s[key][:, k], color=c, lw=1.0, label=f"rotor {k + 1}")
-            ax.fill_between(s["t"], s[key][:, k] - s[f"{key}_std"][:, k], s[key][:, k] + s[f"{key}_std"][:, k],
-                            color=c, alpha=0.15, lw=0)
+            t, mean, std = broken_at_gaps(s["t"], s[key][:, k], s[f"{key}_std"][:, k])
+            ax.plot(t, mean, color=c, lw=1.0, label=f"rotor {k + 1}")
+            ax.fill_between(t, mean - std, mean + std, color=c, alpha=0.15, lw=0)
         nominal = result.summary["config"]["thrust_coeff_nominal" if key == "kf" else "drag_coeff_nominal"]
         ax.axhline(float(np.mean(nominal)), color="k", ls=":", lw=1, label="prior mean")
         ax.set_ylabel(f"{label} [{result.summary['units'][key].split(':')[0]}]")
@@ -286,9 +365,9 @@ def plot_replay(result, path: str, title: str = "", reference_kf: float | None =
     axes[0].legend(fontsize=7, ncol=3, loc="lower right")
     for k, axis in enumerate("xyz"):
         c = colors[k]
-        axes[2].plot(s["t"], s["gyro_bias"][:, k], color=c, lw=1.0, label=f"b_{axis}")
-        axes[2].fill_between(s["t"], s["gyro_bias"][:, k] - s["gyro_bias_std"][:, k],
-                             s["gyro_bias"][:, k] + s["gyro_bias_std"][:, k], color=c, alpha=0.15, lw=0)
+        t, mean, std = broken_at_gaps(s["t"], s["gyro_bias"][:, k], s["gyro_bias_std"][:, k])
+        axes[2].plot(t, mean, color=c, lw=1.0, label=f"b_{axis}")
+        axes[2].fill_between(t, mean - std, mean + std, color=c, alpha=0.15, lw=0)
     axes[2].set_ylabel("gyro bias [rad/s]")
     axes[2].set_xlabel("log time [s]")
     axes[2].legend(fontsize=7, ncol=3)
@@ -299,7 +378,7 @@ def plot_replay(result, path: str, title: str = "", reference_kf: float | None =
     fig.savefig(path)
     plt.close(fig)
 
-def plot_fleet(summaries: list[dict], path: str, reference_kf: float) -> None:
+def plot_fleet(summaries: list[dict], path: str, reference_kf: float, dpi: int = 80) -> None:
     """Bar chart per run: the filter's kf and the least-squares checks, relative to the
     independent kf."""
     plt = _pyplot()
@@ -316,7 +395,7 @@ def plot_fleet(summaries: list[dict], path: str, reference_kf: float) -> None:
         series["LS torque raw (roll+pitch)/2"] = list(0.5 * (np.array(check("raw", "roll_kf")) + np.array(check("raw", "pitch_kf"))))
         series["LS torque 2-10 Hz (roll+pitch)/2"] = list(
             0.5 * (np.array(check("2-10Hz", "roll_kf")) + np.array(check("2-10Hz", "pitch_kf"))))
-    fig, ax = plt.subplots(figsize=(9, 3.6), dpi=80)
+    fig, ax = plt.subplots(figsize=(9, 3.6), dpi=dpi)
     width = 0.8 / len(series)
     x = np.arange(len(names))
     for k, (label, values) in enumerate(series.items()):

@@ -366,7 +366,7 @@ def band_evidence_table(checks: list[dict], names: list[str], reference_kf: floa
     return "\n".join(lines)
 
 
-def plot_band_evidence(checks: list[dict], names: list[str], path: str, reference_kf: float) -> None:
+def plot_band_evidence(checks: list[dict], names: list[str], path: str, reference_kf: float, dpi: int = 80) -> None:
     """PNG: torque-derived kf (roll+pitch)/2 and the band-passed accelerometer thrust kf per
     band, relative to the reference, one line per run."""
     import matplotlib
@@ -376,7 +376,7 @@ def plot_band_evidence(checks: list[dict], names: list[str], path: str, referenc
 
     bands = ["raw", *EVIDENCE_BANDS]
     x = np.arange(len(bands))
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), dpi=80, sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), dpi=dpi, sharey=True)
     colors = {"square": "C0", "random1": "C1", "random2": "C2", "multisine": "C3"}
     for name, c in zip(names, checks):
         color = next((v for k, v in colors.items() if name.startswith(k)), "C4")

@@ -254,6 +254,8 @@ def load_table(path: str | Path) -> dict:
     path = Path(path)
     try:
         table = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise UserError(f"{path}: not a text file (a Table 1 file is the JSON `propid campaign` writes)") from None
     except OSError as exc:
         raise UserError(f"{path}: cannot read ({exc.strerror})") from None
     except json.JSONDecodeError as exc:

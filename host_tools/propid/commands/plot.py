@@ -20,14 +20,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--truth", type=Path, metavar="CSV",
                         help="take true_kf_i/true_km_i/true_bg_* from this SITL log "
                              "(e.g. to overlay truth on a recorded .tlog)")
-    parser.add_argument("--title", help="figure title (default: the log's file name)")
+    parser.add_argument("--summary", type=Path, metavar="JSON",
+                        help="the simulator's --summary-json of this run: vehicle, trajectory and effects go into "
+                             "the title (default: LOG.summary.json beside the log, if present)")
+    parser.add_argument("--title", help="figure title (default: the log's file name, vehicle, trajectory, effects)")
     parser.add_argument("--dpi", type=int, default=110, help="resolution (default 110)")
 
 
 def run(args: argparse.Namespace) -> int:
     if args.out.suffix.lower() != ".png":
         raise UserError(f"--out {args.out}: the output is a PNG (name it *.png)")
+    if not 20 <= args.dpi <= 1200:
+        raise UserError(f"--dpi {args.dpi}: choose 20..1200")
+    if args.summary is not None and not args.summary.is_file():
+        raise UserError(f"--summary {args.summary}: no such file")
     flight = plotting.load_flight(args.log)
+    if args.summary is not None:
+        flight.context.update(plotting.run_context(args.log, args.summary))
     if args.truth is not None:
         plotting.add_truth(flight, plotting.load_flight(args.truth))
     out = plotting.plot_flight(flight, args.out, title=args.title, dpi=args.dpi)

@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 
 from propid.errors import UserError
 from propid.flightlog import read_flightlog, read_vehicle, vehicle_path_for
+from propid.outputs import check_writable, write_text
 
 NAME = "replay"
 HELP = "replay a flight-log v1 CSV through the firmware filter: per-rotor kf/km, gyro biases, JSON + plot"
@@ -39,7 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="flight-log v1 CSV (see `propid convert`); several logs of one vehicle give a fleet "
                              "summary (mean, run-to-run spread) as well")
     parser.add_argument("--vehicle", metavar="V.json", help="vehicle file (default: FLIGHT.vehicle.json beside the log)")
-    parser.add_argument("--json", metavar="OUT.json", help="write the summary here (default: print it)")
+    parser.add_argument("--json", metavar="OUT.json",
+                        help="write the summary (JSON) here; '-' writes it to stdout and moves the readable "
+                             "report to stderr (default: no JSON, the report on stdout)")
     parser.add_argument("--plot", metavar="PNG",
                         help="one log: kf, km (+-1 sigma) and gyro biases over time; several logs: per-run kf "
                              "relative to --reference-kf, beside the least-squares checks")
@@ -86,6 +90,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "and km beside the accelerometer thrust kf (Markdown)")
     parser.add_argument("--band-plot", metavar="PNG",
                         help="with --checks and --reference-kf: torque and thrust kf per band, one line per run")
+    parser.add_argument("--dpi", type=_dpi, default=80, help="resolution of --plot/--band-plot PNGs (default 80)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -113,6 +118,16 @@ def _prefilter(text: str):
     return value
 
 
+def _dpi(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError("expected a whole number of dots per inch") from None
+    if not 20 <= value <= 1200:
+        raise argparse.ArgumentTypeError("dpi must be within 20..1200")
+    return value
+
+
 def _finite_json(value):
     """JSON has no NaN: write null instead."""
     if isinstance(value, float) and not math.isfinite(value):
@@ -124,15 +139,77 @@ def _finite_json(value):
     return value
 
 
+def check_arguments(args: argparse.Namespace, log_paths: list[Path]) -> None:
+    """Every argument that can be judged without replaying, judged before any work."""
+    several = len(log_paths) > 1
+    if (args.band_table or args.band_plot) and not args.checks:
+        raise UserError("--band-table/--band-plot need --checks")
+    if args.band_plot and not args.reference_kf:
+        raise UserError("--band-plot needs --reference-kf (the plot is relative to it)")
+    if args.plot and several and not args.reference_kf:
+        raise UserError("--plot with several logs needs --reference-kf (the plot is relative to it)")
+    if (args.prefilter is not None or args.diagnostic_highpass is not None) and args.skip_repeats:
+        raise UserError("--prefilter/--diagnostic-highpass cannot be combined with --skip-repeats")
+    if (args.prefilter is not None or args.diagnostic_highpass is not None) and args.streams == "events":
+        raise UserError("--prefilter/--diagnostic-highpass need a rows log, not --streams events")
+    if args.reference_kf is not None and not args.reference_kf > 0:
+        raise UserError("--reference-kf must be positive")
+    for option, value in (("--json", args.json), ("--plot", args.plot), ("--table", args.table),
+                          ("--band-table", args.band_table), ("--band-plot", args.band_plot)):
+        if value and value != "-":
+            check_writable(value, option)
+            if Path(value).resolve() in {p.resolve() for p in log_paths}:
+                raise UserError(f"{option} {value} is one of the input logs")
+    for option in ("plot", "band_plot"):
+        value = getattr(args, option)
+        if value and not value.lower().endswith(".png"):
+            raise UserError(f"--{option.replace('_', '-')} {value}: the plot is written as PNG (use .png)")
+    for path in log_paths:
+        if not path.is_file():
+            raise UserError(f"cannot read {path}: " + ("a directory" if path.is_dir() else "no such file"))
+
+
+def rotor_table(summary: dict) -> str:
+    """Per-rotor kf and km: mean over the converged part +- the final 1-sigma, and flags."""
+    unit_inertia = summary.get("mode") == "unit_inertia"
+    kf_unit = "kf/J" if unit_inertia else "kf [N/(rad/s)^2]"
+    km_unit = "km/Jzz" if unit_inertia else "km [N m/(rad/s)^2]"
+    flagged = "*" if summary.get("warnings") else ""
+    lines = [f"  {'rotor':<6}{kf_unit:>28}{km_unit:>30}   converged kf/km{flagged}"]
+    for k in range(len(summary["kf"])):
+        conv = "/".join("yes" if summary["converged"][c][k] else "no" for c in ("kf", "km"))
+        lines.append(f"  {k + 1:<6}{summary['kf_mean'][k]:>17.4g} +- {summary['kf_std'][k]:<8.2g}"
+                     f"{summary['km_mean'][k]:>19.4g} +- {summary['km_std'][k]:<8.2g}   {conv}")
+    mean = lambda xs: sum(xs) / len(xs)  # noqa: E731
+    lines.append(f"  {'mean':<6}{mean(summary['kf_mean']):>17.4g}{'':12}{mean(summary['km_mean']):>19.4g}")
+    return "\n".join(lines)
+
+
+def report(summary: dict, out) -> None:
+    name = Path(summary["log"]).name if summary["log"] else "log"
+    print(f"{name}: {summary['duration_s']:.1f} s, {summary['rows_replayed']} rows ({summary['segment']}), "
+          f"gyro {summary['gyro_rate_hz']:.0f} Hz, rotor speeds {summary['rotor_rate_hz']:.0f} Hz, "
+          f"rotor delay {1e3 * summary['rotor_delay_s']:.0f} ms", file=out)
+    print("  kf, km: mean over the converged part +- final 1 sigma", file=out)
+    print(rotor_table(summary), file=out)
+    if summary["rejected"]:
+        rejected = ", ".join(f"{count} {name.removeprefix('PROPID_ERR_')}" for name, count in summary["rejected"].items())
+        print(f"  rejected samples: {rejected}", file=out)
+    for warning in summary.get("warnings", []):
+        print(f"  * warning: {warning}", file=out)
+
+
 def run(args: argparse.Namespace) -> int:
     from propid.plotting import plot_fleet, plot_replay
     from propid.replay import ReplayOptions, fleet_summary, replay, validation_table
 
     log_paths = [Path(p) for p in args.log]
+    check_arguments(args, log_paths)
     vehicle_path = Path(args.vehicle) if args.vehicle else vehicle_path_for(log_paths[0])
     if not args.vehicle and not vehicle_path.is_file():
         raise UserError(f"no --vehicle given and no {vehicle_path.name} beside the log")
     vehicle = read_vehicle(vehicle_path)
+    logs = [read_flightlog(path, vehicle) for path in log_paths]  # every file checked before any replay
     overrides = {
         name: getattr(args, f"cfg_{name}") for name, _, _ in OVERRIDES if getattr(args, f"cfg_{name}") is not None
     }
@@ -151,14 +228,14 @@ def run(args: argparse.Namespace) -> int:
         diagnostic_highpass_hz=args.diagnostic_highpass,
         progress=not args.no_progress and len(log_paths) == 1,
     )
-    runs = log_paths
-    if len(log_paths) > 1 and not args.no_progress:
+    text_out = sys.stderr if args.json == "-" else sys.stdout
+    runs = logs
+    if len(logs) > 1 and not args.no_progress:
         from tqdm import tqdm
 
-        runs = tqdm(log_paths, desc="replay", unit="log")
+        runs = tqdm(logs, desc="replay", unit="log")
     results, summaries = [], []
-    for path in runs:
-        log = read_flightlog(path, vehicle)
+    for log in runs:
         result = replay(log, vehicle, options)
         summary = result.summary
         if args.reference_kf:
@@ -168,19 +245,12 @@ def run(args: argparse.Namespace) -> int:
             from propid.realdata_checks import check_log, format_checks
 
             summary["checks"] = check_log(log, vehicle, unit_inertia=args.unit_inertia)
-            if len(log_paths) == 1:
-                print(format_checks(summary["checks"]))
+            if len(logs) == 1:
+                print(format_checks(summary["checks"]), file=text_out)
         results.append(result)
         summaries.append(summary)
-    mean = lambda xs: sum(xs) / len(xs)  # noqa: E731
     for summary in summaries:
-        name = Path(summary["log"]).name if summary["log"] else "log"
-        print(
-            f"{name}: kf mean over rotors {mean(summary['kf_mean']):.4g}, km {mean(summary['km_mean']):.4g} "
-            f"({summary['units']['kf'].split(':')[0]}); converged kf {sum(summary['converged']['kf'])}/"
-            f"{len(summary['kf'])}, km {sum(summary['converged']['km'])}/{len(summary['km'])}; "
-            f"rejected {summary['rejected']}"
-        )
+        report(summary, text_out)
     if len(summaries) == 1:
         output = summaries[0]
     else:
@@ -189,38 +259,41 @@ def run(args: argparse.Namespace) -> int:
         text = f"fleet of {fleet['runs']}: kf mean {fleet['kf_fleet_mean']:.4g} (run-to-run CV {fleet['kf_run_cv']:.1%})"
         if args.reference_kf:
             text += f" = {fleet['kf_fleet_over_reference']:.3f} x reference {args.reference_kf:.4g}"
-        print(text + f"; km mean {fleet['km_fleet_mean']:.4g} (CV {fleet['km_run_cv']:.1%})")
-        if args.table:
-            Path(args.table).write_text(validation_table(summaries, args.reference_kf) + "\n", encoding="utf-8")
-            print(f"wrote {args.table}")
-    text = json.dumps(_finite_json(output), indent=2)
+        print(text + f"; km mean {fleet['km_fleet_mean']:.4g} (CV {fleet['km_run_cv']:.1%})", file=text_out)
+    if args.table:
+        write_text(args.table, validation_table(summaries, args.reference_kf) + "\n")
+        print(f"wrote {args.table}", file=text_out)
     if args.json:
-        Path(args.json).write_text(text + "\n", encoding="utf-8")
-        print(f"wrote {args.json}")
-    elif len(summaries) == 1:
-        print(text)
-    if (args.band_table or args.band_plot) and not args.checks:
-        raise UserError("--band-table/--band-plot need --checks")
+        text = json.dumps(_finite_json(output), indent=2)
+        if args.json == "-":
+            print(text)
+        else:
+            write_text(args.json, text + "\n")
+            print(f"wrote {args.json}", file=text_out)
     if args.band_table or args.band_plot:
         from propid.realdata_checks import band_evidence_table, plot_band_evidence
 
         names = [Path(s["log"]).stem if s.get("log") else "log" for s in summaries]
         checks = [s["checks"] for s in summaries]
         if args.band_table:
-            Path(args.band_table).write_text(band_evidence_table(checks, names, args.reference_kf) + "\n",
-                                             encoding="utf-8")
-            print(f"wrote {args.band_table}")
+            write_text(args.band_table, band_evidence_table(checks, names, args.reference_kf) + "\n")
+            print(f"wrote {args.band_table}", file=text_out)
         if args.band_plot:
-            if not args.reference_kf:
-                raise UserError("--band-plot needs --reference-kf (the plot is relative to it)")
-            plot_band_evidence(checks, names, args.band_plot, args.reference_kf)
-            print(f"wrote {args.band_plot}")
+            plot_band_evidence(checks, names, args.band_plot, args.reference_kf, dpi=args.dpi)
+            print(f"wrote {args.band_plot}", file=text_out)
     if args.plot:
         if len(results) == 1:
-            plot_replay(results[0], args.plot, title=log_paths[0].name, reference_kf=args.reference_kf)
+            plot_replay(results[0], args.plot, title=_plot_title(log_paths[0], vehicle, args), dpi=args.dpi,
+                        reference_kf=args.reference_kf)
         else:
-            if not args.reference_kf:
-                raise UserError("--plot with several logs needs --reference-kf (the plot is relative to it)")
-            plot_fleet(summaries, args.plot, args.reference_kf)
-        print(f"wrote {args.plot}")
+            plot_fleet(summaries, args.plot, args.reference_kf, dpi=args.dpi)
+        print(f"wrote {args.plot}", file=text_out)
     return 0
+
+
+def _plot_title(log_path: Path, vehicle, args: argparse.Namespace) -> str:
+    parts = [log_path.name, f"vehicle {vehicle.name or (vehicle.path.name if vehicle.path else '?')}"]
+    parts.append(f"segment {args.segment}")
+    if args.prefilter is not None:
+        parts.append(f"pre-filter {args.prefilter}")
+    return ", ".join(parts)

@@ -11,6 +11,8 @@ from propid.realdata_checks import absurd_speed_limit, check_log, flying_mask
 from propid.replay.noise import estimate_noise
 from propid.replay.options import ReplayOptions
 
+NOISE_FIELDS = ("gyro_noise_density", "gyro_sample_rate_hz", "rate_process_noise")
+
 def _nominals(vehicle: Vehicle, options: ReplayOptions, log: FlightLog) -> tuple[list[float], list[float], str]:
     n = vehicle.rotor_count
     if options.unit_inertia:
@@ -67,10 +69,22 @@ def build_config(vehicle: Vehicle, log: FlightLog, options: ReplayOptions) -> tu
         mask = flying_mask(log)
         auto = estimate_noise(log, inertia, vehicle.positions, vehicle.yaw_signs, mask)
         config.update(auto)
-        notes["noise"] = ("auto: gyro noise and unmodelled angular acceleration measured on the log "
-                          "(residual of a least-squares fit of the filter's torque model)")
+        if auto:
+            notes["noise"] = ("auto: gyro noise and unmodelled angular acceleration measured on the log "
+                              "(residual of a least-squares fit of the filter's torque model)")
+        else:
+            notes["noise"] = ("auto requested, but the log has too few flying samples with both neighbours "
+                              "(100 needed) to measure the noise: library defaults used")
     else:
         notes["noise"] = "library defaults"
     config.update(options.overrides)
+    given = [key for key in NOISE_FIELDS if key in options.overrides]
+    if given:
+        notes["noise"] += "; given on the command line: " + ", ".join(given)
+    # Record the values in force, whatever their source, so the JSON says what was used.
+    from propid.cfilter import DEFAULT_TUNING
+
+    for key in NOISE_FIELDS:
+        config.setdefault(key, DEFAULT_TUNING[key])
     return config, notes
 
