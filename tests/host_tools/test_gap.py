@@ -47,7 +47,7 @@ def flights(tmp_path_factory):
             subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120, check=True)
             vehicle = read_vehicle(log_path.with_name(log_path.stem + ".vehicle.json"))
             log = read_flightlog(log_path, vehicle)
-            result = analysis.run([log], vehicle, [], analysis.Options(Band(), progress=False))
+            result = analysis.run([log], vehicle, [], analysis.Options(Band(), progress=False, auto_highpass=True))
             cache[key] = (log_path, vehicle, result)
         return cache[key]
 

@@ -27,8 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--report", metavar="DIR", help="write DIR/index.html with plots")
     parser.add_argument("--vehicle-out", metavar="CORRECTED.json",
                         help="write the vehicle file corrected with the significant effects' parameters")
-    parser.add_argument("--highpass", type=float, default=1.0, metavar="HZ",
-                        help="torque axes: slow disturbance torques below this are a nuisance (default 1 Hz)")
+    parser.add_argument("--highpass", default="auto", metavar="HZ|auto",
+                        help="torque axes: slow disturbance torques below this are a nuisance; auto (default): the "
+                             "lowest of 0.2/0.5/1/2 Hz at which the roll/pitch kf no longer depends on the band")
     parser.add_argument("--lowpass", type=float, default=25.0, metavar="HZ",
                         help="upper band edge (default 25 Hz, at most a quarter of the sample rate)")
     parser.add_argument("--no-filter", action="store_true",
@@ -58,7 +59,12 @@ def run(args: argparse.Namespace) -> int:
     from propid.gap import analysis
     from propid.gap.prep import Band
 
-    if not (args.highpass >= 0 and args.lowpass > args.highpass):
+    auto = args.highpass == "auto"
+    try:
+        highpass = 1.0 if auto else float(args.highpass)
+    except ValueError:
+        raise UserError(f"--highpass: expected a frequency in Hz or 'auto', got {args.highpass!r}") from None
+    if not (highpass >= 0 and args.lowpass > highpass):
         raise UserError("--lowpass must be above --highpass (both in Hz, >= 0)")
     vehicle_path = Path(args.vehicle) if args.vehicle else vehicle_path_for(args.log[0])
     if not vehicle_path.exists():
@@ -66,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     vehicle = read_vehicle(vehicle_path)
     logs = [read_flightlog(p, vehicle) for p in args.log]
     holdout = [read_flightlog(p, vehicle) for p in args.holdout]
-    options = analysis.Options(Band(args.highpass, args.lowpass), progress=not args.quiet)
+    options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto)
     try:
         result = analysis.run(logs, vehicle, holdout, options)
     except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
@@ -85,13 +91,14 @@ def run(args: argparse.Namespace) -> int:
     if args.vehicle_out:
         write_vehicle(args.vehicle_out, corrected)
     result = _clean(result)
+    text = json.dumps(result, indent=1)
+    if args.json:
+        Path(args.json).write_text(text + "\n", encoding="utf-8")
     if args.report:
         from propid.gap.report import write_report
 
         write_report(result, args.report)
-    text = json.dumps(result, indent=1)
     if args.json:
-        Path(args.json).write_text(text + "\n", encoding="utf-8")
         print(f"verdict: {result['verdict']} (significant: {', '.join(result['significant']) or 'none'})")
     else:
         print(text)

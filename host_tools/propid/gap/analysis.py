@@ -29,6 +29,38 @@ MIN_REPORTED_DELAY_S = 0.005  # shorter lags are sampling conventions (latest-sa
 class Options:
     band: Band
     progress: bool = True
+    auto_highpass: bool = False
+
+
+HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0)
+BAND_STABILITY = 0.10
+
+
+def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band) -> tuple[Band, dict]:
+    """Closed-loop bias shows as a torque coefficient that depends on the band's lower
+    edge (the controller cancels slow unmodelled torques). Rule: the lowest candidate
+    high-pass whose roll/pitch fleet kf (least squares, mean of the two axes) is within
+    BAND_STABILITY of the kf at every higher candidate; the highest candidate otherwise."""
+    values = {}
+    for hp in HIGHPASS_CANDIDATES_HZ:
+        trial = [replace(f, band=Band(hp, band.lowpass_hz).for_rate(f.rate_hz)) for f in flights]
+        kf = []
+        for axis in ("roll", "pitch"):
+            fit = basefit.fleet_fit(trial, axis, vehicle.positions, vehicle.yaw_signs, vehicle.mass,
+                                    use_instrument=False)
+            kf.append(fit["least_squares_value"])
+        values[hp] = float(np.mean(kf))
+    chosen = HIGHPASS_CANDIDATES_HZ[-1]
+    for k, hp in enumerate(HIGHPASS_CANDIDATES_HZ):
+        higher = HIGHPASS_CANDIDATES_HZ[k + 1:]
+        if all(values[h] != 0 and abs(values[hp] / values[h] - 1.0) <= BAND_STABILITY for h in higher):
+            chosen = hp
+            break
+    return Band(chosen, band.lowpass_hz), {"candidates_hz": list(HIGHPASS_CANDIDATES_HZ),
+                                           "roll_pitch_kf": [values[h] for h in HIGHPASS_CANDIDATES_HZ],
+                                           "chosen_hz": chosen,
+                                           "rule": "lowest high-pass whose roll/pitch kf is within 10 % of the kf "
+                                                   "at every higher candidate"}
 
 
 class Progress:
@@ -87,6 +119,11 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         vehicle.inertia = np.eye(3)
     progress = Progress(options.progress, total=60 + 12 * 6)
     flights = [prepare_flight(log, vehicle, options.band) for log in logs]
+    band_rule = None
+    if options.auto_highpass:
+        band, band_rule = choose_highpass(flights, vehicle, options.band)
+        options = Options(band, options.progress, False)
+        flights = [replace(f, band=band.for_rate(f.rate_hz)) for f in flights]
     held_flights = [prepare_flight(log, vehicle, options.band) for log in holdout]
     progress(5)
     present = columns_present(logs + holdout, vehicle)
@@ -163,8 +200,10 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         entries.append({"id": s["id"], "explained_fraction": s["explained_fraction"], "ci": s["ci"],
                         "axes": s["axes"], "params": _physical(design, th, s["id"], ctx),
                         "effect_size": s["effect_size"], "per_axis": s["per_axis"],
+                        "explained_fraction_all_axes": s["explained_fraction_all_axes"],
                         "significant": s["significant"], **({"step": s["step"]} if "step" in s else {})})
-    entries.sort(key=lambda e: (not e["significant"], -e["explained_fraction"]))
+    entries.sort(key=lambda e: (not e["significant"], e.get("step", 99),
+                                -e.get("explained_fraction_all_axes", e["explained_fraction"])))
     significant = [e["id"] for e in entries if e["significant"]]
     verdict = significant[0] if significant else "none"
     for e in untestable:
@@ -180,6 +219,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         "inputs": {"logs": [str(l.path) for l in logs], "holdout": [str(l.path) for l in holdout],
                    "vehicle": str(vehicle.path) if vehicle.path else vehicle.name, "columns_present": present,
                    "band_hz": [options.band.highpass_hz, options.band.lowpass_hz],
+                   "highpass_rule": band_rule,
                    "rows": int(sum(f.rows for f in flights)), "blocks": int(design.n_blocks),
                    "rate_hz": [f.rate_hz for f in flights],
                    "inertia": ("unit: the vehicle file has no inertia, so torque coefficients (kf_roll, kf_pitch, "

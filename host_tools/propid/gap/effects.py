@@ -238,6 +238,7 @@ LOOK_ALIKES = [
     ("inertia_error", "thrust_nonlinearity"),
     ("esc_delay", "rotor_inertia"),
     ("esc_delay", "gyro_lowpass"),
+    ("rotor_inertia", "aero_damping"),
     ("aero_damping", "gyro_lowpass"),
     ("rotor_drag", "aero_damping"),
     ("translational_lift", "rotor_drag"),

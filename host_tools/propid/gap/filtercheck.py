@@ -1,8 +1,8 @@
 """The firmware filter before/after: `propid replay` (the C filter, gyro only) on the
 held-out logs with the given vehicle file and with the corrected one.
 
-Both runs use the replay's recommended settings (`--segment flying`, stream alignment
-`auto`); the corrected run pushes the rotor stream by the corrected `esc_delay_s` when
+Both runs use the replay's recommended settings (`--segment flying`, or `all` when the
+replay finds no flying rows; stream alignment `auto`); the corrected run pushes the rotor stream by the corrected `esc_delay_s` when
 it has one. A `gyro_scale` in the corrected file is undone on the gyro before the
 replay (the filter takes rates as measured). Fleet kf = mean over rotors of each run's
 converged kf; run-to-run CV = std/mean over runs.
@@ -14,6 +14,7 @@ import copy
 
 import numpy as np
 
+from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 
 
@@ -30,7 +31,10 @@ def _replay_kf(log: FlightLog, vehicle: Vehicle, delay) -> float:
     log = copy.copy(log)
     if vehicle.gyro_scale is not None:
         log.gyro = log.gyro / np.asarray(vehicle.gyro_scale)[None, :]
-    result = replay(log, vehicle, ReplayOptions(segment="flying", rotor_delay_s=delay, progress=False))
+    try:
+        result = replay(log, vehicle, ReplayOptions(segment="flying", rotor_delay_s=delay, progress=False))
+    except UserError:  # the replay's flying detector found nothing (e.g. a log that starts airborne)
+        result = replay(log, vehicle, ReplayOptions(segment="all", rotor_delay_s=delay, progress=False))
     return float(np.mean(result.summary["kf_mean"]))
 
 

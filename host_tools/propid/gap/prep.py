@@ -10,6 +10,8 @@ Rules (docs/gap.md, "Data preparation"):
   gyro rows, rows without a gyro sample are dropped;
 - missing or absurd rotor speeds (above 2x the 99.9th percentile) and isolated
   missing gyro samples are interpolated for the fits;
+- a sample-and-held rotor stream (more than 20 % of the rows repeat the previous row's
+  rotor speeds exactly) is interpolated between its report instants;
 - derivatives by central differences on the log's time stamps;
 - measured torque tau = J dw/dt + w x J w with the vehicle file's J (and its
   `gyro_scale`, if given, undone first);
@@ -67,6 +69,7 @@ class Flight:
     segs: list[tuple[int, int]]
     band: Band
     repaired_rotor_samples: int = 0
+    held_rotor_fraction: float = 0.0
     blocks: list[tuple[int, int]] = field(default_factory=list)  # [start, stop) inside segments
 
     @property
@@ -111,6 +114,27 @@ def _interp_missing(x: np.ndarray) -> np.ndarray:
     return x
 
 
+HELD_FRACTION = 0.2  # more held rows than this: the rotor stream was sample-and-held
+
+
+def unhold_rotor_stream(t: np.ndarray, speeds: np.ndarray) -> tuple[np.ndarray, float]:
+    """A row whose rotor speeds all equal the previous row's carries no new telemetry
+    report (sample-and-hold onto a faster log). When more than HELD_FRACTION of the rows
+    are held, each rotor is linearly interpolated between the report instants (the rows
+    where a new report arrived), so dOmega/dt is not a train of spikes. Returns the speeds
+    and the held fraction."""
+    held = np.zeros(len(t), dtype=bool)
+    held[1:] = np.all(speeds[1:] == speeds[:-1], axis=1)
+    fraction = float(held.mean())
+    if fraction <= HELD_FRACTION or (~held).sum() < 4:
+        return speeds, fraction
+    reports = np.flatnonzero(~held)
+    out = np.empty_like(speeds)
+    for k in range(speeds.shape[1]):
+        out[:, k] = np.interp(t, t[reports], speeds[reports, k])
+    return out, fraction
+
+
 def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | None = None) -> Flight:
     """Build a Flight from a validated log. Raises UserError if nothing usable. What the
     vehicle file already models (gyro_scale, aero_damping, esc_delay_s) is applied here, so
@@ -134,6 +158,7 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
     limit = absurd_speed_limit(speeds)
     speeds, repaired = clean_rotor_speeds(speeds, limit)
     speeds = _interp_missing(speeds)
+    speeds, held_fraction = unhold_rotor_stream(log.t, speeds)
     gyro = _interp_missing(log.gyro)
     if vehicle.gyro_scale is not None:
         gyro = gyro / np.asarray(vehicle.gyro_scale)[None, :]
@@ -169,7 +194,8 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
         name=name or (log.path.stem if log.path else "log"), path=log.path, rate_hz=rate, t=log.t,
         gyro=gyro, rate_dot=rate_dot, speed=speeds, speed_dot=speed_dot, torque=torque,
         specific_force_z=None if acc is None else acc[:, 2], acc=acc, body_velocity=vel, height=height,
-        cmd=cmd, vbat=vbat, segs=segs, band=band.for_rate(rate), repaired_rotor_samples=repaired)
+        cmd=cmd, vbat=vbat, segs=segs, band=band.for_rate(rate), repaired_rotor_samples=repaired,
+        held_rotor_fraction=held_fraction)
     block = max(int(round(BLOCK_S * rate)), 20)
     for a, b in segs:
         starts = list(range(a, b, block))

@@ -197,7 +197,9 @@ def write_report(result: dict, directory: str | Path) -> Path:
                         [[a, v["rms_before"], v["rms_after"], v["reduction"], v["pred_0.1s_before"], v["pred_0.1s_after"],
                           v["pred_0.5s_before"], v["pred_0.5s_after"]] for a, v in result["shrink"].items()]))
     parts.append("<img src='shrink.png'>")
-    if result.get("filter"):
+    if result.get("filter") and "error" in result["filter"]:
+        parts.append(f"<h3>Firmware filter (replay)</h3><p>not run: {html.escape(str(result['filter']['error']))}</p>")
+    elif result.get("filter"):
         f = result["filter"]
         parts.append("<h3>Firmware filter (replay, gyro only)</h3>" + _table(
             ["", "fleet kf mean", "run-to-run CV", "per run"],

@@ -4,7 +4,8 @@ Rule (docs/gap.md, "Which"):
 1. start from the base model (plus the stream alignment if esc_delay was significant);
 2. score every remaining testable effect added to the current model (held-out
    explained fraction of the current residual on the effect's axes, bootstrap CI);
-3. among the significant ones take the best; if a look-alike of it is also
+3. among the significant ones take the one explaining most of the residual summed over
+   all axes (so one-axis and four-axis effects compete on one scale); if a look-alike of it is also
    significant and the bootstrap CI of their score difference contains 0, the two
    cannot be told apart: if one's columns contain the other's (nested), the one with
    fewer parameters is kept, else the best is kept; both are listed in `ambiguous`;
@@ -21,6 +22,7 @@ from propid.gap.design import Design
 from propid.gap.effects import LOOK_ALIKES, by_id
 
 MAX_EFFECTS = 4
+SCALE_EFFECTS = ("inertia_error", "gyro_scale", "thrust_nonlinearity")
 NESTED = {("inertia_error", "gyro_scale")}  # (smaller, larger): the larger's columns span the smaller's
 
 
@@ -39,13 +41,16 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
     axes = by_id(effect_id).axes
     idx = _axis_idx(design, axes)
     all_idx = list(range(len(design.axes)))
-    frac, ci = scoring.explained(held_current, held, all_idx)
+    frac_all, _ = scoring.explained(held_current, held, all_idx, bootstrap=False)
+    frac, ci = scoring.explained(held_current, held, idx)
     per_axis = {a: scoring.explained(held_current, held, [k], bootstrap=False)[0] for k, a in enumerate(design.axes)}
     size = scoring.effect_size(gr, current, design.groups[effect_id], idx)
     return {"id": effect_id, "explained_fraction": frac, "ci": ci, "held": held, "effect_size": size,
+            "explained_fraction_all_axes": frac_all,
             "per_axis": per_axis,
             "axes": [a for a in axes if a in design.axes],
-            "significant": bool(ci[0] > 0 and frac >= scoring.MIN_EXPLAINED and size >= scoring.MIN_EFFECT_SIZE)}
+            "significant": bool(ci[0] > 0 and frac >= scoring.MIN_EXPLAINED and size >= (
+                scoring.MIN_SCALE_EFFECT_SIZE if effect_id in SCALE_EFFECTS else scoring.MIN_EFFECT_SIZE))}
 
 
 def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], base_cols: list[int],
@@ -60,14 +65,14 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
         scores = [score(design, gr, current, e, held_current) for e in remaining]
         if progress:
             progress(len(scores))
-        good = sorted([s for s in scores if s["significant"]], key=lambda s: -s["explained_fraction"])
+        good = sorted([s for s in scores if s["significant"]], key=lambda s: -s["explained_fraction_all_axes"])
         if not good:
             break
         best = good[0]
         for other in good[1:]:
             if not _look_alike(best["id"], other["id"]):
                 continue
-            idx = list(range(len(design.axes)))
+            idx = sorted(set(_axis_idx(design, tuple(best["axes"]))) | set(_axis_idx(design, tuple(other["axes"]))))
             diff = scoring.difference_ci(held_current, best["held"], other["held"], idx)
             if diff[0] <= 0:
                 pair = (best["id"], other["id"])
