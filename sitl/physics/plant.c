@@ -69,11 +69,26 @@ void sitl_plant_derivative(const sitl_plant_t *plant, const sitl_state_t *state,
                     rot[2][i] * state->velocity[2];
     }
 
+    /* With their effects off, the rotor loads are the quadratic law and the
+     * effect wrench is zero: skip the hooks (the sums below start at +0, so
+     * leaving out += 0 terms changes no bit). */
+    const int *on = plant->effects.enabled;
+    const int load_effects = on[SITL_EFFECT_THRUST_NONLINEARITY] |
+                             on[SITL_EFFECT_TRANSLATIONAL_LIFT] | on[SITL_EFFECT_GROUND_EFFECT];
+    const int wrench_effects = on[SITL_EFFECT_ROTOR_INERTIA] | on[SITL_EFFECT_ROTOR_GYROSCOPIC] |
+                               on[SITL_EFFECT_ROTOR_DRAG] | on[SITL_EFFECT_AERO_DAMPING];
     for (int i = 0; i < plant->rotor_count; i++) {
         ld->rotor_accel[i] =
             sitl_motor_acceleration(&plant->motor, rotor_command[i], state->rotor_speed[i]);
         deriv->rotor_speed[i] = ld->rotor_accel[i];
-        sitl_effects_rotor_loads(plant, state, v_body, i, &ld->thrust[i], &ld->drag_torque[i]);
+        if (load_effects) {
+            sitl_effects_rotor_loads(plant, state, v_body, i, &ld->thrust[i], &ld->drag_torque[i]);
+        } else {
+            const double w = state->rotor_speed[i];
+            const double w2 = w * w;
+            ld->thrust[i] = plant->thrust_coeff[i] * w2;
+            ld->drag_torque[i] = plant->drag_coeff[i] * w2;
+        }
         /* Thrust along body z at the hub: force and r x F; drag torque about z. */
         const double *r = plant->rotor_position[i];
         ld->force_body[2] += ld->thrust[i];
@@ -81,12 +96,14 @@ void sitl_plant_derivative(const sitl_plant_t *plant, const sitl_state_t *state,
         ld->torque_body[1] -= r[0] * ld->thrust[i];
         ld->torque_body[2] += plant->yaw_sign[i] * ld->drag_torque[i];
     }
-    double extra_force[3] = {0.0, 0.0, 0.0};
-    sitl_effects_rotor_wrench(plant, state, v_body, ld->rotor_accel, extra_force,
-                              ld->effect_torque_body);
-    for (int k = 0; k < 3; k++) {
-        ld->force_body[k] += extra_force[k];
-        ld->torque_body[k] += ld->effect_torque_body[k];
+    if (wrench_effects) {
+        double extra_force[3] = {0.0, 0.0, 0.0};
+        sitl_effects_rotor_wrench(plant, state, v_body, ld->rotor_accel, extra_force,
+                                  ld->effect_torque_body);
+        for (int k = 0; k < 3; k++) {
+            ld->force_body[k] += extra_force[k];
+            ld->torque_body[k] += ld->effect_torque_body[k];
+        }
     }
 
     /* Translation: a = R F / m - g z. */
