@@ -31,7 +31,7 @@ CMAKE_COMMON := -DPROPID_PYTHON=$(VENV_PYTHON) -DPROPID_UNITY_DIR=$(UNITY_DIR)
 export PYTHON
 MAKEFLAGS += --no-print-directory
 
-.PHONY: help setup host target test debug asan clean test-host test-target test-python \
+.PHONY: help setup host target test debug asan clean test-host test-target test-python bench \
         configure-host configure-target
 
 help:
@@ -49,6 +49,9 @@ help:
 	@echo "  make table1   run the Table 1 campaign (see docs/results.md)"
 	@echo "  make gap-bench  blind benchmark of propid gap on SITL flights with known effects,"
 	@echo "                next to a least-squares baseline (see docs/gap-bench.md)"
+	@echo "  make bench    benchmark (not a test): Cortex-M4 instructions per filter step (QEMU),"
+	@echo "                dense baseline, flash/RAM/stack, SITL speed vs RotorPy, make table1 time;"
+	@echo "                prints a table, writes build/results/bench.json (docs/performance.md)"
 	@echo "  make debug    Debug host build in build/debug + host tests"
 	@echo "  make asan     AddressSanitizer + UBSan host build in build/asan + host tests"
 	@echo "  make clean    remove build/ (keeps .venv; rm -rf .venv to redo the venv)"
@@ -138,6 +141,12 @@ test: setup
 	if [ -n "$$failed" ]; then echo "=== FAILED:$$failed"; fi; \
 	$(PYTHON) $(REPO)/tests/count_results.py $$logs; \
 	if [ -n "$$failed" ]; then exit 1; fi
+
+# Benchmark, not a test (docs/performance.md). BENCH_SKIP=rotorpy,table1 leaves parts out.
+BENCH_SKIP ?=
+bench: setup host target
+	@cd $(REPO) && $(VENV_PYTHON) tests/bench/bench.py --repo $(REPO) --build $(BUILD) \
+	    $(if $(BENCH_SKIP),--skip $(BENCH_SKIP))
 
 clean:
 	rm -rf $(BUILD)

@@ -1,30 +1,43 @@
 /*
  * Instruction-count harness for one filter step (benchmark, not a test).
  *
- * Flies a small float32 rigid-body simulation of a quad (plus frame and X frame,
- * Hummingbird-class, diagonal inertia, per-rotor coefficients off the nominal,
- * sums-of-sines rotor speeds, gyro noise and bias), feeds the filter, and wraps
- * every counted propid_push_gyro() call in propid_count_begin()/propid_count_end().
- * count_step.sh runs the ELF under qemu-system-arm with an instruction trace and
- * counts the instructions executed between the two markers (the step and all
- * its callees; not the rotor-speed push, not the simulation).
+ * Flies a small float32 rigid-body simulation of a multirotor (Hummingbird-class,
+ * diagonal inertia, per-rotor coefficients off the nominal, sums-of-sines rotor
+ * speeds, gyro noise and bias), feeds the filter, and wraps every counted
+ * gyro step in propid_count_begin()/propid_count_end(). count_step.sh runs the
+ * ELF under qemu-system-arm with an instruction trace and counts the
+ * instructions executed between the two markers (the step and all its callees;
+ * not the rotor-speed push, not the simulation).
  *
- * Output (semihosting): one line per variant with the filter's status summary,
+ * Variants (each starts with propid_count_variant() and prints its label):
+ * quad plus, quad X, hexa, octo, and the dense baseline (dense_ekf.c) on the
+ * quad plus flight, flown side by side with propid on the same samples: only
+ * the dense steps are counted, and the two estimates are compared at the end.
+ *
+ * Output (semihosting): per variant its label and the filter's status summary,
  * so a run whose steps were gated or repaired (cheaper or dearer paths) shows.
  */
 #include <math.h>
 #include <stdint.h>
 
+#include "dense_ekf.h"
 #include "propid/propid.h"
 #include "semihosting.h"
 
 #define WARMUP_STEPS 400u   /* let the filter settle (first samples collapse P) */
 #define COUNTED_STEPS 200u
+/* The dense baseline costs ~30x more to trace: fewer steps (same sequence). */
+#define DENSE_WARMUP_STEPS 100u
+#define DENSE_COUNTED_STEPS 50u
+#define RATE_FEEDBACK 20.0f /* rotor speed per body rate [(rad/s)/(rad/s)]: keeps the rates small */
 #define GYRO_DT_US 2000u    /* 500 Hz gyro, rotor speeds pushed before every gyro sample */
+#define MAX_ROTORS 8u
 
 /* The markers: noinline and distinct, so the trace shows their addresses. */
+__attribute__((noinline)) void propid_count_variant(uint32_t variant);
 __attribute__((noinline)) void propid_count_begin(uint32_t variant);
 __attribute__((noinline)) void propid_count_end(uint32_t variant);
+__attribute__((noinline)) void propid_count_variant(uint32_t variant) { __asm__ volatile("" ::"r"(variant)); }
 __attribute__((noinline)) void propid_count_begin(uint32_t variant) { __asm__ volatile("" ::"r"(variant)); }
 __attribute__((noinline)) void propid_count_end(uint32_t variant) { __asm__ volatile("" ::"r"(variant)); }
 
@@ -48,46 +61,111 @@ static void put_uint(uint32_t value)
     }
 }
 
-static propid_filter_t filter;
-
-static int fly(uint32_t variant, float first_angle)
+/* x >= 0 with 6 significant digits as d.ddddde[-]XX (no printf on the target). */
+static void put_sci(float x)
 {
+    int exponent = 0;
+    if (x > 0.0f) {
+        while (x >= 10.0f) {
+            x /= 10.0f;
+            exponent++;
+        }
+        while (x < 1.0f) {
+            x *= 10.0f;
+            exponent--;
+        }
+    }
+    uint32_t digits = (uint32_t)(x * 100000.0f + 0.5f);
+    put_uint(digits / 100000u);
+    propid_qemu_putc('.');
+    uint32_t frac = digits % 100000u;
+    for (uint32_t div = 10000u; div > 0u; div /= 10u) {
+        propid_qemu_putc((char)('0' + (frac / div) % 10u));
+    }
+    propid_qemu_putc('e');
+    if (exponent < 0) {
+        propid_qemu_putc('-');
+        exponent = -exponent;
+    }
+    put_uint((uint32_t)exponent);
+}
+
+static propid_filter_t filter;
+static propid_filter_t dense_model; /* the dense baseline's model and bookkeeping */
+static dense_ekf_t dense;
+
+/* Largest |dense - propid| over every state, in units of propid's std. */
+static float dense_difference(void)
+{
+    float worst = 0.0f;
+    const uint8_t n = filter.derived.state_count;
+    for (uint8_t i = 0; i < n; ++i) {
+        const float var = filter.core.cov[i][i];
+        const float diff = fabsf(dense.x[i] - filter.core.state[i]) / sqrtf(var);
+        worst = diff > worst ? diff : worst;
+    }
+    return worst;
+}
+
+/* One flight: `rotors` rotors evenly spaced from first_angle; with_dense: the
+ * dense baseline is counted instead of propid (both fly). Optional model terms
+ * and measurements are further variants of this function (a flag argument and
+ * a row in main() with its label). */
+static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_angle, int with_dense)
+{
+    propid_count_variant(variant);
+    propid_qemu_puts("variant ");
+    propid_qemu_puts(label);
+    propid_qemu_putc('\n');
     const float kf_nominal = 5.57e-6f;
     const float km_nominal = 1.36e-7f;
     const float jxx = 3.65e-3f, jyy = 3.68e-3f, jzz = 7.03e-3f;
     propid_config_t config;
     propid_config_default(&config);
-    if (propid_config_set_symmetric(&config, 4u, 0.17f, first_angle, 1.0f, kf_nominal, km_nominal) !=
+    if (propid_config_set_symmetric(&config, rotors, 0.17f, first_angle, 1.0f, kf_nominal, km_nominal) !=
         PROPID_OK) {
         return 1;
     }
     propid_config_set_inertia_diag(&config, jxx, jyy, jzz);
-    if (propid_init(&filter, &config) != PROPID_OK) {
+    if (propid_init(&filter, &config) != PROPID_OK ||
+        (with_dense && propid_init(&dense_model, &config) != PROPID_OK)) {
         return 1;
     }
-    const float kf_true[4] = {1.10f * kf_nominal, 0.92f * kf_nominal, 1.05f * kf_nominal, 0.88f * kf_nominal};
-    const float km_true[4] = {0.90f * km_nominal, 1.12f * km_nominal, 1.04f * km_nominal, 0.95f * km_nominal};
+    const float kf_scale[MAX_ROTORS] = {1.10f, 0.92f, 1.05f, 0.88f, 0.95f, 1.07f, 0.97f, 1.03f};
+    const float km_scale[MAX_ROTORS] = {0.90f, 1.12f, 1.04f, 0.95f, 1.08f, 0.93f, 1.01f, 0.97f};
     const float bias[3] = {0.01f, -0.02f, 0.015f};
     const float gyro_std = 0.011f;
+    /* Hover speed of the rotor count (same thrust to weight for every variant). */
+    const float hover = 900.0f * sqrtf(4.0f / (float)rotors);
     float rate[3] = {0.0f, 0.0f, 0.0f};
     const float dt = (float)GYRO_DT_US * 1.0e-6f;
     uint64_t t_us = 1000u;
     int errors = 0;
-    for (uint32_t step = 0; step < WARMUP_STEPS + COUNTED_STEPS; ++step) {
+    const uint32_t warmup = with_dense ? DENSE_WARMUP_STEPS : WARMUP_STEPS;
+    const uint32_t total = warmup + (with_dense ? DENSE_COUNTED_STEPS : COUNTED_STEPS);
+    const float arm = 0.17f;
+    for (uint32_t step = 0; step < total; ++step) {
         const float t = (float)step * dt;
-        /* Hover plus differential sines (rad/s), different per rotor. */
-        float speed[4];
-        for (uint32_t i = 0; i < 4u; ++i) {
+        /* Hover plus differential sines (rad/s), different per rotor, plus a
+         * rate feedback through the mixer, as a flight controller's rate loop
+         * does: the body rates stay at a few rad/s on every frame. */
+        float speed[MAX_ROTORS];
+        for (uint32_t i = 0; i < rotors; ++i) {
             const float phase = 1.3f * (float)i;
-            speed[i] = 900.0f + 60.0f * sinf(7.0f * t + phase) + 35.0f * sinf(23.0f * t + 2.0f * phase);
+            const float *r = config.rotor[i].position_m;
+            const float feedback = -RATE_FEEDBACK * (rate[0] * r[1] / arm - rate[1] * r[0] / arm +
+                                                     rate[2] * config.rotor[i].yaw_sign);
+            speed[i] = hover + 60.0f * sinf(7.0f * t + phase) + 35.0f * sinf(23.0f * t + 2.0f * phase) +
+                       feedback;
         }
         /* Torque from the true coefficients (same geometry as the filter). */
         float torque[3] = {0.0f, 0.0f, 0.0f};
-        for (uint32_t i = 0; i < 4u; ++i) {
+        for (uint32_t i = 0; i < rotors; ++i) {
             const float u = speed[i] * speed[i];
-            torque[0] += config.rotor[i].position_m[1] * kf_true[i] * u;
-            torque[1] -= config.rotor[i].position_m[0] * kf_true[i] * u;
-            torque[2] += config.rotor[i].yaw_sign * km_true[i] * u;
+            const float kf = kf_scale[i] * kf_nominal, km = km_scale[i] * km_nominal;
+            torque[0] += config.rotor[i].position_m[1] * kf * u;
+            torque[1] -= config.rotor[i].position_m[0] * kf * u;
+            torque[2] += config.rotor[i].yaw_sign * km * u;
         }
         /* Weak rate damping keeps the simulation bounded (unmodelled for the filter). */
         const float momentum[3] = {jxx * rate[0], jyy * rate[1], jzz * rate[2]};
@@ -95,7 +173,8 @@ static int fly(uint32_t variant, float first_angle)
                                      rate[2] * momentum[0] - rate[0] * momentum[2],
                                      rate[0] * momentum[1] - rate[1] * momentum[0]};
         const float inertia[3] = {jxx, jyy, jzz};
-        if (propid_push_rotor_speeds(&filter, t_us, speed, 4u) != PROPID_OK) {
+        if (propid_push_rotor_speeds(&filter, t_us, speed, rotors) != PROPID_OK ||
+            (with_dense && propid_push_rotor_speeds(&dense_model, t_us, speed, rotors) != PROPID_OK)) {
             errors++;
         }
         t_us += GYRO_DT_US;
@@ -106,7 +185,30 @@ static int fly(uint32_t variant, float first_angle)
         for (uint32_t a = 0; a < 3u; ++a) {
             gyro[a] = rate[a] + bias[a] + gyro_std * 1.7f * noise();
         }
-        const int counted = step >= WARMUP_STEPS;
+        const int counted = step >= warmup;
+        if (with_dense) {
+            /* The reference propid filter is not counted; the dense one is from
+             * its second sample on (the first only anchors the time). */
+            if (step == 0u) {
+                if (propid_push_gyro(&dense_model, t_us, gyro) < 0) {
+                    errors++;
+                }
+                dense_ekf_load(&dense, &dense_model);
+            } else {
+                if (counted) {
+                    propid_count_begin(variant);
+                }
+                const int failed = dense_ekf_step(&dense, &dense_model, t_us, gyro);
+                if (counted) {
+                    propid_count_end(variant);
+                }
+                errors += failed != 0;
+            }
+            if (propid_push_gyro(&filter, t_us, gyro) < 0) {
+                errors++;
+            }
+            continue;
+        }
         if (counted) {
             propid_count_begin(variant);
         }
@@ -120,8 +222,8 @@ static int fly(uint32_t variant, float first_angle)
     }
     propid_counters_t counters;
     (void)propid_get_counters(&filter, &counters);
-    propid_qemu_puts(variant == 0u ? "plus: " : "x:    ");
-    propid_qemu_puts("accepted ");
+    propid_qemu_puts(label);
+    propid_qemu_puts(": accepted ");
     put_uint(counters.gyro_accepted);
     propid_qemu_puts(" gated ");
     put_uint(counters.axis_gated[0] + counters.axis_gated[1] + counters.axis_gated[2]);
@@ -134,12 +236,26 @@ static int fly(uint32_t variant, float first_angle)
     propid_qemu_puts(" rejected ");
     put_uint((uint32_t)errors);
     propid_qemu_putc('\n');
+    if (with_dense) {
+        /* The same estimates: every state within a small fraction of its std. */
+        propid_qemu_puts("dense-vs-propid max_state_diff_in_std ");
+        put_sci(dense_difference());
+        propid_qemu_putc('\n');
+    }
     return errors != 0;
 }
 
 int main(void)
 {
-    int failed = fly(0u, 0.0f);                       /* plus frame */
-    failed |= fly(1u, 0.78539816f);                   /* X frame */
+    int failed = 0;
+    failed |= fly(0u, "quad_plus", 4u, 0.0f, 0);
+    failed |= fly(1u, "quad_x", 4u, 0.78539816f, 0);
+#if PROPID_MAX_ROTORS >= 6
+    failed |= fly(2u, "hexa", 6u, 0.0f, 0);
+#endif
+#if PROPID_MAX_ROTORS >= 8
+    failed |= fly(3u, "octo", 8u, 0.0f, 0);
+#endif
+    failed |= fly(4u, "dense_quad_plus", 4u, 0.0f, 1);
     return failed;
 }

@@ -1,0 +1,374 @@
+#!/usr/bin/env python3
+"""`make bench`: what the filter costs a flight controller and how fast the SITL runs.
+
+    bench.py --repo DIR --build DIR [--out FILE] [--skip NAME,...]
+
+A benchmark, not a test: it measures and reports, it does not pass or fail on
+the figures (it fails only when a measurement cannot be made). Measurements:
+
+  mcu        Cortex-M4 instructions per gyro step (tests/qemu/count_step.sh: QEMU
+             instruction trace, target build flags) for 4, 6 and 8 rotors, and the
+             dense baseline (tests/qemu/dense_ekf.c) on the quad, checked to give
+             the same estimates.
+  footprint  flash (.text + .rodata) of the filter alone: the library
+             (build/target/firmware/libpropid.a) and linked into a minimal quad
+             application with --gc-sections (PROPID_MAX_ROTORS=4, step code and
+             init-only code apart); RAM: sizeof(propid_filter_t) for 4, 6, 8
+             rotors; worst stack of every public call (-fcallgraph-info of the
+             target build).
+  sitl       propid_sitl's real-time factor (simulated s / CPU s, best of 5) for
+             the default 10 s Lissajous with default and with --paper sensors.
+  rotorpy    the same flight in RotorPy (PyPI, pinned, in a bench-only venv under
+             the build directory), timed in the same run; the speed ratio.
+  table1     wall time of `make table1`.
+
+Prints a table and writes every figure to --out (default BUILD/results/bench.json).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pathlib
+import re
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+
+ROTORPY_VERSION = "3.0.0"
+CPU = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard"]
+TARGET_CFLAGS = CPU + ["-std=c11", "-O2", "-DNDEBUG", "-fno-math-errno", "-ffp-contract=fast",
+                       "-ffunction-sections", "-fdata-sections"]
+PER_SAMPLE_CALLS = ("propid_push_gyro", "propid_push_rotor_speeds", "propid_get_estimate")
+# Cycles-per-instruction assumptions for the CPU-load estimate (docs/performance.md):
+# Cortex-M4F at 168 MHz from flash with the ART/prefetch (FPU multiply-add 3 cycles,
+# loads 2, taken branches 2-4, divide 14): 1.5; Cortex-M7 at 480 MHz from TCM/cache,
+# dual issue: 1.0. Instruction counts are measured; these turn them into cycles.
+CPU_MODELS = (("Cortex-M4F 168 MHz", 168e6, 1.5), ("Cortex-M7 480 MHz", 480e6, 1.0))
+GYRO_RATES_HZ = (1000.0, 8000.0)
+SECTIONS = ["mcu", "footprint", "sitl", "rotorpy", "table1"]
+
+
+def say(text: str) -> None:
+    print(f"bench: {text}", flush=True)
+
+
+def run(cmd: list[str], **kw) -> subprocess.CompletedProcess:
+    return subprocess.run(cmd, check=True, text=True, capture_output=True, **kw)
+
+
+# ---------------------------------------------------------------------------
+def bench_mcu(repo: pathlib.Path, work: pathlib.Path) -> dict:
+    say("Cortex-M4 instruction counts under QEMU (quad, hexa, octo, dense baseline)...")
+    out = work / "count_step.json"
+    run(["bash", str(repo / "tests/qemu/count_step.sh"), "--json", str(out), str(work / "count")])
+    counts = json.loads(out.read_text())
+    variants = counts["variants"]
+    result = {"variants": {k: {x: v[x] for x in ("median", "min", "max", "steps")}
+                           for k, v in variants.items()},
+              "dense_max_state_diff_in_std": counts.get("dense_max_state_diff_in_std"),
+              "harness_output": counts["harness_output"]}
+    result["mcu_instr_per_step_quad"] = variants["quad_plus"]["median"]
+    result["mcu_instr_per_step_quad_x"] = variants["quad_x"]["median"]
+    result["mcu_instr_per_step_hexa"] = variants.get("hexa", {}).get("median")
+    result["mcu_instr_per_step_octo"] = variants.get("octo", {}).get("median")
+    result["dense_instr_per_step_quad"] = variants["dense_quad_plus"]["median"]
+    result["dense_ratio_quad"] = result["dense_instr_per_step_quad"] / result["mcu_instr_per_step_quad"]
+    load = {}
+    for name, clock, cpi in CPU_MODELS:
+        for rate in GYRO_RATES_HZ:
+            load[f"{name}, {rate / 1000:.0f} kHz gyro"] = \
+                100.0 * result["mcu_instr_per_step_quad"] * cpi * rate / clock
+    result["cpu_percent_quad"] = load
+    result["cpu_model_cpi"] = {name: cpi for name, _, cpi in CPU_MODELS}
+    diff = result["dense_max_state_diff_in_std"]
+    result["dense_same_estimates"] = diff is not None and diff < 0.01
+    return result
+
+
+# ---------------------------------------------------------------------------
+def section_sizes(size_tool: str, path: pathlib.Path) -> dict[str, int]:
+    """{object: .text + .rodata bytes} of an archive or object (size -A)."""
+    sizes: dict[str, int] = {}
+    current = path.name
+    for line in run([size_tool, "-A", str(path)]).stdout.splitlines():
+        m = re.match(r"^(\S+)\s+\(ex ", line)
+        if m:
+            current = m.group(1)
+            continue
+        parts = line.split()
+        if len(parts) >= 2 and parts[1].isdigit() and (
+                parts[0].startswith(".text") or parts[0].startswith(".rodata")):
+            sizes[current] = sizes.get(current, 0) + int(parts[1])
+    return sizes
+
+
+def linked_filter_size(repo: pathlib.Path, work: pathlib.Path, rotors: int,
+                       per_sample: set[str]) -> dict:
+    """Flash of the filter linked into a minimal application (--gc-sections),
+    split into what the per-sample calls reach and the rest (init-only)."""
+    sources = [p for p in sorted((repo / "firmware/src").glob("propid_*.c"))
+               if p.name not in ("propid_abi.c", "propid_mavlink.c")]
+    elf = work / f"footprint_app_{rotors}.elf"
+    map_file = work / f"footprint_app_{rotors}.map"
+    qemu = repo / "tests/qemu"
+    objects_dir = work / f"footprint_objects_{rotors}"
+    objects_dir.mkdir(exist_ok=True)
+    flags = [*TARGET_CFLAGS, f"-DPROPID_MAX_ROTORS={rotors}", "-I", str(repo / "firmware/include"),
+             "-I", str(qemu)]
+    inputs = []
+    for source in [*sources, repo / "tests/bench/footprint_app.c", qemu / "startup.c",
+                   qemu / "semihosting.c", qemu / "stack_watermark.c"]:
+        obj = objects_dir / (source.stem + ".o")
+        run(["arm-none-eabi-gcc", *flags, "-c", str(source), "-o", str(obj)])
+        inputs.append(str(obj))
+    run(["arm-none-eabi-gcc", *CPU, *inputs, "-nostartfiles", "--specs=nano.specs",
+         "--specs=nosys.specs", "-L", str(qemu), "-T", str(qemu / "mps2_an386.ld"),
+         "-Wl,--gc-sections", f"-Wl,-Map={map_file}", "-lm", "-o", str(elf)])
+    # Symbol sizes of the filter's own functions and constants in the linked ELF.
+    filter_bytes = 0
+    by_symbol: dict[str, int] = {}
+    objects = {p.stem for p in sources}
+    text = map_file.read_text().split("Linker script and memory map", 1)[-1]
+    # Map lines: " .text.name  0xADDR  0xSIZE  path/propid_x.o" (name may wrap).
+    for m in re.finditer(r"^ (\.(?:text|rodata)\S*)\s*\n?\s+0x[0-9a-f]+\s+0x([0-9a-f]+)\s+(\S+)",
+                         text, re.M):
+        section, size, origin = m.group(1), int(m.group(2), 16), m.group(3)
+        stem = pathlib.Path(origin.split("(")[-1].rstrip(")")).stem
+        if any(stem.endswith(o) for o in objects):
+            filter_bytes += size
+            by_symbol[section] = by_symbol.get(section, 0) + size
+    # .text.NAME holds function NAME (-ffunction-sections; static functions are
+    # "file.c:NAME" in the call graph, clones "NAME.constprop.0" in both).
+    reach = {name.rsplit(":", 1)[-1] for name in per_sample}
+    step_bytes = sum(size for name, size in by_symbol.items()
+                     if name.startswith(".text.") and name[len(".text."):] in reach)
+    return {"flash_bytes": filter_bytes, "flash_bytes_per_sample_path": step_bytes,
+            "flash_bytes_init_and_rest": filter_bytes - step_bytes,
+            "per_section": dict(sorted(by_symbol.items(), key=lambda kv: -kv[1]))}
+
+
+def sizeof_filter(repo: pathlib.Path, work: pathlib.Path, rotors: int) -> int:
+    probe = work / "probe.c"
+    probe.write_text('#include "propid/propid.h"\npropid_filter_t propid_footprint_probe;\n')
+    obj = work / f"probe{rotors}.o"
+    run(["arm-none-eabi-gcc", *CPU, "-std=c11", "-O2", f"-DPROPID_MAX_ROTORS={rotors}",
+         "-I", str(repo / "firmware/include"), "-c", str(probe), "-o", str(obj)])
+    for line in run(["arm-none-eabi-nm", "-S", "--radix=d", str(obj)]).stdout.splitlines():
+        parts = line.split()
+        if parts[-1] == "propid_footprint_probe":
+            return int(parts[1])
+    raise RuntimeError("sizeof probe failed")
+
+
+def public_functions(repo: pathlib.Path) -> list[str]:
+    header = (repo / "firmware/include/propid/propid.h").read_text()
+    header = re.sub(r"static inline[^{]*\{[^}]*\}", "", header)
+    return sorted(set(re.findall(r"\b(propid_[a-z_0-9]+)\s*\(", header)))
+
+
+def bench_footprint(repo: pathlib.Path, build: pathlib.Path, work: pathlib.Path) -> dict:
+    say("footprint of the target build (flash, RAM, stack)...")
+    library = build / "target/firmware/libpropid.a"
+    if not library.exists():
+        raise RuntimeError(f"{library} missing: run `make target` first")
+    per_object = section_sizes("arm-none-eabi-size", library)
+    result: dict = {"flash_bytes": sum(per_object.values()), "flash_per_object": per_object}
+    for rotors, key in ((4, "ram_bytes_quad"), (6, "ram_bytes_hexa"), (8, "ram_bytes_octo")):
+        result[key] = sizeof_filter(repo, work, rotors)
+    sys.path.insert(0, str(repo / "firmware/toolchain"))
+    import stack_report  # noqa: E402  (the firmware's own call-graph reader)
+
+    dirs = [str(d) for d in (build / "target/firmware/CMakeFiles/propid.dir",) if d.exists()]
+    frames, _kinds, calls = stack_report.load(dirs)
+    stacks = {}
+    for function in public_functions(repo):
+        if function in frames:
+            depth, chain = stack_report.worst_chain(function, frames, calls, {}, [])
+            stacks[function] = {"bytes": depth, "chain": chain}
+    result["stack"] = stacks
+    # What the per-sample calls reach (the rest is configuration and init-only code).
+    per_sample: set[str] = set()
+    todo = list(PER_SAMPLE_CALLS)
+    while todo:
+        function = todo.pop()
+        if function not in per_sample:
+            per_sample.add(function)
+            todo.extend(calls.get(function, ()))
+    result["linked_quad"] = linked_filter_size(repo, work, 4, per_sample)
+    result["flash_bytes_linked_quad"] = result["linked_quad"]["flash_bytes"]
+    result["stack_bytes_max"] = max(v["bytes"] for v in stacks.values())
+    result["stack_bytes_push_gyro"] = stacks.get("propid_push_gyro", {}).get("bytes")
+    return result
+
+
+# ---------------------------------------------------------------------------
+def cpu_seconds(cmd: list[str], repeats: int) -> float:
+    best = None
+    for _ in range(repeats):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+        best = cpu if best is None else min(best, cpu)
+    return best
+
+
+def bench_sitl(build: pathlib.Path) -> dict:
+    say("SITL real-time factor (CPU time, best of 5)...")
+    sitl = build / "host/sitl/propid_sitl"
+    if not sitl.exists():
+        raise RuntimeError(f"{sitl} missing: run `make host` first")
+    result = {"flight": "propid_sitl --quiet (crazyflie-plus, lissajous, filter mode, 10 s)"}
+    for key, extra in (("sitl_realtime_factor", []), ("sitl_realtime_factor_paper", ["--paper"])):
+        cpu = cpu_seconds([str(sitl), "--quiet", "--duration", "10", *extra], 5)
+        result[key] = 10.0 / cpu
+        result[key.replace("realtime_factor", "cpu_s")] = cpu
+    return result
+
+
+def bench_rotorpy(repo: pathlib.Path, build: pathlib.Path, sitl: dict | None) -> dict:
+    venv = build / "bench-venv"
+    python = venv / "bin/python"
+    result: dict = {"rotorpy_pinned": ROTORPY_VERSION}
+    try:
+        if not python.exists() or subprocess.run(
+                [str(python), "-c", f"import importlib.metadata as m; "
+                 f"assert m.version('rotorpy') == '{ROTORPY_VERSION}'"],
+                capture_output=True).returncode != 0:
+            say(f"installing rotorpy=={ROTORPY_VERSION} into {venv} (bench only)...")
+            run([sys.executable, "-m", "venv", str(venv)])
+            run([str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
+                 f"rotorpy=={ROTORPY_VERSION}"])
+    except (subprocess.CalledProcessError, OSError) as error:
+        detail = getattr(error, "stderr", "") or str(error)
+        result["rotorpy_error"] = f"rotorpy {ROTORPY_VERSION} could not be installed: " + \
+            detail.strip().splitlines()[-1] if detail.strip() else "unknown error"
+        say(result["rotorpy_error"])
+        return result
+    say("RotorPy: the same 10 s flight (CPU time)...")
+    out = run([str(python), str(repo / "tests/bench/rotorpy_flight.py"), "--duration", "10"],
+              cwd=build).stdout
+    rotorpy = json.loads(out.strip().splitlines()[-1])
+    result.update({f"rotorpy_{k}" if not k.startswith("rotorpy") else k: v
+                   for k, v in rotorpy.items()})
+    if sitl and "sitl_realtime_factor" in sitl:
+        result["rotorpy_speed_ratio"] = sitl["sitl_realtime_factor"] / rotorpy["realtime_factor"]
+    return result
+
+
+def bench_table1(repo: pathlib.Path, work: pathlib.Path) -> dict:
+    say("wall time of `make table1` (the campaign, a few minutes)...")
+    start = time.monotonic()
+    run(["make", "-C", str(repo), "--no-print-directory", "table1",
+         f"TABLE1_OUT={work / 'table1'}"])
+    return {"table1_wall_s": time.monotonic() - start}
+
+
+# ---------------------------------------------------------------------------
+def fmt(value, spec: str = ",.0f") -> str:
+    return "n/a" if value is None else format(value, spec)
+
+
+def print_table(r: dict) -> None:
+    rows = []
+    mcu, fp, sitl, rp, t1 = (r.get(k, {}) for k in SECTIONS)
+    if mcu:
+        v = mcu["variants"]
+        names = {"quad_plus": "quad (plus)", "quad_x": "quad (X)",
+                 "dense_quad_plus": "dense baseline, quad"}
+        for label, counts in v.items():  # every variant the harness flew, in its order
+            rows.append((f"Cortex-M4 instructions per step, {names.get(label, label)}",
+                         f"{fmt(counts['median'])} ({fmt(counts['min'])}-{fmt(counts['max'])})"))
+        for key, percent in mcu["cpu_percent_quad"].items():
+            rows.append((f"CPU load, quad, {key} (CPI {mcu['cpu_model_cpi'][key.split(',')[0]]})",
+                         f"{percent:.2f} %"))
+        rows.append(("dense / propid (quad)", f"{mcu['dense_ratio_quad']:.1f}x; same estimates: "
+                     f"{'yes' if mcu['dense_same_estimates'] else 'NO'} (max diff "
+                     f"{mcu['dense_max_state_diff_in_std']:.1e} std)"))
+    if fp:
+        rows.append(("filter flash, libpropid.a .text+.rodata (B)", fmt(fp["flash_bytes"])))
+        lq = fp["linked_quad"]
+        rows.append(("filter flash linked, quad build, --gc-sections (B)",
+                     f"{fmt(lq['flash_bytes'])} (per-sample path {fmt(lq['flash_bytes_per_sample_path'])}, "
+                     f"init and rest {fmt(lq['flash_bytes_init_and_rest'])})"))
+        rows.append(("RAM sizeof(propid_filter_t) quad / hexa / octo (B)",
+                     f"{fmt(fp['ram_bytes_quad'])} / {fmt(fp['ram_bytes_hexa'])} / {fmt(fp['ram_bytes_octo'])}"))
+        for name, s in sorted(fp["stack"].items(), key=lambda kv: -kv[1]["bytes"]):
+            rows.append((f"worst stack {name} (B)", fmt(s["bytes"])))
+    if sitl:
+        rows.append(("SITL 10 s Lissajous, real-time factor (CPU)", f"{fmt(sitl['sitl_realtime_factor'])}x"))
+        rows.append(("SITL same with --paper sensors", f"{fmt(sitl['sitl_realtime_factor_paper'])}x"))
+    if rp:
+        if "rotorpy_error" in rp:
+            rows.append(("RotorPy", rp["rotorpy_error"]))
+        else:
+            rows.append((f"RotorPy {rp.get('rotorpy_version')} same flight, real-time factor (CPU)",
+                         f"{rp['rotorpy_realtime_factor']:.2f}x at {fmt(rp['rotorpy_sim_rate_hz'])} Hz"))
+            if "rotorpy_speed_ratio" in rp:
+                rows.append(("propid_sitl / RotorPy speed", f"{fmt(rp['rotorpy_speed_ratio'])}x"))
+    if t1:
+        rows.append(("make table1 wall time", f"{t1['table1_wall_s']:.0f} s"))
+    width = max(len(a) for a, _ in rows)
+    print()
+    print(f"{'figure':<{width}}  value")
+    print(f"{'-' * width}  {'-' * 30}")
+    for a, b in rows:
+        print(f"{a:<{width}}  {b}")
+    print()
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repo", required=True, type=pathlib.Path)
+    parser.add_argument("--build", required=True, type=pathlib.Path)
+    parser.add_argument("--out", type=pathlib.Path, help="JSON (default BUILD/results/bench.json)")
+    parser.add_argument("--skip", default="", help=f"comma list of {','.join(SECTIONS)}")
+    args = parser.parse_args()
+    skip = {s for s in args.skip.split(",") if s}
+    if skip - set(SECTIONS):
+        parser.error(f"--skip: unknown {sorted(skip - set(SECTIONS))}")
+    repo, build = args.repo.resolve(), args.build.resolve()
+    work = build / "bench"
+    work.mkdir(parents=True, exist_ok=True)
+    out = args.out or build / "results/bench.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    results: dict = {}
+    try:
+        if "mcu" not in skip:
+            results["mcu"] = bench_mcu(repo, work)
+        if "footprint" not in skip:
+            results["footprint"] = bench_footprint(repo, build, work)
+        if "sitl" not in skip:
+            results["sitl"] = bench_sitl(build)
+        if "rotorpy" not in skip:
+            results["rotorpy"] = bench_rotorpy(repo, build, results.get("sitl"))
+        if "table1" not in skip:
+            results["table1"] = bench_table1(repo, work)
+    except (subprocess.CalledProcessError, RuntimeError) as error:
+        detail = getattr(error, "stderr", None) or ""
+        print(f"bench: failed: {error}\n{detail[-2000:]}", file=sys.stderr)
+        return 1
+    flat = {}
+    for section in results.values():
+        for key in ("mcu_instr_per_step_quad", "mcu_instr_per_step_hexa", "mcu_instr_per_step_octo",
+                    "dense_instr_per_step_quad", "dense_ratio_quad", "flash_bytes",
+                    "flash_bytes_linked_quad", "ram_bytes_quad", "stack_bytes_max",
+                    "stack_bytes_push_gyro", "sitl_realtime_factor", "sitl_realtime_factor_paper",
+                    "rotorpy_speed_ratio", "table1_wall_s"):
+            if key in section:
+                flat[key] = section[key]
+    document = {**flat, "details": results,
+                "machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]}}
+    out.write_text(json.dumps(document, indent=1) + "\n")
+    print_table(results)
+    say(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
