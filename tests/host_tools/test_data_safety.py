@@ -336,3 +336,15 @@ def test_plot_says_which_body_rate_is_drawn(tmp_path, monkeypatch):
     plotting.plot_flight(plotting.load_flight(csv_path), tmp_path / "f.png")
     rate_titles = [t for t in titles if t.startswith("body rate:")]
     assert rate_titles and ("gyro" in rate_titles[0] or "truth" in rate_titles[0] or "estimate" in rate_titles[0])
+
+
+def test_stream_rates_ignore_skipped_segments():
+    """A 500 Hz log with a 10 s hole (ground segment left out) is still a 500 Hz log."""
+    from propid.replay.run import stream_rates
+    from test_replay import synthetic_log
+
+    log = synthetic_log(duration=4.0)
+    t = np.where(log.t < 2.0, log.t, log.t + 10.0)
+    holed = FlightLog(t=t, gyro=log.gyro, rotor_speed=np.nan_to_num(log.rotor_speed, nan=500.0), extra={})
+    rates = stream_rates(holed, np.arange(len(holed)))
+    assert rates["gyro"] == pytest.approx(500.0, rel=0.01) and rates["rotor"] == pytest.approx(500.0, rel=0.01)

@@ -228,8 +228,11 @@ MIN_ACCEPTED_GYRO_FRACTION = 0.5
 def stream_rates(log: FlightLog, rows: np.ndarray) -> dict:
     """New samples per second of the gyro and the rotor-speed streams over `rows`: a row
     counts for a stream if it carries a finite value that differs from the stream's previous
-    one (sample-and-hold resampling adds no information)."""
-    duration = float(log.t[rows[-1]] - log.t[rows[0]])
+    one (sample-and-hold resampling adds no information). The time is the time the rows
+    cover: steps longer than 5 x the median step (skipped segments) do not count."""
+    steps = np.diff(log.t[rows])
+    positive = steps[steps > 0]
+    duration = float(np.sum(steps[steps <= 5.0 * np.median(positive)])) if positive.size else 0.0
 
     def rate(values: np.ndarray) -> float:
         carried = values[rows]
