@@ -15,4 +15,5 @@ COMMAND_MODULES = [
     "campaign",
     "gap",
     "gap_bench",
+    "observability",
 ]
