@@ -25,8 +25,9 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from propid import table1
+from propid import crlb, table1
 from propid.errors import UserError
+from propid.flightlog import read_vehicle
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 EXIT_DIVERGED = 3  # propid_sitl's exit code for a flight it stopped
@@ -73,6 +74,8 @@ class CampaignConfig:
     filter_coeff_walk: float | None = 0.0
     filter_bias_walk: float | None = 0.0
     priors_from_truth: bool = True
+    # Cramér-Rao bound along each flight (propid.crlb): its times next to the filter's.
+    cramer_rao: bool = True
     extra_args: list[str] = field(default_factory=list)  # appended to every propid_sitl call
     workers: int = 2
     keep_logs: bool = False
@@ -86,6 +89,59 @@ class Job:
     mode: str
     trial: int
     seed: int
+
+
+# The filter library's default priors (firmware/src/propid_config.c), used when the
+# campaign leaves them to the library (--library-filter-config).
+LIBRARY_COEFF_REL_STD0 = 0.3
+LIBRARY_GYRO_BIAS_STD0 = 0.05
+LIBRARY_RATE_STD0 = 1.0
+LIBRARY_RATE_PROCESS_NOISE = 0.2
+LIBRARY_COEFF_WALK = 0.02
+LIBRARY_BIAS_WALK = 1.0e-4
+# propid_sitl's gyro noise density (BMI088, sitl/imu.c), which it also gives the
+# filter; a --gyro-noise in the extra SITL arguments overrides it.
+SITL_GYRO_NOISE_DENSITY = math.radians(0.014)
+
+
+def _extra_option(args: list[str], name: str) -> str | None:
+    for i, arg in enumerate(args):
+        if arg == name and i + 1 < len(args):
+            return args[i + 1]
+        if arg.startswith(name + "="):
+            return arg.split("=", 1)[1]
+    return None
+
+
+def bound_config(config: CampaignConfig) -> crlb.BoundConfig:
+    """The filter's own model, prior and noise as the SITL configures it (for the bound)."""
+    coeff_std, bias_std = filter_priors(config)
+    noise = _extra_option(config.extra_args, "--gyro-noise")
+
+    def pick(value, library):
+        return library if value is None else value
+    return crlb.BoundConfig(
+        gyro_noise_density=float(noise) if noise is not None else SITL_GYRO_NOISE_DENSITY,
+        rate_process_noise=pick(config.filter_rate_noise, LIBRARY_RATE_PROCESS_NOISE),
+        rate_std0=pick(config.prior_rate_std, LIBRARY_RATE_STD0),
+        coeff_rel_std0=coeff_std, bias_std0=bias_std,
+        coeff_walk=pick(config.filter_coeff_walk, LIBRARY_COEFF_WALK),
+        bias_walk=pick(config.filter_bias_walk, LIBRARY_BIAS_WALK))
+
+
+def filter_priors(config: CampaignConfig) -> tuple[float, float]:
+    """(coefficient relative std, gyro bias std [rad/s]) the SITL's filter starts with,
+    exactly as passed on its command line."""
+    if not config.priors_from_truth:
+        return LIBRARY_COEFF_REL_STD0, LIBRARY_GYRO_BIAS_STD0
+    coeff_std = float(f"{config.coeff_spread / math.sqrt(3.0):.6g}")
+    bias_std = float(f"{config.gyro_bias_max / math.sqrt(3.0):.6g}")
+    return coeff_std, bias_std
+
+
+def convergence_spec(config: CampaignConfig) -> "table1.ConvergenceSpec":
+    """0.1 x the filter's prior std (docs/results.md, Definitions)."""
+    return table1.ConvergenceSpec.from_prior_std(*filter_priors(config))
 
 
 def sitl_command(config: CampaignConfig, job: Job, log_path: Path) -> list[str]:
@@ -109,9 +165,9 @@ def sitl_command(config: CampaignConfig, job: Job, log_path: Path) -> list[str]:
     if config.esc_phase_s is not None:
         cmd += ["--esc-phase", repr(config.esc_phase_s)]
     if config.priors_from_truth:
-        coeff_std = config.coeff_spread / math.sqrt(3.0)
+        coeff_std, bias_std = filter_priors(config)
         cmd += ["--prior-kf-std", f"{coeff_std:.6g}", "--prior-km-std", f"{coeff_std:.6g}",
-                "--prior-bias-std", f"{config.gyro_bias_max / math.sqrt(3.0):.6g}"]
+                "--prior-bias-std", f"{bias_std:.6g}"]
     for option, value in (("--prior-rate-std", config.prior_rate_std),
                           ("--filter-rate-noise", config.filter_rate_noise),
                           ("--filter-coeff-walk", config.filter_coeff_walk),
@@ -150,11 +206,17 @@ def run_job(config: CampaignConfig, job: Job) -> dict:
     try:
         columns = table1.read_log_columns(log_path)
         kf_nom, km_nom = table1.read_nominal_coefficients(vehicle_path, table1.rotor_count(columns))
-        spec = table1.ConvergenceSpec.from_uniform_truth(config.coeff_spread, config.gyro_bias_max)
+        spec = convergence_spec(config)
         record.update(table1.trial_metrics(
             columns, kf_nom, km_nom, spec, duration_s=config.duration_s,
             diverged=proc.returncode == EXIT_DIVERGED,
             max_position_error=config.max_position_error, where=str(log_path)))
+        if config.cramer_rao:
+            try:  # the bound is context: a flight it cannot be computed for stays a flight
+                record.update(crlb.bound_times_for_log(columns, read_vehicle(vehicle_path),
+                                                       bound_config(config)))
+            except UserError as exc:
+                record["bound_error"] = str(exc)
     except UserError as exc:
         record.update(stable=False, error=str(exc))
     finally:
@@ -220,7 +282,7 @@ def build_table(config: CampaignConfig, records: list[dict]) -> dict:
     conditions = asdict(config)
     conditions["out_dir"] = str(config.out_dir)
     conditions["sitl"] = str(config.sitl)
-    spec = table1.ConvergenceSpec.from_uniform_truth(config.coeff_spread, config.gyro_bias_max)
+    spec = convergence_spec(config)
     conditions["coeff_threshold_rel"] = spec.coeff_threshold_rel
     conditions["bias_threshold_rad_s"] = spec.bias_threshold
     conditions["command_example"] = " ".join(
@@ -239,4 +301,5 @@ def write_outputs(out_dir: Path, table: dict) -> None:
               f"{conditions.get('base_seed', 0) + conditions.get('trials', 0) - 1}, "
               f"{conditions.get('duration_s')} s flights.\n"
               f"Example flight: `{conditions.get('command_example')}`\n\n")
-    (out_dir / "table1.md").write_text(header + table1.render_markdown(table), encoding="utf-8")
+    (out_dir / "table1.md").write_text(header + table1.render_markdown(table) + "\n"
+                                       + table1.render_bound_markdown(table), encoding="utf-8")

@@ -1,9 +1,11 @@
 /*
  * Flight metrics (Table 1 style): tracking RMSE per axis and yaw, final
- * errors, and filter convergence times. Convergence time (as Table 1): the
- * first time after which EVERY later estimate stays within 0.1 prior
- * standard deviation of the truth — for all kf and km together, and for all
- * three gyro biases together. Never reached (the last sample is outside) = -1.
+ * errors, and filter convergence times. Convergence time (docs/results.md,
+ * the one definition host_tools/propid/table1.py uses too): the first time
+ * after which EVERY later estimate stays within 0.1 x the filter's prior
+ * standard deviation of that state from the truth — for all kf and km
+ * together, and for all three gyro biases together. Never reached (the last
+ * sample is outside) = -1.
  */
 #ifndef SITL_METRICS_H
 #define SITL_METRICS_H

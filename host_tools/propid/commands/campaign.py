@@ -66,6 +66,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=2, help="parallel flights (default 2)")
     parser.add_argument("--keep-logs", action="store_true", help="keep every flight's CSV under OUT/logs")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--no-cramer-rao", action="store_true",
+                        help="skip the Cramér-Rao bound along each flight (propid.crlb)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -98,9 +100,13 @@ def run(args: argparse.Namespace) -> int:
         extra_args=shlex.split(args.sitl_args),
         workers=args.workers,
         keep_logs=args.keep_logs,
+        cramer_rao=not args.no_cramer_rao,
     )
     table = run_campaign(config, progress=not args.no_progress)
     print(table1.render_markdown(table))
+    bound = table1.render_bound_markdown(table)
+    if bound:
+        print(bound)
     print(f"wrote {config.out_dir / 'table1.json'} and {config.out_dir / 'table1.md'}")
     failed = [r for traj in config.trajectories for mode in config.modes
               for r in table[traj][mode]["per_trial"] if r.get("error")]

@@ -22,6 +22,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     table = table1.load_table(args.table)
     text = table1.render_markdown(table, with_paper=not args.no_paper)
+    bound = table1.render_bound_markdown(table)
+    if bound:
+        text += "\nConvergence against the Cramér-Rao bound (propid.crlb):\n\n" + bound
     if args.out:
         Path(args.out).write_text(text, encoding="utf-8")
         print(f"wrote {args.out}")
