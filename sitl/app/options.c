@@ -198,7 +198,8 @@ static int parse_pole_pairs(sitl_options_t *o, const char *opt, const char *val)
 static const opt_t options[] = {
     PATH("Flight", "vehicle", vehicle, "NAME|FILE.json",
          "crazyflie-plus (default), crazyflie-x, hummingbird-plus,\n"
-         "hummingbird-x, or a flight-log v1 vehicle file"),
+         "hummingbird-x, hexa-plus, hexa-x, octo-plus, octo-x (Crazyflie\n"
+         "rotors), or a flight-log v1 vehicle file"),
     {NULL, "trajectory", OPT_CUSTOM, 0, 0, 0, 0, parse_trajectory, "KIND",
      "one of (default lissajous):", sitl_trajectory_names},
     CUSTOM(NULL, "mode", parse_mode, "MODE", "oracle | incorrect | filter (default)"),

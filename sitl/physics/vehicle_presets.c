@@ -12,8 +12,9 @@
 
 #include "sitl_math.h"
 
-const char *const sitl_vehicle_preset_names[] = {"crazyflie-plus", "crazyflie-x",
-                                                 "hummingbird-plus", "hummingbird-x", NULL};
+const char *const sitl_vehicle_preset_names[] = {
+    "crazyflie-plus", "crazyflie-x", "hummingbird-plus", "hummingbird-x",
+    "hexa-plus",      "hexa-x",      "octo-plus",        "octo-x",      NULL};
 
 void sitl_vehicle_symmetric_rotors(sitl_vehicle_t *v, int rotor_count, double arm,
                                    double first_angle, double thrust_coeff, double drag_coeff)
@@ -69,6 +70,26 @@ static void hummingbird(sitl_vehicle_t *v, double first_angle)
     v->flapping_coeff = 0.5 * 0.10 * 1.19e-4;
 }
 
+/*
+ * Six and eight Crazyflie rotors (same propeller, motor and speed range) on a
+ * frame scaled so the hover speed and thrust-to-weight stay the quad's: mass x
+ * N/4. The arm keeps neighbouring propellers 5 % of a radius apart
+ * (2 arm sin(pi/N) = 2.1 r), never shorter than the quad's 0.043 m; the
+ * inertia scales as mass x arm^2 from the quad's.
+ */
+static void crazyflie_multirotor(sitl_vehicle_t *v, int rotor_count, double first_angle)
+{
+    crazyflie(v, 0.0);
+    const double scale_mass = (double)rotor_count / 4.0;
+    const double arm = fmax(0.043, 1.05 * v->rotor_radius / sin(SITL_PI / (double)rotor_count));
+    const double scale_arm_sq = (arm / 0.043) * (arm / 0.043);
+    v->mass *= scale_mass;
+    for (int k = 0; k < 3; k++) {
+        v->inertia[k][k] *= scale_mass * scale_arm_sq;
+    }
+    sitl_vehicle_symmetric_rotors(v, rotor_count, arm, first_angle, 2.3e-8, 7.8e-10);
+}
+
 int sitl_vehicle_preset(const char *name, sitl_vehicle_t *v)
 {
     if (name == NULL || v == NULL) {
@@ -83,6 +104,14 @@ int sitl_vehicle_preset(const char *name, sitl_vehicle_t *v)
         hummingbird(v, 0.0);
     } else if (strcmp(name, "hummingbird-x") == 0) {
         hummingbird(v, 0.25 * SITL_PI);
+    } else if (strcmp(name, "hexa-plus") == 0) {
+        crazyflie_multirotor(v, 6, 0.0);
+    } else if (strcmp(name, "hexa-x") == 0) {
+        crazyflie_multirotor(v, 6, SITL_PI / 6.0);
+    } else if (strcmp(name, "octo-plus") == 0) {
+        crazyflie_multirotor(v, 8, 0.0);
+    } else if (strcmp(name, "octo-x") == 0) {
+        crazyflie_multirotor(v, 8, SITL_PI / 8.0);
     } else {
         return -1;
     }

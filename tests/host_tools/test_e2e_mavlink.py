@@ -271,3 +271,40 @@ def test_bad_mavlink_url_is_refused(url, message):
                             capture_output=True, text=True, timeout=60)
     assert result.returncode != 0
     assert message in result.stderr
+
+
+def test_octocopter_estimates_cross_the_link(tmp_path):
+    """Eight rotors: every rotor's kf/km and std arrive, equal to the filter's (float32)."""
+    _require_sitl()
+    port = _free_udp_port()
+    est_csv, sitl_csv = tmp_path / "estimates.csv", tmp_path / "sitl.csv"
+    logger = subprocess.Popen(
+        [sys.executable, "-m", "propid.cli", "log", "--connect", f"udp:127.0.0.1:{port}",
+         "--csv", str(est_csv), "--timeout", "60", "--stop-when-idle", "2", "--quiet"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_until_bound(port, logger)
+        sitl = subprocess.run(
+            [str(SITL), "--vehicle", "octo-x", "--trajectory", "lissajous", "--mode", "filter",
+             "--paper", "--duration", "3", "--seed", "2", "--realtime", "20",
+             "--mavlink", f"udp:127.0.0.1:{port}", "--log", str(sitl_csv), "--quiet"],
+            capture_output=True, text=True, timeout=300)
+        assert sitl.returncode == 0, sitl.stderr
+        _, log_err = logger.communicate(timeout=60)
+    finally:
+        if logger.poll() is None:
+            logger.kill()
+    assert logger.returncode == 0, log_err
+    rec = plotting.read_csv_columns(est_csv)
+    sim = plotting.read_csv_columns(sitl_csv)
+    assert "est_kf_8" in rec and "est_kf_9" not in rec
+    matched = 0
+    for k, t in enumerate(rec["t"]):
+        j = int(np.argmin(np.abs(sim["t"] - t)))
+        if abs(sim["t"][j] - t) > 1e-9:
+            continue
+        matched += 1
+        for i in range(1, 9):
+            for name in (f"est_kf_{i}", f"std_kf_{i}", f"est_km_{i}", f"std_km_{i}"):
+                assert rec[name][k] == pytest.approx(sim[name][j], rel=1e-6), (name, t)
+    assert matched >= 0.9 * rec["t"].size > 0

@@ -70,6 +70,35 @@ static void test_x_preset_is_rotated_45_degrees(void)
     TEST_ASSERT_EQUAL_DOUBLE(0.072, x.motor_time_constant);
 }
 
+/* Hexa and octo presets: same hover speed as the quad (mass x N/4), balanced
+ * yaw signs, propellers that do not overlap, a valid vehicle. */
+static void test_multirotor_presets(void)
+{
+    const char *names[] = {"hexa-plus", "hexa-x", "octo-plus", "octo-x"};
+    const int counts[] = {6, 6, 8, 8};
+    sitl_vehicle_t quad;
+    sitl_vehicle_preset("crazyflie-plus", &quad);
+    for (int k = 0; k < 4; k++) {
+        sitl_vehicle_t v;
+        char err[128];
+        TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset(names[k], &v));
+        TEST_ASSERT_EQUAL_INT_MESSAGE(0, sitl_vehicle_check(&v, err, (int)sizeof(err)), err);
+        TEST_ASSERT_EQUAL_INT(counts[k], v.rotor_count);
+        TEST_ASSERT_DOUBLE_WITHIN(1e-15, quad.mass * counts[k] / 4.0, v.mass);
+        double yaw_sum = 0.0;
+        for (int i = 0; i < v.rotor_count; i++) {
+            yaw_sum += v.rotor[i].yaw_sign;
+            const sitl_rotor_t *a = &v.rotor[i], *b = &v.rotor[(i + 1) % v.rotor_count];
+            double gap = hypot(a->position[0] - b->position[0], a->position[1] - b->position[1]);
+            TEST_ASSERT_TRUE(gap > 2.0 * v.rotor_radius);
+        }
+        TEST_ASSERT_EQUAL_DOUBLE(0.0, yaw_sum);
+        /* plus: rotor 1 on +x; X: rotated by half the rotor spacing */
+        double angle = atan2(v.rotor[0].position[1], v.rotor[0].position[0]);
+        TEST_ASSERT_DOUBLE_WITHIN(1e-12, (k % 2) ? SITL_PI / counts[k] : 0.0, angle);
+    }
+}
+
 static void test_json_round_trip(void)
 {
     sitl_vehicle_t v, w;
@@ -170,6 +199,7 @@ int main(void)
     UNITY_BEGIN();
     RUN_TEST(test_plus_preset_layout);
     RUN_TEST(test_x_preset_is_rotated_45_degrees);
+    RUN_TEST(test_multirotor_presets);
     RUN_TEST(test_json_round_trip);
     RUN_TEST(test_json_full_inertia_and_hexa);
     RUN_TEST(test_json_errors_are_clear);
