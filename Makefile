@@ -52,6 +52,8 @@ help:
 	@echo "  make bench    benchmark (not a test): Cortex-M4 instructions per filter step (QEMU),"
 	@echo "                dense baseline, flash/RAM/stack, SITL speed vs RotorPy, make table1 time;"
 	@echo "                prints a table, writes build/results/bench.json (docs/performance.md)"
+	@echo "  make table1-extended  Table 1 per preset: quads, hexa, octo (docs/results.md)"
+	@echo "  make damage-bench     randomized propeller-damage flights, detector in the loop (docs/damage.md)"
 	@echo "  make debug    Debug host build in build/debug + host tests"
 	@echo "  make asan     AddressSanitizer + UBSan host build in build/asan + host tests"
 	@echo "  make clean    remove build/ (keeps .venv; rm -rf .venv to redo the venv)"
@@ -156,3 +158,5 @@ clean:
 include $(REPO)/sitl/sitl.mk
 include $(REPO)/sitl/table1.mk
 include $(REPO)/host_tools/gap_bench.mk
+include $(REPO)/sitl/damage_bench.mk
+include $(REPO)/sitl/table1_extended.mk

@@ -58,6 +58,7 @@ void sitl_options_default(sitl_options_t *o)
     o->filter_rate_noise = -1.0;
     o->filter_coeff_walk = -1.0;
     o->filter_bias_walk = -1.0;
+    o->damage_false_alarms_per_hour = -1.0;
 }
 
 
@@ -165,6 +166,30 @@ static int parse_effect(sitl_options_t *o, const char *opt, const char *val)
     return 0;
 }
 
+/* ROTOR@TIME=FRACTION, rotor 1-based: e.g. 2@3.5=0.3 */
+static int parse_damage(sitl_options_t *o, const char *opt, const char *val)
+{
+    int rotor = 0;
+    double time_s = 0.0, fraction = 0.0;
+    int used = 0;
+    if (sscanf(val, "%d@%lf=%lf%n", &rotor, &time_s, &fraction, &used) != 3 ||
+        val[used] != '\0' || rotor < 1 || rotor > SITL_MAX_ROTORS || !(time_s >= 0.0) ||
+        !(fraction > 0.0) || !(fraction < 1.0)) {
+        fprintf(stderr, "propid_sitl: %s: '%s' is not ROTOR@TIME=FRACTION "
+                        "(rotor 1..%d, time >= 0 s, 0 < fraction < 1)\n", opt, val, SITL_MAX_ROTORS);
+        return -1;
+    }
+    if (o->damage_count >= SITL_MAX_DAMAGE) {
+        fprintf(stderr, "propid_sitl: %s: at most %d damages\n", opt, SITL_MAX_DAMAGE);
+        return -1;
+    }
+    sitl_damage_t *d = &o->damage[o->damage_count++];
+    d->rotor = rotor - 1;
+    d->time_s = time_s;
+    d->fraction = fraction;
+    return 0;
+}
+
 static int parse_esc_quantisation(sitl_options_t *o, const char *opt, const char *val)
 {
     if (strcmp(val, "dshot") == 0) {
@@ -258,6 +283,16 @@ static const opt_t options[] = {
     {"Effects (all off by default = the paper's conditions), repeatable", "effect", OPT_CUSTOM,
      0, 0, 0, 0, parse_effect, "NAME[=STRENGTH]", "NAME one of (none = all off):",
      sitl_effects_names},
+
+    CUSTOM("Propeller damage (docs/damage.md)", "damage", parse_damage, "ROTOR@TIME=FRACTION",
+           "at TIME [s] rotor ROTOR (1-based) loses FRACTION of its\n"
+           "kf and km (repeatable)"),
+    FLAG(NULL, "detect-damage", detect_damage, 1,
+         "run the firmware damage detector (propid_damage) after\n"
+         "every gyro sample; a detection re-opens the rotor's\n"
+         "coefficients"),
+    NUMBER(NULL, "damage-false-alarm-rate", damage_false_alarms_per_hour, 1e-12, 1e6, "PER_H",
+           "detector design false alarms per flight hour (default 1e-3)"),
 
     FLAG("Sensors (defaults: Bosch BMI088 IMU, bidirectional-DShot telemetry; docs/sitl.md)",
          "paper", paper, 1,

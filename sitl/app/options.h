@@ -13,6 +13,14 @@
 #include "trajectory.h"
 
 #define SITL_PATH_MAX 1024
+#define SITL_MAX_DAMAGE 8
+
+/* A propeller damage: at time_s rotor's kf and km lose fraction of their value. */
+typedef struct {
+    int rotor;                          /* 0-based */
+    double time_s;
+    double fraction;                    /* 0 < fraction < 1 */
+} sitl_damage_t;
 
 typedef enum {
     SITL_MODE_ORACLE = 0,    /* controller allocation uses the true coefficients */
@@ -77,6 +85,12 @@ typedef struct {
     double filter_rate_noise;           /* rate_process_noise [rad/s^2/sqrt(Hz)] */
     double filter_coeff_walk;           /* thrust_ and drag_coeff_rel_walk [1/sqrt(s)] */
     double filter_bias_walk;            /* gyro_bias_walk [rad/s/sqrt(s)] */
+
+    /* Propeller damage scenario and the firmware's damage detector. */
+    sitl_damage_t damage[SITL_MAX_DAMAGE];
+    int damage_count;
+    int detect_damage;                  /* run propid_damage_step after every gyro sample */
+    double damage_false_alarms_per_hour; /* detector design rate (< 0 = library default) */
 } sitl_options_t;
 
 void sitl_options_default(sitl_options_t *opts);

@@ -15,6 +15,7 @@
 #include <time.h>
 
 #include "flight_log.h"
+#include "propid/propid_damage.h"
 #include "sitl_math.h"
 
 #ifdef PROPID_SITL_WITH_MAVLINK
@@ -118,6 +119,8 @@ typedef struct {
     double last_gyro[3], last_accel[3];
     double last_omega[SITL_MAX_ROTORS];
     int last_status;
+    propid_damage_t detector;
+    int damage_applied[SITL_MAX_DAMAGE];
 #ifdef PROPID_SITL_WITH_MAVLINK
     sitl_mavlink_t *link;
 #endif
@@ -219,6 +222,22 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
         km_std[i] = (double)f->filter_config.drag_coeff_rel_std0 * f->vehicle.rotor[i].drag_coeff;
     }
     sitl_metrics_init(&f->metrics, n, kf_std, km_std, (double)f->filter_config.gyro_bias_std0);
+    for (int k = 0; k < o->damage_count; k++) {
+        if (o->damage[k].rotor >= n) {
+            snprintf(err, sizeof(err), "--damage: rotor %d but the vehicle has %d", o->damage[k].rotor + 1, n);
+            return fail(r, SITL_EXIT_USAGE, err);
+        }
+    }
+    if (o->detect_damage) {
+        propid_damage_config_t dc;
+        propid_damage_config_default(&dc);
+        if (o->damage_false_alarms_per_hour > 0.0) {
+            dc.false_alarms_per_hour = (float)o->damage_false_alarms_per_hour;
+        }
+        if (propid_damage_init(&f->detector, &dc, &f->filter) != PROPID_OK) {
+            return fail(r, SITL_EXIT_USAGE, "damage detector rejected its configuration");
+        }
+    }
 
     sitl_imu_init(&f->imu, &o->imu, o->seed, &o->effects);
     double history_rate = o->physics_rate_hz + o->imu.rate_hz + o->esc.rate_hz +
@@ -286,6 +305,56 @@ static void teardown(flight_t *f, sitl_result_t *r)
     if (f->link != NULL) {
         sitl_mavlink_close(f->link);
         f->link = NULL;
+    }
+#endif
+}
+
+/* Damages due by time t: the plant's (true) kf and km drop; the Oracle's
+ * allocation knows at once. */
+static void apply_damage(flight_t *f, const sitl_options_t *o, double t)
+{
+    for (int k = 0; k < o->damage_count; k++) {
+        const sitl_damage_t *d = &o->damage[k];
+        if (f->damage_applied[k] || t < d->time_s) {
+            continue;
+        }
+        f->damage_applied[k] = 1;
+        f->true_kf[d->rotor] *= 1.0 - d->fraction;
+        f->true_km[d->rotor] *= 1.0 - d->fraction;
+        f->plant.thrust_coeff[d->rotor] = f->true_kf[d->rotor];
+        f->plant.drag_coeff[d->rotor] = f->true_km[d->rotor];
+        if (o->mode == SITL_MODE_ORACLE &&
+            sitl_allocation_set_coefficients(&f->allocation, f->true_kf, f->true_km) == 0) {
+            memcpy(f->used_kf, f->true_kf, sizeof(f->used_kf));
+            memcpy(f->used_km, f->true_km, sizeof(f->used_km));
+        }
+        if (!o->quiet) {
+            fprintf(stderr, "t=%6.3f s  damage: rotor %d loses %.0f %% of kf and km\n", t,
+                    d->rotor + 1, 100.0 * d->fraction);
+        }
+    }
+}
+
+static void step_detector(flight_t *f, const sitl_options_t *o, sitl_result_t *r, double t)
+{
+    int8_t rotor = -1;
+    propid_status_t dst = propid_damage_step(&f->detector, &f->filter, &rotor);
+    if (dst != PROPID_OK || rotor < 0) {
+        return;
+    }
+    if (r->detection_count < SITL_MAX_DAMAGE) {
+        r->detection_rotor[r->detection_count] = rotor;
+        r->detection_time_s[r->detection_count] = t;
+        r->detection_count++;
+    }
+    if (!o->quiet) {
+        fprintf(stderr, "t=%6.3f s  detector: rotor %d damaged, coefficients re-opened\n", t,
+                rotor + 1);
+    }
+#ifdef PROPID_SITL_WITH_MAVLINK
+    if (f->link != NULL) {
+        sitl_mavlink_damage(f->link, (uint8_t)rotor, f->detector.detections,
+                            f->detector.damaged_mask, f->filter.core.time_us);
     }
 #endif
 }
@@ -399,6 +468,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     for (;;) {
         const double t = (double)now_ns * 1e-9;
         const uint64_t t_us = (uint64_t)((now_ns + 500) / 1000);
+        apply_damage(f, o, t);
 
         if (now_ns == esc.next_ns) {
             double speed[SITL_MAX_ROTORS];
@@ -422,6 +492,9 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
             float gyro_f[3] = {(float)f->last_gyro[0], (float)f->last_gyro[1],
                                (float)f->last_gyro[2]};
             f->last_status = (int)propid_push_gyro(&f->filter, t_us, gyro_f);
+            if (o->detect_damage && f->last_status >= 0) {
+                step_detector(f, o, r, t);
+            }
             schedule_advance(&imu);
         }
         if (now_ns == control.next_ns || now_ns >= end_ns) {

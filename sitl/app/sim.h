@@ -46,6 +46,10 @@ typedef struct {
     propid_counters_t counters;
     long control_steps;
     long log_rows;
+    /* Damage detector (--detect-damage): every detection, in order. */
+    int detection_count;
+    int detection_rotor[SITL_MAX_DAMAGE];   /* 0-based */
+    double detection_time_s[SITL_MAX_DAMAGE];
 } sitl_result_t;
 
 /* Set-up pieces (sim_setup.c), public for tests. */

@@ -305,6 +305,28 @@ static void attitude_ned_frd(const double q[4], double *roll, double *pitch, dou
     *yaw = atan2(r[1][0], r[0][0]);
 }
 
+void sitl_mavlink_damage(sitl_mavlink_t *link, uint8_t rotor, uint32_t detections,
+                         uint16_t damaged_mask, uint64_t time_us)
+{
+    if (link == NULL) {
+        return;
+    }
+    mavlink_status_t status = tx_status(link);
+    mavlink_message_t msg;
+    mavlink_msg_propid_damage_pack_status(link->sender.system_id, link->sender.component_id,
+                                          &status, &msg, time_us, (uint8_t)(rotor + 1u),
+                                          detections, damaged_mask);
+    link->sender.sequence = status.current_tx_seq;
+    send_message(link, &msg);
+    char text[MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN + 1];
+    snprintf(text, sizeof(text), "propid: rotor %u damaged, re-identifying", (unsigned)(rotor + 1u));
+    status = tx_status(link);
+    mavlink_msg_statustext_pack_status(link->sender.system_id, link->sender.component_id, &status,
+                                       &msg, MAV_SEVERITY_CRITICAL, text, 0u, 0u);
+    link->sender.sequence = status.current_tx_seq;
+    send_message(link, &msg);
+}
+
 static void send_attitude_and_position(sitl_mavlink_t *link, const sitl_mavlink_snapshot_t *snap)
 {
     double roll, pitch, yaw;

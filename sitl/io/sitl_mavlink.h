@@ -46,6 +46,10 @@ void sitl_mavlink_close(sitl_mavlink_t *link);
 void sitl_mavlink_update(sitl_mavlink_t *link, const sitl_mavlink_snapshot_t *snapshot,
                          const propid_filter_t *filter);
 
+/* A damage detection: PROPID_DAMAGE and a STATUSTEXT (CRITICAL) a ground station shows. */
+void sitl_mavlink_damage(sitl_mavlink_t *link, uint8_t rotor, uint32_t detections,
+                         uint16_t damaged_mask, uint64_t time_us);
+
 /* Read pending incoming frames without blocking; a COMMAND_LONG asking for a
  * filter reset (all rotors or one) is executed on filter and acknowledged with
  * COMMAND_ACK. Returns the number of commands executed. */

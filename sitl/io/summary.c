@@ -116,6 +116,21 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
         cJSON_AddItemToArray(true_bias, number9(r->true_bias[a]));
         cJSON_AddItemToArray(est_bias, number9((double)r->estimate.gyro_bias[a]));
     }
+    cJSON *damages = cJSON_AddArrayToObject(root, "damage");
+    for (int k = 0; k < o->damage_count; k++) {
+        cJSON *item = cJSON_CreateObject();
+        cJSON_AddNumberToObject(item, "rotor", o->damage[k].rotor + 1);
+        add_number(item, "time_s", o->damage[k].time_s);
+        add_number(item, "fraction", o->damage[k].fraction);
+        cJSON_AddItemToArray(damages, item);
+    }
+    cJSON *detections = cJSON_AddArrayToObject(root, "detections");
+    for (int k = 0; k < r->detection_count; k++) {
+        cJSON *item = cJSON_CreateObject();
+        cJSON_AddNumberToObject(item, "rotor", r->detection_rotor[k] + 1);
+        add_number(item, "time_s", r->detection_time_s[k]);
+        cJSON_AddItemToArray(detections, item);
+    }
     cJSON_AddNumberToObject(root, "gyro_accepted", (double)r->counters.gyro_accepted);
     cJSON_AddNumberToObject(root, "rotor_accepted", (double)r->counters.rotor_accepted);
     cJSON_AddNumberToObject(root, "control_steps", (double)r->control_steps);

@@ -69,6 +69,7 @@ typedef enum {
 #define PROPID_HEALTH_GATE_REOPENED   (1u << 5) /* an axis was re-opened after too many gated samples (sticky) */
 #define PROPID_HEALTH_ALL_CONVERGED   (1u << 6) /* every kf and km has converged */
 #define PROPID_HEALTH_TIME_RESYNCED   (1u << 7) /* propid_resync() was used since last reset (sticky) */
+#define PROPID_HEALTH_ROTOR_DAMAGE    (1u << 8) /* propid_damage_step() detected a damaged rotor (sticky) */
 
 /* ------------------------------------------------------------------------ */
 /* Configuration                                                            */

@@ -16,4 +16,6 @@ COMMAND_MODULES = [
     "gap",
     "gap_bench",
     "observability",
+    "damage_bench",
+    "table1_extended",
 ]

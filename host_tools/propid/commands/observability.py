@@ -6,7 +6,6 @@ import argparse
 import json
 from pathlib import Path
 
-from propid import observability
 from propid.errors import UserError
 from propid.flightlog import read_vehicle
 
@@ -20,13 +19,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="flight-log v1 vehicle file (needs inertia, kf_nominal, km_nominal)")
     parser.add_argument("--measure", default="gyro", metavar="gyro|gyro,accel",
                         help="measurement set (default gyro; accel adds the specific force along body z)")
-    parser.add_argument("--max-order", type=int, default=observability.MAX_ORDER_DEFAULT,
+    parser.add_argument("--max-order", type=int, default=4,
                         help="highest Lie-derivative order (default %(default)s; "
                              "the search stops earlier once an order adds no rank)")
     parser.add_argument("--json", metavar="OUT.json", help="also write the result as JSON")
 
 
 def run(args: argparse.Namespace) -> int:
+    from propid import observability  # sympy takes a while to import: only when asked
+
     measurements = tuple(name.strip() for name in args.measure.split(",") if name.strip())
     if "gyro" not in measurements:
         raise UserError(f"--measure: the filter always has the gyro; expected gyro or gyro,accel, "

@@ -1,0 +1,86 @@
+/*
+ * Propeller damage detector: a bank of one-sided CUSUM tests, one per rotor,
+ * on the filter's own normalised gyro innovations projected on the signature
+ * a loss of that rotor's coefficients leaves in them (docs/damage.md).
+ *
+ * Use: after every propid_push_gyro() that returned PROPID_OK or
+ * PROPID_OK_GATED, call propid_damage_step(). On a detection it isolates the
+ * rotor (largest statistic), re-opens that rotor's kf and km covariance to the
+ * prior (the estimates are kept and re-converge in flight), sets
+ * PROPID_HEALTH_ROTOR_DAMAGE in the filter's health and counts the event.
+ * The allocation that reads the filter's estimates then re-allocates with the
+ * new coefficients.
+ *
+ * Allocation-free, float32, bounded loops; state lives in propid_damage_t.
+ */
+#ifndef PROPID_DAMAGE_H
+#define PROPID_DAMAGE_H
+
+#include <stdint.h>
+
+#include "propid/propid.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct {
+    /* Design false-alarm rate of the whole bank on a healthy vehicle whose
+     * filter innovations are white and honest [alarms per flight hour]. */
+    float false_alarms_per_hour;
+    /* Mean shift of the projected, normalised innovation the test is tuned to
+     * detect fastest [standard deviations]; the CUSUM drift is half of it. */
+    float design_shift_sigma;
+    /* After a detection the bank is frozen this long while the re-opened
+     * coefficients re-converge [s]. */
+    float hold_s;
+    /* Time constant of the running mean and variance that standardise each
+     * rotor's projected innovation (slow model error is not damage) [s]; the
+     * bank is armed after 3 of them, from the start and after a detection. */
+    float adapt_time_s;
+} propid_damage_config_t;
+
+typedef struct {
+    propid_damage_config_t config;
+    float drift;                           /* CUSUM reference value k [sigma] */
+    float threshold;                       /* CUSUM decision threshold h [sigma] */
+    float clip;                            /* increments clipped at drift + threshold / 3 [sigma] */
+    float statistic[PROPID_MAX_ROTORS];    /* CUSUM statistic per rotor [sigma] */
+    float mean[PROPID_MAX_ROTORS];         /* running mean of the projection */
+    float var[PROPID_MAX_ROTORS];          /* running variance of the projection */
+    float armed_s;                         /* time since (re-)start, arms the bank */
+    uint64_t last_time_us;                 /* estimate time of the previous step */
+    uint64_t hold_until_us;                /* bank frozen until then */
+    uint64_t last_detection_us;            /* time of the latest detection */
+    uint32_t detections;                   /* count since init */
+    uint16_t damaged_mask;                 /* bit i: rotor i detected since init */
+    uint8_t rotor_count;
+    uint8_t has_time;
+    int8_t last_rotor;                     /* latest isolated rotor, -1 none */
+} propid_damage_t;
+
+/* Defaults: 1e-3 false alarms per flight hour, design shift 8 sigma, hold 0.5 s,
+ * adaptation 0.5 s (armed 1.5 s after start and after each detection). */
+void propid_damage_config_default(propid_damage_config_t *config);
+
+/* Threshold h of one CUSUM test whose in-control average run length is
+ * arl_samples (Siegmund's approximation for unit-variance Gaussian increments
+ * and drift k); bisection, 60 iterations. Returns a negative value on bad input. */
+float propid_damage_threshold(float drift, float arl_samples);
+
+/* Derive drift and threshold for the filter's rotor count and gyro rate.
+ * PROPID_ERR_CONFIG on a bad configuration, PROPID_ERR_NULL, PROPID_ERR_NOT_INITIALISED. */
+propid_status_t propid_damage_init(propid_damage_t *detector, const propid_damage_config_t *config,
+                                   const propid_filter_t *filter);
+
+/* One step after an accepted gyro sample. *detected_rotor = the isolated rotor
+ * (0-based) when this step detected a damage, else -1. PROPID_OK, or an error
+ * status (filter untouched) on NULL or an uninitialised filter. */
+propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *filter,
+                                   int8_t *detected_rotor);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* PROPID_DAMAGE_H */

@@ -1,0 +1,241 @@
+/*
+ * Propeller damage detector (see propid_damage.h and docs/damage.md).
+ *
+ * Each gyro update leaves three sequential scalar innovations nu_a with
+ * variances S_a; for an honest filter z_a = nu_a / sqrt(S_a) are independent
+ * N(0, 1). A sudden loss of a fraction delta of rotor i's kf and km removes the
+ * torque delta * u_i (a_i kf_rel_i + d_i km_rel_i) (J^-1 scaled, docs/math.md
+ * section 1), so the next innovations move by -delta * g_i in the direction
+ *     g_i,a = dt u_i (a_i,a kf_rel_i + d_i,a km_rel_i) / sqrt(S_a)
+ * (and keep growing while the filter's rate absorbs the missing torque).
+ * Rotor i's test statistic is the projection s_i = -(g_i . z) / |g_i|, N(0, 1)
+ * on a healthy vehicle, positive mean after a loss on rotor i; a one-sided
+ * CUSUM on it, C_i = max(0, C_i + s_i - k), alarms at C_i > h.
+ */
+#include "propid/propid_damage.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "propid_internal.h"
+
+#define PROPID_DAMAGE_BISECTION_STEPS 60
+#define PROPID_DAMAGE_H_MAX 200.0f
+/* Siegmund's correction of the threshold for the overshoot of Gaussian increments. */
+#define PROPID_DAMAGE_SIEGMUND 1.166f
+/* A detection needs at least this many samples of evidence: increments are
+ * clipped at drift + threshold / PROPID_DAMAGE_MIN_SAMPLES. */
+#define PROPID_DAMAGE_MIN_SAMPLES 3.0f
+/* Clip (in running sigmas) of the values that update the running mean/variance. */
+#define PROPID_DAMAGE_CLIP 3.0f
+/* Floor of the running variance (an honest filter gives 1). */
+#define PROPID_DAMAGE_VAR_FLOOR 0.25f
+
+void propid_damage_config_default(propid_damage_config_t *config)
+{
+    if (config == NULL) {
+        return;
+    }
+    config->false_alarms_per_hour = 1.0e-3f;
+    config->design_shift_sigma = 8.0f;
+    config->hold_s = 0.5f;
+    config->adapt_time_s = 0.5f;
+}
+
+/* In-control average run length of a CUSUM with drift k and threshold h. */
+static float cusum_arl(float drift, float threshold)
+{
+    const float x = 2.0f * drift * (threshold + PROPID_DAMAGE_SIEGMUND);
+    return (expf(x) - 1.0f - x) / (2.0f * drift * drift);
+}
+
+float propid_damage_threshold(float drift, float arl_samples)
+{
+    if (!(drift > 0.0f) || !(arl_samples > 1.0f) || !isfinite(drift) || !isfinite(arl_samples)) {
+        return -1.0f;
+    }
+    float low = 0.0f;
+    float high = PROPID_DAMAGE_H_MAX;
+    if (!(cusum_arl(drift, high) > arl_samples)) {
+        return -1.0f;
+    }
+    for (int i = 0; i < PROPID_DAMAGE_BISECTION_STEPS; ++i) {
+        const float mid = 0.5f * (low + high);
+        if (cusum_arl(drift, mid) < arl_samples) {
+            low = mid;
+        } else {
+            high = mid;
+        }
+    }
+    return high;
+}
+
+propid_status_t propid_damage_init(propid_damage_t *detector, const propid_damage_config_t *config,
+                                   const propid_filter_t *filter)
+{
+    if (detector == NULL || config == NULL || filter == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    if (filter->magic != PROPID_MAGIC) {
+        return PROPID_ERR_NOT_INITIALISED;
+    }
+    const float rate_hz = filter->config.gyro_sample_rate_hz;
+    const uint8_t rotor_count = filter->config.rotor_count;
+    if (!(config->false_alarms_per_hour > 0.0f) || !isfinite(config->false_alarms_per_hour) ||
+        !(config->design_shift_sigma > 0.0f) || !(config->design_shift_sigma < 50.0f) ||
+        !(config->hold_s >= 0.0f) || !(config->hold_s < 60.0f) || !(rate_hz > 0.0f) ||
+        !(config->adapt_time_s > 0.0f) || !(config->adapt_time_s < 600.0f) ||
+        rotor_count == 0u || rotor_count > PROPID_MAX_ROTORS) {
+        return PROPID_ERR_CONFIG;
+    }
+    /* The bank alarms falsely when any of its rotor_count tests does: each test
+     * gets rotor_count times the bank's average run length (union bound). */
+    const float samples_per_hour = 3600.0f * rate_hz;
+    const float arl = (float)rotor_count * samples_per_hour / config->false_alarms_per_hour;
+    const float drift = 0.5f * config->design_shift_sigma;
+    const float threshold = propid_damage_threshold(drift, arl);
+    if (!(threshold > 0.0f)) {
+        return PROPID_ERR_CONFIG;
+    }
+    memset(detector, 0, sizeof(*detector));
+    detector->config = *config;
+    detector->drift = drift;
+    detector->clip = drift + threshold / PROPID_DAMAGE_MIN_SAMPLES;
+    detector->threshold = threshold;
+    detector->rotor_count = rotor_count;
+    detector->last_rotor = -1;
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        detector->var[i] = 1.0f; /* an honest filter's value */
+    }
+    return PROPID_OK;
+}
+
+/* The rotor's kf and km variance back to the prior, their correlations
+ * cleared; the estimates stay where they are and re-converge. The body rates
+ * are re-opened too: between the loss and its detection the unexplained
+ * torque moved them (and the gate may have held the gyro off), and a rate
+ * error left in place would be read as a larger loss. */
+static void reopen_rotor(propid_filter_t *filter, uint8_t rotor)
+{
+    const uint8_t rotor_count = filter->config.rotor_count;
+    for (uint8_t a = 0; a < PROPID_RATE_STATES; ++a) {
+        propid_cov_reset_state(&filter->derived, &filter->core, a);
+        filter->core.gated_run[a] = 0u;
+    }
+    propid_cov_reset_state(&filter->derived, &filter->core, (uint8_t)(propid_first_thrust() + rotor));
+    propid_cov_reset_state(&filter->derived, &filter->core,
+                           (uint8_t)(propid_first_drag(rotor_count) + rotor));
+    filter->core.health |= PROPID_HEALTH_ROTOR_DAMAGE;
+}
+
+propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *filter,
+                                   int8_t *detected_rotor)
+{
+    if (detector == NULL || filter == NULL || detected_rotor == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    *detected_rotor = -1;
+    if (filter->magic != PROPID_MAGIC) {
+        return PROPID_ERR_NOT_INITIALISED;
+    }
+    if (filter->config.rotor_count != detector->rotor_count) {
+        return PROPID_ERR_ROTOR_COUNT;
+    }
+    const propid_core_t *core = &filter->core;
+    const uint64_t now = core->time_us;
+    if (!detector->has_time || now <= detector->last_time_us) {
+        detector->has_time = 1u;
+        detector->last_time_us = now;
+        return PROPID_OK;
+    }
+    const float dt = (float)(uint32_t)(now - detector->last_time_us) * 1.0e-6f;
+    detector->last_time_us = now;
+    const int holding = now < detector->hold_until_us;
+
+    /* Normalised innovations z_a and 1/sqrt(S_a) from the stored innovation and
+     * its test ratio nu^2 / (gate^2 S) (inv_gate_sq is 1 with the gate off). */
+    float z[3];
+    float inv_sd[3];
+    for (uint8_t a = 0; a < 3u; ++a) {
+        const float nu = core->innovation[a];
+        const float ratio = core->innovation_test_ratio[a] / filter->derived.inv_gate_sq;
+        if (!(ratio > 0.0f) || !isfinite(ratio) || nu == 0.0f) {
+            return PROPID_OK; /* no update on this axis: nothing to test */
+        }
+        const float magnitude = sqrtf(ratio);
+        z[a] = nu > 0.0f ? magnitude : -magnitude;
+        inv_sd[a] = magnitude / fabsf(nu);
+    }
+
+    const uint8_t rotor_count = detector->rotor_count;
+    const uint8_t first_drag = propid_first_drag(rotor_count);
+    const float adapt = detector->config.adapt_time_s;
+    const float alpha = dt < adapt ? dt / adapt : 1.0f;
+    detector->armed_s += dt;
+    const int armed = detector->armed_s > 3.0f * adapt;
+    int8_t best = -1;
+    float best_statistic = detector->threshold;
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const float kf_rel = core->state[propid_first_thrust() + i];
+        const float km_rel = core->state[first_drag + i];
+        const float weight = dt * core->rotor_speed_sq[i];
+        float g[3];
+        float norm_sq = 0.0f;
+        float dot = 0.0f;
+        for (uint8_t a = 0; a < 3u; ++a) {
+            g[a] = weight * inv_sd[a] *
+                   (filter->derived.thrust_torque[i][a] * kf_rel + filter->derived.drag_torque[i][a] * km_rel);
+            norm_sq += g[a] * g[a];
+            dot += g[a] * z[a];
+        }
+        if (!(norm_sq > 0.0f) || !isfinite(norm_sq)) {
+            detector->statistic[i] = 0.0f; /* a stopped rotor leaves no signature */
+            continue;
+        }
+        const float projection = -dot / sqrtf(norm_sq);
+        /* Standardise by the running mean and variance, then update them with
+         * the value clipped to +-3 running sigmas, so an onset is not absorbed. */
+        const float sd = sqrtf(detector->var[i]);
+        float standard = (projection - detector->mean[i]) / sd;
+        const float clipped = standard > PROPID_DAMAGE_CLIP ? PROPID_DAMAGE_CLIP
+                              : standard < -PROPID_DAMAGE_CLIP ? -PROPID_DAMAGE_CLIP
+                                                                : standard;
+        const float deviation = clipped * sd;
+        detector->mean[i] += alpha * deviation;
+        detector->var[i] += alpha * (deviation * deviation - detector->var[i]);
+        if (detector->var[i] < PROPID_DAMAGE_VAR_FLOOR) {
+            detector->var[i] = PROPID_DAMAGE_VAR_FLOOR;
+        }
+        if (!armed || holding) {
+            continue;
+        }
+        /* Clipped increment: one or two outliers (a lost or quantised telemetry
+         * sample) cannot alarm alone; a damage's shift persists. */
+        const float increment = standard > detector->clip ? detector->clip : standard;
+        const float next = detector->statistic[i] + increment - detector->drift;
+        detector->statistic[i] = next > 0.0f ? next : 0.0f;
+        if (detector->statistic[i] > best_statistic) {
+            best_statistic = detector->statistic[i];
+            best = (int8_t)i;
+        }
+    }
+    if (best < 0) {
+        return PROPID_OK;
+    }
+    reopen_rotor(filter, (uint8_t)best);
+    detector->detections++;
+    detector->damaged_mask = (uint16_t)(detector->damaged_mask | (1u << (uint8_t)best));
+    detector->last_rotor = best;
+    detector->last_detection_us = now;
+    detector->hold_until_us = now + (uint64_t)(uint32_t)(detector->config.hold_s * 1.0e6f);
+    /* Start afresh: the re-opened coefficients re-converge during the hold and
+     * the running moments are re-learnt (armed again after 3 adapt times). */
+    detector->armed_s = 0.0f;
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        detector->statistic[i] = 0.0f;
+        detector->mean[i] = 0.0f;
+        detector->var[i] = 1.0f;
+    }
+    *detected_rotor = best;
+    return PROPID_OK;
+}

@@ -1,0 +1,254 @@
+/*
+ * Propeller damage detector (propid_damage): threshold design, input checks,
+ * and closed-loop synthetic flights simulated inside the test (float32): a plus
+ * quad's rate dynamics under a rate-hold loop with an excitation torque,
+ * allocated with the nominal mixer; gyro with white noise and a bias; rotor
+ * speeds reported exactly. No false alarm on a healthy flight; a sudden loss on
+ * any rotor detected within 50 ms and isolated, its coefficients re-opened and
+ * re-converged to the damaged value.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "propid/propid.h"
+#include "propid/propid_damage.h"
+#include "test_rng.h"
+#include "unity.h"
+
+#define PI_F 3.14159265358979f
+#define ARM 0.043f
+#define KF_NOM 2.3e-8f
+#define KM_NOM 7.8e-10f
+#define MASS 0.03f
+#define GYRO_RATE 500.0f
+#define GYRO_DENSITY 2.443e-4f /* 0.014 deg/s/sqrt(Hz) */
+#define SUBSTEPS 4
+
+static const float inertia[3] = {1.43e-5f, 1.43e-5f, 2.89e-5f};
+
+void setUp(void) {}
+void tearDown(void) {}
+
+static float uniform(rng_t *rng)
+{
+    return ((float)(rng_next(rng) >> 8) + 0.5f) * (1.0f / 16777216.0f);
+}
+
+static float normal(rng_t *rng)
+{
+    return sqrtf(-2.0f * logf(uniform(rng))) * cosf(2.0f * PI_F * uniform(rng));
+}
+
+typedef struct {
+    float kf[4], km[4];
+    float rate[3];
+    float bias[3];
+    rng_t rng;
+    propid_filter_t filter;
+    propid_damage_t detector;
+} flight_t;
+
+static void setup_flight(flight_t *f, uint32_t seed)
+{
+    memset(f, 0, sizeof(*f));
+    f->rng.state = seed * 2654435761u + 1u;
+    for (int i = 0; i < 4; i++) {
+        f->kf[i] = KF_NOM * (0.9f + 0.2f * uniform(&f->rng));
+        f->km[i] = KM_NOM * (0.9f + 0.2f * uniform(&f->rng));
+    }
+    for (int a = 0; a < 3; a++) {
+        f->bias[a] = 0.01f * (2.0f * uniform(&f->rng) - 1.0f);
+    }
+    propid_config_t c;
+    propid_config_default(&c);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&c, 4, ARM, 0.0f, 1.0f, KF_NOM, KM_NOM));
+    propid_config_set_inertia_diag(&c, inertia[0], inertia[1], inertia[2]);
+    c.gyro_noise_density = GYRO_DENSITY;
+    c.gyro_sample_rate_hz = GYRO_RATE;
+    c.thrust_coeff_rel_std0 = 0.1155f;
+    c.drag_coeff_rel_std0 = 0.1155f;
+    c.gyro_bias_std0 = 0.01f;
+    c.rate_std0 = 0.01f;
+    c.rate_process_noise = 4e-4f;
+    c.thrust_coeff_rel_walk = 0.0f;
+    c.drag_coeff_rel_walk = 0.0f;
+    c.gyro_bias_walk = 0.0f;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&f->filter, &c));
+    propid_damage_config_t dc;
+    propid_damage_config_default(&dc);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_damage_init(&f->detector, &dc, &f->filter));
+}
+
+/* Nominal plus-frame mixer: rotor 1 +x, 2 +y, 3 -x, 4 -y, yaw signs +,-,+,-. */
+static void mix(const float torque[3], float speed_sq[4])
+{
+    const float s = MASS * 9.81f / KF_NOM;
+    const float x = torque[0] / (ARM * KF_NOM);
+    const float y = torque[1] / (ARM * KF_NOM);
+    const float z = torque[2] / KM_NOM;
+    speed_sq[0] = (0.5f * (s + z) - y) * 0.5f;
+    speed_sq[2] = (0.5f * (s + z) + y) * 0.5f;
+    speed_sq[1] = (0.5f * (s - z) + x) * 0.5f;
+    speed_sq[3] = (0.5f * (s - z) - x) * 0.5f;
+    for (int i = 0; i < 4; i++) {
+        speed_sq[i] = speed_sq[i] > 0.0f ? speed_sq[i] : 0.0f;
+    }
+}
+
+static void rate_derivative(const flight_t *f, const float rate[3], const float u[4], float out[3])
+{
+    const float tx = ARM * (f->kf[1] * u[1] - f->kf[3] * u[3]);
+    const float ty = ARM * (f->kf[2] * u[2] - f->kf[0] * u[0]);
+    const float tz = f->km[0] * u[0] - f->km[1] * u[1] + f->km[2] * u[2] - f->km[3] * u[3];
+    const float jw[3] = {inertia[0] * rate[0], inertia[1] * rate[1], inertia[2] * rate[2]};
+    out[0] = (tx - (rate[1] * jw[2] - rate[2] * jw[1])) / inertia[0];
+    out[1] = (ty - (rate[2] * jw[0] - rate[0] * jw[2])) / inertia[1];
+    out[2] = (tz - (rate[0] * jw[1] - rate[1] * jw[0])) / inertia[2];
+}
+
+/* Fly from t0 to t1 [s]; returns the first detection time (or -1) and its rotor. */
+static float fly(flight_t *f, float t0, float t1, int8_t *rotor_out)
+{
+    const float dt = 1.0f / GYRO_RATE;
+    const float sigma = GYRO_DENSITY * sqrtf(GYRO_RATE);
+    float detected_at = -1.0f;
+    *rotor_out = -1;
+    const int steps = (int)((t1 - t0) * GYRO_RATE + 0.5f);
+    for (int k = 1; k <= steps; k++) {
+        const float t = t0 + (float)k * dt;
+        /* rate hold (20 rad/s) + excitation torque on all axes */
+        float torque[3];
+        for (int a = 0; a < 3; a++) {
+            const float excitation = 40.0f * sinf(2.0f * PI_F * (1.3f + 0.7f * (float)a) * t + (float)a);
+            torque[a] = inertia[a] * (excitation - 20.0f * f->rate[a]);
+        }
+        float u[4];
+        mix(torque, u);
+        for (int s = 0; s < SUBSTEPS; s++) { /* midpoint rule */
+            const float h = dt / SUBSTEPS;
+            float d1[3], mid[3], d2[3];
+            rate_derivative(f, f->rate, u, d1);
+            for (int a = 0; a < 3; a++) {
+                mid[a] = f->rate[a] + 0.5f * h * d1[a];
+            }
+            rate_derivative(f, mid, u, d2);
+            for (int a = 0; a < 3; a++) {
+                f->rate[a] += h * d2[a];
+            }
+        }
+        const uint64_t t_us = (uint64_t)(t * 1e6f + 0.5f);
+        float speed[4];
+        for (int i = 0; i < 4; i++) {
+            speed[i] = sqrtf(u[i]);
+        }
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&f->filter, t_us, speed, 4));
+        float gyro[3];
+        for (int a = 0; a < 3; a++) {
+            gyro[a] = f->rate[a] + f->bias[a] + sigma * normal(&f->rng);
+        }
+        const propid_status_t st = propid_push_gyro(&f->filter, t_us, gyro);
+        TEST_ASSERT_TRUE(st == PROPID_OK || st == PROPID_OK_GATED);
+        int8_t rotor = -1;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_damage_step(&f->detector, &f->filter, &rotor));
+        if (rotor >= 0 && detected_at < 0.0f) {
+            detected_at = t;
+            *rotor_out = rotor;
+        }
+    }
+    return detected_at;
+}
+
+static void test_threshold_inverts_the_run_length(void)
+{
+    const float drift = 4.0f;
+    float previous = 0.0f;
+    for (float arl = 1e4f; arl < 1e13f; arl *= 100.0f) {
+        const float h = propid_damage_threshold(drift, arl);
+        const float x = 2.0f * drift * (h + 1.166f);
+        const float back = (expf(x) - 1.0f - x) / (2.0f * drift * drift);
+        TEST_ASSERT_FLOAT_WITHIN(1e-3f * arl, arl, back);
+        TEST_ASSERT_TRUE(h > previous);
+        previous = h;
+    }
+    TEST_ASSERT_TRUE(propid_damage_threshold(0.0f, 1e6f) < 0.0f);
+    TEST_ASSERT_TRUE(propid_damage_threshold(4.0f, 0.5f) < 0.0f);
+    TEST_ASSERT_TRUE(propid_damage_threshold(NAN, 1e6f) < 0.0f);
+}
+
+static void test_init_rejects_bad_input(void)
+{
+    flight_t f;
+    setup_flight(&f, 1u);
+    propid_damage_config_t dc;
+    propid_damage_config_default(&dc);
+    propid_damage_t d;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_NULL, propid_damage_init(NULL, &dc, &f.filter));
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_NULL, propid_damage_init(&d, NULL, &f.filter));
+    dc.false_alarms_per_hour = 0.0f;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_damage_init(&d, &dc, &f.filter));
+    propid_damage_config_default(&dc);
+    dc.design_shift_sigma = NAN;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_damage_init(&d, &dc, &f.filter));
+    propid_damage_config_default(&dc);
+    dc.adapt_time_s = -1.0f;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_damage_init(&d, &dc, &f.filter));
+    propid_filter_t blank;
+    memset(&blank, 0, sizeof(blank));
+    propid_damage_config_default(&dc);
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_NOT_INITIALISED, propid_damage_init(&d, &dc, &blank));
+    int8_t rotor = 3;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_NULL, propid_damage_step(&f.detector, &f.filter, NULL));
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_NOT_INITIALISED, propid_damage_step(&f.detector, &blank, &rotor));
+    TEST_ASSERT_EQUAL_INT(-1, rotor);
+    /* the design threshold with the defaults is a few sigma, not degenerate */
+    TEST_ASSERT_TRUE(f.detector.threshold > 1.0f && f.detector.threshold < 10.0f);
+    TEST_ASSERT_TRUE(f.detector.clip > f.detector.drift);
+}
+
+static void test_healthy_flight_has_no_alarm(void)
+{
+    flight_t f;
+    setup_flight(&f, 7u);
+    int8_t rotor;
+    TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 8.0f, &rotor));
+    TEST_ASSERT_EQUAL_UINT32(0u, f.detector.detections);
+    propid_estimate_t e;
+    propid_get_estimate(&f.filter, &e);
+    TEST_ASSERT_EQUAL_UINT32(0u, e.health & PROPID_HEALTH_ROTOR_DAMAGE);
+}
+
+static void test_damage_detected_isolated_and_reconverged(void)
+{
+    for (uint8_t damaged = 0; damaged < 4; damaged++) {
+        flight_t f;
+        setup_flight(&f, 11u + damaged);
+        int8_t rotor;
+        TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 2.0f, &rotor));
+        f.kf[damaged] *= 0.85f; /* 15 % loss of kf and km */
+        f.km[damaged] *= 0.85f;
+        const float at = fly(&f, 2.0f, 2.2f, &rotor);
+        TEST_ASSERT_TRUE_MESSAGE(at > 2.0f && at <= 2.05f, "detected within 50 ms");
+        TEST_ASSERT_EQUAL_INT(damaged, rotor);
+        TEST_ASSERT_EQUAL_UINT32(1u, f.detector.detections);
+        TEST_ASSERT_EQUAL_UINT16(1u << damaged, f.detector.damaged_mask);
+        propid_estimate_t e;
+        propid_get_estimate(&f.filter, &e);
+        TEST_ASSERT_NOT_EQUAL(0u, e.health & PROPID_HEALTH_ROTOR_DAMAGE);
+        /* then the filter re-learns the damaged rotor in flight */
+        fly(&f, 2.2f, 4.0f, &rotor);
+        propid_get_estimate(&f.filter, &e);
+        TEST_ASSERT_FLOAT_WITHIN(0.02f * f.kf[damaged], f.kf[damaged], e.thrust_coeff[damaged]);
+        TEST_ASSERT_EQUAL_UINT32(1u, f.detector.detections);
+    }
+}
+
+int main(void)
+{
+    UNITY_BEGIN();
+    RUN_TEST(test_threshold_inverts_the_run_length);
+    RUN_TEST(test_init_rejects_bad_input);
+    RUN_TEST(test_healthy_flight_has_no_alarm);
+    RUN_TEST(test_damage_detected_isolated_and_reconverged);
+    return UNITY_END();
+}

@@ -1,0 +1,121 @@
+"""Damage benchmark bookkeeping (propid.damage_bench) on synthetic records, the
+randomized flight plan, and the extended-campaign checks (propid.table1_extended)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from propid import damage_bench, table1_extended
+
+
+def config(**kw) -> damage_bench.BenchConfig:
+    return damage_bench.BenchConfig(sitl=Path("/bin/true"), out_dir=Path("/tmp"), **kw)
+
+
+def test_flight_plan_is_deterministic_and_as_documented():
+    specs = damage_bench.flight_specs(config(damaged=30, undamaged=9))
+    again = damage_bench.flight_specs(config(damaged=30, undamaged=9))
+    assert [s.damages for s in specs] == [s.damages for s in again]
+    damaged, undamaged = specs[:30], specs[30:]
+    assert all(s.damages and not s.effects for s in damaged)
+    assert all(not s.damages and 1 <= len(s.effects) <= 3 for s in undamaged)
+    assert sum(1 for s in damaged if len(s.damages) == 2) == 10
+    for s in damaged:
+        (rotor, t1, f1), *rest = s.damages
+        assert 1 <= rotor <= 4 and 2.0 <= t1 <= 3.0 and 0.1 <= f1 <= 0.5
+        for rotor2, t2, _ in rest:
+            assert rotor2 != rotor and t2 - t1 >= 2.0
+    assert {s.trajectory for s in specs} == {"lissajous", "circle", "step"}
+    assert {s.preset for s in specs} == set(damage_bench.PRESETS)
+
+
+def test_scoring_detection_isolation_and_false_alarms():
+    spec = {"damages": [[2, 3.0, 0.3], [4, 5.5, 0.15]], "effects": [], "index": 0}
+    flight = {"detections": [{"rotor": 1, "time_s": 3.004}, {"rotor": 2, "time_s": 3.6},
+                             {"rotor": 4, "time_s": 5.51}], "stable": True, "rmse_after_damage_m": 0.3}
+    scored = damage_bench.score_damages(spec, flight)
+    assert scored[0]["detected"] and scored[0]["detect_ms"] == pytest.approx(4.0)
+    assert not scored[0]["isolated_correctly"] and scored[0]["isolate_ms"] == pytest.approx(600.0)
+    assert scored[1]["isolated_correctly"] and scored[1]["detect_ms"] == pytest.approx(10.0)
+    records = [
+        {"spec": spec, "filter": flight, "oracle": {"stable": True, "rmse_after_damage_m": 0.2}},
+        {"spec": {"damages": [], "effects": ["rotor_drag"], "index": 1},
+         "filter": {"detections": [{"rotor": 3, "time_s": 4.0}], "stable": True}},
+        {"spec": {"damages": [], "effects": ["gyro_scale"], "index": 2},
+         "filter": {"detections": [], "stable": False}},
+    ]
+    result = damage_bench.summarise(records, config())
+    assert result["flights"] == 3 and result["damaged_flights"] == 1 and result["undamaged_flights"] == 2
+    assert result["detection_rate"] == 1.0 and result["detection_rate_ge20"] == 1.0
+    assert result["isolation_accuracy"] == 0.5
+    assert result["false_alarms"] == 1 and result["false_alarm_flights"] == 1
+    assert result["tracking_ratio_median"] == pytest.approx(1.5)
+    assert result["stable_pct"] == pytest.approx(200.0 / 3.0)
+    assert "| false alarms (undamaged flights) | 1 in 1 flights | 0 |" in damage_bench.render(result)
+
+
+def test_missed_damage_counts_against_the_rate():
+    spec = {"damages": [[1, 2.5, 0.12]], "effects": [], "index": 0}
+    records = [{"spec": spec, "filter": {"detections": [{"rotor": 1, "time_s": 2.0}], "stable": True},
+                "oracle": {"stable": True}}]
+    result = damage_bench.summarise(records, config())
+    assert result["detection_rate"] == 0.0 and result["detection_rate_ge20"] is None
+    assert result["detections_before_damage"] == 1
+    assert result["median_detect_ms"] is None
+
+
+def test_extended_checks_ratio_and_stability():
+    row = {"rmse_x": 0.02, "rmse_y": 0.05, "rmse_z": 0.004, "rmse_yaw_deg": 0.5, "stable_pct": 100.0,
+           "t_conv_coeff_s": 0.4, "t_conv_bias_s": 3.0}
+    worse = dict(row, rmse_y=0.065, stable_pct=90.0)
+    table = {"hexa-x": {"circle": {"oracle": row, "filter": worse}}, "_conditions": {}}
+    checks = table1_extended.checks(table)["hexa-x"]["circle"]
+    assert checks["rmse_ratio_max"] == pytest.approx(1.3)
+    assert checks["stable_pct"] == 90.0
+    table["_checks"] = {"hexa-x": {"circle": checks}}
+    assert "| hexa-x | circle | 1.300 | 90 |" in table1_extended.render(table)
+    plan = table1_extended.presets_and_modes()
+    assert ("octo-x", ("oracle", "filter")) in plan and plan[0] == ("crazyflie-plus", ("oracle", "incorrect", "filter"))
+
+
+def _sitl() -> Path:
+    import os
+
+    build = Path(os.environ.get("PROPID_BUILD_DIR", Path(__file__).resolve().parents[2] / "build" / "host"))
+    sitl = build / "sitl" / "propid_sitl"
+    if not sitl.is_file():
+        if "PROPID_BUILD_DIR" in os.environ:
+            pytest.fail(f"{sitl} missing although PROPID_BUILD_DIR is set")
+        pytest.skip("propid_sitl not built")
+    return sitl
+
+
+def test_sitl_damage_is_detected_isolated_and_reported(tmp_path):
+    import json
+    import subprocess
+
+    summary = tmp_path / "s.json"
+    proc = subprocess.run([str(_sitl()), "--vehicle", "hexa-x", "--trajectory", "circle", "--seed", "4",
+                           "--duration", "4", "--start-at-rest", "--damage", "5@2.5=0.25",
+                           "--detect-damage", "--summary-json", str(summary), "--quiet"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(summary.read_text())
+    assert data["damage"] == [{"rotor": 5, "time_s": 2.5, "fraction": 0.25}]
+    assert len(data["detections"]) == 1
+    assert data["detections"][0]["rotor"] == 5
+    assert 2.5 <= data["detections"][0]["time_s"] <= 2.55
+    assert data["health"] & 0x100  # PROPID_HEALTH_ROTOR_DAMAGE
+    assert abs(data["est_kf"][4] / data["true_kf"][4] - 1) < 0.05  # re-learnt in flight
+
+
+def test_sitl_rejects_bad_damage_specs():
+    import subprocess
+
+    for bad in ("0@1=0.2", "2@1=1.5", "2@-1=0.2", "2at1=0.2", "9@1=0.2"):
+        proc = subprocess.run([str(_sitl()), "--damage", bad, "--duration", "0.1", "--quiet"],
+                              capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 2, (bad, proc.stderr)
+        assert "damage" in proc.stderr
