@@ -13,8 +13,9 @@ the nominal-model residual of flight X (propid.gapbench.rigid_body, true kf/km):
     signature  e = r(B) - r(C)      what the effect adds (sensor effects included)
     noise      n = r(N) - r(C)      what the measurements add
 
-Axes are weighted by 1/RMS(n), and the part of e that re-fitted per-rotor kf, km
-could absorb is projected out (those are unknown to any diagnosis). The index is
+Axes are weighted by 1/std(n), and the part of e that re-fitted per-rotor kf, km
+and a thrust offset (the accelerometer's bias) could absorb is projected out (those
+are unknown to any diagnosis). The index is
 the weighted norm of what remains:
 
     D = || P_perp W e ||       (P_perp: residual of least squares on W X_nominal)
@@ -61,10 +62,16 @@ def detectability(clean_effect: FlightLog, clean_twin: FlightLog, noisy_twin: Fl
     signature = r_b - r_c
     noise = r_n - r_c
     axes = [a for a in range(4) if np.all(np.isfinite(signature[a])) and np.all(np.isfinite(noise[a]))]
-    sigma = np.array([np.sqrt(np.mean(noise[a] ** 2)) for a in axes])
+    # The noise is what varies: a constant (the accelerometer's bias on the thrust
+    # axis) is a sensor offset any diagnosis fits, so it is projected out below too.
+    sigma = np.array([np.std(noise[a]) for a in axes])
     sigma = np.maximum(sigma, 1e-12 * max(float(np.max(sigma)), 1e-30))
     weighted_e = np.concatenate([signature[a] / s for a, s in zip(axes, sigma)])
     weighted_x = np.concatenate([x_nominal[a] / s for a, s in zip(axes, sigma)], axis=0)
+    if 3 in axes:  # accelerometer bias: a constant on the thrust axis
+        offset_column = np.concatenate([np.full(signature.shape[1], 1.0 / s if a == 3 else 0.0)
+                                        for a, s in zip(axes, sigma)])
+        weighted_x = np.column_stack([weighted_x, offset_column])
     scale = np.linalg.norm(weighted_x, axis=0)
     scale[scale == 0] = 1.0
     coef, *_ = np.linalg.lstsq(weighted_x / scale, weighted_e, rcond=None)
