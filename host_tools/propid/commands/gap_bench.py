@@ -36,6 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the diagnosis to benchmark, called with --log/--vehicle/--json/--report "
                              "(default: this package's `propid gap`)")
     parser.add_argument("--no-tool", action="store_true", help="score the baseline only")
+    parser.add_argument("--time-budget", type=float, default=None, metavar="S",
+                        help="start no new flight after S seconds; score the flights done "
+                             "(flights run in a seeded random order, so those are a fair sample)")
     parser.add_argument("--sitl", metavar="PATH",
                         help="propid_sitl binary (default $PROPID_BUILD_DIR/sitl/propid_sitl)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -61,12 +64,15 @@ def run(args: argparse.Namespace) -> int:
         out_dir=Path(args.out).resolve(), result_path=Path(args.result).resolve(),
         sitl=locate_sitl(args.sitl), seed=args.seed, singles_per_effect=args.singles_per_effect,
         pairs=args.pairs, nones=args.nones, effects=effects, duration_s=args.duration,
-        workers=args.workers, tool_command=tool,
+        workers=args.workers, tool_command=tool, time_budget_s=args.time_budget,
     )
     result = run_bench(config, progress=not args.no_progress)
     print(render(result))
     for error in result["errors"][:10]:
         print(f"flight failed: {error}")
+    if result["cancelled_flights"]:
+        print(f"time budget: {result['cancelled_flights']} of {result['planned_flights']} "
+              "planned flights not flown")
     print(f"{len(result['flights'])} flights in {result['runtime_s']['total']:.0f} s; "
           f"wrote {config.result_path}")
     return 0 if not result["errors"] else 1

@@ -19,6 +19,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from propid.gapbench import baseline
 from propid.gapbench.flights import FlightMaker, clear
 from propid.gapbench.magnitudes import DETECTABILITY_MAX, DETECTION_LIMIT, EFFECT_RANGES
@@ -44,6 +46,7 @@ class BenchConfig:
     workers: int = 2
     tool_command: list[str] | None = field(default_factory=default_tool_command)
     tool_timeout_s: float = 600.0
+    time_budget_s: float | None = None  # stop starting flights after this [s]
 
 
 def tool_available(command: list[str]) -> tuple[bool, str]:
@@ -122,9 +125,15 @@ def run_bench(config: BenchConfig, progress: bool = True) -> dict:
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=len(plan), unit="flight", desc="gap-bench", dynamic_ncols=True)
+    # Submitted in a seeded random order, so that the flights done when a time budget
+    # runs out are a fair sample of every kind, effect, vehicle and rate.
+    order = np.random.default_rng(config.seed + 1).permutation(len(plan))
+    cancelled = 0
     with ProcessPoolExecutor(max_workers=max(1, config.workers)) as pool:
-        futures = {pool.submit(run_flight, config, spec, with_tool): spec for spec in plan}
+        futures = {pool.submit(run_flight, config, plan[i], with_tool): plan[i] for i in order}
         for future in as_completed(futures):
+            if future.cancelled():
+                continue
             spec = futures[future]
             try:
                 outcomes.append(future.result())
@@ -132,6 +141,9 @@ def run_bench(config: BenchConfig, progress: bool = True) -> dict:
                 errors.append(f"{spec.flight_id}: {exc}")
             if bar is not None:
                 bar.update(1)
+            if (config.time_budget_s is not None and not cancelled
+                    and time.monotonic() - start > config.time_budget_s):
+                cancelled = sum(f.cancel() for f in futures)
     if bar is not None:
         bar.close()
     outcomes.sort(key=lambda o: o["answer"]["flight_id"])
@@ -169,6 +181,8 @@ def run_bench(config: BenchConfig, progress: bool = True) -> dict:
             }
             for i, o in enumerate(outcomes)
         ],
+        "planned_flights": len(plan),
+        "cancelled_flights": cancelled,
         "errors": errors,
         "runtime_s": {
             "total": time.monotonic() - start,
