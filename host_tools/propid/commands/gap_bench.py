@@ -34,7 +34,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=2, help="parallel flights (default 2)")
     parser.add_argument("--tool-command", default=None, metavar="'CMD'",
                         help="the diagnosis to benchmark, called with --log/--vehicle/--json/--report "
-                             "(default: this package's `propid gap`)")
+                             "(default: this package's `propid gap --no-filter --quiet`: the "
+                             "filter replay is not scored)")
     parser.add_argument("--no-tool", action="store_true", help="score the baseline only")
     parser.add_argument("--time-budget", type=float, default=None, metavar="S",
                         help="start no new flight after S seconds; score the flights done "

@@ -29,7 +29,9 @@ from propid.gapbench.scoring import score_flight, summarize
 
 
 def default_tool_command() -> list[str]:
-    return [sys.executable, "-m", "propid.cli", "gap"]
+    # The bench scores the diagnosis (verdict, effects, shrink), not the firmware
+    # filter's before/after replay, which costs ~10 s per flight: --no-filter.
+    return [sys.executable, "-m", "propid.cli", "gap", "--no-filter", "--quiet"]
 
 
 @dataclass
