@@ -385,7 +385,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         PROPID_BAD("converged_rel_std");
     }
 
-    out.state_count = (uint8_t)(6u + 2u * rotor_count);
+    out.layout.rate = 0u;
+    out.layout.thrust = propid_first_thrust();
+    out.layout.drag = propid_first_drag(rotor_count);
+    out.layout.gyro_bias = propid_first_bias(rotor_count);
+    out.state_count = (uint8_t)(out.layout.gyro_bias + PROPID_BIAS_STATES);
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const propid_rotor_config_t *rotor = &config->rotor[i];
         /* r x z = (r_y, -r_x, 0) */
@@ -406,6 +410,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     flush_residues(&out.thrust_torque[0][0], 3u * PROPID_MAX_ROTORS);
     flush_residues(&out.drag_torque[0][0], 3u * PROPID_MAX_ROTORS);
     derive_sparsity(config, &out);
+    out.quad_core = (uint8_t)(rotor_count == 4u && out.state_count == PROPID_QUAD_STATES);
 
     out.gyro_var = config->gyro_noise_density * config->gyro_noise_density *
                    config->gyro_sample_rate_hz;

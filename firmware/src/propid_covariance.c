@@ -128,3 +128,41 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
     }
     return repaired;
 }
+
+uint32_t propid_clamp_coefficients(const propid_config_t *config, propid_core_t *core)
+{
+    const uint8_t first = propid_first_thrust();
+    const uint8_t end = propid_first_bias(config->rotor_count);
+    /* Fast test of both bounds on the bit patterns (0 < min < max, see
+     * outside_positive_range); the rare clamp then compares the values. */
+    uint32_t min_bits;
+    uint32_t max_bits;
+    memcpy(&min_bits, &config->coeff_rel_min, sizeof(min_bits));
+    memcpy(&max_bits, &config->coeff_rel_max, sizeof(max_bits));
+    const uint32_t range_bits = max_bits - min_bits;
+    if (config->rotor_count == 4u) {
+        /* The quad: one straight-line test of the 8 coefficients' bit patterns. */
+        uint32_t outside = 0u;
+#pragma GCC unroll 8
+        for (uint8_t k = PROPID_QUAD_FIRST_THRUST; k < PROPID_QUAD_FIRST_BIAS; ++k) {
+            outside |= propid_outside_positive_range(core->state[k], min_bits, range_bits);
+        }
+        if (outside == 0u) {
+            return 0u;
+        }
+    }
+    uint32_t clamped = 0u;
+    for (uint8_t k = first; k < end; ++k) {
+        if (!propid_outside_positive_range(core->state[k], min_bits, range_bits)) {
+            continue;
+        }
+        if (core->state[k] < config->coeff_rel_min) {
+            core->state[k] = config->coeff_rel_min;
+            clamped++;
+        } else if (core->state[k] > config->coeff_rel_max) {
+            core->state[k] = config->coeff_rel_max;
+            clamped++;
+        }
+    }
+    return clamped;
+}

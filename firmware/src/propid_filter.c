@@ -147,6 +147,40 @@ propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_
     return PROPID_OK;
 }
 
+/* Round-robin integrity check: one covariance row per accepted gyro sample. */
+static void check_next_row(propid_filter_t *filter)
+{
+    propid_core_t *core = &filter->core;
+    const propid_derived_t *derived = &filter->derived;
+    if (propid_cov_check_row(derived, core, core->check_row)) {
+        core->health |= PROPID_HEALTH_COV_REPAIRED;
+        filter->counters.cov_repairs++;
+    }
+    core->check_row = (uint8_t)(core->check_row + 1u >= derived->state_count ? 0u : core->check_row + 1u);
+}
+
+/* The accepted gyro sample's prediction over dt: the rate step (decided first:
+ * a non-finite step returns PROPID_ERR_NUMERIC with nothing written), then the
+ * integrity check of one covariance row and the covariance propagation. Not
+ * inlined: the Jacobian rows live in this frame, not under the update's. */
+static __attribute__((noinline)) propid_status_t predict_step(propid_filter_t *filter, float dt)
+{
+    propid_core_t *core = &filter->core;
+    float rate_next[3];
+    float rate_jacobian_dt[3][PROPID_MAX_STATES];
+    if (propid_predict_stage(filter, dt, rate_next, rate_jacobian_dt) != PROPID_OK) {
+        return PROPID_ERR_NUMERIC;
+    }
+    /* Accepted: from here on the filter changes. */
+    core->health &= ~(PROPID_HEALTH_GATED | PROPID_HEALTH_STATE_CLAMPED);
+    check_next_row(filter);
+    propid_predict_covariance(&filter->derived, core, dt, rate_jacobian_dt);
+    core->state[0] = rate_next[0];
+    core->state[1] = rate_next[1];
+    core->state[2] = rate_next[2];
+    return PROPID_OK;
+}
+
 propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
                                  const float gyro_rad_s[3])
 {
@@ -198,13 +232,12 @@ propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
         return reject(filter, PROPID_ERR_ROTOR_STALE);
     }
 
-    float rate_next[3];
-    float rate_jacobian_dt[3][PROPID_MAX_STATES];
     if (!anchor) {
-        if (propid_predict_stage(filter, dt, rate_next, rate_jacobian_dt) != PROPID_OK) {
+        if (predict_step(filter, dt) != PROPID_OK) {
             return reject(filter, PROPID_ERR_NUMERIC);
         }
     } else {
+        /* The first sample only anchors the clock (no prediction). */
         float check = 0.0f;
         for (uint8_t k = 0; k < filter->derived.state_count; ++k) {
             check += core->state[k];
@@ -212,27 +245,10 @@ propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
         if (!isfinite(check)) {
             return reject(filter, PROPID_ERR_NUMERIC);
         }
+        core->health &= ~(PROPID_HEALTH_GATED | PROPID_HEALTH_STATE_CLAMPED);
+        check_next_row(filter);
     }
-
-    /* Accepted: from here on the filter changes. */
-    const propid_derived_t *derived = &filter->derived;
-    uint32_t health = core->health & ~(PROPID_HEALTH_GATED | PROPID_HEALTH_STATE_CLAMPED);
-    core->health = health;
-
-    /* Round-robin integrity check: one covariance row per sample. */
-    if (propid_cov_check_row(derived, core, core->check_row)) {
-        core->health |= PROPID_HEALTH_COV_REPAIRED;
-        filter->counters.cov_repairs++;
-    }
-    core->check_row = (uint8_t)(core->check_row + 1u >= derived->state_count ? 0u : core->check_row + 1u);
-
-    if (!anchor) {
-        propid_predict_covariance(derived, core, dt, rate_jacobian_dt);
-        core->state[0] = rate_next[0];
-        core->state[1] = rate_next[1];
-        core->state[2] = rate_next[2];
-    }
-
+    /* Accepted: the filter has changed (prediction); now the measurement. */
     const int gated = propid_update_gyro(filter, gyro_rad_s) != 0u;
     const uint32_t clamped = propid_clamp_coefficients(config, core);
     if (clamped != 0u) {

@@ -5,6 +5,8 @@
 #ifndef PROPID_INTERNAL_H
 #define PROPID_INTERNAL_H
 
+#include <string.h>
+
 #include "propid/propid.h"
 
 /* Marks a filter on which propid_init() succeeded ("PRID"). */
@@ -70,6 +72,38 @@ static inline uint8_t propid_first_bias(uint8_t rotor_count)
     return (uint8_t)(PROPID_RATE_STATES + 2u * rotor_count);
 }
 
+/* The fixed indices of the plain quad (4 rotors, no optional state): the
+ * straight-line kernels are written for this layout. */
+#define PROPID_QUAD_FIRST_THRUST PROPID_RATE_STATES
+#define PROPID_QUAD_FIRST_DRAG (PROPID_RATE_STATES + 4u)
+#define PROPID_QUAD_FIRST_BIAS (PROPID_RATE_STATES + 8u)
+
+/* One scalar measurement y = H x + v with a sparse H (propid_scalar_update.c):
+ * H has `count` non-zero entries, value[k] in column index[k]. */
+#define PROPID_SPARSE_MAX 4u
+typedef struct {
+    uint8_t count;
+    uint8_t index[PROPID_SPARSE_MAX];
+    float value[PROPID_SPARSE_MAX];
+} propid_sparse_row_t;
+
+typedef enum {
+    PROPID_SCALAR_FUSED = 0,   /* state and covariance updated */
+    PROPID_SCALAR_GATED = 1,   /* innovation outside the gate: nothing changed */
+    PROPID_SCALAR_NUMERIC = 2, /* non-finite covariance even after repair: nothing changed */
+} propid_scalar_result_t;
+
+/* propid_scalar_update.c: the one measurement update every sensor calls.
+ * innovation = y - h(x); noise_var = R; gate_sq = gate^2 in S units (0: no gate).
+ * Writes innovation^2 / (gate^2 S) to *test_ratio (inv_gate_sq scaling of the
+ * derived data). Gate, symmetric rank-one downdate P -= (P h)(P h)^T / S on the
+ * stored triangle (the Joseph form's result for the optimal gain, with the
+ * variance floors/ceilings and the repair below keeping it PSD in float32),
+ * coefficient-independent: clamps are the caller's. */
+propid_scalar_result_t propid_scalar_update(propid_filter_t *filter, const propid_sparse_row_t *row,
+                                            float innovation, float noise_var, float gate_sq,
+                                            float *test_ratio);
+
 /* propid_config.c: validate a configuration and compute its derived quantities.
  * Writes *derived only when the configuration is valid. */
 propid_status_t propid_config_derive(const propid_config_t *config, propid_derived_t *derived,
@@ -104,10 +138,22 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
                                const float jacobian_dt[3][PROPID_MAX_STATES]);
 
-/* propid_update.c: fuse one gyro sample, three scalar updates (x, y, z; H = e_rate +
- * e_bias each) applied in one pass. Returns the mask of axes gated out (bit a). */
+/* propid_gyro.c: fuse one gyro sample, three scalar updates (x, y, z; H = e_rate +
+ * e_bias each). Returns the mask of axes gated out (bit a). */
 uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3]);
-/* Clamp the coefficients to [coeff_rel_min, coeff_rel_max]; returns how many were clamped. */
+/* propid_covariance.c: clamp the coefficients to [coeff_rel_min, coeff_rel_max];
+ * returns how many were clamped. */
 uint32_t propid_clamp_coefficients(const propid_config_t *config, propid_core_t *core);
+
+/* 1 when a value is outside [floor, ceiling] (or negative, or not finite): for
+ * non-negative floats the bit patterns are ordered like the values, so one
+ * unsigned comparison of (bits - floor_bits) with (ceiling_bits - floor_bits)
+ * tests both bounds; negative values and NaN land far above the range. */
+static inline uint32_t propid_outside_positive_range(float value, uint32_t floor_bits, uint32_t range_bits)
+{
+    uint32_t bits;
+    memcpy(&bits, &value, sizeof(bits));
+    return (uint32_t)(bits - floor_bits) > range_bits ? 1u : 0u;
+}
 
 #endif /* PROPID_INTERNAL_H */

@@ -53,7 +53,7 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
         const float entry0 = dt * (quad_gyro[a][0] * rate[other1]);
         const float entry1 = dt * (quad_gyro[a][1] * rate[other0]);
         gyroscopic[a] = entry0 * rate[other0] + entry1 * rate[other1];
-        const float *coefficient = state + (a < 2u ? PROPID_RATE_STATES : PROPID_RATE_STATES + 4u);
+        const float *coefficient = state + (a < 2u ? PROPID_QUAD_FIRST_THRUST : PROPID_QUAD_FIRST_DRAG);
         const float *torque = jac_torque[a];
         float sum = 0.0f;
 #pragma GCC unroll 4
@@ -83,7 +83,7 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
     /* The sums above already hold every rate (rate_next) and, through a product,
      * every coefficient (each appears in at least one row; a zero entry times a
      * non-finite coefficient is NaN): only the biases remain. */
-    check += state[PROPID_QUAD_STATES - 3u] + state[PROPID_QUAD_STATES - 2u] + state[PROPID_QUAD_STATES - 1u];
+    check += state[PROPID_QUAD_FIRST_BIAS] + state[PROPID_QUAD_FIRST_BIAS + 1u] + state[PROPID_QUAD_FIRST_BIAS + 2u];
     if (!isfinite(check)) {
         return PROPID_ERR_NUMERIC;
     }
@@ -248,20 +248,24 @@ PROPID_DEFINE_PREDICT(predict_covariance_any, PROPID_NO_UNROLL)
  * (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp collects its
  * coefficient-column terms during the sweep (upper triangle). */
 /* (Not inlined, for the same reason as predict_stage_quad: its own base registers.) */
+#define T0 PROPID_QUAD_FIRST_THRUST
+#define D0 PROPID_QUAD_FIRST_DRAG
+#define B0 PROPID_QUAD_FIRST_BIAS
 static __attribute__((noinline)) void
 predict_covariance_quad_layout(const propid_derived_t *derived, float (*restrict cov)[PROPID_MAX_STATES],
                                float dt, const float jacobian_dt[3][PROPID_MAX_STATES])
 {
-    /* Row 0: columns 1, 2, 3..6; row 1: 0, 2, 3..6; row 2: 0, 1, 7..10. */
+    /* Row 0: columns 1, 2 and the thrust columns; row 1: 0, 2 and the thrust
+     * columns; row 2: 0, 1 and the drag columns. */
     const float *g0 = jacobian_dt[0];
     const float *g1 = jacobian_dt[1];
     const float *g2 = jacobian_dt[2];
     const float g0r0 = g0[0], g0r1 = g0[1], g0c0 = g0[2], g0c1 = g0[3], g0c2 = g0[4], g0c3 = g0[5];
     const float g1r0 = g1[0], g1r1 = g1[1], g1c0 = g1[2], g1c1 = g1[3], g1c2 = g1[4], g1c3 = g1[5];
     const float g2r0 = g2[0], g2r1 = g2[1], g2c0 = g2[2], g2c1 = g2[3], g2c2 = g2[4], g2c3 = g2[5];
-    const float q_thrust = derived->process_psd[3] * dt;
-    const float q_drag = derived->process_psd[7] * dt;
-    const float q_bias = derived->process_psd[11] * dt;
+    const float q_thrust = derived->process_psd[T0] * dt;
+    const float q_drag = derived->process_psd[D0] * dt;
+    const float q_bias = derived->process_psd[B0] * dt;
     float rate_cols[3][3]; /* T_ab for the rate columns b */
     float block00 = 0.0f, block01 = 0.0f, block11 = 0.0f; /* thrust-column terms */
     float block02 = 0.0f, block12 = 0.0f, block22 = 0.0f; /* drag-column terms */
@@ -269,30 +273,30 @@ predict_covariance_quad_layout(const propid_derived_t *derived, float (*restrict
     for (uint8_t j = 0; j < PROPID_QUAD_STATES; ++j) {
 #define PROPID_P(c) propid_cov_at((const float (*)[PROPID_MAX_STATES])cov, (c), j)
         const float p0 = PROPID_P(0u), p1 = PROPID_P(1u), p2 = PROPID_P(2u);
-        const float k0 = PROPID_P(3u), k1 = PROPID_P(4u), k2 = PROPID_P(5u), k3 = PROPID_P(6u);
-        const float d0 = PROPID_P(7u), d1 = PROPID_P(8u), d2 = PROPID_P(9u), d3 = PROPID_P(10u);
+        const float k0 = PROPID_P(T0), k1 = PROPID_P(T0 + 1u), k2 = PROPID_P(T0 + 2u), k3 = PROPID_P(T0 + 3u);
+        const float d0 = PROPID_P(D0), d1 = PROPID_P(D0 + 1u), d2 = PROPID_P(D0 + 2u), d3 = PROPID_P(D0 + 3u);
 #undef PROPID_P
         /* The own element last: the sums then start with a product (a fresh
          * register) instead of a copy of an operand the other rows still need. */
         const float t0 = (g0r0 * p1 + g0r1 * p2 + g0c0 * k0 + g0c1 * k1 + g0c2 * k2 + g0c3 * k3) + p0;
         const float t1 = (g1r0 * p0 + g1r1 * p2 + g1c0 * k0 + g1c1 * k1 + g1c2 * k2 + g1c3 * k3) + p1;
         const float t2 = (g2r0 * p0 + g2r1 * p1 + g2c0 * d0 + g2c1 * d1 + g2c2 * d2 + g2c3 * d3) + p2;
-        if (j < 3u) {
+        if (j < T0) {
             rate_cols[0][j] = t0;
             rate_cols[1][j] = t1;
             rate_cols[2][j] = t2;
             PROPID_SCHEDULE_BARRIER();
             continue;
         }
-        if (j < 7u) {
+        if (j < D0) {
             /* The entries of column j from the registers (j is a constant here). */
-            const float g0j = j == 3u ? g0c0 : j == 4u ? g0c1 : j == 5u ? g0c2 : g0c3;
-            const float g1j = j == 3u ? g1c0 : j == 4u ? g1c1 : j == 5u ? g1c2 : g1c3;
+            const float g0j = j == T0 ? g0c0 : j == T0 + 1u ? g0c1 : j == T0 + 2u ? g0c2 : g0c3;
+            const float g1j = j == T0 ? g1c0 : j == T0 + 1u ? g1c1 : j == T0 + 2u ? g1c2 : g1c3;
             block00 += t0 * g0j;
             block01 += t0 * g1j;
             block11 += t1 * g1j;
-        } else if (j < 11u) {
-            const float g2j = j == 7u ? g2c0 : j == 8u ? g2c1 : j == 9u ? g2c2 : g2c3;
+        } else if (j < B0) {
+            const float g2j = j == D0 ? g2c0 : j == D0 + 1u ? g2c1 : j == D0 + 2u ? g2c2 : g2c3;
             block02 += t0 * g2j;
             block12 += t1 * g2j;
             block22 += t2 * g2j;
@@ -303,9 +307,9 @@ predict_covariance_quad_layout(const propid_derived_t *derived, float (*restrict
         /* Q per kind of state (thrust, drag, bias: propid_config.c), and the
          * rounding loading (propid_internal.h); the diagonal of a coefficient
          * column is already in a register (j is a constant here). */
-        const float own = j == 3u ? k0 : j == 4u ? k1 : j == 5u ? k2 : j == 6u ? k3 :
-                          j == 7u ? d0 : j == 8u ? d1 : j == 9u ? d2 : j == 10u ? d3 : cov[j][j];
-        cov[j][j] = own + (PROPID_VAR_LOADING * own + (j < 7u ? q_thrust : (j < 11u ? q_drag : q_bias)));
+        const float own = j == T0 ? k0 : j == T0 + 1u ? k1 : j == T0 + 2u ? k2 : j == T0 + 3u ? k3 :
+                          j == D0 ? d0 : j == D0 + 1u ? d1 : j == D0 + 2u ? d2 : j == D0 + 3u ? d3 : cov[j][j];
+        cov[j][j] = own + (PROPID_VAR_LOADING * own + (j < D0 ? q_thrust : (j < B0 ? q_drag : q_bias)));
         PROPID_SCHEDULE_BARRIER();
     }
     const float (*t)[3] = (const float (*)[3])rate_cols;
@@ -326,6 +330,9 @@ predict_covariance_quad_layout(const propid_derived_t *derived, float (*restrict
     cov[1][2] = p12;
     cov[2][2] = p22;
 }
+#undef T0
+#undef D0
+#undef B0
 
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
                                const float jacobian_dt[3][PROPID_MAX_STATES])

@@ -165,12 +165,26 @@ typedef struct {
     uint32_t rejected[PROPID_REJECT_SLOTS]; /* indexed by -status */
 } propid_counters_t;
 
+/* State layout: the first index of each block of the scaled state. Fixed blocks
+ * first (rates, kf, km, gyro biases), then the optional ones the configuration
+ * enables (PROPID_NO_STATE when off). */
+#define PROPID_NO_STATE 0xFFu
+typedef struct {
+    uint8_t rate;                                   /* body rate (3) */
+    uint8_t thrust;                                 /* kf / kf_nominal (rotor_count) */
+    uint8_t drag;                                   /* km / km_nominal (rotor_count) */
+    uint8_t gyro_bias;                              /* gyro bias (3) */
+} propid_layout_t;
+
 /* Quantities derived once from the configuration (so the step does no divisions). */
 typedef struct {
-    uint8_t state_count;                            /* 6 + 2 * rotor_count */
+    uint8_t state_count;                            /* 6 + 2 * rotor_count (+ optional blocks) */
     uint8_t quad_layout;                            /* private: 1 when the step's fixed quad kernels
                                                        apply (jac_* in the fixed layout, see
                                                        propid_internal.h); fills padding */
+    uint8_t quad_core;                              /* private: 1 for the plain quad (14 states in
+                                                       the fixed order): the gyro's one-pass update */
+    propid_layout_t layout;
     float inertia_inv[3][3];
     float thrust_torque[PROPID_MAX_ROTORS][3];      /* J^-1 (r_i x z) kf_nominal_i */
     float drag_torque[PROPID_MAX_ROTORS][3];        /* J^-1 z yaw_sign_i km_nominal_i */

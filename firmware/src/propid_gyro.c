@@ -1,0 +1,289 @@
+/* The gyro as a measurement (docs/math.md §3): when and how it is fused.
+ * y_a = omega_a + b_a + v_a, three scalar updates in the order x, y, z, each
+ * through propid_scalar_update() with H_a = e_rate(a) + e_bias(a), gated, and
+ * re-anchored after too many gated samples in a row.
+ *
+ * The usual quad sample (every axis passes, 14 states) takes a straight-line
+ * equivalent of the three updates in one pass over P: the later axes' vectors
+ * are formed from the P in memory with the earlier axes' pending rank-one terms
+ * folded in,
+ *   h_a = P H_a^T - sum_{p<a} g_p (h_p . H_a),   g_p = h_p / S_p,
+ * (each h_a and S_a equals the sequential one in exact arithmetic), then one
+ * sweep over the upper triangle writes
+ *   P_ij -= sum_a g_a,i h_a,j,   x_i += sum_a g_a,i nu_a,
+ * four rows at a time (fuse_quad_usual, apply_three_quad). Any other sample or
+ * vehicle takes the generic scalar update per axis. */
+#include <math.h>
+#include <string.h>
+
+#include "propid_internal.h"
+
+
+typedef struct {
+    uint8_t count;                      /* pending fused axes */
+    float h[3][PROPID_MAX_STATES];      /* P H^T of each pending axis (its gain is h / S) */
+    float inv_var[3];                   /* 1 / S: the gain is g = h / S */
+    float innovation[3];
+} pending_t;
+
+/* Rows first .. first + rows - 1 of the quad's three-term pass: their gains
+ * g_k,i = h_k,i / S_k and state updates, the upper triangle of their diagonal
+ * block, then every column to the right, where each h_j triple is loaded once
+ * for all the group's rows (4 rows: 23 instructions per 4 elements, with the 12
+ * gains in registers). Returns non-zero when a new variance of the group is
+ * outside its [floor, ceiling]. */
+static inline __attribute__((always_inline)) uint32_t
+apply_row_group(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
+                const pending_t *restrict pending, const propid_derived_t *restrict derived,
+                const uint8_t first, const uint8_t rows)
+{
+    const float *h0 = pending->h[0];
+    const float *h1 = pending->h[1];
+    const float *h2 = pending->h[2];
+    const float inv0 = pending->inv_var[0];
+    const float inv1 = pending->inv_var[1];
+    const float inv2 = pending->inv_var[2];
+    const float nu0 = pending->innovation[0];
+    const float nu1 = pending->innovation[1];
+    const float nu2 = pending->innovation[2];
+    float gain[4][3];
+    uint32_t outside = 0u;
+#pragma GCC unroll 4
+    for (uint8_t r = 0; r < rows; ++r) {
+        const uint8_t i = (uint8_t)(first + r);
+        gain[r][0] = h0[i] * inv0;
+        gain[r][1] = h1[i] * inv1;
+        gain[r][2] = h2[i] * inv2;
+        state[i] += gain[r][0] * nu0 + gain[r][1] * nu1 + gain[r][2] * nu2;
+    }
+#pragma GCC unroll 4
+    for (uint8_t r = 0; r < rows; ++r) {
+        const uint8_t i = (uint8_t)(first + r);
+#pragma GCC unroll 4
+        for (uint8_t c = r; c < rows; ++c) {
+            const uint8_t j = (uint8_t)(first + c);
+            cov[i][j] = cov[i][j] - gain[r][0] * h0[j] - gain[r][1] * h1[j] - gain[r][2] * h2[j];
+        }
+        /* Floors and ceilings are per kind of state (rate, thrust, drag, bias:
+         * propid_config.c): the first state of its kind stands for each, so
+         * the constants stay in registers across the groups. */
+        const uint8_t kind = i < PROPID_QUAD_FIRST_THRUST ? 0u
+                             : (i < PROPID_QUAD_FIRST_DRAG ? PROPID_QUAD_FIRST_THRUST
+                                : (i < PROPID_QUAD_FIRST_BIAS ? PROPID_QUAD_FIRST_DRAG : PROPID_QUAD_FIRST_BIAS));
+        outside |= propid_outside_positive_range(cov[i][i], derived->var_floor_bits[kind], derived->var_range_bits[kind]);
+    }
+#pragma GCC unroll 10
+    for (uint8_t j = (uint8_t)(first + rows); j < PROPID_QUAD_STATES; ++j) {
+        const float hj0 = h0[j];
+        const float hj1 = h1[j];
+        const float hj2 = h2[j];
+#pragma GCC unroll 4
+        for (uint8_t r = 0; r < rows; ++r) {
+            float *p = &cov[first + r][j];
+            *p = *p - gain[r][0] * hj0 - gain[r][1] * hj1 - gain[r][2] * hj2;
+        }
+    }
+    return outside;
+}
+
+/* P_ij -= sum_k g_k,i h_k,j on the stored upper triangle, x += sum_k g_k nu_k,
+ * for three pending terms of a quad: n constant, fully unrolled, four rows at a
+ * time. Also tests every new variance against its floor and ceiling; returns 1
+ * when all are inside. */
+static int apply_three_quad(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
+                            const pending_t *restrict pending, const propid_derived_t *restrict derived)
+{
+    uint32_t outside = apply_row_group(cov, state, pending, derived, 0u, 4u);
+    outside |= apply_row_group(cov, state, pending, derived, 4u, 4u);
+    outside |= apply_row_group(cov, state, pending, derived, 8u, 4u);
+    outside |= apply_row_group(cov, state, pending, derived, 12u, 2u);
+    return outside == 0u;
+}
+
+/* The axis' rate forgets everything and restarts from this sample: rate :=
+ * measurement - bias estimate, rate variance := its prior, correlations zeroed
+ * (zeroing a row/column and setting a positive diagonal keeps P PSD). */
+static void reanchor_rate(propid_filter_t *filter, uint8_t axis, uint8_t bias, float gyro)
+{
+    propid_core_t *core = &filter->core;
+    core->state[axis] = gyro - core->state[bias];
+    propid_cov_reset_state(&filter->derived, core, axis);
+}
+
+/* One axis through the generic scalar update: gate, and after
+ * gate_max_consecutive gated samples in a row the re-anchor. Returns 1 when the
+ * axis was gated out. */
+static uint32_t fuse_axis(propid_filter_t *filter, uint8_t axis, float measured)
+{
+    propid_core_t *core = &filter->core;
+    const propid_derived_t *derived = &filter->derived;
+    const uint8_t rate = (uint8_t)(derived->layout.rate + axis);
+    const uint8_t bias = (uint8_t)(derived->layout.gyro_bias + axis);
+    const propid_sparse_row_t row = {2u, {rate, bias, 0u, 0u}, {1.0f, 1.0f, 0.0f, 0.0f}};
+    float innovation = measured - core->state[rate] - core->state[bias];
+    float test_ratio = 0.0f;
+    propid_scalar_result_t result =
+        propid_scalar_update(filter, &row, innovation, derived->gyro_var, derived->gate_sq, &test_ratio);
+    core->innovation[axis] = innovation;
+    core->innovation_test_ratio[axis] = test_ratio;
+    if (result == PROPID_SCALAR_GATED) {
+        if (core->gated_run[axis] < filter->config.gate_max_consecutive) {
+            core->gated_run[axis]++;
+            filter->counters.axis_gated[axis]++;
+            return 1u;
+        }
+        /* Too many rejections in a row: the filter, not the sensor, is probably
+         * wrong. Re-anchor this axis' rate on the sample (prior variance, no
+         * correlations) and fuse it: the update then has the conditioning of
+         * the very first sample, never the P_hh ~ nu^2 of an inflation by the
+         * innovation. */
+        reanchor_rate(filter, rate, bias, measured);
+        innovation = measured - core->state[rate] - core->state[bias];
+        (void)propid_scalar_update(filter, &row, innovation, derived->gyro_var, 0.0f, &test_ratio);
+        filter->counters.gate_reopened++;
+        core->health |= PROPID_HEALTH_GATE_REOPENED;
+    }
+    core->gated_run[axis] = 0u;
+    return 0u;
+}
+
+/* The usual quad sample, straight-line: all three axes pass the gate, every
+ * S >= R and the vectors are finite. Same arithmetic in the same order as
+ * fuse_axis (the scalars S, innovation and projections are formed from the few
+ * vector entries they need before the vectors themselves). Returns 1 with the
+ * three axes queued in `pending` and their innovations recorded, or 0 without
+ * writing anything: the general path then handles the sample. Not inlined, and
+ * given the covariance as its own pointer: offsets from the filter's base exceed
+ * the 1 KiB reach of a VFP load. */
+static __attribute__((noinline)) int
+fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *restrict core,
+                const propid_derived_t *restrict derived, pending_t *restrict pending,
+                const float *restrict gyro)
+{
+#define PROPID_P(i, j) propid_cov_at(cov, (i), (j))
+    const float *state = core->state;
+    const float noise_var = derived->gyro_var;
+    const float gate_sq = derived->gate_sq;
+    const uint8_t b0 = PROPID_QUAD_FIRST_BIAS; /* the three gyro-bias states */
+    const uint8_t b1 = PROPID_QUAD_FIRST_BIAS + 1u;
+    const uint8_t b2 = PROPID_QUAD_FIRST_BIAS + 2u;
+
+    /* x axis: h_0 = P_:,0 + P_:,11 */
+    const float h0_r0 = PROPID_P(0, 0) + PROPID_P(b0, 0);
+    const float h0_b0 = PROPID_P(0, b0) + PROPID_P(b0, b0);
+    const float var0 = h0_r0 + h0_b0 + noise_var;
+    const float nu0 = gyro[0] - state[0] - state[b0];
+    const float nu0_sq = nu0 * nu0;
+    /* S < R (even within rounding: fuse_axis decides) leaves the fast path. */
+    if (!(var0 >= noise_var) || (gate_sq > 0.0f && nu0_sq > gate_sq * var0)) {
+        return 0;
+    }
+    const float inv0 = 1.0f / var0;
+    const float step0 = nu0 * inv0;
+
+    /* y axis: h_1 = P_:,1 + P_:,12 - c10 h_0 */
+    const float h0_r1 = PROPID_P(0, 1) + PROPID_P(b0, 1);
+    const float h0_b1 = PROPID_P(0, b1) + PROPID_P(b0, b1);
+    const float c10 = (h0_r1 + h0_b1) * inv0;
+    const float h1_r1 = PROPID_P(1, 1) + PROPID_P(b1, 1) - c10 * h0_r1;
+    const float h1_b1 = PROPID_P(1, b1) + PROPID_P(b1, b1) - c10 * h0_b1;
+    const float var1 = h1_r1 + h1_b1 + noise_var;
+    const float nu1 = gyro[1] - (state[1] + h0_r1 * step0) - (state[b1] + h0_b1 * step0);
+    const float nu1_sq = nu1 * nu1;
+    if (!(var1 >= noise_var) || (gate_sq > 0.0f && nu1_sq > gate_sq * var1)) {
+        return 0;
+    }
+    const float inv1 = 1.0f / var1;
+    const float step1 = nu1 * inv1;
+
+    /* z axis: h_2 = P_:,2 + P_:,13 - c20 h_0 - c21 h_1 */
+    const float h0_r2 = PROPID_P(0, 2) + PROPID_P(b0, 2);
+    const float h0_b2 = PROPID_P(0, b2) + PROPID_P(b0, b2);
+    const float h1_r2 = PROPID_P(1, 2) + PROPID_P(b1, 2) - c10 * h0_r2;
+    const float h1_b2 = PROPID_P(1, b2) + PROPID_P(b1, b2) - c10 * h0_b2;
+    const float c20 = (h0_r2 + h0_b2) * inv0;
+    const float c21 = (h1_r2 + h1_b2) * inv1;
+    const float h2_r2 = PROPID_P(2, 2) + PROPID_P(b2, 2) - c20 * h0_r2 - c21 * h1_r2;
+    const float h2_b2 = PROPID_P(2, b2) + PROPID_P(b2, b2) - c20 * h0_b2 - c21 * h1_b2;
+    const float var2 = h2_r2 + h2_b2 + noise_var;
+    const float shift_r2 = h0_r2 * step0 + h1_r2 * step1;
+    const float shift_b2 = h0_b2 * step0 + h1_b2 * step1;
+    const float nu2 = gyro[2] - (state[2] + shift_r2) - (state[b2] + shift_b2);
+    const float nu2_sq = nu2 * nu2;
+    if (!(var2 >= noise_var) || (gate_sq > 0.0f && nu2_sq > gate_sq * var2)) {
+        return 0;
+    }
+    const float inv2 = 1.0f / var2;
+
+    /* The three vectors, with one finiteness test over all of them: h_2 folds in
+     * h_0 and h_1 (c * Inf is Inf, or NaN when c = 0), so a non-finite element of
+     * any of the three makes that element of h_2 non-finite; summing h_2 covers all. */
+    float *h0 = pending->h[0];
+    float *h1 = pending->h[1];
+    float *h2 = pending->h[2];
+    float check = 0.0f;
+#pragma GCC unroll 14
+    for (uint8_t i = 0; i < PROPID_QUAD_STATES; ++i) {
+        const float value0 = PROPID_P(0, i) + PROPID_P(b0, i);
+        const float value1 = PROPID_P(1, i) + PROPID_P(b1, i) - c10 * value0;
+        const float value2 = PROPID_P(2, i) + PROPID_P(b2, i) - c20 * value0 - c21 * value1;
+        h0[i] = value0;
+        h1[i] = value1;
+        h2[i] = value2;
+        check += value2;
+    }
+#undef PROPID_P
+    if (!isfinite(check)) {
+        return 0;
+    }
+    const float inv_gate_sq = derived->inv_gate_sq;
+    core->innovation[0] = nu0;
+    core->innovation[1] = nu1;
+    core->innovation[2] = nu2;
+    core->innovation_test_ratio[0] = nu0_sq * inv0 * inv_gate_sq;
+    core->innovation_test_ratio[1] = nu1_sq * inv1 * inv_gate_sq;
+    core->innovation_test_ratio[2] = nu2_sq * inv2 * inv_gate_sq;
+    core->gated_run[0] = 0u;
+    core->gated_run[1] = 0u;
+    core->gated_run[2] = 0u;
+    pending->innovation[0] = nu0;
+    pending->innovation[1] = nu1;
+    pending->innovation[2] = nu2;
+    pending->inv_var[0] = inv0;
+    pending->inv_var[1] = inv1;
+    pending->inv_var[2] = inv2;
+    pending->count = 3u;
+    return 1;
+}
+
+/* Every sample the quad's one pass does not take (a gated axis, S < R, a
+ * non-finite vector) and every other vehicle: the generic scalar update per
+ * axis. Not inlined: its callees' frames stay off the quad path's stack. */
+static __attribute__((noinline)) uint32_t fuse_generic(propid_filter_t *filter, const float gyro[3])
+{
+    uint32_t gated_mask = 0u;
+    for (uint8_t axis = 0; axis < 3u; ++axis) {
+        gated_mask |= fuse_axis(filter, axis, gyro[axis]) << axis;
+    }
+    return gated_mask;
+}
+
+uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
+{
+    propid_core_t *core = &filter->core;
+    const propid_derived_t *derived = &filter->derived;
+    if (derived->quad_core) {
+        pending_t pending;
+        if (fuse_quad_usual((const float (*)[PROPID_MAX_STATES])core->cov, core, derived, &pending, gyro)) {
+            /* Variance floors and ceilings: tested inside the pass; the full
+             * pass (which also repairs) only when one is outside. */
+            if (!apply_three_quad(core->cov, core->state, &pending, derived) &&
+                propid_cov_enforce_bounds(derived, core)) {
+                core->health |= PROPID_HEALTH_COV_REPAIRED;
+                filter->counters.cov_repairs++;
+            }
+            return 0u;
+        }
+    }
+    return fuse_generic(filter, gyro);
+}
