@@ -38,6 +38,17 @@ void propid_config_default(propid_config_t *config)
     config->coeff_rel_min = 0.05f;
     config->coeff_rel_max = 5.0f;
     config->converged_rel_std = 0.05f;
+
+    /* Optional terms off (rotor_inertia zeroed above, mass 0); their noise and
+     * prior defaults apply when a caller switches them on. */
+    config->disturbance_torque = 0u;
+    config->disturbance_std0 = 20.0f;
+    config->disturbance_walk = 0.2f;
+    config->mass = 0.0f;
+    config->accel_noise_std = 0.5f;
+    config->accel_bias_std0 = 0.5f;
+    config->accel_bias_walk = 1.0e-3f;
+    config->accel_range = 160.0f;
 }
 
 propid_status_t propid_config_set_symmetric(propid_config_t *config, uint8_t rotor_count,
@@ -187,8 +198,8 @@ static void cross3(const float a[3], const float b[3], float out[3])
 static void derive_quad_layout(const propid_config_t *config, propid_derived_t *out)
 {
     out->quad_layout = 0u;
-    if (config->rotor_count != 4u) {
-        return;
+    if (config->rotor_count != 4u || out->state_count != PROPID_QUAD_STATES || out->rotor_inertia_on) {
+        return; /* the fixed kernels know neither the optional states nor the rotor terms */
     }
     for (uint8_t a = 0; a < 3u; ++a) {
         /* Gyroscopic block of a diagonal inertia: A_ab depends on the third rate only. */
@@ -255,7 +266,8 @@ static void derive_sparsity(const propid_config_t *config, propid_derived_t *out
         uint8_t count = 0u;
         for (uint8_t b = 0; b < 3u; ++b) {
             const float *coeff = out->gyro_jacobian[a][b];
-            if (coeff[0] != 0.0f || coeff[1] != 0.0f || coeff[2] != 0.0f) {
+            const int rotor_term = b < 2u && out->rotor_gyro[a][b] != 0.0f;
+            if (coeff[0] != 0.0f || coeff[1] != 0.0f || coeff[2] != 0.0f || rotor_term) {
                 out->jac_column[a][count] = b;
                 out->jac_rotor[a][count] = 0u;
                 out->jac_torque[a][count] = 0.0f;
@@ -278,6 +290,14 @@ static void derive_sparsity(const propid_config_t *config, propid_derived_t *out
                 out->jac_torque[a][count] = out->drag_torque[i][a];
                 count++;
             }
+        }
+        /* The disturbance acts like one more "rotor" with torque 1 and input 1
+         * (jac_rotor = rotor_count: the step's input slot holding dt). */
+        if (out->layout.disturbance != PROPID_NO_STATE) {
+            out->jac_column[a][count] = (uint8_t)(out->layout.disturbance + a);
+            out->jac_rotor[a][count] = rotor_count;
+            out->jac_torque[a][count] = 1.0f;
+            count++;
         }
         out->jac_count[a] = count;
     }
@@ -384,12 +404,78 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!positive_finite(config->converged_rel_std)) {
         PROPID_BAD("converged_rel_std");
     }
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const float rotor_inertia = config->rotor_inertia[i];
+        if (!isfinite(rotor_inertia) || rotor_inertia < 0.0f || rotor_inertia > 1.0f) {
+            PROPID_BAD("rotor_inertia");
+        }
+    }
+    if (config->disturbance_torque > 1u) {
+        PROPID_BAD("disturbance_torque");
+    }
+    if (config->disturbance_torque) {
+        if (!positive_finite(config->disturbance_std0) || config->disturbance_std0 > 1.0e4f) {
+            PROPID_BAD("disturbance_std0");
+        }
+        if (!isfinite(config->disturbance_walk) || config->disturbance_walk < 0.0f) {
+            PROPID_BAD("disturbance_walk");
+        }
+    }
+    if (!isfinite(config->mass) || config->mass < 0.0f || config->mass > 1.0e4f) {
+        PROPID_BAD("mass");
+    }
+    if (config->mass > 0.0f) {
+        if (!positive_finite(config->accel_noise_std) || config->accel_noise_std > 1.0e3f) {
+            PROPID_BAD("accel_noise_std");
+        }
+        if (!positive_finite(config->accel_bias_std0) || config->accel_bias_std0 > 1.0e3f) {
+            PROPID_BAD("accel_bias_std0");
+        }
+        if (!isfinite(config->accel_bias_walk) || config->accel_bias_walk < 0.0f) {
+            PROPID_BAD("accel_bias_walk");
+        }
+        if (!positive_finite(config->accel_range) || config->accel_range > 1.0e4f) {
+            PROPID_BAD("accel_range");
+        }
+    }
 
     out.layout.rate = 0u;
     out.layout.thrust = propid_first_thrust();
     out.layout.drag = propid_first_drag(rotor_count);
     out.layout.gyro_bias = propid_first_bias(rotor_count);
-    out.state_count = (uint8_t)(out.layout.gyro_bias + PROPID_BIAS_STATES);
+    uint8_t next = (uint8_t)(out.layout.gyro_bias + PROPID_BIAS_STATES);
+    out.layout.disturbance = PROPID_NO_STATE;
+    out.layout.accel_bias = PROPID_NO_STATE;
+    if (config->disturbance_torque) {
+        out.layout.disturbance = next;
+        next = (uint8_t)(next + PROPID_DISTURBANCE_STATES);
+    }
+    if (config->mass > 0.0f) {
+        out.layout.accel_bias = next;
+        next = (uint8_t)(next + PROPID_ACCEL_BIAS_STATES);
+        out.accel_var = config->accel_noise_std * config->accel_noise_std;
+        for (uint8_t i = 0; i < rotor_count; ++i) {
+            out.thrust_per_mass[i] = config->rotor[i].thrust_coeff_nominal / config->mass;
+        }
+    }
+    out.state_count = next;
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const float rotor_inertia = config->rotor_inertia[i];
+        if (rotor_inertia > 0.0f) {
+            out.rotor_inertia_on = 1u;
+        }
+        out.rotor_momentum[i] = config->rotor[i].yaw_sign * rotor_inertia;
+        for (uint8_t a = 0; a < 3u; ++a) {
+            out.rotor_reaction[i][a] = out.inertia_inv[a][2] * out.rotor_momentum[i];
+        }
+    }
+    /* Rotor angular momentum h z_B with h = -sum_i yaw_sign_i J_r,i Omega_i (a rotor
+     * spins opposite to the yaw torque its drag puts on the body): the body torque
+     * -omega x (h z) = sum_i yaw_sign_i J_r,i Omega_i (omega_y, -omega_x, 0). */
+    for (uint8_t a = 0; a < 3u; ++a) {
+        out.rotor_gyro[a][0] = out.rotor_inertia_on ? -out.inertia_inv[a][1] : 0.0f;
+        out.rotor_gyro[a][1] = out.rotor_inertia_on ? out.inertia_inv[a][0] : 0.0f;
+    }
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const propid_rotor_config_t *rotor = &config->rotor[i];
         /* r x z = (r_y, -r_x, 0) */
@@ -450,20 +536,31 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             psd = config->drag_coeff_rel_walk * config->drag_coeff_rel_walk;
             floor_var = 1.0e-10f;
             ceiling = coeff_ceiling;
-        } else {
+        } else if (k < first_bias + PROPID_BIAS_STATES) {
             prior = config->gyro_bias_std0 * config->gyro_bias_std0;
             psd = config->gyro_bias_walk * config->gyro_bias_walk;
             floor_var = 1.0e-14f;
             ceiling = config->gyro_range * config->gyro_range;
+        } else if (k == out.layout.accel_bias) {
+            prior = config->accel_bias_std0 * config->accel_bias_std0;
+            psd = config->accel_bias_walk * config->accel_bias_walk;
+            floor_var = 1.0e-12f;
+            ceiling = config->accel_range * config->accel_range;
+        } else { /* disturbance */
+            prior = config->disturbance_std0 * config->disturbance_std0;
+            psd = config->disturbance_walk * config->disturbance_walk;
+            floor_var = 1.0e-12f;
+            ceiling = 100.0f * prior;
         }
         if (ceiling < prior) {
             ceiling = prior;
         }
         if (!positive_finite(prior) || prior < floor_var) {
             PROPID_BAD(k < PROPID_RATE_STATES ? "rate_std0"
-                                              : (k < first_drag ? "thrust_coeff_rel_std0"
-                                                                : (k < first_bias ? "drag_coeff_rel_std0"
-                                                                                  : "gyro_bias_std0")));
+                       : k < first_drag ? "thrust_coeff_rel_std0"
+                       : k < first_bias ? "drag_coeff_rel_std0"
+                       : k < first_bias + PROPID_BIAS_STATES ? "gyro_bias_std0"
+                       : k == out.layout.accel_bias ? "accel_bias_std0" : "disturbance_std0");
         }
         out.prior_var[k] = prior;
         out.process_psd[k] = psd;

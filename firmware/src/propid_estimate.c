@@ -65,6 +65,27 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
             estimate->drag_coeff_converged |= bit;
         }
     }
+    const uint8_t disturbance = derived->layout.disturbance;
+    if (disturbance != PROPID_NO_STATE) {
+        for (uint8_t a = 0; a < 3u; ++a) {
+            float torque = 0.0f;
+            float torque_var = 0.0f;
+            for (uint8_t b = 0; b < 3u; ++b) {
+                const uint8_t k = (uint8_t)(disturbance + b);
+                torque += config->inertia[a][b] * core->state[k];
+                torque_var += config->inertia[a][b] * config->inertia[a][b] * core->cov[k][k];
+            }
+            estimate->disturbance_torque[a] = torque;
+            estimate->disturbance_torque_std[a] = std_of(torque_var);
+        }
+    }
+    const uint8_t accel_bias = derived->layout.accel_bias;
+    if (accel_bias != PROPID_NO_STATE) {
+        estimate->accel_bias = core->state[accel_bias];
+        estimate->accel_bias_std = std_of(core->cov[accel_bias][accel_bias]);
+        estimate->accel_innovation = core->accel_innovation;
+        estimate->accel_innovation_test_ratio = core->accel_innovation_test_ratio;
+    }
     uint32_t health = core->health;
     if (!core->has_rotor_data) {
         health |= PROPID_HEALTH_NO_ROTOR_DATA;

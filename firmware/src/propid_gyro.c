@@ -119,7 +119,7 @@ static uint32_t fuse_axis(propid_filter_t *filter, uint8_t axis, float measured)
     const propid_derived_t *derived = &filter->derived;
     const uint8_t rate = (uint8_t)(derived->layout.rate + axis);
     const uint8_t bias = (uint8_t)(derived->layout.gyro_bias + axis);
-    const propid_sparse_row_t row = {2u, {rate, bias, 0u, 0u}, {1.0f, 1.0f, 0.0f, 0.0f}};
+    const propid_sparse_row_t row = {2u, {rate, bias}, {1.0f, 1.0f}};
     float innovation = measured - core->state[rate] - core->state[bias];
     float test_ratio = 0.0f;
     propid_scalar_result_t result =

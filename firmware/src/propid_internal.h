@@ -80,7 +80,7 @@ static inline uint8_t propid_first_bias(uint8_t rotor_count)
 
 /* One scalar measurement y = H x + v with a sparse H (propid_scalar_update.c):
  * H has `count` non-zero entries, value[k] in column index[k]. */
-#define PROPID_SPARSE_MAX 4u
+#define PROPID_SPARSE_MAX (PROPID_MAX_ROTORS + 1u)
 typedef struct {
     uint8_t count;
     uint8_t index[PROPID_SPARSE_MAX];

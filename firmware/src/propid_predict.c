@@ -90,14 +90,12 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
     return PROPID_OK;
 }
 
-propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, float rate_next[3],
-                                     float jacobian_dt[3][PROPID_MAX_STATES])
+/* Any vehicle and any optional term, over the sparsity lists. Not inlined: its
+ * frame stays off the quad path's stack. */
+static __attribute__((noinline)) propid_status_t
+predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
+                  float jacobian_dt[3][PROPID_MAX_STATES])
 {
-    if (filter->derived.quad_layout) {
-        return predict_stage_quad(filter->core.state, filter->core.input_speed_sq,
-                                  filter->core.rotor_speed_sq, filter->derived.quad_gyro,
-                                  filter->derived.jac_torque, dt, rate_next, jacobian_dt);
-    }
     const propid_derived_t *derived = &filter->derived;
     const float *state = filter->core.state;
     const uint8_t rotor_count = filter->config.rotor_count;
@@ -106,10 +104,28 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
      * and the latest one: holding only the latest over the interval leaves a model
      * error that, on agile flights, swamps the small process noise the gyro-bias
      * observability needs (docs/math.md, "Input over the interval"). */
-    float speed_sq_dt[PROPID_MAX_ROTORS];
+    float speed_sq_dt[PROPID_MAX_ROTORS + 1u];
     const float half_dt = 0.5f * dt;
     for (uint8_t i = 0; i < rotor_count; ++i) {
         speed_sq_dt[i] = half_dt * (filter->core.input_speed_sq[i] + filter->core.rotor_speed_sq[i]);
+    }
+    speed_sq_dt[rotor_count] = dt; /* the disturbance's input slot (propid_config.c) */
+    /* Rotor inertia (docs/math.md §8): the yaw reaction integrates exactly to
+     * rotor_reaction_i (Omega_i(end) - Omega_i(start)) over the interval; the
+     * rotors' angular momentum h (trapezoid mean of the speeds) makes a
+     * gyroscopic torque linear in omega, A_ab += rotor_gyro[a][b] h. */
+    float reaction[3] = {0.0f, 0.0f, 0.0f};
+    float momentum_dt = 0.0f;
+    if (derived->rotor_inertia_on) {
+        for (uint8_t i = 0; i < rotor_count; ++i) {
+            const float start = sqrtf(filter->core.input_speed_sq[i]);
+            const float end = sqrtf(filter->core.rotor_speed_sq[i]);
+            momentum_dt += derived->rotor_momentum[i] * (start + end);
+            for (uint8_t a = 0; a < 3u; ++a) {
+                reaction[a] += derived->rotor_reaction[i][a] * (end - start);
+            }
+        }
+        momentum_dt *= half_dt;
     }
     const uint8_t n = derived->state_count;
     float check = 0.0f;
@@ -127,8 +143,11 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
         for (uint8_t p = 0; p < rate_count; ++p) {
             const float *coeff = derived->gyro_jacobian[a][column[p]];
             const float entry = dt * (coeff[0] * rate[0] + coeff[1] * rate[1] + coeff[2] * rate[2]);
-            sum += entry * rate[column[p]];
-            g[p] = entry;
+            /* The rotor term is linear in omega: twice its share in this sum,
+             * which holds twice the (quadratic) gyroscopic acceleration. */
+            const float rotor_entry = column[p] < 2u ? derived->rotor_gyro[a][column[p]] * momentum_dt : 0.0f;
+            sum += (entry + 2.0f * rotor_entry) * rate[column[p]];
+            g[p] = entry + rotor_entry;
         }
         gyroscopic[a] = sum;
         /* Rotor torques: G = torque dt u, velocity change sum G x_coefficient. */
@@ -140,7 +159,7 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
             sum += entry * state[column[p]];
             g[p] = entry;
         }
-        rotors[a] = sum;
+        rotors[a] = sum + reaction[a];
         /* The Euler step omega + dt f (the G entries already carry dt). */
         predictor[a] = rate[a] + (rotors[a] + 0.5f * gyroscopic[a]);
     }
@@ -156,8 +175,9 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
             const float *coeff = derived->gyro_jacobian[a][column[p]];
             const float entry = dt * (coeff[0] * predictor[0] + coeff[1] * predictor[1] +
                                       coeff[2] * predictor[2]);
-            corrector += entry * predictor[column[p]];
-            g[p] = 0.5f * (entry + g[p]);
+            const float rotor_entry = column[p] < 2u ? derived->rotor_gyro[a][column[p]] * momentum_dt : 0.0f;
+            corrector += (entry + 2.0f * rotor_entry) * predictor[column[p]];
+            g[p] = 0.5f * (entry + g[p] + rotor_entry); /* g[p] held entry(omega) + rotor_entry */
         }
         rate_next[a] = rate[a] + (rotors[a] + 0.25f * (gyroscopic[a] + corrector));
         /* A non-finite G entry makes its product in a sum non-finite (Inf times
@@ -175,11 +195,22 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
     return PROPID_OK;
 }
 
+propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, float rate_next[3],
+                                     float jacobian_dt[3][PROPID_MAX_STATES])
+{
+    if (filter->derived.quad_layout) {
+        return predict_stage_quad(filter->core.state, filter->core.input_speed_sq,
+                                  filter->core.rotor_speed_sq, filter->derived.quad_gyro,
+                                  filter->derived.jac_torque, dt, rate_next, jacobian_dt);
+    }
+    return predict_stage_any(filter, dt, rate_next, jacobian_dt);
+}
+
 /* The propagation for a given state count, defined twice by this macro: for the
  * quad (n constant, loops over the state fully unrolled by PROPID_UNROLL, addresses
  * folded into immediates) and for any n (plain loops, small code). */
 #define PROPID_DEFINE_PREDICT(name, UNROLL)                                                     \
-static inline __attribute__((always_inline)) void name(                                          \
+static __attribute__((noinline)) void name(                                                      \
                  const propid_derived_t *derived, float (*cov)[PROPID_MAX_STATES], float dt,   \
                  const float jacobian_dt[3][PROPID_MAX_STATES], const uint8_t n)               \
 {                                                                                               \

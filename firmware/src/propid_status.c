@@ -20,6 +20,7 @@ const char *propid_status_name(propid_status_t status)
     case PROPID_ERR_NO_ROTOR_DATA: return "PROPID_ERR_NO_ROTOR_DATA";
     case PROPID_ERR_ROTOR_STALE: return "PROPID_ERR_ROTOR_STALE";
     case PROPID_ERR_NUMERIC: return "PROPID_ERR_NUMERIC";
+    case PROPID_ERR_ACCEL_RANGE: return "PROPID_ERR_ACCEL_RANGE";
     default: return "PROPID_UNKNOWN_STATUS";
     }
 }

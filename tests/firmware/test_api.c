@@ -61,10 +61,10 @@ static void test_status_names_distinct(void)
         PROPID_ERR_NOT_FINITE, PROPID_ERR_ROTOR_SPEED_NEGATIVE, PROPID_ERR_ROTOR_SPEED_RANGE,
         PROPID_ERR_ROTOR_COUNT, PROPID_ERR_ROTOR_INDEX, PROPID_ERR_GYRO_RANGE,
         PROPID_ERR_TIME_BACKWARDS, PROPID_ERR_TIME_JUMP, PROPID_ERR_NO_ROTOR_DATA,
-        PROPID_ERR_ROTOR_STALE, PROPID_ERR_NUMERIC};
+        PROPID_ERR_ROTOR_STALE, PROPID_ERR_NUMERIC, PROPID_ERR_ACCEL_RANGE};
     const uint32_t count = (uint32_t)(sizeof all / sizeof all[0]);
     /* Every rejection code has a counter slot. */
-    TEST_ASSERT_EQUAL_INT(PROPID_REJECT_SLOTS, 1 - (int)PROPID_ERR_NUMERIC);
+    TEST_ASSERT_EQUAL_INT(PROPID_REJECT_SLOTS, 1 - (int)PROPID_ERR_ACCEL_RANGE);
     for (uint32_t i = 0; i < count; ++i) {
         const char *name = propid_status_name(all[i]);
         TEST_ASSERT_NOT_NULL(name);

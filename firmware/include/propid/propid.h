@@ -53,10 +53,11 @@ typedef enum {
     PROPID_ERR_NO_ROTOR_DATA = -12,   /* gyro sample before any rotor speeds were pushed */
     PROPID_ERR_ROTOR_STALE = -13,     /* latest rotor speeds older than config.rotor_stale_us */
     PROPID_ERR_NUMERIC = -14,         /* the step would have produced a non-finite state */
+    PROPID_ERR_ACCEL_RANGE = -15,     /* |specific force| beyond config.accel_range (saturated sensor) */
 } propid_status_t;
 
 /* Number of distinct rejection reasons; counters.rejected[] is indexed by -status. */
-#define PROPID_REJECT_SLOTS 15
+#define PROPID_REJECT_SLOTS 16
 
 /* ------------------------------------------------------------------------ */
 /* Health flags (propid_estimate_t.health)                                  */
@@ -110,6 +111,20 @@ typedef struct {
     float coeff_rel_min;              /* clamp of kf/kf_nom and km/km_nom, e.g. 0.05 */
     float coeff_rel_max;              /* e.g. 5 */
     float converged_rel_std;          /* a coefficient is converged below this relative std */
+
+    /* Optional model terms and sensors (docs/math.md §7-9). Each is off at its
+     * default: the plain filter is the 6 + 2N state one above. */
+    float rotor_inertia[PROPID_MAX_ROTORS]; /* spinning inertia of rotor + motor bell [kg m^2];
+                                               0: its yaw reaction and gyroscopic torque not modelled */
+    uint8_t disturbance_torque;       /* 1: estimate a slowly varying body torque (3 more states) */
+    float disturbance_std0;           /* its prior std, as angular acceleration J^-1 tau [rad/s^2] */
+    float disturbance_walk;           /* its random walk [rad/s^2/sqrt(s)] */
+    float mass;                       /* vehicle mass [kg]; > 0 enables propid_push_accel()
+                                         (1 more state: the accelerometer's z bias) */
+    float accel_noise_std;            /* per-sample noise of the z specific force [m/s^2] */
+    float accel_bias_std0;            /* [m/s^2] */
+    float accel_bias_walk;            /* [m/s^2/sqrt(s)] */
+    float accel_range;                /* larger |specific force| is a saturated sensor [m/s^2] */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -146,10 +161,15 @@ typedef struct {
     uint8_t has_rotor_data;
     uint8_t has_time;
     uint16_t gated_run[3];                            /* consecutive gated samples per axis */
+    uint16_t accel_gated_run;                         /* consecutive gated accelerometer samples */
+    uint8_t has_accel;
+    uint64_t accel_time_us;                           /* time of the latest accepted accelerometer sample */
     uint32_t health;                                  /* PROPID_HEALTH_* (sticky and per-step bits) */
     /* Private (not part of the API contract): */
     float innovation[3];                              /* last gyro innovation per axis [rad/s] */
     float innovation_test_ratio[3];                   /* last innovation^2 / (gate^2 * S) */
+    float accel_innovation;                           /* last accelerometer z innovation [m/s^2] */
+    float accel_innovation_test_ratio;
     uint32_t stale_mark;                              /* counters.rejected[-ROTOR_STALE] at last accepted gyro */
     uint8_t check_row;                                /* next covariance row of the round-robin integrity check */
 } propid_core_t;
@@ -163,6 +183,9 @@ typedef struct {
     uint32_t state_clamps;
     uint32_t resyncs;
     uint32_t rejected[PROPID_REJECT_SLOTS]; /* indexed by -status */
+    uint32_t accel_accepted;
+    uint32_t accel_gated;             /* accelerometer updates skipped by the gate */
+    uint32_t accel_reanchored;        /* z bias re-anchored after too many gated samples */
 } propid_counters_t;
 
 /* State layout: the first index of each block of the scaled state. Fixed blocks
@@ -174,6 +197,8 @@ typedef struct {
     uint8_t thrust;                                 /* kf / kf_nominal (rotor_count) */
     uint8_t drag;                                   /* km / km_nominal (rotor_count) */
     uint8_t gyro_bias;                              /* gyro bias (3) */
+    uint8_t disturbance;                            /* disturbance angular acceleration (3) or none */
+    uint8_t accel_bias;                             /* accelerometer z bias (1) or none */
 } propid_layout_t;
 
 /* Quantities derived once from the configuration (so the step does no divisions). */
@@ -208,6 +233,12 @@ typedef struct {
     uint8_t jac_rotor[3][PROPID_MAX_STATES - 3];    /* coefficient entry: its rotor */
     float jac_torque[3][PROPID_MAX_STATES - 3];     /* coefficient entry: A = jac_torque * u_rotor */
     float gyro_jacobian[3][3][3];                   /* A_ab = sum_c gyro_jacobian[a][b][c] omega_c */
+    uint8_t rotor_inertia_on;                       /* any config.rotor_inertia > 0 */
+    float rotor_momentum[PROPID_MAX_ROTORS];        /* yaw_sign_i J_r,i: h = sum_i rotor_momentum_i Omega_i */
+    float rotor_gyro[3][2];                         /* rotor gyroscopic term: A_ab += rotor_gyro[a][b] h, b < 2 */
+    float rotor_reaction[PROPID_MAX_ROTORS][3];     /* J^-1 z yaw_sign_i J_r,i: delta omega per delta Omega_i */
+    float thrust_per_mass[PROPID_MAX_ROTORS];       /* kf_nominal_i / mass (accelerometer row) */
+    float accel_var;                                /* accel_noise_std^2 */
     float quad_gyro[3][2];                          /* quad layout only: A_ab = quad_gyro[a][p] omega_c for
                                                        entry p (column b) of row a, c the third axis */
 } propid_derived_t;
@@ -246,6 +277,13 @@ propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_
 propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
                                  const float gyro_rad_s[3]);
 
+/* Accelerometer aiding (config.mass > 0, else PROPID_ERR_CONFIG): body specific
+ * force [m/s^2] (what an accelerometer reads: +g on z at hover), any rate, its
+ * own time stamps. Only z is fused: f_z = sum_i kf_i Omega_i^2 / m + b_z, with
+ * the latest rotor speeds. PROPID_OK_GATED when the gate skipped it. */
+propid_status_t propid_push_accel(propid_filter_t *filter, uint64_t time_us,
+                                  const float specific_force[3]);
+
 /* ------------------------------------------------------------------------ */
 /* Outputs                                                                  */
 /* ------------------------------------------------------------------------ */
@@ -267,6 +305,13 @@ typedef struct {
     uint16_t drag_coeff_converging;
     uint16_t drag_coeff_converged;
     uint32_t health;                                  /* PROPID_HEALTH_* */
+    /* Optional blocks (zeros when off). */
+    float disturbance_torque[3];                      /* J * disturbance state [N m] */
+    float disturbance_torque_std[3];                  /* (axes' correlations ignored for a full J) */
+    float accel_bias;                                 /* accelerometer z bias [m/s^2] */
+    float accel_bias_std;
+    float accel_innovation;                           /* last accelerometer z innovation [m/s^2] */
+    float accel_innovation_test_ratio;
 } propid_estimate_t;
 
 propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estimate_t *estimate);
@@ -285,6 +330,16 @@ static inline uint8_t propid_index_drag_coeff(const propid_filter_t *filter, uin
 static inline uint8_t propid_index_gyro_bias(const propid_filter_t *filter, uint8_t axis)
 {
     return (uint8_t)(3u + 2u * filter->config.rotor_count + axis);
+}
+/* PROPID_NO_STATE when the block is not configured. */
+static inline uint8_t propid_index_disturbance(const propid_filter_t *filter, uint8_t axis)
+{
+    const uint8_t first = filter->derived.layout.disturbance;
+    return first == PROPID_NO_STATE ? (uint8_t)PROPID_NO_STATE : (uint8_t)(first + axis);
+}
+static inline uint8_t propid_index_accel_bias(const propid_filter_t *filter)
+{
+    return filter->derived.layout.accel_bias;
 }
 
 #ifdef __cplusplus

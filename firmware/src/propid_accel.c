@@ -1,0 +1,114 @@
+/* The accelerometer as a measurement (docs/math.md §9): when and how it is fused.
+ *
+ * The body-z specific force of a multirotor is its collective thrust over its mass
+ * (rotor thrust is the only large z force; aerodynamic drag of the airframe is
+ * small at the speeds the filter is flown at and is left to the noise and gate):
+ *
+ *   f_z = sum_i kf_i Omega_i^2 / m + b_z + v
+ *       = sum_i (kf_nominal_i / m) u_i kf_rel_i + b_z + v
+ *
+ * linear in the state, H = [(kf_nominal_i / m) u_i at kf_rel_i, 1 at b_z]. It
+ * measures the thrust coefficients' scale directly, independent of the inertia
+ * and the arm lengths through which the gyro sees them. Fused against the
+ * current state with the latest rotor speeds (the coefficients and the bias are
+ * random walks: no prediction to the sample's time is needed). */
+#include <math.h>
+#include <stddef.h>
+
+#include "propid_internal.h"
+
+static propid_status_t reject(propid_filter_t *filter, propid_status_t status)
+{
+    filter->counters.rejected[-(int)status]++;
+    return status;
+}
+
+propid_status_t propid_push_accel(propid_filter_t *filter, uint64_t time_us, const float specific_force[3])
+{
+    if (filter == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    if (filter->magic != PROPID_MAGIC) {
+        return PROPID_ERR_NOT_INITIALISED;
+    }
+    if (specific_force == NULL) {
+        return reject(filter, PROPID_ERR_NULL);
+    }
+    const propid_config_t *config = &filter->config;
+    const propid_derived_t *derived = &filter->derived;
+    if (derived->layout.accel_bias == PROPID_NO_STATE) {
+        return reject(filter, PROPID_ERR_CONFIG); /* no mass configured: not used */
+    }
+    for (uint8_t a = 0; a < 3u; ++a) {
+        if (!isfinite(specific_force[a])) {
+            return reject(filter, PROPID_ERR_NOT_FINITE);
+        }
+    }
+    for (uint8_t a = 0; a < 3u; ++a) {
+        if (fabsf(specific_force[a]) > config->accel_range) {
+            return reject(filter, PROPID_ERR_ACCEL_RANGE);
+        }
+    }
+    propid_core_t *core = &filter->core;
+    if (core->has_accel && time_us <= core->accel_time_us) {
+        return reject(filter, PROPID_ERR_TIME_BACKWARDS);
+    }
+    if (!core->has_rotor_data) {
+        return reject(filter, PROPID_ERR_NO_ROTOR_DATA);
+    }
+    if (time_us > core->rotor_time_us && time_us - core->rotor_time_us > (uint64_t)config->rotor_stale_us) {
+        return reject(filter, PROPID_ERR_ROTOR_STALE);
+    }
+
+    const uint8_t rotor_count = config->rotor_count;
+    const uint8_t bias = derived->layout.accel_bias;
+    propid_sparse_row_t row;
+    row.count = (uint8_t)(rotor_count + 1u);
+    float thrust = 0.0f; /* collective thrust over mass at the current coefficients */
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const uint8_t k = (uint8_t)(derived->layout.thrust + i);
+        row.index[i] = k;
+        row.value[i] = derived->thrust_per_mass[i] * core->rotor_speed_sq[i];
+        thrust += row.value[i] * core->state[k];
+    }
+    row.index[rotor_count] = bias;
+    row.value[rotor_count] = 1.0f;
+    const float measured = specific_force[2];
+    float innovation = measured - thrust - core->state[bias];
+    if (!isfinite(innovation)) {
+        return reject(filter, PROPID_ERR_NUMERIC);
+    }
+
+    /* Accepted: from here on the filter changes. */
+    float test_ratio = 0.0f;
+    propid_scalar_result_t result =
+        propid_scalar_update(filter, &row, innovation, derived->accel_var, derived->gate_sq, &test_ratio);
+    core->accel_innovation = innovation;
+    core->accel_innovation_test_ratio = test_ratio;
+    core->accel_time_us = time_us;
+    core->has_accel = 1u;
+    filter->counters.accel_accepted++;
+    if (result == PROPID_SCALAR_GATED) {
+        if (core->accel_gated_run < config->gate_max_consecutive) {
+            core->accel_gated_run++;
+            filter->counters.accel_gated++;
+            return PROPID_OK_GATED;
+        }
+        /* Persistently outside the gate: the bias, not the sensor, is probably
+         * wrong (a changed mounting, a payload). Re-anchor it on this sample
+         * (prior variance, no correlations) and fuse: the coefficients keep
+         * what the gyro taught them. */
+        core->state[bias] = measured - thrust;
+        propid_cov_reset_state(derived, core, bias);
+        innovation = 0.0f;
+        (void)propid_scalar_update(filter, &row, innovation, derived->accel_var, 0.0f, &test_ratio);
+        filter->counters.accel_reanchored++;
+    }
+    core->accel_gated_run = 0u;
+    const uint32_t clamped = propid_clamp_coefficients(config, core);
+    if (clamped != 0u) {
+        core->health |= PROPID_HEALTH_STATE_CLAMPED;
+        filter->counters.state_clamps += clamped;
+    }
+    return PROPID_OK;
+}

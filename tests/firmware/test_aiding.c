@@ -1,0 +1,312 @@
+/*
+ * The optional model terms and the accelerometer aid (docs/math.md §7-9):
+ * - propid_push_accel(): every rejection code, state and covariance unchanged on
+ *   rejection, PROPID_ERR_CONFIG without a mass;
+ * - accelerometer aiding pins the thrust-coefficient scale in a closed-loop
+ *   hover flight whose coefficients are all 25 % above the nominal;
+ * - disturbance-torque states: a constant body torque (a centre-of-mass offset)
+ *   that the rate loop's integrator cancels biases kf with the states off and
+ *   not with them on;
+ * - rotor inertia: one prediction step carries the yaw reaction
+ *   J^-1 z yaw_sign J_r (Omega(end) - Omega(start)).
+ */
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "propid/propid.h"
+#include "unity.h"
+#include "test_rng.h"
+
+void setUp(void) {}
+void tearDown(void) {}
+
+#define SIM_PI 3.14159265358979f
+#define KF_NOMINAL 5.57e-6f
+#define KM_NOMINAL 1.36e-7f
+#define MASS 1.0f
+#define ARM 0.17f
+
+static propid_filter_t filter; /* static: keeps the test stack small */
+static propid_filter_t before;
+
+static float rng_normal(rng_t *rng)
+{
+    const float u1 = ((float)(rng_next(rng) >> 8) + 0.5f) * (1.0f / 16777216.0f);
+    const float u2 = ((float)(rng_next(rng) >> 8) + 0.5f) * (1.0f / 16777216.0f);
+    return sqrtf(-2.0f * logf(u1)) * cosf(2.0f * SIM_PI * u2);
+}
+
+static void quad_config(propid_config_t *config)
+{
+    propid_config_default(config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(config, 4u, ARM, SIM_PI / 4.0f, 1.0f,
+                                                                 KF_NOMINAL, KM_NOMINAL));
+    propid_config_set_inertia_diag(config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    config->gyro_noise_density = 0.003f / sqrtf(500.0f);
+}
+
+/* ---- accelerometer rejections ------------------------------------------ */
+static void expect_rejected(propid_status_t expected, uint64_t t_us, const float *force)
+{
+    memcpy(&before, &filter, sizeof(filter));
+    TEST_ASSERT_EQUAL_INT(expected, propid_push_accel(&filter, t_us, force));
+    TEST_ASSERT_EQUAL_MEMORY(&before.core, &filter.core, sizeof(filter.core));
+    TEST_ASSERT_EQUAL_UINT32(before.counters.rejected[-(int)expected] + 1u,
+                             filter.counters.rejected[-(int)expected]);
+}
+
+static void test_accel_rejections_leave_the_filter_unchanged(void)
+{
+    propid_config_t config;
+    quad_config(&config);
+    const float hover[3] = {0.0f, 0.0f, 9.81f};
+    /* Without a mass the accelerometer is not used. */
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    TEST_ASSERT_EQUAL_UINT8(PROPID_NO_STATE, propid_index_accel_bias(&filter));
+    expect_rejected(PROPID_ERR_CONFIG, 1000u, hover);
+
+    config.mass = MASS;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    TEST_ASSERT_EQUAL_UINT8(14u, propid_index_accel_bias(&filter));
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_NULL, propid_push_accel(&filter, 1000u, NULL));
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_NULL, propid_push_accel(NULL, 1000u, hover));
+    expect_rejected(PROPID_ERR_NO_ROTOR_DATA, 1000u, hover);
+    const float speeds[4] = {663.0f, 663.0f, 663.0f, 663.0f};
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1000u, speeds, 4u));
+    const float nan_force[3] = {0.0f, NAN, 9.81f};
+    expect_rejected(PROPID_ERR_NOT_FINITE, 1000u, nan_force);
+    const float saturated[3] = {0.0f, 0.0f, 200.0f};
+    expect_rejected(PROPID_ERR_ACCEL_RANGE, 1000u, saturated);
+    expect_rejected(PROPID_ERR_ROTOR_STALE, 1000u + config.rotor_stale_us + 1u, hover);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_accel(&filter, 2000u, hover));
+    expect_rejected(PROPID_ERR_TIME_BACKWARDS, 2000u, hover);
+    expect_rejected(PROPID_ERR_TIME_BACKWARDS, 1500u, hover);
+    propid_counters_t counters;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
+    TEST_ASSERT_EQUAL_UINT32(1u, counters.accel_accepted);
+
+    /* A gated sample (far outside the gate) changes nothing but its counter. */
+    const float absurd[3] = {0.0f, 0.0f, 150.0f};
+    memcpy(&before, &filter, sizeof(filter));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK_GATED, propid_push_accel(&filter, 3000u, absurd));
+    TEST_ASSERT_EQUAL_MEMORY(before.core.state, filter.core.state, sizeof(filter.core.state));
+    TEST_ASSERT_EQUAL_MEMORY(before.core.cov, filter.core.cov, sizeof(filter.core.cov));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
+    TEST_ASSERT_EQUAL_UINT32(1u, counters.accel_gated);
+}
+
+static void test_optional_configuration_is_validated(void)
+{
+    propid_config_t config;
+    quad_config(&config);
+    const char *bad = NULL;
+    config.mass = -1.0f;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("mass", bad);
+    config.mass = MASS;
+    config.accel_noise_std = 0.0f;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("accel_noise_std", bad);
+    quad_config(&config);
+    config.disturbance_torque = 1u;
+    config.disturbance_std0 = NAN;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("disturbance_std0", bad);
+    config.disturbance_torque = 2u;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("disturbance_torque", bad);
+    quad_config(&config);
+    config.rotor_inertia[2] = -1e-6f;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("rotor_inertia", bad);
+    /* Layout: the optional blocks follow the gyro biases, in this order. */
+    quad_config(&config);
+    config.disturbance_torque = 1u;
+    config.mass = MASS;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    TEST_ASSERT_EQUAL_UINT8(18u, filter.derived.state_count);
+    TEST_ASSERT_EQUAL_UINT8(14u, propid_index_disturbance(&filter, 0u));
+    TEST_ASSERT_EQUAL_UINT8(17u, propid_index_accel_bias(&filter));
+}
+
+/* ---- closed-loop hover flight ------------------------------------------- */
+typedef struct {
+    float kf_scale;          /* true kf = kf_scale * nominal (all rotors, +-4 % per rotor) */
+    float disturbance[3];    /* constant body torque [N m] */
+    int accel;               /* push the accelerometer */
+    int disturbance_states;  /* filter option */
+    float duration_s;
+} flight_t;
+
+/* Mean over rotors of kf_est / kf_true at the end. */
+static float fly(const flight_t *flight, float *worst_rotor)
+{
+    propid_config_t config;
+    quad_config(&config);
+    config.rate_process_noise = 0.5f;
+    if (flight->accel) {
+        config.mass = MASS;
+        config.accel_noise_std = 0.2f;
+    }
+    config.disturbance_torque = (uint8_t)flight->disturbance_states;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    const float per_rotor[4] = {1.04f, 0.97f, 1.02f, 0.96f};
+    float kf[4];
+    float km[4];
+    for (uint8_t i = 0; i < 4u; ++i) {
+        kf[i] = flight->kf_scale * per_rotor[i] * KF_NOMINAL;
+        km[i] = per_rotor[3u - i] * KM_NOMINAL;
+    }
+    const float inertia[3] = {3.65e-3f, 3.68e-3f, 7.03e-3f};
+    float rate[3] = {0.0f, 0.0f, 0.0f};
+    float integral[3] = {0.0f, 0.0f, 0.0f};
+    const float bias[3] = {0.01f, -0.02f, 0.005f};
+    rng_t rng = {12345u};
+    const float dt = 0.002f;
+    const uint32_t steps = (uint32_t)(flight->duration_s / dt);
+    float speed[4];
+    for (uint32_t step = 0; step < steps; ++step) {
+        const float t = (float)step * dt;
+        /* Rate loop with an integrator (cancels the disturbance), nominal mixer,
+         * plus a multi-sine angular-acceleration excitation and a thrust swing. */
+        float accel_cmd[3];
+        for (uint8_t a = 0; a < 3u; ++a) {
+            const float phase = (float)a * 1.3f;
+            const float excitation = (a < 2u ? 6.0f : 2.0f) *
+                                     (sinf(2.0f * SIM_PI * 1.1f * t + phase) + 0.6f * sinf(2.0f * SIM_PI * 2.9f * t + 2.0f * phase));
+            integral[a] += rate[a] * dt;
+            accel_cmd[a] = excitation - 8.0f * rate[a] - 10.0f * integral[a];
+        }
+        const float collective = MASS * 9.81f * (1.0f + 0.25f * sinf(2.0f * SIM_PI * 0.7f * t));
+        float u[4];
+        for (uint8_t i = 0; i < 4u; ++i) {
+            const propid_rotor_config_t *rotor = &config.rotor[i];
+            /* Nominal allocation: thrust share plus roll/pitch/yaw torques. */
+            const float tx = inertia[0] * accel_cmd[0];
+            const float ty = inertia[1] * accel_cmd[1];
+            const float tz = inertia[2] * accel_cmd[2];
+            const float share = collective / 4.0f +
+                                tx / (4.0f * rotor->position_m[1]) - ty / (4.0f * rotor->position_m[0]) +
+                                rotor->yaw_sign * tz * KF_NOMINAL / (4.0f * KM_NOMINAL);
+            u[i] = share > 0.0f ? share / KF_NOMINAL : 0.0f;
+            speed[i] = sqrtf(u[i]);
+        }
+        /* Plant over dt (explicit Euler at 2 ms; the filter's model is the same). */
+        float torque[3] = {flight->disturbance[0], flight->disturbance[1], flight->disturbance[2]};
+        float thrust = 0.0f;
+        for (uint8_t i = 0; i < 4u; ++i) {
+            const propid_rotor_config_t *rotor = &config.rotor[i];
+            torque[0] += kf[i] * u[i] * rotor->position_m[1];
+            torque[1] -= kf[i] * u[i] * rotor->position_m[0];
+            torque[2] += rotor->yaw_sign * km[i] * u[i];
+            thrust += kf[i] * u[i];
+        }
+        const float gyroscopic[3] = {(inertia[2] - inertia[1]) * rate[1] * rate[2],
+                                     (inertia[0] - inertia[2]) * rate[2] * rate[0],
+                                     (inertia[1] - inertia[0]) * rate[0] * rate[1]};
+        for (uint8_t a = 0; a < 3u; ++a) {
+            rate[a] += dt * (torque[a] - gyroscopic[a]) / inertia[a];
+        }
+        const uint64_t t_us = 1000u + (uint64_t)(step + 1u) * 2000u;
+        (void)propid_push_rotor_speeds(&filter, t_us - 2000u, speed, 4u);
+        float gyro[3];
+        for (uint8_t a = 0; a < 3u; ++a) {
+            gyro[a] = rate[a] + bias[a] + 0.003f * rng_normal(&rng);
+        }
+        const propid_status_t status = propid_push_gyro(&filter, t_us, gyro);
+        TEST_ASSERT_TRUE(status >= 0);
+        if (flight->accel && step % 2u == 0u) {
+            const float force[3] = {0.0f, 0.0f, thrust / MASS + 0.1f + 0.2f * rng_normal(&rng)};
+            TEST_ASSERT_TRUE(propid_push_accel(&filter, t_us, force) >= 0);
+        }
+    }
+    propid_estimate_t estimate;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    float mean = 0.0f;
+    float worst = 0.0f;
+    for (uint8_t i = 0; i < 4u; ++i) {
+        const float ratio = estimate.thrust_coeff[i] / kf[i];
+        mean += 0.25f * ratio;
+        worst = fabsf(ratio - 1.0f) > worst ? fabsf(ratio - 1.0f) : worst;
+    }
+    if (worst_rotor != NULL) {
+        *worst_rotor = worst;
+    }
+#ifdef PROPID_TEST_VERBOSE
+    printf("kf ratio %.4f worst %.4f accel bias %.4f\n", (double)mean, (double)worst,
+           (double)estimate.accel_bias);
+#endif
+    return mean;
+}
+
+static void test_accelerometer_pins_the_thrust_scale(void)
+{
+    flight_t flight = {1.25f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f};
+    float worst = 0.0f;
+    const float with_accel = fly(&flight, &worst);
+    TEST_ASSERT_FLOAT_WITHIN(0.02f, 1.0f, with_accel);
+    TEST_ASSERT_TRUE(worst < 0.05f);
+    propid_estimate_t estimate;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    TEST_ASSERT_FLOAT_WITHIN(0.05f, 0.1f, estimate.accel_bias);
+}
+
+static void test_disturbance_states_remove_the_closed_loop_bias(void)
+{
+    /* A 1 cm centre-of-mass offset along x at 1 kg: 0.098 N m about y. */
+    flight_t flight = {1.0f, {0.0f, 0.098f, 0.0f}, 0, 0, 20.0f};
+    float worst_off = 0.0f;
+    float worst_on = 0.0f;
+    const float off = fly(&flight, &worst_off);
+    flight.disturbance_states = 1;
+    const float on = fly(&flight, &worst_on);
+    propid_estimate_t estimate;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    TEST_ASSERT_TRUE(worst_off > 0.05f);  /* biased without the states */
+    TEST_ASSERT_TRUE(worst_on < 0.03f);   /* unbiased with them */
+    TEST_ASSERT_FLOAT_WITHIN(0.01f, 1.0f, on);
+    TEST_ASSERT_FLOAT_WITHIN(0.015f, 0.098f, estimate.disturbance_torque[1]);
+    (void)off;
+}
+
+/* ---- rotor inertia: the yaw reaction in one step ------------------------ */
+static float yaw_rate_after_spin_up(float rotor_inertia)
+{
+    propid_config_t config;
+    quad_config(&config);
+    config.gyro_noise_density = 10.0f; /* the update barely moves the state */
+    for (uint8_t i = 0; i < 4u; ++i) {
+        config.rotor_inertia[i] = rotor_inertia;
+    }
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    const float zero[3] = {0.0f, 0.0f, 0.0f};
+    const float start[4] = {600.0f, 600.0f, 600.0f, 600.0f};
+    const float end[4] = {700.0f, 600.0f, 600.0f, 600.0f};
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1000u, start, 4u));
+    TEST_ASSERT_TRUE(propid_push_gyro(&filter, 1000u, zero) >= 0);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 3000u, end, 4u));
+    TEST_ASSERT_TRUE(propid_push_gyro(&filter, 3000u, zero) >= 0);
+    return filter.core.state[2];
+}
+
+static void test_rotor_inertia_yaw_reaction(void)
+{
+    const float rotor_inertia = 3.0e-5f;
+    const float without = yaw_rate_after_spin_up(0.0f);
+    const float with = yaw_rate_after_spin_up(rotor_inertia);
+    /* Rotor 0 has yaw_sign +1: yaw_sign J_r (Omega_end - Omega_start) / Jzz. */
+    const float expected = 1.0f * rotor_inertia * 100.0f / 7.03e-3f;
+    TEST_ASSERT_FLOAT_WITHIN(0.01f * expected, expected, with - without);
+}
+
+int main(void)
+{
+    UNITY_BEGIN();
+    RUN_TEST(test_accel_rejections_leave_the_filter_unchanged);
+    RUN_TEST(test_optional_configuration_is_validated);
+    RUN_TEST(test_rotor_inertia_yaw_reaction);
+    RUN_TEST(test_accelerometer_pins_the_thrust_scale);
+    RUN_TEST(test_disturbance_states_remove_the_closed_loop_bias);
+    return UNITY_END();
+}
