@@ -42,8 +42,10 @@ if TYPE_CHECKING:
 MAX_ROTORS = 8
 RATE_STATES = 3
 BIAS_STATES = 3
-MAX_STATES = RATE_STATES + 2 * MAX_ROTORS + BIAS_STATES
-REJECT_SLOTS = 15
+DISTURBANCE_STATES = 3
+ACCEL_BIAS_STATES = 1
+MAX_STATES = RATE_STATES + 2 * MAX_ROTORS + BIAS_STATES + DISTURBANCE_STATES + ACCEL_BIAS_STATES
+REJECT_SLOTS = 16
 
 # propid_status_t (propid.h). Negative = rejected, filter state unchanged.
 STATUS = {
@@ -63,6 +65,7 @@ STATUS = {
     "PROPID_ERR_NO_ROTOR_DATA": -12,
     "PROPID_ERR_ROTOR_STALE": -13,
     "PROPID_ERR_NUMERIC": -14,
+    "PROPID_ERR_ACCEL_RANGE": -15,
 }
 STATUS_NAME = {code: name for name, code in STATUS.items()}
 globals().update(STATUS)  # PROPID_OK, PROPID_ERR_TIME_JUMP, ... as module constants
@@ -119,6 +122,18 @@ _TUNING_FIELDS = [
     ("coeff_rel_max", ctypes.c_float),
     ("converged_rel_std", ctypes.c_float),
 ]
+# The optional terms after them (propid_config_t, same order): rotor_inertia[] first.
+_OPTIONAL_FIELDS = [
+    ("disturbance_torque", ctypes.c_uint8),
+    ("disturbance_std0", ctypes.c_float),
+    ("disturbance_walk", ctypes.c_float),
+    ("mass", ctypes.c_float),
+    ("accel_noise_std", ctypes.c_float),
+    ("accel_bias_std0", ctypes.c_float),
+    ("accel_bias_walk", ctypes.c_float),
+    ("accel_range", ctypes.c_float),
+]
+_INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32)
 
 
 class ConfigStruct(ctypes.Structure):
@@ -126,7 +141,7 @@ class ConfigStruct(ctypes.Structure):
         ("rotor_count", ctypes.c_uint8),
         ("rotor", RotorConfigStruct * MAX_ROTORS),
         ("inertia", (ctypes.c_float * 3) * 3),
-    ] + _TUNING_FIELDS
+    ] + _TUNING_FIELDS + [("rotor_inertia", ctypes.c_float * MAX_ROTORS)] + _OPTIONAL_FIELDS
 
 
 class EstimateStruct(ctypes.Structure):
@@ -148,6 +163,12 @@ class EstimateStruct(ctypes.Structure):
         ("drag_coeff_converging", ctypes.c_uint16),
         ("drag_coeff_converged", ctypes.c_uint16),
         ("health", ctypes.c_uint32),
+        ("disturbance_torque", ctypes.c_float * 3),
+        ("disturbance_torque_std", ctypes.c_float * 3),
+        ("accel_bias", ctypes.c_float),
+        ("accel_bias_std", ctypes.c_float),
+        ("accel_innovation", ctypes.c_float),
+        ("accel_innovation_test_ratio", ctypes.c_float),
     ]
 
 
@@ -161,6 +182,9 @@ class CountersStruct(ctypes.Structure):
         ("state_clamps", ctypes.c_uint32),
         ("resyncs", ctypes.c_uint32),
         ("rejected", ctypes.c_uint32 * REJECT_SLOTS),
+        ("accel_accepted", ctypes.c_uint32),
+        ("accel_gated", ctypes.c_uint32),
+        ("accel_reanchored", ctypes.c_uint32),
     ]
 
 
@@ -189,6 +213,15 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "coeff_rel_min": 0.05,
     "coeff_rel_max": 5.0,
     "converged_rel_std": 0.05,
+    # Optional terms (off: disturbance_torque 0, mass 0; docs/math.md §7-9).
+    "disturbance_torque": 0,
+    "disturbance_std0": 20.0,
+    "disturbance_walk": 0.2,
+    "mass": 0.0,
+    "accel_noise_std": 0.5,
+    "accel_bias_std0": 0.5,
+    "accel_bias_walk": 1.0e-3,
+    "accel_range": 160.0,
 }
 
 
@@ -227,6 +260,15 @@ class FilterConfig:
     coeff_rel_min: float = DEFAULT_TUNING["coeff_rel_min"]
     coeff_rel_max: float = DEFAULT_TUNING["coeff_rel_max"]
     converged_rel_std: float = DEFAULT_TUNING["converged_rel_std"]
+    rotor_inertia: Optional[list] = None  # per rotor [kg m^2]; None or zeros: not modelled
+    disturbance_torque: int = DEFAULT_TUNING["disturbance_torque"]
+    disturbance_std0: float = DEFAULT_TUNING["disturbance_std0"]
+    disturbance_walk: float = DEFAULT_TUNING["disturbance_walk"]
+    mass: float = DEFAULT_TUNING["mass"]
+    accel_noise_std: float = DEFAULT_TUNING["accel_noise_std"]
+    accel_bias_std0: float = DEFAULT_TUNING["accel_bias_std0"]
+    accel_bias_walk: float = DEFAULT_TUNING["accel_bias_walk"]
+    accel_range: float = DEFAULT_TUNING["accel_range"]
 
     @property
     def rotor_count(self) -> int:
@@ -234,7 +276,8 @@ class FilterConfig:
 
     @property
     def state_count(self) -> int:
-        return 6 + 2 * self.rotor_count
+        return (6 + 2 * self.rotor_count + (DISTURBANCE_STATES if self.disturbance_torque else 0)
+                + (ACCEL_BIAS_STATES if self.mass > 0.0 else 0))
 
     def with_overrides(self, **overrides: Any) -> "FilterConfig":
         """A copy with some tuning fields changed (unknown names raise UserError)."""
@@ -296,9 +339,14 @@ class FilterConfig:
         for a in range(3):
             for b in range(3):
                 s.inertia[a][b] = float(self.inertia[a][b])
-        for name, ctype in _TUNING_FIELDS:
+        for name, ctype in _TUNING_FIELDS + _OPTIONAL_FIELDS:
             value = getattr(self, name)
-            setattr(s, name, int(value) if ctype in (ctypes.c_uint16, ctypes.c_uint32) else float(value))
+            setattr(s, name, int(value) if ctype in _INTEGER_TYPES else float(value))
+        if self.rotor_inertia is not None:
+            if len(self.rotor_inertia) != self.rotor_count:
+                raise UserError(f"rotor_inertia has {len(self.rotor_inertia)} values for {self.rotor_count} rotors")
+            for i, value in enumerate(self.rotor_inertia):
+                s.rotor_inertia[i] = float(value)
         return s
 
 
@@ -337,6 +385,12 @@ class Estimate:
     drag_coeff_converged: int
     health: int
     health_flags: list = field(default_factory=list)
+    disturbance_torque: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    disturbance_torque_std: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    accel_bias: float = 0.0
+    accel_bias_std: float = 0.0
+    accel_innovation: float = 0.0
+    accel_innovation_test_ratio: float = 0.0
 
 
 # ---------------------------------------------------------------------------
@@ -405,6 +459,8 @@ def _declare(lib: ctypes.CDLL) -> None:
                                              ctypes.POINTER(ctypes.c_float), ctypes.c_uint8]
     lib.propid_push_gyro.restype = ctypes.c_int
     lib.propid_push_gyro.argtypes = [c_filter_p, ctypes.c_uint64, ctypes.POINTER(ctypes.c_float)]
+    lib.propid_push_accel.restype = ctypes.c_int
+    lib.propid_push_accel.argtypes = [c_filter_p, ctypes.c_uint64, ctypes.POINTER(ctypes.c_float)]
     lib.propid_get_estimate.restype = ctypes.c_int
     lib.propid_get_estimate.argtypes = [c_filter_p, ctypes.POINTER(EstimateStruct)]
     lib.propid_get_counters.restype = ctypes.c_int
@@ -446,7 +502,7 @@ def c_default_tuning(path: Optional[os.PathLike] = None) -> dict:
     lib = load_library(path)
     s = ConfigStruct()
     lib.propid_config_default(ctypes.byref(s))
-    return {name: getattr(s, name) for name, _ in _TUNING_FIELDS}
+    return {name: getattr(s, name) for name, _ in _TUNING_FIELDS + _OPTIONAL_FIELDS}
 
 
 # ---------------------------------------------------------------------------
@@ -474,6 +530,7 @@ class CFilter:
         self._rotor_count = config.rotor_count
         self._speeds = (ctypes.c_float * MAX_ROTORS)()
         self._gyro = (ctypes.c_float * 3)()
+        self._accel = (ctypes.c_float * 3)()
 
     @staticmethod
     def status_name(code: int) -> str:
@@ -493,6 +550,14 @@ class CFilter:
             raise ValueError("gyro needs 3 components [rad/s]")
         self._gyro[0], self._gyro[1], self._gyro[2] = float(gyro[0]), float(gyro[1]), float(gyro[2])
         return self._lib.propid_push_gyro(self._handle, int(t_us), self._gyro)
+
+    def push_accel(self, t_us: int, specific_force: Sequence[float]) -> int:
+        """Body specific force [m/s^2] (z is fused); needs config.mass > 0."""
+        if len(specific_force) != 3:
+            raise ValueError("specific force needs 3 components [m/s^2]")
+        for a in range(3):
+            self._accel[a] = float(specific_force[a])
+        return self._lib.propid_push_accel(self._handle, int(t_us), self._accel)
 
     def reset(self) -> int:
         return self._lib.propid_reset(self._handle)
@@ -527,6 +592,11 @@ class CFilter:
             drag_coeff_converging=int(e.drag_coeff_converging),
             drag_coeff_converged=int(e.drag_coeff_converged),
             health=int(e.health), health_flags=health_names(int(e.health)),
+            disturbance_torque=arr(e.disturbance_torque, 3),
+            disturbance_torque_std=arr(e.disturbance_torque_std, 3),
+            accel_bias=float(e.accel_bias), accel_bias_std=float(e.accel_bias_std),
+            accel_innovation=float(e.accel_innovation),
+            accel_innovation_test_ratio=float(e.accel_innovation_test_ratio),
         )
 
     def counters(self) -> dict:
@@ -542,6 +612,9 @@ class CFilter:
             "state_clamps": int(c.state_clamps),
             "resyncs": int(c.resyncs),
             "rejected": rejected,
+            "accel_accepted": int(c.accel_accepted),
+            "accel_gated": int(c.accel_gated),
+            "accel_reanchored": int(c.accel_reanchored),
         }
 
     def scaled_state(self) -> tuple[np.ndarray, np.ndarray]:

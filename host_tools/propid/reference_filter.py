@@ -41,14 +41,24 @@ class ReferenceFilter:
     def __init__(self, config: FilterConfig):
         self.config = config
         self.rotor_count = n_rot = config.rotor_count
-        self.n = 6 + 2 * n_rot
         self.first_drag = 3 + n_rot
         self.first_bias = 3 + 2 * n_rot
+        # Optional blocks after the gyro biases (propid_layout_t): disturbance (3), accel-z bias (1).
+        nxt = self.first_bias + 3
+        self.first_disturbance = None
+        self.accel_bias = None
+        if int(config.disturbance_torque):
+            self.first_disturbance, nxt = nxt, nxt + 3
+        if float(config.mass) > 0.0:
+            self.accel_bias, nxt = nxt, nxt + 1
+        self.n = nxt
         c = {name: _f32(getattr(config, name)) for name in (
             "rate_std0", "thrust_coeff_rel_std0", "drag_coeff_rel_std0", "gyro_bias_std0",
             "gyro_noise_density", "gyro_sample_rate_hz", "rate_process_noise",
             "thrust_coeff_rel_walk", "drag_coeff_rel_walk", "gyro_bias_walk", "gate_sigma",
-            "max_rotor_speed", "gyro_range", "coeff_rel_min", "coeff_rel_max", "converged_rel_std")}
+            "max_rotor_speed", "gyro_range", "coeff_rel_min", "coeff_rel_max", "converged_rel_std",
+            "disturbance_std0", "disturbance_walk", "mass", "accel_noise_std", "accel_bias_std0",
+            "accel_bias_walk", "accel_range")}
         self.c = c
         self.gate_max_consecutive = int(config.gate_max_consecutive)
         self.rotor_stale_us = int(config.rotor_stale_us)
@@ -65,6 +75,15 @@ class ReferenceFilter:
         arm = np.stack([positions[:, 1], -positions[:, 0], np.zeros(n_rot)], axis=1)
         self.thrust_torque = (arm @ self.inertia_inv.T) * self.kf_nominal[:, None]
         self.drag_torque = np.outer(yaw * self.km_nominal, self.inertia_inv[:, 2])
+        # Rotor inertia (docs/math.md §8): h = sum_i yaw_sign_i J_r,i Omega_i; yaw reaction
+        # J^-1 z yaw_sign_i J_r,i dOmega_i/dt; gyroscopic torque h (omega_y, -omega_x, 0).
+        rotor_inertia = np.array([_f32(v) for v in (config.rotor_inertia or [0.0] * n_rot)])
+        self.rotor_inertia_on = bool(np.any(rotor_inertia > 0.0))
+        self.rotor_momentum = yaw * rotor_inertia
+        self.rotor_reaction = np.outer(self.rotor_momentum, self.inertia_inv[:, 2])
+        if c["mass"] > 0.0:
+            self.thrust_per_mass = self.kf_nominal / c["mass"]
+            self.accel_var = c["accel_noise_std"] ** 2
 
         self.gyro_var = c["gyro_noise_density"] ** 2 * c["gyro_sample_rate_hz"]
         if c["gate_sigma"] > 0.0:
@@ -90,9 +109,15 @@ class ReferenceFilter:
             elif k < self.first_bias:
                 prior, psd, floor, ceiling = (c["drag_coeff_rel_std0"] ** 2,
                                               c["drag_coeff_rel_walk"] ** 2, 1e-10, coeff_ceiling)
-            else:
+            elif k < self.first_bias + 3:
                 prior, psd, floor, ceiling = (c["gyro_bias_std0"] ** 2, c["gyro_bias_walk"] ** 2,
                                               1e-14, c["gyro_range"] ** 2)
+            elif k == self.accel_bias:
+                prior, psd, floor, ceiling = (c["accel_bias_std0"] ** 2, c["accel_bias_walk"] ** 2,
+                                              1e-12, c["accel_range"] ** 2)
+            else:  # disturbance
+                prior, psd, floor = c["disturbance_std0"] ** 2, c["disturbance_walk"] ** 2, 1e-12
+                ceiling = 100.0 * prior
             self.prior_var[k] = prior
             self.process_psd[k] = psd
             self.var_floor[k] = floor
@@ -100,7 +125,8 @@ class ReferenceFilter:
 
         self.counters_data = {
             "gyro_accepted": 0, "rotor_accepted": 0, "axis_gated": [0, 0, 0], "gate_reopened": 0,
-            "cov_repairs": 0, "state_clamps": 0, "resyncs": 0, "rejected": [0] * 15,
+            "cov_repairs": 0, "state_clamps": 0, "resyncs": 0, "rejected": [0] * 16,
+            "accel_accepted": 0, "accel_gated": 0, "accel_reanchored": 0,
         }
         self._core_to_prior()
 
@@ -117,6 +143,11 @@ class ReferenceFilter:
         self.has_rotor_data = False
         self.has_time = False
         self.gated_run = [0, 0, 0]
+        self.accel_gated_run = 0
+        self.has_accel = False
+        self.accel_time_us = 0
+        self.accel_innovation = 0.0
+        self.accel_innovation_test_ratio = 0.0
         self.health = 0
         self.innovation = np.zeros(3)
         self.innovation_test_ratio = np.zeros(3)
@@ -156,8 +187,9 @@ class ReferenceFilter:
         return code
 
     # ------------------------------------------------------------------ model
-    def rate_derivative_and_jacobian(self, state: np.ndarray, speed_sq: np.ndarray):
-        """Angular acceleration and its Jacobian rows (3 x (3 + 2N))."""
+    def rate_derivative_and_jacobian(self, state: np.ndarray, speed_sq: np.ndarray, momentum_z: float = 0.0):
+        """Angular acceleration and its Jacobian rows (3 x n); momentum_z = sum_i yaw_sign_i J_r,i
+        Omega_i (rotor inertia; the yaw reaction is added by the caller, it does not depend on x)."""
         n_rot = self.rotor_count
         rate = state[:3]
         kf_rel = state[3:3 + n_rot]
@@ -169,10 +201,20 @@ class ReferenceFilter:
                     + (km_rel * speed_sq) @ self.drag_torque)
         # d(omega x J omega)/d omega = [omega]x J - [J omega]x
         dgyro = _skew(rate) @ self.inertia - _skew(momentum)
-        rows = np.zeros((3, 3 + 2 * n_rot))
+        rows = np.zeros((3, self.n))
         rows[:, :3] = -(self.inertia_inv @ dgyro)
         rows[:, 3:3 + n_rot] = (self.thrust_torque * speed_sq[:, None]).T
-        rows[:, 3 + n_rot:] = (self.drag_torque * speed_sq[:, None]).T
+        rows[:, 3 + n_rot:3 + 2 * n_rot] = (self.drag_torque * speed_sq[:, None]).T
+        if momentum_z != 0.0:
+            rotor_gyro = np.zeros((3, 3))
+            rotor_gyro[:, 0] = -self.inertia_inv[:, 1] * momentum_z
+            rotor_gyro[:, 1] = self.inertia_inv[:, 0] * momentum_z
+            rate_dot = rate_dot + rotor_gyro @ rate
+            rows[:, :3] += rotor_gyro
+        if self.first_disturbance is not None:
+            d = self.first_disturbance
+            rate_dot = rate_dot + state[d:d + 3]
+            rows[:, d:d + 3] = np.eye(3)
         return rate_dot, rows
 
     # ------------------------------------------------------------------ covariance
@@ -270,16 +312,21 @@ class ReferenceFilter:
         if not anchor:
             # Trapezoid input over the interval, as the C filter (docs/math.md).
             speed_sq = 0.5 * (self.input_speed_sq + self.rotor_speed_sq)
-            rate_dot, rows = self.rate_derivative_and_jacobian(self.state, speed_sq)
+            momentum_z, reaction = 0.0, np.zeros(3)
+            if self.rotor_inertia_on:
+                start, end = np.sqrt(self.input_speed_sq), np.sqrt(self.rotor_speed_sq)
+                momentum_z = float(self.rotor_momentum @ (0.5 * (start + end)))
+                reaction = (end - start) @ self.rotor_reaction
+            rate_dot, rows = self.rate_derivative_and_jacobian(self.state, speed_sq, momentum_z)
             # Heun (docs/math.md §2): f again at the Euler predictor, averaged. Only
             # the gyroscopic part differs between the two (the rotor part does not
             # depend on omega), so this is the C filter's "Heun on the gyroscopic
             # term"; the Jacobian is the mean of the two (the gyroscopic Jacobian at
             # the midpoint, as it is linear in omega; the rotor columns are equal).
             predicted = self.state.copy()
-            predicted[:3] = self.state[:3] + dt * rate_dot
-            rate_dot_next, rows_next = self.rate_derivative_and_jacobian(predicted, speed_sq)
-            rate_next = self.state[:3] + dt * 0.5 * (rate_dot + rate_dot_next)
+            predicted[:3] = self.state[:3] + dt * rate_dot + reaction
+            rate_dot_next, rows_next = self.rate_derivative_and_jacobian(predicted, speed_sq, momentum_z)
+            rate_next = self.state[:3] + dt * 0.5 * (rate_dot + rate_dot_next) + reaction
             jac_dt = dt * 0.5 * (rows + rows_next)
             if not (np.all(np.isfinite(rate_next)) and np.all(np.isfinite(jac_dt))
                     and np.all(np.isfinite(self.state))):
@@ -295,9 +342,9 @@ class ReferenceFilter:
         self.check_row = 0 if self.check_row + 1 >= self.n else self.check_row + 1
 
         if not anchor:
-            n, m = self.n, self.n - 3
+            n = self.n
             f = np.eye(n)
-            f[:3, :m] += jac_dt
+            f[:3, :] += jac_dt
             self.cov = f @ self.cov @ f.T
             self.cov = 0.5 * (self.cov + self.cov.T)
             # Q dt and the rounding loading (C: PROPID_VAR_LOADING, docs/math.md §2).
@@ -309,13 +356,7 @@ class ReferenceFilter:
         for axis in range(3):
             gated |= self._update_axis(axis, y[axis])
 
-        lo, hi = self.c["coeff_rel_min"], self.c["coeff_rel_max"]
-        coeffs = self.state[3:self.first_bias]
-        clamped = int(np.sum(coeffs < lo) + np.sum(coeffs > hi))
-        self.state[3:self.first_bias] = np.clip(coeffs, lo, hi)
-        if clamped:
-            self.health |= HEALTH["STATE_CLAMPED"]
-            self.counters_data["state_clamps"] += clamped
+        self._clamp()
         if self._enforce_bounds():
             self.health |= HEALTH["COV_REPAIRED"]
             self.counters_data["cov_repairs"] += 1
@@ -334,7 +375,8 @@ class ReferenceFilter:
         innovation_var = cov_h[axis] + cov_h[bias] + self.gyro_var
         # S >= R up to the rounding of the sum (C: PROPID_ROUNDING_TOL): var(omega + b)
         # within it of zero is zero, not a fault.
-        rounding = ROUNDING_TOL * (self.cov[axis, axis] + self.cov[bias, bias])
+        # (C, propid_scalar_update: count * sum_k h_k^2 P_kk with H = e_rate + e_bias, count 2)
+        rounding = ROUNDING_TOL * 2.0 * (self.cov[axis, axis] + self.cov[bias, bias])
         if innovation_var >= self.gyro_var - rounding:
             innovation_var = max(innovation_var, self.gyro_var)
         else:
@@ -362,10 +404,81 @@ class ReferenceFilter:
             self.counters_data["gate_reopened"] += 1
             self.health |= HEALTH["GATE_REOPENED"]
         self.gated_run[axis] = 0
+        self._fuse(cov_h, innovation, innovation_var)
+        return False
+
+    def _fuse(self, cov_h: np.ndarray, innovation: float, innovation_var: float) -> None:
+        """The scalar update's write (C: propid_scalar_update): state, covariance, variance bounds."""
         self.state += cov_h * (innovation / innovation_var)
         self.cov -= np.outer(cov_h, cov_h) / innovation_var
         self.cov = 0.5 * (self.cov + self.cov.T)
-        return False
+        if self._enforce_bounds():
+            self.health |= HEALTH["COV_REPAIRED"]
+            self.counters_data["cov_repairs"] += 1
+
+    def push_accel(self, t_us: int, specific_force: Sequence[float]) -> int:
+        """Mirror of propid_push_accel (propid_accel.c): z specific force = sum kf_i u_i / m + b_z."""
+        if self.accel_bias is None:
+            return self._reject("PROPID_ERR_CONFIG")
+        f = [_f32(v) for v in specific_force]
+        if not all(math.isfinite(v) for v in f):
+            return self._reject("PROPID_ERR_NOT_FINITE")
+        if any(abs(v) > self.c["accel_range"] for v in f):
+            return self._reject("PROPID_ERR_ACCEL_RANGE")
+        if self.has_accel and t_us <= self.accel_time_us:
+            return self._reject("PROPID_ERR_TIME_BACKWARDS")
+        if not self.has_rotor_data:
+            return self._reject("PROPID_ERR_NO_ROTOR_DATA")
+        if t_us > self.rotor_time_us and t_us - self.rotor_time_us > self.rotor_stale_us:
+            return self._reject("PROPID_ERR_ROTOR_STALE")
+        n_rot, b = self.rotor_count, self.accel_bias
+        h = np.zeros(self.n)
+        h[3:3 + n_rot] = self.thrust_per_mass * self.rotor_speed_sq
+        h[b] = 1.0
+        thrust = float(h[3:3 + n_rot] @ self.state[3:3 + n_rot])
+        innovation = f[2] - thrust - self.state[b]
+        if not math.isfinite(innovation):
+            return self._reject("PROPID_ERR_NUMERIC")
+        idx = np.flatnonzero(h)
+        scale = len(idx) * float(np.sum(h[idx] ** 2 * np.diag(self.cov)[idx]))
+        cov_h = self.cov @ h
+        innovation_var = float(h @ cov_h) + self.accel_var
+        if not (innovation_var >= self.accel_var - ROUNDING_TOL * scale):
+            if self._repair():
+                self.health |= HEALTH["COV_REPAIRED"]
+                self.counters_data["cov_repairs"] += 1
+            cov_h = self.cov @ h
+            innovation_var = float(h @ cov_h) + self.accel_var
+        innovation_var = max(innovation_var, self.accel_var)
+        self.accel_innovation = innovation
+        self.accel_innovation_test_ratio = innovation * innovation / innovation_var * self.inv_gate_sq
+        self.accel_time_us = int(t_us)
+        self.has_accel = True
+        self.counters_data["accel_accepted"] += 1
+        if self.gate_sq > 0.0 and innovation * innovation > self.gate_sq * innovation_var:
+            if self.accel_gated_run < self.gate_max_consecutive:
+                self.accel_gated_run += 1
+                self.counters_data["accel_gated"] += 1
+                return STATUS["PROPID_OK_GATED"]
+            self.state[b] = f[2] - thrust
+            self._reset_state(b)
+            cov_h = self.cov @ h
+            innovation_var = max(float(h @ cov_h) + self.accel_var, self.accel_var)
+            innovation = 0.0
+            self.counters_data["accel_reanchored"] += 1
+        self.accel_gated_run = 0
+        self._fuse(cov_h, innovation, innovation_var)
+        self._clamp()
+        return STATUS["PROPID_OK"]
+
+    def _clamp(self) -> None:
+        lo, hi = self.c["coeff_rel_min"], self.c["coeff_rel_max"]
+        coeffs = self.state[3:self.first_bias]
+        clamped = int(np.sum(coeffs < lo) + np.sum(coeffs > hi))
+        self.state[3:self.first_bias] = np.clip(coeffs, lo, hi)
+        if clamped:
+            self.health |= HEALTH["STATE_CLAMPED"]
+            self.counters_data["state_clamps"] += clamped
 
     # ------------------------------------------------------------------ outputs
     def estimate(self) -> Estimate:
@@ -402,7 +515,21 @@ class ReferenceFilter:
             drag_coeff_converging=mask(var[km] < 0.25 * self.prior_var[km]),
             drag_coeff_converged=km_converged,
             health=health, health_flags=health_names(health),
+            **self._optional_estimates(std),
         )
+
+    def _optional_estimates(self, std: np.ndarray) -> dict:
+        out: dict = {}
+        if self.first_disturbance is not None:
+            d = slice(self.first_disturbance, self.first_disturbance + 3)
+            out["disturbance_torque"] = self.inertia @ self.state[d]
+            out["disturbance_torque_std"] = np.sqrt((self.inertia ** 2) @ (std[d] ** 2))
+        if self.accel_bias is not None:
+            out["accel_bias"] = float(self.state[self.accel_bias])
+            out["accel_bias_std"] = float(std[self.accel_bias])
+            out["accel_innovation"] = float(self.accel_innovation)
+            out["accel_innovation_test_ratio"] = float(self.accel_innovation_test_ratio)
+        return out
 
     def counters(self) -> dict:
         d = dict(self.counters_data)

@@ -35,9 +35,18 @@ def library():
         pytest.fail(str(exc))
 
 
-def make_config() -> FilterConfig:
+MASS = 1.8  # the flight's collective thrust is ~18 N
+
+
+def make_config(options: str = "plain") -> FilterConfig:
+    """plain: the 14-state filter; all: disturbance torque, rotor inertia and the
+    accelerometer (18 states, the generic step and the scalar update everywhere)."""
     inertia = [3.65e-3, 3.68e-3, 7.03e-3]
-    return FilterConfig.symmetric(4, 0.17, math.pi / 4, 1.0, 5.57e-6, 1.36e-7, inertia)
+    config = FilterConfig.symmetric(4, 0.17, math.pi / 4, 1.0, 5.57e-6, 1.36e-7, inertia)
+    if options == "all":
+        config = config.with_overrides(disturbance_torque=1, rotor_inertia=[2e-6] * 4, mass=MASS,
+                                       accel_noise_std=0.3)
+    return config
 
 
 def record_flight(seed: int = 7, duration_s: float = 5.0):
@@ -82,6 +91,10 @@ def record_flight(seed: int = 7, duration_s: float = 5.0):
             speeds *= 1.0 + 0.03 * np.sin(2 * math.pi * (2.3 + 0.7 * np.arange(4)) * t + np.arange(4))
             speeds = np.minimum(speeds, 1500.0)
             events.append((t_us, "rotor", speeds.tolist()))
+            force_z = float(np.sum(kf_true * speeds ** 2)) / MASS + 0.1 + 0.3 * rng.standard_normal()
+            if t_us == int(2.0e6):
+                force_z += 50.0  # one gross accelerometer outlier
+            events.append((t_us, "accel", [0.0, 0.0, force_z]))
         u_sq = speeds ** 2
         thrust = kf_true * u_sq
         tau = np.array([np.sum(positions[:, 1] * thrust), -np.sum(positions[:, 0] * thrust),
@@ -101,6 +114,11 @@ def replay(filt, events, perturb_at=None):
     for t_us, kind, values in events:
         if kind == "rotor":
             assert filt.push_rotor_speeds(t_us, values) == STATUS["PROPID_OK"]
+        elif kind == "accel":
+            if filt.config.mass > 0.0:
+                status = filt.push_accel(t_us, values)
+                state, cov = filt.scaled_state()
+                trace.append((status, state, np.diag(cov).copy()))
         elif kind == "reset_rotor":
             assert filt.reset_rotor(values) == STATUS["PROPID_OK"]
         else:
@@ -132,6 +150,41 @@ def flight():
 @pytest.fixture(scope="module")
 def reference_trace(flight):
     return replay(ReferenceFilter(make_config()), flight)
+
+
+def test_c_agrees_with_reference_with_every_option(flight):
+    """Disturbance torque, rotor inertia and accelerometer aiding on: same bounds."""
+    config = make_config("all")
+    trace_ref = replay(ReferenceFilter(config), flight)
+    trace_c = replay(CFilter(config), flight)
+    assert len(trace_c) == len(trace_ref) > 3000
+    assert len(trace_c[0][1]) == 18
+    statuses = [s for s, _, _ in trace_c]
+    print("gated samples:", statuses.count(STATUS["PROPID_OK_GATED"]))
+    assert statuses.count(STATUS["PROPID_OK_GATED"]) >= 4  # three gyro outliers, one accelerometer
+    state_err, cov_err = disagreement(trace_c, trace_ref)  # inf when any status differs
+    print(f"C vs reference, every option: max |dx|/std = {state_err:.3g}, max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+
+
+def test_accel_rejections_agree(flight):
+    """The accelerometer's rejection codes are the same in both filters."""
+    for options, expected in (("plain", "PROPID_ERR_CONFIG"), ("all", None)):
+        c_filter, ref = CFilter(make_config(options)), ReferenceFilter(make_config(options))
+        for filt in (c_filter, ref):
+            first = filt.push_accel(1000, [0.0, 0.0, 9.8])
+            if expected:
+                assert first == STATUS[expected]
+                continue
+            assert first == STATUS["PROPID_ERR_NO_ROTOR_DATA"]
+            assert filt.push_rotor_speeds(1000, [900.0] * 4) == STATUS["PROPID_OK"]
+            assert filt.push_accel(1000, [0.0, math.nan, 9.8]) == STATUS["PROPID_ERR_NOT_FINITE"]
+            assert filt.push_accel(1000, [0.0, 0.0, 1e3]) == STATUS["PROPID_ERR_ACCEL_RANGE"]
+            assert filt.push_accel(1000, [0.0, 0.0, 9.8]) == STATUS["PROPID_OK"]
+            assert filt.push_accel(1000, [0.0, 0.0, 9.8]) == STATUS["PROPID_ERR_TIME_BACKWARDS"]
+            assert filt.push_accel(10**6, [0.0, 0.0, 9.8]) == STATUS["PROPID_ERR_ROTOR_STALE"]
+        assert c_filter.counters()["rejected"] == ref.counters()["rejected"]
 
 
 def test_defaults_match_c():
