@@ -69,6 +69,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="DIAGNOSTIC ONLY: remove content below HZ from gyro and rotor speed squared (common "
                              "offset trick, symmetric vehicles; pins the rotors to one kf) to show what slow "
                              "unmodelled moments cost (docs/real-data.md)")
+    parser.add_argument("--aiding", choices=["auto", "gyro", "gyro+accel"], default="auto",
+                        help="measurements the filter fuses: gyro only, or gyro + the accelerometer's z specific "
+                             "force (pins the kf scale); auto (default): gyro+accel when the log has acc_* columns "
+                             "and the vehicle file a mass")
+    parser.add_argument("--disturbance", choices=["on", "off"], default="off",
+                        help="the filter's disturbance-torque states (a slowly varying body torque: CoM offset, "
+                             "aerodynamic moments); default off")
+    parser.add_argument("--rotor-inertia", choices=["auto", "on", "off"], default="auto",
+                        help="model the rotors' yaw reaction and gyroscopic torque with the vehicle file's "
+                             "rotor_inertia (auto: when it is given)")
     parser.add_argument("--unit-inertia", action="store_true",
                         help="run with J = identity: estimates are kf/J and km/Jzz ratios (for vehicles without inertia)")
     parser.add_argument("--kf-nominal", type=float, help="prior mean of kf (overrides the vehicle file)")
@@ -226,6 +236,9 @@ def run(args: argparse.Namespace) -> int:
         rotor_delay_s=args.rotor_delay,
         prefilter_hz=args.prefilter,
         diagnostic_highpass_hz=args.diagnostic_highpass,
+        aiding=args.aiding,
+        disturbance=args.disturbance,
+        rotor_inertia=args.rotor_inertia,
         progress=not args.no_progress and len(log_paths) == 1,
     )
     text_out = sys.stderr if args.json == "-" else sys.stdout

@@ -77,6 +77,7 @@ def build_config(vehicle: Vehicle, log: FlightLog, options: ReplayOptions) -> tu
                               "(100 needed) to measure the noise: library defaults used")
     else:
         notes["noise"] = "library defaults"
+    _optional_terms(vehicle, log, options, config, notes)
     config.update(options.overrides)
     given = [key for key in NOISE_FIELDS if key in options.overrides]
     if given:
@@ -87,4 +88,63 @@ def build_config(vehicle: Vehicle, log: FlightLog, options: ReplayOptions) -> tu
     for key in NOISE_FIELDS:
         config.setdefault(key, DEFAULT_TUNING[key])
     return config, notes
+
+
+ACCEL_NOISE_FLOOR = 0.05  # [m/s^2]: no accelerometer is trusted beyond this per sample
+
+
+def resolve_aiding(vehicle: Vehicle, log: FlightLog, options: ReplayOptions) -> str:
+    """'gyro' or 'gyro+accel' for this log (--aiding auto: gyro+accel when the log has acc_*
+    columns and the vehicle a mass, not in unit-inertia mode)."""
+    usable = log.acc is not None and bool(vehicle.mass) and not options.unit_inertia
+    if options.aiding == "auto":
+        return "gyro+accel" if usable else "gyro"
+    if options.aiding == "gyro+accel" and not usable:
+        raise UserError("--aiding gyro+accel needs acc_x/acc_y/acc_z columns in the log, a 'mass' in the vehicle "
+                        "file, and SI mode (not --unit-inertia)")
+    if options.aiding not in ("gyro", "gyro+accel"):
+        raise UserError(f"--aiding {options.aiding!r}: choose gyro, gyro+accel or auto")
+    return options.aiding
+
+
+def accel_noise(log: FlightLog, vehicle: Vehicle, mask: np.ndarray) -> float:
+    """Per-sample noise of the z specific force by the filter's own model: the residual of the
+    least-squares fit acc_z = c sum_i Omega_i^2 + b over the flying rows (robust: the central
+    99 % of the residuals), floored at ACCEL_NOISE_FLOOR. Uses no coefficient value."""
+    acc_z = log.acc[:, 2]
+    u = np.sum(log.rotor_speed ** 2, axis=1)
+    ok = mask & np.isfinite(acc_z) & np.isfinite(u)
+    if np.sum(ok) < 20:
+        return 0.5
+    design = np.column_stack([u[ok], np.ones(int(np.sum(ok)))])
+    coef, *_ = np.linalg.lstsq(design, acc_z[ok], rcond=None)
+    residual = acc_z[ok] - design @ coef
+    lo, hi = np.percentile(residual, [0.5, 99.5])
+    central = residual[(residual >= lo) & (residual <= hi)]
+    return max(float(np.std(central)), ACCEL_NOISE_FLOOR)
+
+
+def _optional_terms(vehicle: Vehicle, log: FlightLog, options: ReplayOptions, config: dict, notes: dict) -> None:
+    """Accelerometer aiding, disturbance-torque states and rotor inertia (docs/math.md §7-9)."""
+    aiding = resolve_aiding(vehicle, log, options)
+    notes["aiding"] = aiding
+    if aiding == "gyro+accel":
+        config["mass"] = float(vehicle.mass)
+        if options.noise in ("auto", "nis"):
+            config["accel_noise_std"] = accel_noise(log, vehicle, flying_mask(log))
+            notes["accel_noise_std"] = "auto: residual of acc_z = c sum Omega^2 + b on the flying rows"
+    if options.disturbance not in ("on", "off"):
+        raise UserError(f"--disturbance {options.disturbance!r}: choose on or off")
+    if options.disturbance == "on":
+        config["disturbance_torque"] = 1
+    notes["disturbance"] = options.disturbance
+    if options.rotor_inertia not in ("auto", "on", "off"):
+        raise UserError(f"--rotor-inertia {options.rotor_inertia!r}: choose auto, on or off")
+    inertias = vehicle.rotor_inertias
+    if options.rotor_inertia == "on" and not inertias:
+        raise UserError("--rotor-inertia on needs 'rotor_inertia' in the vehicle file")
+    use = options.rotor_inertia != "off" and inertias and not options.unit_inertia
+    if use:
+        config["rotor_inertia"] = [float(v) for v in inertias]
+    notes["rotor_inertia"] = "vehicle file" if use else "not modelled"
 

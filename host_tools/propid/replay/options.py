@@ -21,6 +21,9 @@ class ReplayOptions:
     rotor_delay_s: float | str = 0.0  # push rotor speeds this much later than logged, or "auto"
     prefilter_hz: float | str | None = None  # matched causal low-pass of gyro and rotor speed^2: Hz, "auto" or None
     diagnostic_highpass_hz: float | None = None  # diagnostic only: emulate removing slow content (docs/real-data.md)
+    aiding: str = "auto"  # "gyro", "gyro+accel", or "auto": gyro+accel when the log has acc_* and the vehicle a mass
+    disturbance: str = "off"  # "on": the filter's disturbance-torque states
+    rotor_inertia: str = "auto"  # "auto"/"on": the vehicle's rotor_inertia enters the model; "off"
     record_every: int = 1  # keep every k-th estimate for the time series
     progress: bool = True
 

@@ -54,6 +54,9 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     filt = FilterSession(vehicle, config_fields)
     t_us = np.round((log.t - log.t[0]) * US).astype(np.int64) + US  # start at 1 s: time 0 is 'no time yet'
     speeds = np.ascontiguousarray(log.rotor_speed, dtype=np.float32)
+    aiding = notes.get("aiding", "gyro")
+    acc = np.ascontiguousarray(log.acc, dtype=np.float32) if aiding == "gyro+accel" else None
+    has_acc = np.all(np.isfinite(acc), axis=1) if acc is not None else None
     gyro = np.ascontiguousarray(log.gyro, dtype=np.float32)
     has_gyro = np.any(np.isfinite(log.gyro), axis=1)
     has_rotor = np.any(np.isfinite(log.rotor_speed), axis=1)
@@ -116,6 +119,11 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
             else:
                 gyro_accepted += 1
             gyro_pushes += 1
+            if has_acc is not None and has_acc[i]:
+                status = filt.push_accel(int(t_us[i]), acc[i])
+                if status < 0:
+                    name = "accel " + filt.status_name(status)
+                    status_counts[name] = status_counts.get(name, 0) + 1
             if gyro_pushes % options.record_every == 0:
                 est = filt.estimate()
                 rec_t.append(log.t[i])
@@ -194,6 +202,13 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "converged": {"kf": kf_conv, "km": km_conv},
         "gyro_bias": [float(v) for v in final["gyro_bias"]],
         "gyro_bias_std": [float(v) for v in final["gyro_bias_std"]],
+        "aiding": aiding,
+        "disturbance": notes.get("disturbance", "off"),
+        "rotor_inertia": notes.get("rotor_inertia", "not modelled"),
+        "disturbance_torque": [float(v) for v in final["disturbance_torque"]],
+        "disturbance_torque_std": [float(v) for v in final["disturbance_torque_std"]],
+        "accel_bias": float(final["accel_bias"]),
+        "accel_bias_std": float(final["accel_bias_std"]),
         "rejected": dict(sorted(status_counts.items())),
         "nis_mean": nis_mean(series),
         "counters": counters,

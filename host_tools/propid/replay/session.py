@@ -49,6 +49,9 @@ class FilterSession:
     def push_gyro(self, t_us: int, gyro: np.ndarray) -> int:
         return int(self._filter.push_gyro(t_us, gyro))
 
+    def push_accel(self, t_us: int, specific_force: np.ndarray) -> int:
+        return int(self._filter.push_accel(t_us, specific_force))
+
     def resync(self, t_us: int) -> int:
         return int(self._filter.resync(t_us))
 
@@ -58,7 +61,8 @@ class FilterSession:
     def estimate(self) -> dict:
         est = self._filter.estimate()
         names = ("thrust_coeff", "thrust_coeff_std", "drag_coeff", "drag_coeff_std", "gyro_bias", "gyro_bias_std",
-                 "thrust_coeff_converged", "drag_coeff_converged", "health", "innovation_test_ratio")
+                 "thrust_coeff_converged", "drag_coeff_converged", "health", "innovation_test_ratio",
+                 "disturbance_torque", "disturbance_torque_std", "accel_bias", "accel_bias_std")
         return {name: _field(est, name) for name in names}
 
     def counters(self) -> dict:
