@@ -49,6 +49,8 @@ void propid_config_default(propid_config_t *config)
     config->accel_bias_std0 = 0.5f;
     config->accel_bias_walk = 1.0e-3f;
     config->accel_range = 160.0f;
+    config->torque_scale = 0u;
+    config->torque_scale_std0 = 0.5f;
 }
 
 propid_status_t propid_config_set_symmetric(propid_config_t *config, uint8_t rotor_count,
@@ -275,8 +277,10 @@ static void derive_sparsity(const propid_config_t *config, propid_derived_t *out
             }
         }
         out->jac_rate_count[a] = count;
+        uint8_t thrust_entries = 0u;
         for (uint8_t i = 0; i < rotor_count; ++i) {
             if (out->thrust_torque[i][a] != 0.0f) {
+                thrust_entries++;
                 out->jac_column[a][count] = (uint8_t)(PROPID_RATE_STATES + i);
                 out->jac_rotor[a][count] = i;
                 out->jac_torque[a][count] = out->thrust_torque[i][a];
@@ -290,6 +294,14 @@ static void derive_sparsity(const propid_config_t *config, propid_derived_t *out
                 out->jac_torque[a][count] = out->drag_torque[i][a];
                 count++;
             }
+        }
+        /* The thrust-torque scale: one entry per row that has thrust entries,
+         * its value (the unscaled thrust part of the row) formed by the step. */
+        if (out->layout.torque_scale != PROPID_NO_STATE && thrust_entries > 0u) {
+            out->jac_column[a][count] = out->layout.torque_scale;
+            out->jac_rotor[a][count] = PROPID_SCALE_ENTRY;
+            out->jac_torque[a][count] = 0.0f;
+            count++;
         }
         /* The disturbance acts like one more "rotor" with torque 1 and input 1
          * (jac_rotor = rotor_count: the step's input slot holding dt). */
@@ -438,6 +450,12 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             PROPID_BAD("accel_range");
         }
     }
+    if (config->torque_scale > 1u || (config->torque_scale && !(config->mass > 0.0f))) {
+        PROPID_BAD("torque_scale"); /* only the accelerometer makes it observable */
+    }
+    if (config->torque_scale && (!positive_finite(config->torque_scale_std0) || config->torque_scale_std0 > 10.0f)) {
+        PROPID_BAD("torque_scale_std0");
+    }
 
     out.layout.rate = 0u;
     out.layout.thrust = propid_first_thrust();
@@ -446,6 +464,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     uint8_t next = (uint8_t)(out.layout.gyro_bias + PROPID_BIAS_STATES);
     out.layout.disturbance = PROPID_NO_STATE;
     out.layout.accel_bias = PROPID_NO_STATE;
+    out.layout.torque_scale = PROPID_NO_STATE;
     if (config->disturbance_torque) {
         out.layout.disturbance = next;
         next = (uint8_t)(next + PROPID_DISTURBANCE_STATES);
@@ -457,6 +476,10 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         for (uint8_t i = 0; i < rotor_count; ++i) {
             out.thrust_per_mass[i] = config->rotor[i].thrust_coeff_nominal / config->mass;
         }
+    }
+    if (config->torque_scale) {
+        out.layout.torque_scale = next;
+        next = (uint8_t)(next + PROPID_TORQUE_SCALE_STATES);
     }
     out.state_count = next;
     for (uint8_t i = 0; i < rotor_count; ++i) {
@@ -546,6 +569,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             psd = config->accel_bias_walk * config->accel_bias_walk;
             floor_var = 1.0e-12f;
             ceiling = config->accel_range * config->accel_range;
+        } else if (k == out.layout.torque_scale) {
+            prior = config->torque_scale_std0 * config->torque_scale_std0;
+            psd = 0.0f; /* geometry and inertia: constant */
+            floor_var = 1.0e-10f;
+            ceiling = coeff_ceiling;
         } else { /* disturbance */
             prior = config->disturbance_std0 * config->disturbance_std0;
             psd = config->disturbance_walk * config->disturbance_walk;
@@ -560,7 +588,8 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
                        : k < first_drag ? "thrust_coeff_rel_std0"
                        : k < first_bias ? "drag_coeff_rel_std0"
                        : k < first_bias + PROPID_BIAS_STATES ? "gyro_bias_std0"
-                       : k == out.layout.accel_bias ? "accel_bias_std0" : "disturbance_std0");
+                       : k == out.layout.accel_bias ? "accel_bias_std0"
+                       : k == out.layout.torque_scale ? "torque_scale_std0" : "disturbance_std0");
         }
         out.prior_var[k] = prior;
         out.process_psd[k] = psd;

@@ -16,6 +16,9 @@ void propid_cov_set_prior(const propid_derived_t *derived, uint8_t rotor_count, 
     for (uint8_t k = propid_first_thrust(); k < first_bias; ++k) {
         core->state[k] = 1.0f; /* coefficients start at their nominal */
     }
+    if (derived->layout.torque_scale != PROPID_NO_STATE) {
+        core->state[derived->layout.torque_scale] = 1.0f; /* the configured J and arms */
+    }
     for (uint8_t k = 0; k < n; ++k) {
         core->cov[k][k] = derived->prior_var[k];
     }

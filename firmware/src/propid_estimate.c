@@ -86,6 +86,11 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         estimate->accel_innovation = core->accel_innovation;
         estimate->accel_innovation_test_ratio = core->accel_innovation_test_ratio;
     }
+    estimate->torque_scale = 1.0f;
+    if (derived->layout.torque_scale != PROPID_NO_STATE) {
+        estimate->torque_scale = core->state[derived->layout.torque_scale];
+        estimate->torque_scale_std = std_of(core->cov[derived->layout.torque_scale][derived->layout.torque_scale]);
+    }
     uint32_t health = core->health;
     if (!core->has_rotor_data) {
         health |= PROPID_HEALTH_NO_ROTOR_DATA;

@@ -78,6 +78,9 @@ static inline uint8_t propid_first_bias(uint8_t rotor_count)
 #define PROPID_QUAD_FIRST_DRAG (PROPID_RATE_STATES + 4u)
 #define PROPID_QUAD_FIRST_BIAS (PROPID_RATE_STATES + 8u)
 
+/* jac_rotor marker of the thrust-torque scale's Jacobian entry (propid_config.c). */
+#define PROPID_SCALE_ENTRY 0xFEu
+
 /* One scalar measurement y = H x + v with a sparse H (propid_scalar_update.c):
  * H has `count` non-zero entries, value[k] in column index[k]. */
 #define PROPID_SPARSE_MAX (PROPID_MAX_ROTORS + 1u)

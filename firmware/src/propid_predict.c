@@ -114,6 +114,8 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
      * rotor_reaction_i (Omega_i(end) - Omega_i(start)) over the interval; the
      * rotors' angular momentum h (trapezoid mean of the speeds) makes a
      * gyroscopic torque linear in omega, A_ab += rotor_gyro[a][b] h. */
+    const float torque_scale =
+        derived->layout.torque_scale != PROPID_NO_STATE ? filter->core.state[derived->layout.torque_scale] : 1.0f;
     float reaction[3] = {0.0f, 0.0f, 0.0f};
     float momentum_dt = 0.0f;
     if (derived->rotor_inertia_on) {
@@ -150,12 +152,23 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
             g[p] = entry + rotor_entry;
         }
         gyroscopic[a] = sum;
-        /* Rotor torques: G = torque dt u, velocity change sum G x_coefficient. */
+        /* Rotor torques: G = torque dt u, velocity change sum G x_coefficient.
+         * With the thrust-torque scale s (math.md §9) the thrust entries are
+         * s torque dt u and the scale's own entry is the unscaled thrust part. */
         sum = 0.0f;
+        float thrust_part = 0.0f;
         const float *torque = derived->jac_torque[a];
         const uint8_t *rotor = derived->jac_rotor[a];
         for (uint8_t p = rate_count; p < count; ++p) {
-            const float entry = torque[p] * speed_sq_dt[rotor[p]];
+            if (rotor[p] == PROPID_SCALE_ENTRY) {
+                g[p] = thrust_part;
+                continue;
+            }
+            float entry = torque[p] * speed_sq_dt[rotor[p]];
+            if (column[p] < derived->layout.drag) {
+                thrust_part += entry * state[column[p]];
+                entry *= torque_scale;
+            }
             sum += entry * state[column[p]];
             g[p] = entry;
         }

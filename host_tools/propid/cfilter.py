@@ -44,7 +44,9 @@ RATE_STATES = 3
 BIAS_STATES = 3
 DISTURBANCE_STATES = 3
 ACCEL_BIAS_STATES = 1
-MAX_STATES = RATE_STATES + 2 * MAX_ROTORS + BIAS_STATES + DISTURBANCE_STATES + ACCEL_BIAS_STATES
+TORQUE_SCALE_STATES = 1
+MAX_STATES = (RATE_STATES + 2 * MAX_ROTORS + BIAS_STATES + DISTURBANCE_STATES + ACCEL_BIAS_STATES
+              + TORQUE_SCALE_STATES)
 REJECT_SLOTS = 16
 
 # propid_status_t (propid.h). Negative = rejected, filter state unchanged.
@@ -132,6 +134,8 @@ _OPTIONAL_FIELDS = [
     ("accel_bias_std0", ctypes.c_float),
     ("accel_bias_walk", ctypes.c_float),
     ("accel_range", ctypes.c_float),
+    ("torque_scale", ctypes.c_uint8),
+    ("torque_scale_std0", ctypes.c_float),
 ]
 _INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32)
 
@@ -169,6 +173,8 @@ class EstimateStruct(ctypes.Structure):
         ("accel_bias_std", ctypes.c_float),
         ("accel_innovation", ctypes.c_float),
         ("accel_innovation_test_ratio", ctypes.c_float),
+        ("torque_scale", ctypes.c_float),
+        ("torque_scale_std", ctypes.c_float),
     ]
 
 
@@ -222,6 +228,8 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "accel_bias_std0": 0.5,
     "accel_bias_walk": 1.0e-3,
     "accel_range": 160.0,
+    "torque_scale": 0,
+    "torque_scale_std0": 0.5,
 }
 
 
@@ -269,6 +277,8 @@ class FilterConfig:
     accel_bias_std0: float = DEFAULT_TUNING["accel_bias_std0"]
     accel_bias_walk: float = DEFAULT_TUNING["accel_bias_walk"]
     accel_range: float = DEFAULT_TUNING["accel_range"]
+    torque_scale: int = DEFAULT_TUNING["torque_scale"]
+    torque_scale_std0: float = DEFAULT_TUNING["torque_scale_std0"]
 
     @property
     def rotor_count(self) -> int:
@@ -277,7 +287,8 @@ class FilterConfig:
     @property
     def state_count(self) -> int:
         return (6 + 2 * self.rotor_count + (DISTURBANCE_STATES if self.disturbance_torque else 0)
-                + (ACCEL_BIAS_STATES if self.mass > 0.0 else 0))
+                + (ACCEL_BIAS_STATES if self.mass > 0.0 else 0)
+                + (TORQUE_SCALE_STATES if self.torque_scale else 0))
 
     def with_overrides(self, **overrides: Any) -> "FilterConfig":
         """A copy with some tuning fields changed (unknown names raise UserError)."""
@@ -391,6 +402,8 @@ class Estimate:
     accel_bias_std: float = 0.0
     accel_innovation: float = 0.0
     accel_innovation_test_ratio: float = 0.0
+    torque_scale: float = 1.0
+    torque_scale_std: float = 0.0
 
 
 # ---------------------------------------------------------------------------
@@ -597,6 +610,7 @@ class CFilter:
             accel_bias=float(e.accel_bias), accel_bias_std=float(e.accel_bias_std),
             accel_innovation=float(e.accel_innovation),
             accel_innovation_test_ratio=float(e.accel_innovation_test_ratio),
+            torque_scale=float(e.torque_scale), torque_scale_std=float(e.torque_scale_std),
         )
 
     def counters(self) -> dict:

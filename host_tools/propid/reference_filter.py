@@ -51,6 +51,9 @@ class ReferenceFilter:
             self.first_disturbance, nxt = nxt, nxt + 3
         if float(config.mass) > 0.0:
             self.accel_bias, nxt = nxt, nxt + 1
+        self.torque_scale = None
+        if int(config.torque_scale):
+            self.torque_scale, nxt = nxt, nxt + 1
         self.n = nxt
         c = {name: _f32(getattr(config, name)) for name in (
             "rate_std0", "thrust_coeff_rel_std0", "drag_coeff_rel_std0", "gyro_bias_std0",
@@ -58,7 +61,7 @@ class ReferenceFilter:
             "thrust_coeff_rel_walk", "drag_coeff_rel_walk", "gyro_bias_walk", "gate_sigma",
             "max_rotor_speed", "gyro_range", "coeff_rel_min", "coeff_rel_max", "converged_rel_std",
             "disturbance_std0", "disturbance_walk", "mass", "accel_noise_std", "accel_bias_std0",
-            "accel_bias_walk", "accel_range")}
+            "accel_bias_walk", "accel_range", "torque_scale_std0")}
         self.c = c
         self.gate_max_consecutive = int(config.gate_max_consecutive)
         self.rotor_stale_us = int(config.rotor_stale_us)
@@ -115,6 +118,8 @@ class ReferenceFilter:
             elif k == self.accel_bias:
                 prior, psd, floor, ceiling = (c["accel_bias_std0"] ** 2, c["accel_bias_walk"] ** 2,
                                               1e-12, c["accel_range"] ** 2)
+            elif k == self.torque_scale:
+                prior, psd, floor, ceiling = c["torque_scale_std0"] ** 2, 0.0, 1e-10, coeff_ceiling
             else:  # disturbance
                 prior, psd, floor = c["disturbance_std0"] ** 2, c["disturbance_walk"] ** 2, 1e-12
                 ceiling = 100.0 * prior
@@ -135,6 +140,8 @@ class ReferenceFilter:
         n = self.n
         self.state = np.zeros(n)
         self.state[3:self.first_bias] = 1.0
+        if self.torque_scale is not None:
+            self.state[self.torque_scale] = 1.0
         self.cov = np.diag(self.prior_var.copy())
         self.rotor_speed_sq = np.zeros(self.rotor_count)
         self.input_speed_sq = np.zeros(self.rotor_count)
@@ -196,14 +203,18 @@ class ReferenceFilter:
         km_rel = state[3 + n_rot:3 + 2 * n_rot]
         momentum = self.inertia @ rate
         gyroscopic = np.cross(rate, momentum)
+        scale = state[self.torque_scale] if self.torque_scale is not None else 1.0
+        thrust_part = (kf_rel * speed_sq) @ self.thrust_torque
         rate_dot = (-(self.inertia_inv @ gyroscopic)
-                    + (kf_rel * speed_sq) @ self.thrust_torque
+                    + scale * thrust_part
                     + (km_rel * speed_sq) @ self.drag_torque)
         # d(omega x J omega)/d omega = [omega]x J - [J omega]x
         dgyro = _skew(rate) @ self.inertia - _skew(momentum)
         rows = np.zeros((3, self.n))
         rows[:, :3] = -(self.inertia_inv @ dgyro)
-        rows[:, 3:3 + n_rot] = (self.thrust_torque * speed_sq[:, None]).T
+        rows[:, 3:3 + n_rot] = scale * (self.thrust_torque * speed_sq[:, None]).T
+        if self.torque_scale is not None:
+            rows[:, self.torque_scale] = thrust_part
         rows[:, 3 + n_rot:3 + 2 * n_rot] = (self.drag_torque * speed_sq[:, None]).T
         if momentum_z != 0.0:
             rotor_gyro = np.zeros((3, 3))
@@ -524,6 +535,9 @@ class ReferenceFilter:
             d = slice(self.first_disturbance, self.first_disturbance + 3)
             out["disturbance_torque"] = self.inertia @ self.state[d]
             out["disturbance_torque_std"] = np.sqrt((self.inertia ** 2) @ (std[d] ** 2))
+        if self.torque_scale is not None:
+            out["torque_scale"] = float(self.state[self.torque_scale])
+            out["torque_scale_std"] = float(std[self.torque_scale])
         if self.accel_bias is not None:
             out["accel_bias"] = float(self.state[self.accel_bias])
             out["accel_bias_std"] = float(std[self.accel_bias])

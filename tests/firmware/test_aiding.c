@@ -137,6 +137,9 @@ typedef struct {
     int accel;               /* push the accelerometer */
     int disturbance_states;  /* filter option */
     float duration_s;
+    float inertia_error;     /* the filter's J = inertia_error * true J (0: exact) */
+    int torque_scale;        /* filter option */
+    float accel_noise;       /* accelerometer noise std [m/s^2] (0: 0.2) */
 } flight_t;
 
 /* Mean over rotors of kf_est / kf_true at the end. */
@@ -147,9 +150,14 @@ static float fly(const flight_t *flight, float *worst_rotor)
     config.rate_process_noise = 0.5f;
     if (flight->accel) {
         config.mass = MASS;
-        config.accel_noise_std = 0.2f;
+        config.accel_noise_std = flight->accel_noise > 0.0f ? flight->accel_noise : 0.2f;
     }
     config.disturbance_torque = (uint8_t)flight->disturbance_states;
+    config.torque_scale = (uint8_t)flight->torque_scale;
+    if (flight->inertia_error > 0.0f) {
+        propid_config_set_inertia_diag(&config, flight->inertia_error * 3.65e-3f, flight->inertia_error * 3.68e-3f,
+                                       flight->inertia_error * 7.03e-3f);
+    }
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
     const float per_rotor[4] = {1.04f, 0.97f, 1.02f, 0.96f};
     float kf[4];
@@ -217,7 +225,8 @@ static float fly(const flight_t *flight, float *worst_rotor)
         const propid_status_t status = propid_push_gyro(&filter, t_us, gyro);
         TEST_ASSERT_TRUE(status >= 0);
         if (flight->accel && step % 2u == 0u) {
-            const float force[3] = {0.0f, 0.0f, thrust / MASS + 0.1f + 0.2f * rng_normal(&rng)};
+            const float accel_noise = flight->accel_noise > 0.0f ? flight->accel_noise : 0.2f;
+            const float force[3] = {0.0f, 0.0f, thrust / MASS + 0.1f + accel_noise * rng_normal(&rng)};
             TEST_ASSERT_TRUE(propid_push_accel(&filter, t_us, force) >= 0);
         }
     }
@@ -234,15 +243,15 @@ static float fly(const flight_t *flight, float *worst_rotor)
         *worst_rotor = worst;
     }
 #ifdef PROPID_TEST_VERBOSE
-    printf("kf ratio %.4f worst %.4f accel bias %.4f\n", (double)mean, (double)worst,
-           (double)estimate.accel_bias);
+    printf("kf ratio %.4f worst %.4f accel bias %.4f scale %.4f\n", (double)mean, (double)worst,
+           (double)estimate.accel_bias, (double)estimate.torque_scale);
 #endif
     return mean;
 }
 
 static void test_accelerometer_pins_the_thrust_scale(void)
 {
-    flight_t flight = {1.25f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f};
+    flight_t flight = {1.25f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f, 0.0f, 0, 0.0f};
     float worst = 0.0f;
     const float with_accel = fly(&flight, &worst);
     TEST_ASSERT_FLOAT_WITHIN(0.02f, 1.0f, with_accel);
@@ -255,7 +264,7 @@ static void test_accelerometer_pins_the_thrust_scale(void)
 static void test_disturbance_states_remove_the_closed_loop_bias(void)
 {
     /* A 1 cm centre-of-mass offset along x at 1 kg: 0.098 N m about y. */
-    flight_t flight = {1.0f, {0.0f, 0.098f, 0.0f}, 0, 0, 20.0f};
+    flight_t flight = {1.0f, {0.0f, 0.098f, 0.0f}, 0, 0, 20.0f, 0.0f, 0, 0.0f};
     float worst_off = 0.0f;
     float worst_on = 0.0f;
     const float off = fly(&flight, &worst_off);
@@ -268,6 +277,34 @@ static void test_disturbance_states_remove_the_closed_loop_bias(void)
     TEST_ASSERT_FLOAT_WITHIN(0.01f, 1.0f, on);
     TEST_ASSERT_FLOAT_WITHIN(0.015f, 0.098f, estimate.disturbance_torque[1]);
     (void)off;
+}
+
+static void test_torque_scale_frees_kf_from_an_inertia_error(void)
+{
+    /* The filter's J is 30 % too large: the gyro alone would read kf 30 % high;
+     * with the accelerometer the two scales conflict; the torque-scale state
+     * takes the inertia error (found within 5 %) and kf stays with the
+     * accelerometer. (In this flight the accelerometer's information already
+     * dominates without the state, so only the state's own estimate and kf with
+     * it are asserted.) */
+    /* A vibrating accelerometer (1 m/s^2 per sample, as on a small quad): the
+     * gyro's information on the scale then dominates without the state. */
+    flight_t flight = {1.0f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f, 1.3f, 0, 1.0f};
+    float worst_with = 0.0f;
+    flight.torque_scale = 1;
+    const float with = fly(&flight, &worst_with);
+    propid_estimate_t estimate;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    TEST_ASSERT_FLOAT_WITHIN(0.02f, 1.0f, with);
+    TEST_ASSERT_TRUE(worst_with < 0.05f);
+    TEST_ASSERT_FLOAT_WITHIN(0.05f, 1.3f, estimate.torque_scale);
+    /* Without the accelerometer the scale is not observable: rejected. */
+    propid_config_t config;
+    quad_config(&config);
+    config.torque_scale = 1u;
+    const char *bad = NULL;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("torque_scale", bad);
 }
 
 /* ---- rotor inertia: the yaw reaction in one step ------------------------ */
@@ -308,5 +345,6 @@ int main(void)
     RUN_TEST(test_rotor_inertia_yaw_reaction);
     RUN_TEST(test_accelerometer_pins_the_thrust_scale);
     RUN_TEST(test_disturbance_states_remove_the_closed_loop_bias);
+    RUN_TEST(test_torque_scale_frees_kf_from_an_inertia_error);
     return UNITY_END();
 }

@@ -40,12 +40,13 @@ MASS = 1.8  # the flight's collective thrust is ~18 N
 
 def make_config(options: str = "plain") -> FilterConfig:
     """plain: the 14-state filter; all: disturbance torque, rotor inertia and the
-    accelerometer (18 states, the generic step and the scalar update everywhere)."""
+    accelerometer with the thrust-torque scale (19 states, the generic step and the scalar update
+    everywhere)."""
     inertia = [3.65e-3, 3.68e-3, 7.03e-3]
     config = FilterConfig.symmetric(4, 0.17, math.pi / 4, 1.0, 5.57e-6, 1.36e-7, inertia)
     if options == "all":
         config = config.with_overrides(disturbance_torque=1, rotor_inertia=[2e-6] * 4, mass=MASS,
-                                       accel_noise_std=0.3)
+                                       accel_noise_std=0.3, torque_scale=1)
     return config
 
 
@@ -158,7 +159,7 @@ def test_c_agrees_with_reference_with_every_option(flight):
     trace_ref = replay(ReferenceFilter(config), flight)
     trace_c = replay(CFilter(config), flight)
     assert len(trace_c) == len(trace_ref) > 3000
-    assert len(trace_c[0][1]) == 18
+    assert len(trace_c[0][1]) == 19
     statuses = [s for s, _, _ in trace_c]
     print("gated samples:", statuses.count(STATUS["PROPID_OK_GATED"]))
     assert statuses.count(STATUS["PROPID_OK_GATED"]) >= 4  # three gyro outliers, one accelerometer

@@ -125,6 +125,10 @@ typedef struct {
     float accel_bias_std0;            /* [m/s^2] */
     float accel_bias_walk;            /* [m/s^2/sqrt(s)] */
     float accel_range;                /* larger |specific force| is a saturated sensor [m/s^2] */
+    uint8_t torque_scale;             /* 1 (needs mass > 0): estimate the scale of the thrust torques
+                                         J^-1 (r x z) kf relative to the configured J and arms (1 more
+                                         state): kf's scale then comes from the accelerometer alone */
+    float torque_scale_std0;          /* prior std of that scale (nominal 1) */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -199,6 +203,7 @@ typedef struct {
     uint8_t gyro_bias;                              /* gyro bias (3) */
     uint8_t disturbance;                            /* disturbance angular acceleration (3) or none */
     uint8_t accel_bias;                             /* accelerometer z bias (1) or none */
+    uint8_t torque_scale;                           /* thrust-torque scale (1) or none */
 } propid_layout_t;
 
 /* Quantities derived once from the configuration (so the step does no divisions). */
@@ -312,6 +317,8 @@ typedef struct {
     float accel_bias_std;
     float accel_innovation;                           /* last accelerometer z innovation [m/s^2] */
     float accel_innovation_test_ratio;
+    float torque_scale;                               /* thrust-torque scale (1 when off) */
+    float torque_scale_std;
 } propid_estimate_t;
 
 propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estimate_t *estimate);

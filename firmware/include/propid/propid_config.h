@@ -14,15 +14,16 @@
 
 /* State layout: body rate (3), thrust coefficient (N), drag coefficient (N),
  * gyro bias (3), then the optional blocks. With PROPID_MAX_ROTORS = 8 the largest
- * filter has 26 states. */
+ * filter has 27 states. */
 #define PROPID_RATE_STATES 3
 #define PROPID_BIAS_STATES 3
 /* Optional blocks the configuration may enable after them: disturbance torque (3),
- * accelerometer z bias (1). */
+ * accelerometer z bias (1), thrust-torque scale (1, with the accelerometer). */
 #define PROPID_DISTURBANCE_STATES 3
 #define PROPID_ACCEL_BIAS_STATES 1
+#define PROPID_TORQUE_SCALE_STATES 1
 #define PROPID_MAX_STATES (PROPID_RATE_STATES + 2 * PROPID_MAX_ROTORS + PROPID_BIAS_STATES + \
-                           PROPID_DISTURBANCE_STATES + PROPID_ACCEL_BIAS_STATES)
+                           PROPID_DISTURBANCE_STATES + PROPID_ACCEL_BIAS_STATES + PROPID_TORQUE_SCALE_STATES)
 
 #if PROPID_MAX_ROTORS < 1 || PROPID_MAX_ROTORS > 16
 #error "PROPID_MAX_ROTORS must be in 1..16"

@@ -79,6 +79,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rotor-inertia", choices=["auto", "on", "off"], default="auto",
                         help="model the rotors' yaw reaction and gyroscopic torque with the vehicle file's "
                              "rotor_inertia (auto: when it is given)")
+    parser.add_argument("--torque-scale", choices=["auto", "on", "off"], default="auto",
+                        help="with the accelerometer, also estimate the scale of the thrust torques relative to the "
+                             "vehicle file's inertia and arms, so kf's scale comes from the accelerometer alone "
+                             "(auto: on with --aiding gyro+accel)")
     parser.add_argument("--unit-inertia", action="store_true",
                         help="run with J = identity: estimates are kf/J and km/Jzz ratios (for vehicles without inertia)")
     parser.add_argument("--kf-nominal", type=float, help="prior mean of kf (overrides the vehicle file)")
@@ -239,6 +243,7 @@ def run(args: argparse.Namespace) -> int:
         aiding=args.aiding,
         disturbance=args.disturbance,
         rotor_inertia=args.rotor_inertia,
+        torque_scale=args.torque_scale,
         progress=not args.no_progress and len(log_paths) == 1,
     )
     text_out = sys.stderr if args.json == "-" else sys.stdout

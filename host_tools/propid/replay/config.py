@@ -133,6 +133,14 @@ def _optional_terms(vehicle: Vehicle, log: FlightLog, options: ReplayOptions, co
         if options.noise in ("auto", "nis"):
             config["accel_noise_std"] = accel_noise(log, vehicle, flying_mask(log))
             notes["accel_noise_std"] = "auto: residual of acc_z = c sum Omega^2 + b on the flying rows"
+    if options.torque_scale not in ("auto", "on", "off"):
+        raise UserError(f"--torque-scale {options.torque_scale!r}: choose auto, on or off")
+    if options.torque_scale == "on" and aiding != "gyro+accel":
+        raise UserError("--torque-scale on needs the accelerometer (--aiding gyro+accel): without it the scale "
+                        "of the thrust torques and kf cannot be told apart")
+    if aiding == "gyro+accel" and options.torque_scale != "off":
+        config["torque_scale"] = 1
+    notes["torque_scale"] = "estimated" if config.get("torque_scale") else "fixed (the vehicle file's J and arms)"
     if options.disturbance not in ("on", "off"):
         raise UserError(f"--disturbance {options.disturbance!r}: choose on or off")
     if options.disturbance == "on":

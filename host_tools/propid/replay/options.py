@@ -24,6 +24,7 @@ class ReplayOptions:
     aiding: str = "auto"  # "gyro", "gyro+accel", or "auto": gyro+accel when the log has acc_* and the vehicle a mass
     disturbance: str = "off"  # "on": the filter's disturbance-torque states
     rotor_inertia: str = "auto"  # "auto"/"on": the vehicle's rotor_inertia enters the model; "off"
+    torque_scale: str = "auto"  # "auto"/"on": estimate the thrust-torque scale when the accelerometer is fused; "off"
     record_every: int = 1  # keep every k-th estimate for the time series
     progress: bool = True
 

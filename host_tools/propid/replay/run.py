@@ -209,6 +209,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "disturbance_torque_std": [float(v) for v in final["disturbance_torque_std"]],
         "accel_bias": float(final["accel_bias"]),
         "accel_bias_std": float(final["accel_bias_std"]),
+        "torque_scale": float(final["torque_scale"]),
+        "torque_scale_std": float(final["torque_scale_std"]),
         "rejected": dict(sorted(status_counts.items())),
         "nis_mean": nis_mean(series),
         "counters": counters,
