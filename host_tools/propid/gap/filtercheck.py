@@ -31,10 +31,11 @@ def _replay_kf(log: FlightLog, vehicle: Vehicle, delay) -> float:
     log = copy.copy(log)
     if vehicle.gyro_scale is not None:
         log.gyro = log.gyro / np.asarray(vehicle.gyro_scale)[None, :]
+    gyro_only = dict(rotor_delay_s=delay, aiding="gyro", rotor_inertia="off", torque_scale="off", progress=False)
     try:
-        result = replay(log, vehicle, ReplayOptions(segment="flying", rotor_delay_s=delay, progress=False))
+        result = replay(log, vehicle, ReplayOptions(segment="flying", **gyro_only))
     except UserError:  # the replay's flying detector found nothing (e.g. a log that starts airborne)
-        result = replay(log, vehicle, ReplayOptions(segment="all", rotor_delay_s=delay, progress=False))
+        result = replay(log, vehicle, ReplayOptions(segment="all", **gyro_only))
     return float(np.mean(result.summary["kf_mean"]))
 
 
