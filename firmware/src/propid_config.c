@@ -341,7 +341,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!positive_finite(config->gyro_noise_density)) {
         PROPID_BAD("gyro_noise_density");
     }
-    if (!positive_finite(config->gyro_sample_rate_hz)) {
+    if (!positive_finite(config->gyro_sample_rate_hz) || config->gyro_sample_rate_hz > 1.0e6f) {
         PROPID_BAD("gyro_sample_rate_hz");
     }
     if (!positive_finite(config->rate_process_noise)) {
@@ -356,7 +356,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!isfinite(config->gyro_bias_walk) || config->gyro_bias_walk < 0.0f) {
         PROPID_BAD("gyro_bias_walk");
     }
-    if (!isfinite(config->gate_sigma) || config->gate_sigma > 1.0e3f) {
+    /* A gate below 1 sigma would refuse a third of valid samples. */
+    if (!isfinite(config->gate_sigma) || config->gate_sigma > 1.0e3f ||
+        (config->gate_sigma > 0.0f && config->gate_sigma < 1.0f)) {
         PROPID_BAD("gate_sigma");
     }
     if (config->gate_max_consecutive < 1u) {
@@ -409,16 +411,19 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 
     out.gyro_var = config->gyro_noise_density * config->gyro_noise_density *
                    config->gyro_sample_rate_hz;
-    if (!positive_finite(out.gyro_var) || out.gyro_var < 1.0e-20f) {
+    /* A per-sample noise std beyond the gyro's range is not a sensor. */
+    if (!positive_finite(out.gyro_var) || out.gyro_var < 1.0e-20f ||
+        out.gyro_var > config->gyro_range * config->gyro_range) {
         PROPID_BAD("gyro_noise_density");
     }
     if (config->gate_sigma > 0.0f) {
         out.gate_sq = config->gate_sigma * config->gate_sigma;
         out.inv_gate_sq = 1.0f / out.gate_sq;
     } else {
-        out.gate_sq = 0.0f;
+        out.gate_sq = PROPID_GATE_OFF_SQ;
         out.inv_gate_sq = 1.0f;
     }
+    out.rate_limit = 2.0f * config->gyro_range;
     out.converged_var = config->converged_rel_std * config->converged_rel_std;
 
     /* Per-state prior, process noise, floor and ceiling (reasons in docs/design.md). */
@@ -453,6 +458,16 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         }
         if (ceiling < prior) {
             ceiling = prior;
+        }
+        /* The process noise of one step across the longest allowed gap must stay
+         * below the variance ceiling: larger is not a model but a repair on
+         * every sample. */
+        const float max_gap_s = (float)config->max_gyro_gap_us * 1.0e-6f;
+        if (psd * max_gap_s > ceiling) {
+            PROPID_BAD(k < PROPID_RATE_STATES ? "rate_process_noise"
+                                              : (k < first_drag ? "thrust_coeff_rel_walk"
+                                                                : (k < first_bias ? "drag_coeff_rel_walk"
+                                                                                  : "gyro_bias_walk")));
         }
         if (!positive_finite(prior) || prior < floor_var) {
             PROPID_BAD(k < PROPID_RATE_STATES ? "rate_std0"

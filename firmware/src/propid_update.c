@@ -167,8 +167,20 @@ static float pending_h(const float (*cov)[PROPID_MAX_STATES], const pending_t *p
 static void reanchor_rate(propid_filter_t *filter, uint8_t axis, uint8_t bias, float gyro)
 {
     propid_core_t *core = &filter->core;
+    const propid_derived_t *derived = &filter->derived;
     core->state[axis] = gyro - core->state[bias];
-    propid_cov_reset_state(&filter->derived, core, axis);
+    propid_cov_reset_state(derived, core, axis);
+    /* The model, not the sensor, was wrong for a whole run of samples: the
+     * coefficients that drive this axis are suspect too. Their variances get
+     * their prior added (a diagonal term keeps P PSD), so they can re-learn
+     * instead of the rate drifting off and being gated again (e.g. after a
+     * rotor lost thrust, or after garbage data taught them wrong values). */
+    for (uint8_t p = derived->jac_rate_count[axis]; p < derived->jac_count[axis]; ++p) {
+        if (derived->jac_torque[axis][p] != 0.0f) {
+            const uint8_t k = derived->jac_column[axis][p];
+            core->cov[k][k] += derived->prior_var[k];
+        }
+    }
 }
 
 /* One axis: S, innovation, gate (and re-anchor), then its vector queued in
@@ -228,7 +240,7 @@ fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const 
         core->innovation[axis] = innovation;
         core->innovation_test_ratio[axis] = innovation_sq * inv_innovation_var * derived->inv_gate_sq;
 
-        if (derived->gate_sq > 0.0f && innovation_sq > derived->gate_sq * innovation_var) {
+        if (!(innovation_sq <= derived->gate_sq * innovation_var)) {
             if (core->gated_run[axis] < filter->config.gate_max_consecutive) {
                 core->gated_run[axis]++;
                 filter->counters.axis_gated[axis]++;
@@ -319,7 +331,7 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float nu0 = gyro[0] - state[0] - state[b0];
     const float nu0_sq = nu0 * nu0;
     /* S < R (even within rounding: fuse_axis decides) leaves the fast path. */
-    if (!(var0 >= noise_var) || (gate_sq > 0.0f && nu0_sq > gate_sq * var0)) {
+    if (!(var0 >= noise_var) || !(nu0_sq <= gate_sq * var0)) {
         return 0;
     }
     const float inv0 = 1.0f / var0;
@@ -334,7 +346,7 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float var1 = h1_r1 + h1_b1 + noise_var;
     const float nu1 = gyro[1] - (state[1] + h0_r1 * step0) - (state[b1] + h0_b1 * step0);
     const float nu1_sq = nu1 * nu1;
-    if (!(var1 >= noise_var) || (gate_sq > 0.0f && nu1_sq > gate_sq * var1)) {
+    if (!(var1 >= noise_var) || !(nu1_sq <= gate_sq * var1)) {
         return 0;
     }
     const float inv1 = 1.0f / var1;
@@ -354,7 +366,7 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float shift_b2 = h0_b2 * step0 + h1_b2 * step1;
     const float nu2 = gyro[2] - (state[2] + shift_r2) - (state[b2] + shift_b2);
     const float nu2_sq = nu2 * nu2;
-    if (!(var2 >= noise_var) || (gate_sq > 0.0f && nu2_sq > gate_sq * var2)) {
+    if (!(var2 >= noise_var) || !(nu2_sq <= gate_sq * var2)) {
         return 0;
     }
     const float inv2 = 1.0f / var2;

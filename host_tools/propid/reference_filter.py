@@ -29,6 +29,7 @@ _F32_MAX = float(np.finfo(np.float32).max)
 # algorithm, whose P needs them (docs/math.md §2).
 VAR_LOADING = float(np.finfo(np.float32).eps)
 ROUNDING_TOL = 2.0 * VAR_LOADING
+GATE_OFF_SQ = 1.0e30  # C: PROPID_GATE_OFF_SQ (gating off still refuses 1e15-sigma innovations)
 
 
 def _f32(value: float) -> float:
@@ -71,7 +72,8 @@ class ReferenceFilter:
             self.gate_sq = c["gate_sigma"] ** 2
             self.inv_gate_sq = 1.0 / self.gate_sq
         else:
-            self.gate_sq, self.inv_gate_sq = 0.0, 1.0
+            self.gate_sq, self.inv_gate_sq = GATE_OFF_SQ, 1.0
+        self.rate_limit = 2.0 * c["gyro_range"]
         self.converged_var = c["converged_rel_std"] ** 2
 
         n = self.n
@@ -142,6 +144,7 @@ class ReferenceFilter:
 
     def resync(self, t_us: int) -> int:
         for a in range(3):
+            self.state[a] = 0.0
             self._reset_state(a)
             self.gated_run[a] = 0
         self.time_us = int(t_us)
@@ -237,8 +240,12 @@ class ReferenceFilter:
                 return self._reject("PROPID_ERR_ROTOR_SPEED_NEGATIVE")
             if v > self.c["max_rotor_speed"]:
                 return self._reject("PROPID_ERR_ROTOR_SPEED_RANGE")
+        max_gap = self.max_gyro_gap_us
         if self.has_rotor_data and t_us <= self.rotor_time_us:
-            return self._reject("PROPID_ERR_TIME_BACKWARDS")
+            # ... unless the stored stamp is the clock fault (C: same rule).
+            reference = self.time_us if self.has_time else t_us
+            if not self.rotor_time_us - reference > max_gap:
+                return self._reject("PROPID_ERR_TIME_BACKWARDS")
         self.rotor_speed_sq = np.array(values) ** 2
         self.rotor_time_us = int(t_us)
         self.has_rotor_data = True
@@ -267,6 +274,8 @@ class ReferenceFilter:
             return self._reject("PROPID_ERR_NO_ROTOR_DATA")
         if t_us > self.rotor_time_us and t_us - self.rotor_time_us > self.rotor_stale_us:
             return self._reject("PROPID_ERR_ROTOR_STALE")
+        if self.rotor_time_us - t_us > self.max_gyro_gap_us:
+            return self._reject("PROPID_ERR_ROTOR_STALE")
         if not anchor:
             # Trapezoid input over the interval, as the C filter (docs/math.md).
             speed_sq = 0.5 * (self.input_speed_sq + self.rotor_speed_sq)
@@ -284,6 +293,9 @@ class ReferenceFilter:
             if not (np.all(np.isfinite(rate_next)) and np.all(np.isfinite(jac_dt))
                     and np.all(np.isfinite(self.state))):
                 return self._reject("PROPID_ERR_NUMERIC")
+            # Bounded prediction (C: propid_predict_stage, PROPID_PREDICT_CLAMPED).
+            rate_clamped = int(np.any(np.abs(rate_next) > self.rate_limit))
+            rate_next = np.clip(rate_next, -self.rate_limit, self.rate_limit)
         elif not np.all(np.isfinite(self.state)):
             return self._reject("PROPID_ERR_NUMERIC")
 
@@ -304,6 +316,10 @@ class ReferenceFilter:
             diag = np.diag_indices(n)
             self.cov[diag] += VAR_LOADING * self.cov[diag] + self.process_psd * dt
             self.state[:3] = rate_next
+        else:
+            # The rates start at the anchoring sample (C: propid_push_gyro).
+            self.state[:3] = np.array(y) - self.state[self.first_bias:self.first_bias + 3]
+            rate_clamped = 0
 
         gated = False
         for axis in range(3):
@@ -311,7 +327,7 @@ class ReferenceFilter:
 
         lo, hi = self.c["coeff_rel_min"], self.c["coeff_rel_max"]
         coeffs = self.state[3:self.first_bias]
-        clamped = int(np.sum(coeffs < lo) + np.sum(coeffs > hi))
+        clamped = int(np.sum(coeffs < lo) + np.sum(coeffs > hi)) + rate_clamped
         self.state[3:self.first_bias] = np.clip(coeffs, lo, hi)
         if clamped:
             self.health |= HEALTH["STATE_CLAMPED"]
@@ -347,7 +363,7 @@ class ReferenceFilter:
         innovation_sq = innovation * innovation
         self.innovation[axis] = innovation
         self.innovation_test_ratio[axis] = innovation_sq / innovation_var * self.inv_gate_sq
-        if self.gate_sq > 0.0 and innovation_sq > self.gate_sq * innovation_var:
+        if not innovation_sq <= self.gate_sq * innovation_var:
             if self.gated_run[axis] < self.gate_max_consecutive:
                 self.gated_run[axis] += 1
                 self.counters_data["axis_gated"][axis] += 1
@@ -356,6 +372,15 @@ class ReferenceFilter:
             # prior variance, no correlations; then fuse (C: reanchor_rate).
             self.state[axis] = _f32(gyro) - self.state[bias]
             self._reset_state(axis)
+            # The coefficients driving this axis get their prior variance added
+            # (C: reanchor_rate); structurally zero torques (below float32
+            # resolution of the largest, C: flush_residues) are skipped.
+            for torques, first in ((self.thrust_torque, 3), (self.drag_torque, self.first_drag)):
+                column = torques[:, axis]
+                largest = np.max(np.abs(torques)) if torques.size else 0.0
+                for i in range(self.rotor_count):
+                    if abs(column[i]) > largest * 1.1920929e-7:
+                        self.cov[first + i, first + i] += self.prior_var[first + i]
             cov_h = self.cov[:, axis] + self.cov[:, bias]
             innovation_var = cov_h[axis] + cov_h[bias] + self.gyro_var
             innovation = gyro - self.state[axis] - self.state[bias]
