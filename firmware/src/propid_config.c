@@ -411,9 +411,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 
     out.gyro_var = config->gyro_noise_density * config->gyro_noise_density *
                    config->gyro_sample_rate_hz;
-    /* A per-sample noise std beyond the gyro's range is not a sensor. */
-    if (!positive_finite(out.gyro_var) || out.gyro_var < 1.0e-20f ||
-        out.gyro_var > config->gyro_range * config->gyro_range) {
+    /* (A huge noise is allowed: it only makes the measurement weightless,
+     * which probes of the prediction use.) */
+    if (!positive_finite(out.gyro_var) || out.gyro_var < 1.0e-20f || out.gyro_var > 1.0e20f) {
         PROPID_BAD("gyro_noise_density");
     }
     if (config->gate_sigma > 0.0f) {

@@ -170,17 +170,6 @@ static void reanchor_rate(propid_filter_t *filter, uint8_t axis, uint8_t bias, f
     const propid_derived_t *derived = &filter->derived;
     core->state[axis] = gyro - core->state[bias];
     propid_cov_reset_state(derived, core, axis);
-    /* The model, not the sensor, was wrong for a whole run of samples: the
-     * coefficients that drive this axis are suspect too. Their variances get
-     * their prior added (a diagonal term keeps P PSD), so they can re-learn
-     * instead of the rate drifting off and being gated again (e.g. after a
-     * rotor lost thrust, or after garbage data taught them wrong values). */
-    for (uint8_t p = derived->jac_rate_count[axis]; p < derived->jac_count[axis]; ++p) {
-        if (derived->jac_torque[axis][p] != 0.0f) {
-            const uint8_t k = derived->jac_column[axis][p];
-            core->cov[k][k] += derived->prior_var[k];
-        }
-    }
 }
 
 /* One axis: S, innovation, gate (and re-anchor), then its vector queued in

@@ -372,15 +372,6 @@ class ReferenceFilter:
             # prior variance, no correlations; then fuse (C: reanchor_rate).
             self.state[axis] = _f32(gyro) - self.state[bias]
             self._reset_state(axis)
-            # The coefficients driving this axis get their prior variance added
-            # (C: reanchor_rate); structurally zero torques (below float32
-            # resolution of the largest, C: flush_residues) are skipped.
-            for torques, first in ((self.thrust_torque, 3), (self.drag_torque, self.first_drag)):
-                column = torques[:, axis]
-                largest = np.max(np.abs(torques)) if torques.size else 0.0
-                for i in range(self.rotor_count):
-                    if abs(column[i]) > largest * 1.1920929e-7:
-                        self.cov[first + i, first + i] += self.prior_var[first + i]
             cov_h = self.cov[:, axis] + self.cov[:, bias]
             innovation_var = cov_h[axis] + cov_h[bias] + self.gyro_var
             innovation = gyro - self.state[axis] - self.state[bias]

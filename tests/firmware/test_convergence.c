@@ -153,11 +153,6 @@ static void configure(const scenario_t *sc, propid_config_t *config)
     if (sc->coeff_walk >= 0.0f) {
         config->thrust_coeff_rel_walk = sc->coeff_walk;
         config->drag_coeff_rel_walk = sc->coeff_walk;
-        if (sc->coeff_walk == 0.0f) {
-            /* Frozen means frozen: no gate re-open either (it re-opens the
-             * coefficients' variance, docs/design.md §12). */
-            config->gate_max_consecutive = 65535u;
-        }
     }
 }
 
