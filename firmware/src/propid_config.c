@@ -416,6 +416,19 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!positive_finite(out.gyro_var) || out.gyro_var < 1.0e-20f || out.gyro_var > 1.0e20f) {
         PROPID_BAD("gyro_noise_density");
     }
+    /* A gyro sample measures omega + b with variance R: after it, the
+     * correlation of omega and b is 1 - R / min(P_omega, P_b) to first order,
+     * which float32 holds only while R / P_b >> epsilon. A bias prior (or a
+     * bias walk over the longest gap) above R / (64 epsilon) leaves a
+     * covariance that is not positive definite after the first update. */
+    const float bias_var_max = out.gyro_var * (1.0f / (64.0f * PROPID_VAR_LOADING));
+    if (config->gyro_bias_std0 * config->gyro_bias_std0 > bias_var_max) {
+        PROPID_BAD("gyro_bias_std0");
+    }
+    if (config->gyro_bias_walk * config->gyro_bias_walk * ((float)config->max_gyro_gap_us * 1.0e-6f) >
+        bias_var_max) {
+        PROPID_BAD("gyro_bias_walk");
+    }
     if (config->gate_sigma > 0.0f) {
         out.gate_sq = config->gate_sigma * config->gate_sigma;
         out.inv_gate_sq = 1.0f / out.gate_sq;
@@ -468,6 +481,18 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
                                               : (k < first_drag ? "thrust_coeff_rel_walk"
                                                                 : (k < first_bias ? "drag_coeff_rel_walk"
                                                                                   : "gyro_bias_walk")));
+        }
+        if (k < PROPID_RATE_STATES) {
+            /* An update leaves the rate variance ~(R + P_b) computed as the
+             * difference P - P^2 / S, exact only to ~epsilon P in float32: above
+             * R / (64 epsilon) the rounding is a sizable part of the result and
+             * P loses its definiteness. The prior must stay below that, and the
+             * variance is kept below it (not below 4 gyro_range^2 only). */
+            const float rate_var_max = out.gyro_var * (1.0f / (64.0f * PROPID_VAR_LOADING));
+            if (prior > rate_var_max) {
+                PROPID_BAD("rate_std0");
+            }
+            ceiling = ceiling < rate_var_max ? ceiling : rate_var_max;
         }
         if (!positive_finite(prior) || prior < floor_var) {
             PROPID_BAD(k < PROPID_RATE_STATES ? "rate_std0"

@@ -99,6 +99,9 @@ class ReferenceFilter:
             self.process_psd[k] = psd
             self.var_floor[k] = floor
             self.var_ceiling[k] = max(ceiling, prior)
+            if k < 3:
+                # C: the rate variance is kept below R / (64 epsilon) (float32 rounding).
+                self.var_ceiling[k] = min(self.var_ceiling[k], self.gyro_var / (64.0 * VAR_LOADING))
 
         self.counters_data = {
             "gyro_accepted": 0, "rotor_accepted": 0, "axis_gated": [0, 0, 0], "gate_reopened": 0,
