@@ -416,12 +416,13 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!positive_finite(out.gyro_var) || out.gyro_var < 1.0e-20f || out.gyro_var > 1.0e20f) {
         PROPID_BAD("gyro_noise_density");
     }
-    /* A gyro sample measures omega + b with variance R: after it, the
-     * correlation of omega and b is 1 - R / min(P_omega, P_b) to first order,
-     * which float32 holds only while R / P_b >> epsilon. A bias prior (or a
-     * bias walk over the longest gap) above R / (64 epsilon) leaves a
-     * covariance that is not positive definite after the first update. */
-    const float bias_var_max = out.gyro_var * (1.0f / (64.0f * PROPID_VAR_LOADING));
+    /* A gyro sample measures omega + b with variance R: after it, 1 - rho^2 of
+     * omega and b is ~R / min(P_omega, P_b), which float32 holds only while
+     * it is well above epsilon. A bias prior (or a bias walk over the longest
+     * gap) above R / (64 epsilon) leaves a covariance that is not positive
+     * definite. (The rate prior needs no such bound: the update loading,
+     * propid_internal.h, covers a large P_omega.) */
+    const float bias_var_max = out.gyro_var * (1.0f / PROPID_UPDATE_LOADING);
     if (config->gyro_bias_std0 * config->gyro_bias_std0 > bias_var_max) {
         PROPID_BAD("gyro_bias_std0");
     }
@@ -437,6 +438,17 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         out.inv_gate_sq = 1.0f;
     }
     out.rate_limit = 2.0f * config->gyro_range;
+    {
+        /* S range of the quad's fast update path: [R, R + R / loading]; above
+         * it the general path loads R (propid_internal.h). */
+        const float s_max = out.gyro_var + out.gyro_var * (1.0f / PROPID_UPDATE_LOADING);
+        uint32_t low_bits;
+        uint32_t high_bits;
+        memcpy(&low_bits, &out.gyro_var, sizeof(low_bits));
+        memcpy(&high_bits, &s_max, sizeof(high_bits));
+        out.innovation_var_bits = low_bits;
+        out.innovation_range_bits = high_bits - low_bits;
+    }
     out.converged_var = config->converged_rel_std * config->converged_rel_std;
 
     /* Per-state prior, process noise, floor and ceiling (reasons in docs/design.md). */
@@ -483,16 +495,15 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
                                                                                   : "gyro_bias_walk")));
         }
         if (k < PROPID_RATE_STATES) {
-            /* An update leaves the rate variance ~(R + P_b) computed as the
-             * difference P - P^2 / S, exact only to ~epsilon P in float32: above
-             * R / (64 epsilon) the rounding is a sizable part of the result and
-             * P loses its definiteness. The prior must stay below that, and the
-             * variance is kept below it (not below 4 gyro_range^2 only). */
-            const float rate_var_max = out.gyro_var * (1.0f / (64.0f * PROPID_VAR_LOADING));
-            if (prior > rate_var_max) {
-                PROPID_BAD("rate_std0");
+            /* An update computes the new variance as P - P^2 / S, exact only to
+             * ~epsilon P in float32: the rate variance is kept below R / (64
+             * epsilon) (or the prior, if larger: the update loading handles
+             * that, propid_internal.h), applied before an update that finds S
+             * beyond it and after every update. */
+            const float rate_var_max = out.gyro_var * (1.0f / PROPID_UPDATE_LOADING);
+            if (ceiling > rate_var_max) {
+                ceiling = rate_var_max > prior ? rate_var_max : prior;
             }
-            ceiling = ceiling < rate_var_max ? ceiling : rate_var_max;
         }
         if (!positive_finite(prior) || prior < floor_var) {
             PROPID_BAD(k < PROPID_RATE_STATES ? "rate_std0"

@@ -54,6 +54,13 @@ static inline float propid_cov_at(const float (*cov)[PROPID_MAX_STATES], uint8_t
 #define PROPID_VAR_LOADING 1.1920929e-7f /* FLT_EPSILON = 2^-23 */
 #define PROPID_ROUNDING_TOL (2.0f * PROPID_VAR_LOADING)
 
+/* Update loading: a gyro update computes the new variance of omega + b as
+ * P_hh - P_hh^2 / S, exact only to ~epsilon P_hh in float32; when R is below
+ * PROPID_UPDATE_LOADING P_hh that rounding is a sizable part of the result and
+ * P loses its definiteness. The update then uses R_eff = PROPID_UPDATE_LOADING
+ * P_hh (S += R_eff - R): float32 rounding treated as measurement noise. */
+#define PROPID_UPDATE_LOADING (64.0f * PROPID_VAR_LOADING)
+
 /* Gate constant when gating is off (gate_sigma <= 0): a 1e15-sigma innovation
  * is never data; the gate test then also needs no "gating on" branch. */
 #define PROPID_GATE_OFF_SQ 1.0e30f

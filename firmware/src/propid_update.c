@@ -222,6 +222,13 @@ fuse_axis(propid_filter_t *filter, pending_t *pending_ref, int *repaired, const 
                 innovation_var = noise_var;
             }
         }
+        {
+            /* Update loading (propid_internal.h): R_eff = loading * P_hh when larger. */
+            const float loaded_noise = PROPID_UPDATE_LOADING * (innovation_var - noise_var);
+            if (loaded_noise > noise_var) {
+                innovation_var += loaded_noise - noise_var;
+            }
+        }
         /* The state after the pending axes, on the two components H reads. */
         float innovation = measured - (core->state[axis] + shift_rate) - (core->state[bias] + shift_bias);
         const float innovation_sq = innovation * innovation;
@@ -309,6 +316,10 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float *state = core->state;
     const float noise_var = derived->gyro_var;
     const float gate_sq = derived->gate_sq;
+    /* S outside [R, R + R / loading] (or NaN) leaves the fast path: below, the
+     * general path decides about rounding; above, it loads R. */
+    const uint32_t var_bits = derived->innovation_var_bits;
+    const uint32_t var_range_bits = derived->innovation_range_bits;
     const uint8_t b0 = PROPID_QUAD_STATES - 3u; /* bias states 11, 12, 13 */
     const uint8_t b1 = PROPID_QUAD_STATES - 2u;
     const uint8_t b2 = PROPID_QUAD_STATES - 1u;
@@ -320,7 +331,7 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float nu0 = gyro[0] - state[0] - state[b0];
     const float nu0_sq = nu0 * nu0;
     /* S < R (even within rounding: fuse_axis decides) leaves the fast path. */
-    if (!(var0 >= noise_var) || !(nu0_sq <= gate_sq * var0)) {
+    if (outside_positive_range(var0, var_bits, var_range_bits) || !(nu0_sq <= gate_sq * var0)) {
         return 0;
     }
     const float inv0 = 1.0f / var0;
@@ -335,7 +346,7 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float var1 = h1_r1 + h1_b1 + noise_var;
     const float nu1 = gyro[1] - (state[1] + h0_r1 * step0) - (state[b1] + h0_b1 * step0);
     const float nu1_sq = nu1 * nu1;
-    if (!(var1 >= noise_var) || !(nu1_sq <= gate_sq * var1)) {
+    if (outside_positive_range(var1, var_bits, var_range_bits) || !(nu1_sq <= gate_sq * var1)) {
         return 0;
     }
     const float inv1 = 1.0f / var1;
@@ -355,7 +366,7 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float shift_b2 = h0_b2 * step0 + h1_b2 * step1;
     const float nu2 = gyro[2] - (state[2] + shift_r2) - (state[b2] + shift_b2);
     const float nu2_sq = nu2 * nu2;
-    if (!(var2 >= noise_var) || !(nu2_sq <= gate_sq * var2)) {
+    if (outside_positive_range(var2, var_bits, var_range_bits) || !(nu2_sq <= gate_sq * var2)) {
         return 0;
     }
     const float inv2 = 1.0f / var2;
@@ -414,8 +425,15 @@ uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
         fuse_quad_usual((const float (*)[PROPID_MAX_STATES])core->cov, core, derived, &pending, gyro)) {
         gated_mask = 0u;
     } else {
-        /* Every other sample (a gated axis, S < R, a non-finite vector) and every
-         * other vehicle: the general per-axis code. */
+        /* Every other sample (a gated axis, S out of its range, a non-finite
+         * vector) and every other vehicle: the general per-axis code. A
+         * prediction across a long gap at high rates can inflate the rate
+         * variances by orders of magnitude: the ceilings first (they keep P
+         * PSD), so no update sees an S that float32 cannot downdate. */
+        if (propid_cov_enforce_bounds(derived, core)) {
+            core->health |= PROPID_HEALTH_COV_REPAIRED;
+            filter->counters.cov_repairs++;
+        }
         gated_mask = 0u;
         for (uint8_t axis = 0; axis < 3u; ++axis) {
             gated_mask |= fuse_axis(filter, &pending, &repaired, axis, gyro[axis], n) << axis;

@@ -29,6 +29,7 @@ _F32_MAX = float(np.finfo(np.float32).max)
 # algorithm, whose P needs them (docs/math.md §2).
 VAR_LOADING = float(np.finfo(np.float32).eps)
 ROUNDING_TOL = 2.0 * VAR_LOADING
+UPDATE_LOADING = 64.0 * VAR_LOADING
 GATE_OFF_SQ = 1.0e30  # C: PROPID_GATE_OFF_SQ (gating off still refuses 1e15-sigma innovations)
 
 
@@ -101,7 +102,9 @@ class ReferenceFilter:
             self.var_ceiling[k] = max(ceiling, prior)
             if k < 3:
                 # C: the rate variance is kept below R / (64 epsilon) (float32 rounding).
-                self.var_ceiling[k] = min(self.var_ceiling[k], self.gyro_var / (64.0 * VAR_LOADING))
+                rate_var_max = self.gyro_var / UPDATE_LOADING
+                if self.var_ceiling[k] > rate_var_max:
+                    self.var_ceiling[k] = max(rate_var_max, prior)
 
         self.counters_data = {
             "gyro_accepted": 0, "rotor_accepted": 0, "axis_gated": [0, 0, 0], "gate_reopened": 0,
@@ -324,6 +327,11 @@ class ReferenceFilter:
             self.state[:3] = np.array(y) - self.state[self.first_bias:self.first_bias + 3]
             rate_clamped = 0
 
+        # Ceilings before the update (C: the general update path does this when it
+        # runs; a no-op unless a variance is out of its bounds).
+        if self._enforce_bounds():
+            self.health |= HEALTH["COV_REPAIRED"]
+            self.counters_data["cov_repairs"] += 1
         gated = False
         for axis in range(3):
             gated |= self._update_axis(axis, y[axis])
@@ -362,6 +370,10 @@ class ReferenceFilter:
                 self.counters_data["cov_repairs"] += 1
             cov_h = self.cov[:, axis] + self.cov[:, bias]
             innovation_var = max(cov_h[axis] + cov_h[bias] + self.gyro_var, self.gyro_var)
+        # Update loading (C: PROPID_UPDATE_LOADING): R_eff = 64 eps P_hh when larger.
+        loaded_noise = UPDATE_LOADING * (innovation_var - self.gyro_var)
+        if loaded_noise > self.gyro_var:
+            innovation_var += loaded_noise - self.gyro_var
         innovation = gyro - self.state[axis] - self.state[bias]
         innovation_sq = innovation * innovation
         self.innovation[axis] = innovation

@@ -182,6 +182,8 @@ typedef struct {
     float inv_gate_sq;                              /* 1 / gate_sq (1 when gating is off) */
     float converged_var;                            /* converged_rel_std^2 */
     float rate_limit;                               /* |predicted body rate| bound: 2 gyro_range */
+    uint32_t innovation_var_bits;                   /* bit pattern of gyro_var (S range test) */
+    uint32_t innovation_range_bits;                 /* bits(S at which R is loaded) - bits(gyro_var) */
     float process_psd[PROPID_MAX_STATES];           /* per-state Q rate: Q_ii = process_psd[i] * dt */
     float prior_var[PROPID_MAX_STATES];             /* per-state prior variance */
     float var_floor[PROPID_MAX_STATES];             /* per-state variance floor */
