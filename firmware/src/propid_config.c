@@ -373,7 +373,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!positive_finite(config->gyro_noise_density)) {
         PROPID_BAD("gyro_noise_density");
     }
-    if (!positive_finite(config->gyro_sample_rate_hz)) {
+    if (!positive_finite(config->gyro_sample_rate_hz) || config->gyro_sample_rate_hz > 1.0e6f) {
         PROPID_BAD("gyro_sample_rate_hz");
     }
     if (!positive_finite(config->rate_process_noise)) {
@@ -388,7 +388,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!isfinite(config->gyro_bias_walk) || config->gyro_bias_walk < 0.0f) {
         PROPID_BAD("gyro_bias_walk");
     }
-    if (!isfinite(config->gate_sigma) || config->gate_sigma > 1.0e3f) {
+    /* A gate below 1 sigma would refuse a third of valid samples. */
+    if (!isfinite(config->gate_sigma) || config->gate_sigma > 1.0e3f ||
+        (config->gate_sigma > 0.0f && config->gate_sigma < 1.0f)) {
         PROPID_BAD("gate_sigma");
     }
     if (config->gate_max_consecutive < 1u) {
@@ -523,15 +525,43 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 
     out.gyro_var = config->gyro_noise_density * config->gyro_noise_density *
                    config->gyro_sample_rate_hz;
-    if (!positive_finite(out.gyro_var) || out.gyro_var < 1.0e-20f) {
+    /* (A huge noise is allowed: it only makes the measurement weightless,
+     * which probes of the prediction use.) */
+    if (!positive_finite(out.gyro_var) || out.gyro_var < 1.0e-20f || out.gyro_var > 1.0e20f) {
         PROPID_BAD("gyro_noise_density");
+    }
+    /* A gyro sample measures omega + b with variance R: after it, 1 - rho^2 of
+     * omega and b is ~R / min(P_omega, P_b), which float32 holds only while
+     * it is well above epsilon. A bias prior (or a bias walk over the longest
+     * gap) above R / (64 epsilon) leaves a covariance that is not positive
+     * definite. (The rate prior needs no such bound: the update loading,
+     * propid_internal.h, covers a large P_omega.) */
+    const float bias_var_max = out.gyro_var * (1.0f / PROPID_UPDATE_LOADING);
+    if (config->gyro_bias_std0 * config->gyro_bias_std0 > bias_var_max) {
+        PROPID_BAD("gyro_bias_std0");
+    }
+    if (config->gyro_bias_walk * config->gyro_bias_walk * ((float)config->max_gyro_gap_us * 1.0e-6f) >
+        bias_var_max) {
+        PROPID_BAD("gyro_bias_walk");
     }
     if (config->gate_sigma > 0.0f) {
         out.gate_sq = config->gate_sigma * config->gate_sigma;
         out.inv_gate_sq = 1.0f / out.gate_sq;
     } else {
-        out.gate_sq = 0.0f;
+        out.gate_sq = PROPID_GATE_OFF_SQ;
         out.inv_gate_sq = 1.0f;
+    }
+    out.rate_limit = 2.0f * config->gyro_range;
+    {
+        /* S range of the quad's fast update path: [R, R + R / loading]; above
+         * it the general path loads R (propid_internal.h). */
+        const float s_max = out.gyro_var + out.gyro_var * (1.0f / PROPID_UPDATE_LOADING);
+        uint32_t low_bits;
+        uint32_t high_bits;
+        memcpy(&low_bits, &out.gyro_var, sizeof(low_bits));
+        memcpy(&high_bits, &s_max, sizeof(high_bits));
+        out.innovation_var_bits = low_bits;
+        out.innovation_range_bits = high_bits - low_bits;
     }
     out.converged_var = config->converged_rel_std * config->converged_rel_std;
 
@@ -582,6 +612,27 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         }
         if (ceiling < prior) {
             ceiling = prior;
+        }
+        /* The process noise of one step across the longest allowed gap must stay
+         * below the variance ceiling: larger is not a model but a repair on
+         * every sample. */
+        const float max_gap_s = (float)config->max_gyro_gap_us * 1.0e-6f;
+        if (psd * max_gap_s > ceiling) {
+            PROPID_BAD(k < PROPID_RATE_STATES ? "rate_process_noise"
+                                              : (k < first_drag ? "thrust_coeff_rel_walk"
+                                                                : (k < first_bias ? "drag_coeff_rel_walk"
+                                                                                  : "gyro_bias_walk")));
+        }
+        if (k < PROPID_RATE_STATES) {
+            /* An update computes the new variance as P - P^2 / S, exact only to
+             * ~epsilon P in float32: the rate variance is kept below R / (64
+             * epsilon) (or the prior, if larger: the update loading handles
+             * that, propid_internal.h), applied before an update that finds S
+             * beyond it and after every update. */
+            const float rate_var_max = out.gyro_var * (1.0f / PROPID_UPDATE_LOADING);
+            if (ceiling > rate_var_max) {
+                ceiling = rate_var_max > prior ? rate_var_max : prior;
+            }
         }
         if (!positive_finite(prior) || prior < floor_var) {
             PROPID_BAD(k < PROPID_RATE_STATES ? "rate_std0"

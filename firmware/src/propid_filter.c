@@ -93,9 +93,10 @@ propid_status_t propid_resync(propid_filter_t *filter, uint64_t time_us)
         return PROPID_ERR_NOT_INITIALISED;
     }
     propid_core_t *core = &filter->core;
-    /* The rates drifted during the gap: forget their correlations, prior variance.
-     * The next gyro sample anchors the clock again. */
+    /* The rates drifted during the gap: forget them and their correlations, prior
+     * variance. The next gyro sample anchors the clock and sets the rates again. */
     for (uint8_t a = 0; a < PROPID_RATE_STATES; ++a) {
+        core->state[a] = 0.0f;
         propid_cov_reset_state(&filter->derived, core, a);
         core->gated_run[a] = 0u;
     }
@@ -135,8 +136,17 @@ propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_
         }
     }
     propid_core_t *core = &filter->core;
+    const uint64_t max_gap = config->max_gyro_gap_us;
     if (core->has_rotor_data && time_us <= core->rotor_time_us) {
-        return reject(filter, PROPID_ERR_TIME_BACKWARDS);
+        /* Not after the previous sample: going backwards, unless the stored
+         * stamp is the fault, more than max_gyro_gap_us ahead of the gyro clock
+         * (or, before the clock is anchored, of this sample). Such data is never
+         * used (propid_push_gyro finds it stale, which raises ROTOR_STALE), and
+         * this sample replaces it: one wild stamp must not lock out the stream. */
+        const uint64_t reference = core->has_time ? core->time_us : time_us;
+        if (!(core->rotor_time_us > reference && core->rotor_time_us - reference > max_gap)) {
+            return reject(filter, PROPID_ERR_TIME_BACKWARDS);
+        }
     }
     for (uint8_t i = 0; i < rotor_count; ++i) {
         core->rotor_speed_sq[i] = rotor_speed_rad_s[i] * rotor_speed_rad_s[i];
@@ -168,11 +178,16 @@ static __attribute__((noinline)) propid_status_t predict_step(propid_filter_t *f
     propid_core_t *core = &filter->core;
     float rate_next[3];
     float rate_jacobian_dt[3][PROPID_MAX_STATES];
-    if (propid_predict_stage(filter, dt, rate_next, rate_jacobian_dt) != PROPID_OK) {
+    const propid_status_t staged = propid_predict_stage(filter, dt, rate_next, rate_jacobian_dt);
+    if (staged < 0) {
         return PROPID_ERR_NUMERIC;
     }
-    /* Accepted: from here on the filter changes. */
+    /* Accepted: from here on the filter changes (no rejection follows). */
     core->health &= ~(PROPID_HEALTH_GATED | PROPID_HEALTH_STATE_CLAMPED);
+    if (staged != PROPID_OK) { /* the prediction was bounded */
+        core->health |= PROPID_HEALTH_STATE_CLAMPED;
+        filter->counters.state_clamps++;
+    }
     check_next_row(filter);
     propid_predict_covariance(&filter->derived, core, dt, rate_jacobian_dt);
     core->state[0] = rate_next[0];
@@ -226,9 +241,13 @@ propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
     if (!core->has_rotor_data) {
         return reject(filter, PROPID_ERR_NO_ROTOR_DATA);
     }
-    /* Rotor data stamped after the gyro sample is the freshest we have (ZOH). */
-    if (time_us > core->rotor_time_us &&
-        time_us - core->rotor_time_us > (uint64_t)config->rotor_stale_us) {
+    /* Rotor data stamped after the gyro sample is the freshest we have (ZOH),
+     * unless it is stamped beyond any plausible gap (a clock fault: stale). */
+    if (time_us > core->rotor_time_us) {
+        if (time_us - core->rotor_time_us > (uint64_t)config->rotor_stale_us) {
+            return reject(filter, PROPID_ERR_ROTOR_STALE);
+        }
+    } else if (core->rotor_time_us - time_us > (uint64_t)config->max_gyro_gap_us) {
         return reject(filter, PROPID_ERR_ROTOR_STALE);
     }
 
@@ -247,6 +266,15 @@ propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
         }
         core->health &= ~(PROPID_HEALTH_GATED | PROPID_HEALTH_STATE_CLAMPED);
         check_next_row(filter);
+    }
+    if (anchor) {
+        /* The rates start at this sample (the prior mean of omega given y = omega
+         * + b): its innovation is then zero, so it is fused whatever the rate,
+         * and the bias is not pulled by an unknown initial rate. */
+        const uint8_t first_bias = propid_first_bias(config->rotor_count);
+        for (uint8_t a = 0; a < 3u; ++a) {
+            core->state[a] = gyro_rad_s[a] - core->state[first_bias + a];
+        }
     }
     /* Accepted: the filter has changed (prediction); now the measurement. */
     const int gated = propid_update_gyro(filter, gyro_rad_s) != 0u;

@@ -164,6 +164,10 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float *state = core->state;
     const float noise_var = derived->gyro_var;
     const float gate_sq = derived->gate_sq;
+    /* S outside [R, R + R / loading] (or NaN) leaves the fast path: below, the
+     * generic path decides about rounding; above, it loads R. */
+    const uint32_t var_bits = derived->innovation_var_bits;
+    const uint32_t var_range_bits = derived->innovation_range_bits;
     const uint8_t b0 = PROPID_QUAD_FIRST_BIAS; /* the three gyro-bias states */
     const uint8_t b1 = PROPID_QUAD_FIRST_BIAS + 1u;
     const uint8_t b2 = PROPID_QUAD_FIRST_BIAS + 2u;
@@ -175,7 +179,7 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float nu0 = gyro[0] - state[0] - state[b0];
     const float nu0_sq = nu0 * nu0;
     /* S < R (even within rounding: fuse_axis decides) leaves the fast path. */
-    if (!(var0 >= noise_var) || (gate_sq > 0.0f && nu0_sq > gate_sq * var0)) {
+    if (propid_outside_positive_range(var0, var_bits, var_range_bits) || !(nu0_sq <= gate_sq * var0)) {
         return 0;
     }
     const float inv0 = 1.0f / var0;
@@ -190,7 +194,7 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float var1 = h1_r1 + h1_b1 + noise_var;
     const float nu1 = gyro[1] - (state[1] + h0_r1 * step0) - (state[b1] + h0_b1 * step0);
     const float nu1_sq = nu1 * nu1;
-    if (!(var1 >= noise_var) || (gate_sq > 0.0f && nu1_sq > gate_sq * var1)) {
+    if (propid_outside_positive_range(var1, var_bits, var_range_bits) || !(nu1_sq <= gate_sq * var1)) {
         return 0;
     }
     const float inv1 = 1.0f / var1;
@@ -210,7 +214,7 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     const float shift_b2 = h0_b2 * step0 + h1_b2 * step1;
     const float nu2 = gyro[2] - (state[2] + shift_r2) - (state[b2] + shift_b2);
     const float nu2_sq = nu2 * nu2;
-    if (!(var2 >= noise_var) || (gate_sq > 0.0f && nu2_sq > gate_sq * var2)) {
+    if (propid_outside_positive_range(var2, var_bits, var_range_bits) || !(nu2_sq <= gate_sq * var2)) {
         return 0;
     }
     const float inv2 = 1.0f / var2;
@@ -261,6 +265,13 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
  * axis. Not inlined: its callees' frames stay off the quad path's stack. */
 static __attribute__((noinline)) uint32_t fuse_generic(propid_filter_t *filter, const float gyro[3])
 {
+    /* A prediction across a long gap at high rates can inflate the rate
+     * variances by orders of magnitude: the ceilings first (they keep P PSD),
+     * so no update sees an S that float32 cannot downdate. */
+    if (propid_cov_enforce_bounds(&filter->derived, &filter->core)) {
+        filter->core.health |= PROPID_HEALTH_COV_REPAIRED;
+        filter->counters.cov_repairs++;
+    }
     uint32_t gated_mask = 0u;
     for (uint8_t axis = 0; axis < 3u; ++axis) {
         gated_mask |= fuse_axis(filter, axis, gyro[axis]) << axis;

@@ -56,6 +56,21 @@ static inline float propid_cov_at(const float (*cov)[PROPID_MAX_STATES], uint8_t
 #define PROPID_VAR_LOADING 1.1920929e-7f /* FLT_EPSILON = 2^-23 */
 #define PROPID_ROUNDING_TOL (2.0f * PROPID_VAR_LOADING)
 
+/* Update loading: a gyro update computes the new variance of omega + b as
+ * P_hh - P_hh^2 / S, exact only to ~epsilon P_hh in float32; when R is below
+ * PROPID_UPDATE_LOADING P_hh that rounding is a sizable part of the result and
+ * P loses its definiteness. The update then uses R_eff = PROPID_UPDATE_LOADING
+ * P_hh (S += R_eff - R): float32 rounding treated as measurement noise. */
+#define PROPID_UPDATE_LOADING (64.0f * PROPID_VAR_LOADING)
+
+/* Gate constant when gating is off (gate_sigma <= 0): a 1e15-sigma innovation
+ * is never data; the gate test then also needs no "gating on" branch. */
+#define PROPID_GATE_OFF_SQ 1.0e30f
+
+/* propid_predict_stage's note that it bounded a predicted rate to
+ * derived->rate_limit (not a public status: the step was accepted). */
+#define PROPID_PREDICT_CLAMPED ((propid_status_t)2)
+
 /* Loop annotations for the two copies of the step's kernels: fully unrolled for
  * the quad (GCC and Clang honour the pragma), plain otherwise. */
 #define PROPID_UNROLL_QUAD _Pragma("GCC unroll 14")
@@ -133,7 +148,10 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core);
  * Jacobian entries, the gyroscopic ones at the midpoint of omega and the Euler
  * predictor) into jacobian_dt[a][p], entry p of row a
  * being column derived->jac_column[a][p], without touching the filter. Returns
- * PROPID_ERR_NUMERIC when either (or a state) would be non-finite. */
+ * PROPID_ERR_NUMERIC when either (or a state) would be non-finite, and
+ * PROPID_PREDICT_CLAMPED when a finite rate_next beyond +-derived->rate_limit was
+ * bounded to it (an unobserved rate integrating the gyroscopic term can run away:
+ * the gyro cannot measure beyond gyro_range anyway). */
 propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, float rate_next[3],
                                      float jacobian_dt[3][PROPID_MAX_STATES]);
 /* P := F P F^T + Q dt + PROPID_VAR_LOADING diag, F = I + G, G the sparse rows from propid_predict_stage

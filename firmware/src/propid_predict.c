@@ -18,6 +18,24 @@
 
 #include "propid_internal.h"
 
+/* Rare path of the prediction's finiteness and bound test: PROPID_ERR_NUMERIC
+ * when a rate or `check` is not finite, else every rate bounded to +-limit and
+ * PROPID_PREDICT_CLAMPED (or PROPID_OK when none was beyond it). */
+static propid_status_t bound_rates(float rate_next[3], float limit, float check)
+{
+    if (!isfinite(rate_next[0] + rate_next[1] + rate_next[2] + check)) {
+        return PROPID_ERR_NUMERIC;
+    }
+    propid_status_t status = PROPID_OK;
+    for (uint8_t a = 0; a < 3u; ++a) {
+        if (fabsf(rate_next[a]) > limit) {
+            rate_next[a] = rate_next[a] > 0.0f ? limit : -limit;
+            status = PROPID_PREDICT_CLAMPED;
+        }
+    }
+    return status;
+}
+
 /* propid_predict_stage for the quad layout (propid_internal.h): the same values
  * as the general loop below over the same lists (whose other two gyroscopic
  * products are exact zeros here), straight-line. Takes the arrays it reads as separate pointers: offsets from
@@ -27,7 +45,8 @@ static __attribute__((noinline)) propid_status_t
 predict_stage_quad(const float *restrict state, const float *restrict input_speed_sq,
                    const float *restrict latest_speed_sq, const float (*restrict quad_gyro)[2],
                    const float (*restrict jac_torque)[PROPID_MAX_STATES - 3], float dt,
-                   float *restrict rate_next, float (*restrict jacobian_dt)[PROPID_MAX_STATES])
+                   float rate_limit, float *restrict rate_next,
+                   float (*restrict jacobian_dt)[PROPID_MAX_STATES])
 {
     const float rate[3] = {state[0], state[1], state[2]};
     const float half_dt = 0.5f * dt;
@@ -42,7 +61,6 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
     float rotors[3];
     float gyroscopic[3];
     float predictor[3];
-    float check = 0.0f;
 #pragma GCC unroll 3
     for (uint8_t a = 0; a < 3u; ++a) {
         float *g = jacobian_dt[a];
@@ -78,14 +96,17 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
         g[0] = 0.5f * (entry0 + dt * (quad_gyro[a][0] * rate[other1]));
         g[1] = 0.5f * (entry1 + dt * (quad_gyro[a][1] * rate[other0]));
         rate_next[a] = rate[a] + (rotors[a] + 0.25f * (gyroscopic[a] + corrector));
-        check += rate_next[a] + corrector + rotors[a];
     }
-    /* The sums above already hold every rate (rate_next) and, through a product,
-     * every coefficient (each appears in at least one row; a zero entry times a
-     * non-finite coefficient is NaN): only the biases remain. */
-    check += state[PROPID_QUAD_FIRST_BIAS] + state[PROPID_QUAD_FIRST_BIAS + 1u] + state[PROPID_QUAD_FIRST_BIAS + 2u];
-    if (!isfinite(check)) {
-        return PROPID_ERR_NUMERIC;
+    /* rate_next holds every rate, the rotor sums and the correctors, and through
+     * a product every coefficient and Jacobian entry (each coefficient appears in
+     * at least one row; a zero times a non-finite value is NaN): its bound test
+     * (NaN fails it) is their finiteness test. The biases join the last test as
+     * 0 * sum: exactly zero when finite, NaN otherwise. */
+    const float check = state[PROPID_QUAD_FIRST_BIAS] + state[PROPID_QUAD_FIRST_BIAS + 1u] +
+                        state[PROPID_QUAD_FIRST_BIAS + 2u];
+    if (!(fabsf(rate_next[0]) <= rate_limit) || !(fabsf(rate_next[1]) <= rate_limit) ||
+        !(fabsf(rate_next[2]) + 0.0f * check <= rate_limit)) {
+        return bound_rates(rate_next, rate_limit, check);
     }
     return PROPID_OK;
 }
@@ -202,10 +223,7 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
     for (uint8_t k = 0; k < n; ++k) {
         check += state[k];
     }
-    if (!isfinite(check)) {
-        return PROPID_ERR_NUMERIC;
-    }
-    return PROPID_OK;
+    return bound_rates(rate_next, derived->rate_limit, check);
 }
 
 propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, float rate_next[3],
@@ -214,7 +232,8 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
     if (filter->derived.quad_layout) {
         return predict_stage_quad(filter->core.state, filter->core.input_speed_sq,
                                   filter->core.rotor_speed_sq, filter->derived.quad_gyro,
-                                  filter->derived.jac_torque, dt, rate_next, jacobian_dt);
+                                  filter->derived.jac_torque, dt, filter->derived.rate_limit,
+                                  rate_next, jacobian_dt);
     }
     return predict_stage_any(filter, dt, rate_next, jacobian_dt);
 }

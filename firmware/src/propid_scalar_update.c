@@ -70,10 +70,17 @@ propid_scalar_result_t propid_scalar_update(propid_filter_t *filter, const propi
         }
         innovation_var = noise_var;
     }
+    {
+        /* Update loading (propid_internal.h): R_eff = loading * P_hh when larger. */
+        const float loaded_noise = PROPID_UPDATE_LOADING * (innovation_var - noise_var);
+        if (loaded_noise > noise_var) {
+            innovation_var += loaded_noise - noise_var;
+        }
+    }
     const float inv_innovation_var = 1.0f / innovation_var;
     const float innovation_sq = innovation * innovation;
     *test_ratio = innovation_sq * inv_innovation_var * derived->inv_gate_sq;
-    if (gate_sq > 0.0f && innovation_sq > gate_sq * innovation_var) {
+    if (gate_sq > 0.0f && !(innovation_sq <= gate_sq * innovation_var)) { /* NaN is gated too */
         return PROPID_SCALAR_GATED;
     }
     const float step = innovation * inv_innovation_var;

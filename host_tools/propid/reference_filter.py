@@ -29,6 +29,8 @@ _F32_MAX = float(np.finfo(np.float32).max)
 # algorithm, whose P needs them (docs/math.md §2).
 VAR_LOADING = float(np.finfo(np.float32).eps)
 ROUNDING_TOL = 2.0 * VAR_LOADING
+UPDATE_LOADING = 64.0 * VAR_LOADING
+GATE_OFF_SQ = 1.0e30  # C: PROPID_GATE_OFF_SQ (gating off still refuses 1e15-sigma innovations)
 
 
 def _f32(value: float) -> float:
@@ -93,7 +95,8 @@ class ReferenceFilter:
             self.gate_sq = c["gate_sigma"] ** 2
             self.inv_gate_sq = 1.0 / self.gate_sq
         else:
-            self.gate_sq, self.inv_gate_sq = 0.0, 1.0
+            self.gate_sq, self.inv_gate_sq = GATE_OFF_SQ, 1.0
+        self.rate_limit = 2.0 * c["gyro_range"]
         self.converged_var = c["converged_rel_std"] ** 2
 
         n = self.n
@@ -127,6 +130,11 @@ class ReferenceFilter:
             self.process_psd[k] = psd
             self.var_floor[k] = floor
             self.var_ceiling[k] = max(ceiling, prior)
+            if k < 3:
+                # C: the rate variance is kept below R / (64 epsilon) (float32 rounding).
+                rate_var_max = self.gyro_var / UPDATE_LOADING
+                if self.var_ceiling[k] > rate_var_max:
+                    self.var_ceiling[k] = max(rate_var_max, prior)
 
         self.counters_data = {
             "gyro_accepted": 0, "rotor_accepted": 0, "axis_gated": [0, 0, 0], "gate_reopened": 0,
@@ -180,6 +188,7 @@ class ReferenceFilter:
 
     def resync(self, t_us: int) -> int:
         for a in range(3):
+            self.state[a] = 0.0
             self._reset_state(a)
             self.gated_run[a] = 0
         self.time_us = int(t_us)
@@ -290,8 +299,12 @@ class ReferenceFilter:
                 return self._reject("PROPID_ERR_ROTOR_SPEED_NEGATIVE")
             if v > self.c["max_rotor_speed"]:
                 return self._reject("PROPID_ERR_ROTOR_SPEED_RANGE")
+        max_gap = self.max_gyro_gap_us
         if self.has_rotor_data and t_us <= self.rotor_time_us:
-            return self._reject("PROPID_ERR_TIME_BACKWARDS")
+            # ... unless the stored stamp is the clock fault (C: same rule).
+            reference = self.time_us if self.has_time else t_us
+            if not self.rotor_time_us - reference > max_gap:
+                return self._reject("PROPID_ERR_TIME_BACKWARDS")
         self.rotor_speed_sq = np.array(values) ** 2
         self.rotor_time_us = int(t_us)
         self.has_rotor_data = True
@@ -320,6 +333,8 @@ class ReferenceFilter:
             return self._reject("PROPID_ERR_NO_ROTOR_DATA")
         if t_us > self.rotor_time_us and t_us - self.rotor_time_us > self.rotor_stale_us:
             return self._reject("PROPID_ERR_ROTOR_STALE")
+        if self.rotor_time_us - t_us > self.max_gyro_gap_us:
+            return self._reject("PROPID_ERR_ROTOR_STALE")
         if not anchor:
             # Trapezoid input over the interval, as the C filter (docs/math.md).
             speed_sq = 0.5 * (self.input_speed_sq + self.rotor_speed_sq)
@@ -342,6 +357,9 @@ class ReferenceFilter:
             if not (np.all(np.isfinite(rate_next)) and np.all(np.isfinite(jac_dt))
                     and np.all(np.isfinite(self.state))):
                 return self._reject("PROPID_ERR_NUMERIC")
+            # Bounded prediction (C: propid_predict_stage, PROPID_PREDICT_CLAMPED).
+            rate_clamped = int(np.any(np.abs(rate_next) > self.rate_limit))
+            rate_next = np.clip(rate_next, -self.rate_limit, self.rate_limit)
         elif not np.all(np.isfinite(self.state)):
             return self._reject("PROPID_ERR_NUMERIC")
 
@@ -362,12 +380,21 @@ class ReferenceFilter:
             diag = np.diag_indices(n)
             self.cov[diag] += VAR_LOADING * self.cov[diag] + self.process_psd * dt
             self.state[:3] = rate_next
+        else:
+            # The rates start at the anchoring sample (C: propid_push_gyro).
+            self.state[:3] = np.array(y) - self.state[self.first_bias:self.first_bias + 3]
+            rate_clamped = 0
 
+        # Ceilings before the update (C: the general update path does this when it
+        # runs; a no-op unless a variance is out of its bounds).
+        if self._enforce_bounds():
+            self.health |= HEALTH["COV_REPAIRED"]
+            self.counters_data["cov_repairs"] += 1
         gated = False
         for axis in range(3):
             gated |= self._update_axis(axis, y[axis])
 
-        self._clamp()
+        self._clamp(rate_clamped)
         if self._enforce_bounds():
             self.health |= HEALTH["COV_REPAIRED"]
             self.counters_data["cov_repairs"] += 1
@@ -396,11 +423,15 @@ class ReferenceFilter:
                 self.counters_data["cov_repairs"] += 1
             cov_h = self.cov[:, axis] + self.cov[:, bias]
             innovation_var = max(cov_h[axis] + cov_h[bias] + self.gyro_var, self.gyro_var)
+        # Update loading (C: PROPID_UPDATE_LOADING): R_eff = 64 eps P_hh when larger.
+        loaded_noise = UPDATE_LOADING * (innovation_var - self.gyro_var)
+        if loaded_noise > self.gyro_var:
+            innovation_var += loaded_noise - self.gyro_var
         innovation = gyro - self.state[axis] - self.state[bias]
         innovation_sq = innovation * innovation
         self.innovation[axis] = innovation
         self.innovation_test_ratio[axis] = innovation_sq / innovation_var * self.inv_gate_sq
-        if self.gate_sq > 0.0 and innovation_sq > self.gate_sq * innovation_var:
+        if not innovation_sq <= self.gate_sq * innovation_var:
             if self.gated_run[axis] < self.gate_max_consecutive:
                 self.gated_run[axis] += 1
                 self.counters_data["axis_gated"][axis] += 1
@@ -461,6 +492,9 @@ class ReferenceFilter:
             cov_h = self.cov @ h
             innovation_var = float(h @ cov_h) + self.accel_var
         innovation_var = max(innovation_var, self.accel_var)
+        loaded_noise = UPDATE_LOADING * (innovation_var - self.accel_var)  # C: propid_scalar_update
+        if loaded_noise > self.accel_var:
+            innovation_var += loaded_noise - self.accel_var
         self.accel_innovation = innovation
         self.accel_innovation_test_ratio = innovation * innovation / innovation_var * self.inv_gate_sq
         self.accel_time_us = int(t_us)
@@ -475,6 +509,9 @@ class ReferenceFilter:
             self._reset_state(b)
             cov_h = self.cov @ h
             innovation_var = max(float(h @ cov_h) + self.accel_var, self.accel_var)
+            loaded_noise = UPDATE_LOADING * (innovation_var - self.accel_var)
+            if loaded_noise > self.accel_var:
+                innovation_var += loaded_noise - self.accel_var
             innovation = 0.0
             self.counters_data["accel_reanchored"] += 1
         self.accel_gated_run = 0
@@ -482,10 +519,10 @@ class ReferenceFilter:
         self._clamp()
         return STATUS["PROPID_OK"]
 
-    def _clamp(self) -> None:
+    def _clamp(self, extra: int = 0) -> None:
         lo, hi = self.c["coeff_rel_min"], self.c["coeff_rel_max"]
         coeffs = self.state[3:self.first_bias]
-        clamped = int(np.sum(coeffs < lo) + np.sum(coeffs > hi))
+        clamped = int(np.sum(coeffs < lo) + np.sum(coeffs > hi)) + extra
         self.state[3:self.first_bias] = np.clip(coeffs, lo, hi)
         if clamped:
             self.health |= HEALTH["STATE_CLAMPED"]

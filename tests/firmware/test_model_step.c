@@ -348,7 +348,7 @@ static void invert3(const float s[3][3], float inv[3][3])
 static void check_updates_against_batch(void)
 {
     filter.config.gate_sigma = 0.0f; /* no gating for this comparison */
-    filter.derived.gate_sq = 0.0f;
+    filter.derived.gate_sq = PROPID_GATE_OFF_SQ;
     filter.derived.inv_gate_sq = 1.0f;
     rng_t rng = {23u};
     const uint8_t n = filter.derived.state_count;

@@ -323,13 +323,22 @@ def test_log_times_out_with_a_clear_error(tmp_path, capsys):
     assert "no MAVLink data" in err
 
 
+def _default_sigint() -> None:
+    """In the child before exec: SIGINT back to its default disposition. A shell
+    starts background jobs with SIGINT ignored and children inherit that; Python
+    then installs no KeyboardInterrupt handler and the test's SIGINT would do
+    nothing."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_log_interrupted_keeps_what_was_written(tmp_path):
     port = free_udp_port()
     tlog, csv_path = tmp_path / "i.tlog", tmp_path / "i.csv"
     proc = subprocess.Popen([sys.executable, "-m", "propid.cli", "log", "--connect",
                              f"udp:127.0.0.1:{port}", "--tlog", str(tlog), "--csv", str(csv_path),
                              "--timeout", "30", "--quiet"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_sigint)
     stop = threading.Event()
     sender = threading.Thread(target=_send_frames,
                               args=(port, telemetry_frames(5), 1000, stop, 0.002))

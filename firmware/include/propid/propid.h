@@ -66,7 +66,8 @@ typedef enum {
 #define PROPID_HEALTH_ROTOR_STALE     (1u << 1) /* last gyro sample found stale rotor data */
 #define PROPID_HEALTH_GATED           (1u << 2) /* last gyro sample had a gated axis */
 #define PROPID_HEALTH_COV_REPAIRED    (1u << 3) /* covariance repaired since last reset (sticky) */
-#define PROPID_HEALTH_STATE_CLAMPED   (1u << 4) /* a coefficient sat on its clamp after the last update */
+#define PROPID_HEALTH_STATE_CLAMPED   (1u << 4) /* a coefficient sat on its clamp after the last update, or the
+                                                   predicted body rate was bounded to 2 gyro_range */
 #define PROPID_HEALTH_GATE_REOPENED   (1u << 5) /* an axis was re-opened after too many gated samples (sticky) */
 #define PROPID_HEALTH_ALL_CONVERGED   (1u << 6) /* every kf and km has converged */
 #define PROPID_HEALTH_TIME_RESYNCED   (1u << 7) /* propid_resync() was used since last reset (sticky) */
@@ -102,7 +103,8 @@ typedef struct {
     float gyro_bias_walk;             /* [rad/s/sqrt(s)] */
 
     /* Guards. */
-    float gate_sigma;                 /* innovation gate in standard deviations; <= 0 disables */
+    float gate_sigma;                 /* innovation gate in standard deviations, >= 1; <= 0 disables it
+                                         (innovations beyond 1e15 sigma are still gated) */
     uint16_t gate_max_consecutive;    /* gated samples in a row before an axis is re-opened */
     float max_rotor_speed;            /* larger rotor speeds are absurd [rad/s] */
     float gyro_range;                 /* larger |gyro| is a saturated sensor [rad/s] */
@@ -220,9 +222,12 @@ typedef struct {
     float drag_torque[PROPID_MAX_ROTORS][3];        /* J^-1 z yaw_sign_i km_nominal_i */
     float gyro_var;                                 /* per-sample measurement variance */
     /* Private (not part of the API contract): */
-    float gate_sq;                                  /* gate_sigma^2, 0 when gating is off */
+    float gate_sq;                                  /* gate_sigma^2, PROPID_GATE_OFF_SQ when gating is off */
     float inv_gate_sq;                              /* 1 / gate_sq (1 when gating is off) */
     float converged_var;                            /* converged_rel_std^2 */
+    float rate_limit;                               /* |predicted body rate| bound: 2 gyro_range */
+    uint32_t innovation_var_bits;                   /* bit pattern of gyro_var (S range test) */
+    uint32_t innovation_range_bits;                 /* bits(S at which R is loaded) - bits(gyro_var) */
     float process_psd[PROPID_MAX_STATES];           /* per-state Q rate: Q_ii = process_psd[i] * dt */
     float prior_var[PROPID_MAX_STATES];             /* per-state prior variance */
     float var_floor[PROPID_MAX_STATES];             /* per-state variance floor */
@@ -270,7 +275,8 @@ propid_status_t propid_reset(propid_filter_t *filter);
 propid_status_t propid_reset_rotor(propid_filter_t *filter, uint8_t rotor);
 
 /* Re-anchor the filter clock after a known gap (e.g. after PROPID_ERR_TIME_JUMP):
- * filter time := time_us, body-rate variance back to its prior. Coefficients kept. */
+ * filter time := time_us, body rates and their variance back to the prior (the
+ * next gyro sample sets the rates). Coefficients and biases kept. */
 propid_status_t propid_resync(propid_filter_t *filter, uint64_t time_us);
 
 /* ------------------------------------------------------------------------ */

@@ -1,0 +1,403 @@
+/*
+ * Regression tests of the input and numeric guards under faulty data: each test
+ * drives the public API into one failure found by random-call fuzzing and checks
+ * the filter's answer (docs/reliability.md, "Findings"):
+ *   runaway rate while gated, gating off, an ESC stamp far ahead, the first gyro
+ *   sample at a high rate, noise settings out of range, covariance definiteness.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "propid/propid.h"
+#include "unity.h"
+#include "test_rng.h"
+
+#define ROTORS 4u
+#define GYRO_PERIOD_US 2000u
+#define HOVER_SPEED 470.0f
+
+static propid_config_t config;
+static propid_filter_t filter;
+static uint64_t now_us;
+
+static void make_config(propid_config_t *out)
+{
+    propid_config_default(out);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(out, ROTORS, 0.17f, 0.7853982f,
+                                                                 1.0f, 5.57e-6f, 1.36e-7f));
+    propid_config_set_inertia_diag(out, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+}
+
+void setUp(void)
+{
+    make_config(&config);
+    now_us = 1000000u;
+}
+
+void tearDown(void)
+{
+}
+
+static void init_filter(void)
+{
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+}
+
+static int all_finite(const float *values, uint32_t count)
+{
+    for (uint32_t i = 0; i < count; ++i) {
+        if (!isfinite(values[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* The invariants every call must keep, accepted or not: finite estimates and
+ * innovation ratios, positive finite variances. */
+static void assert_sane(void)
+{
+    propid_estimate_t e;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &e));
+    TEST_ASSERT_TRUE(all_finite(e.body_rate, 3u));
+    TEST_ASSERT_TRUE(all_finite(e.gyro_bias, 3u));
+    TEST_ASSERT_TRUE(all_finite(e.thrust_coeff, ROTORS));
+    TEST_ASSERT_TRUE(all_finite(e.drag_coeff, ROTORS));
+    TEST_ASSERT_TRUE(all_finite(e.innovation, 3u));
+    TEST_ASSERT_TRUE(all_finite(e.innovation_test_ratio, 3u));
+    const uint8_t n = filter.derived.state_count;
+    for (uint8_t i = 0; i < n; ++i) {
+        TEST_ASSERT_TRUE(isfinite(filter.core.state[i]));
+        TEST_ASSERT_TRUE(filter.core.cov[i][i] > 0.0f && isfinite(filter.core.cov[i][i]));
+    }
+    /* Bounded, not running away: the prediction stops at 2 gyro_range, an
+     * update of a correlated axis may move a gated axis' rate a little further. */
+    for (uint8_t a = 0; a < 3u; ++a) {
+        TEST_ASSERT_TRUE_MESSAGE(fabsf(e.body_rate[a]) <= 4.0f * config.gyro_range, "rate beyond bound");
+    }
+}
+
+static propid_status_t push(uint64_t time_us, float speed, const float gyro[3])
+{
+    const float speeds[ROTORS] = {speed, speed * 1.01f, speed * 0.99f, speed * 1.02f};
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, time_us, speeds, ROTORS));
+    return propid_push_gyro(&filter, time_us, gyro);
+}
+
+/* Spin the filter up to a fast rotation: 30 rad/s on every axis. */
+static void spin_up(void)
+{
+    const float gyro[3] = {30.0f, 30.0f, 30.0f};
+    for (uint32_t k = 0; k < 200u; ++k) {
+        now_us += GYRO_PERIOD_US;
+        const propid_status_t status = push(now_us, HOVER_SPEED, gyro);
+        TEST_ASSERT_TRUE_MESSAGE(status >= 0, propid_status_name(status));
+    }
+}
+
+/* Gated samples at the longest allowed gap while the state spins fast: the
+ * gyroscopic term integrated without corrections must stay bounded, and so
+ * must every innovation ratio; afterwards benign data is accepted again. */
+static void run_gated_spin(void)
+{
+    init_filter();
+    spin_up();
+    const float wrong[3] = {-30.0f, 30.0f, -30.0f};
+    const uint64_t gap = config.max_gyro_gap_us;
+    for (uint32_t k = 0; k < 200u; ++k) {
+        now_us += gap;
+        const propid_status_t status = push(now_us, HOVER_SPEED, wrong);
+        TEST_ASSERT_TRUE_MESSAGE(status >= 0, propid_status_name(status));
+        assert_sane();
+    }
+}
+
+/* Benign data (hover, at rest) is accepted again, never NUMERIC, with finite,
+ * bounded numbers; every gated run ends in a re-open within
+ * gate_max_consecutive samples. (Coefficients that the garbage taught wrong
+ * values are re-learnt only at their random walk's pace: docs/design.md §12.) */
+static void assert_recovers(void)
+{
+    const float rest[3] = {0.01f, -0.02f, 0.03f};
+    for (uint32_t k = 0; k < 400u; ++k) {
+        now_us += GYRO_PERIOD_US;
+        const propid_status_t status = push(now_us, HOVER_SPEED, rest);
+        TEST_ASSERT_TRUE_MESSAGE(status >= 0, propid_status_name(status));
+        assert_sane();
+        for (uint8_t a = 0; a < 3u; ++a) {
+            TEST_ASSERT_TRUE(filter.core.gated_run[a] <= config.gate_max_consecutive);
+        }
+    }
+    propid_counters_t counters;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
+    TEST_ASSERT_EQUAL_UINT32(0u, counters.rejected[-(int)PROPID_ERR_NUMERIC]);
+}
+
+static void test_gated_rate_stays_bounded_and_recovers(void)
+{
+    run_gated_spin();
+    assert_recovers();
+    propid_counters_t counters;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
+    TEST_ASSERT_EQUAL_UINT32(0u, counters.rejected[-(int)PROPID_ERR_NUMERIC]);
+}
+
+/* The same with a gate that practically never re-opens (65535 in a row): the
+ * bound alone keeps the numbers finite, and propid_resync() forgets the rates. */
+static void test_resync_resets_runaway_rate(void)
+{
+    config.gate_max_consecutive = 65535u;
+    init_filter();
+    spin_up();
+    const float wrong[3] = {-30.0f, 30.0f, -30.0f};
+    for (uint32_t k = 0; k < 100u; ++k) {
+        now_us += config.max_gyro_gap_us;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK_GATED, push(now_us, HOVER_SPEED, wrong));
+        assert_sane();
+    }
+    now_us += GYRO_PERIOD_US;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_resync(&filter, now_us));
+    TEST_ASSERT_EQUAL_FLOAT(0.0f, filter.core.state[0]);
+    TEST_ASSERT_EQUAL_FLOAT(0.0f, filter.core.state[1]);
+    TEST_ASSERT_EQUAL_FLOAT(0.0f, filter.core.state[2]);
+    /* The anchoring sample sets the rates from the measurement. */
+    const float rest[3] = {0.01f, -0.02f, 0.03f};
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, push(now_us, HOVER_SPEED, rest));
+    propid_estimate_t e;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &e));
+    for (uint8_t a = 0; a < 3u; ++a) {
+        TEST_ASSERT_FLOAT_WITHIN(1.0e-3f, rest[a], e.body_rate[a] + e.gyro_bias[a]);
+    }
+    config.gate_max_consecutive = 25u; /* (the filter keeps its own copy) */
+}
+
+/* gate_sigma = 0 (documented: gating off): never a non-finite state. */
+static void test_gate_off_never_writes_non_finite(void)
+{
+    config.gate_sigma = 0.0f;
+    run_gated_spin();
+    rng_t rng = {77u};
+    for (uint32_t k = 0; k < 2000u; ++k) {
+        now_us += 1u + (rng_next(&rng) % config.max_gyro_gap_us);
+        const float gyro[3] = {rng_range(&rng, -34.0f, 34.0f), rng_range(&rng, -34.0f, 34.0f),
+                               rng_range(&rng, -34.0f, 34.0f)};
+        const propid_status_t status = push(now_us, rng_range(&rng, 0.0f, 5000.0f), gyro);
+        TEST_ASSERT_TRUE_MESSAGE(status >= 0, propid_status_name(status));
+        assert_sane();
+    }
+}
+
+/* One ESC sample stamped an hour ahead must not lock out the rotor stream:
+ * gyro samples meanwhile are refused as stale (flag raised), the next correct
+ * ESC sample replaces the wild one. */
+static void test_esc_stamp_far_ahead_does_not_freeze_input(void)
+{
+    init_filter();
+    const float gyro[3] = {0.01f, -0.02f, 0.03f};
+    for (uint32_t k = 0; k < 20u; ++k) {
+        now_us += GYRO_PERIOD_US;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, push(now_us, HOVER_SPEED, gyro));
+    }
+    const float speeds[ROTORS] = {100.0f, 100.0f, 100.0f, 100.0f};
+    TEST_ASSERT_EQUAL_INT(PROPID_OK,
+                          propid_push_rotor_speeds(&filter, now_us + 3600000000u, speeds, ROTORS));
+    now_us += GYRO_PERIOD_US;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_ROTOR_STALE, propid_push_gyro(&filter, now_us, gyro));
+    propid_estimate_t e;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &e));
+    TEST_ASSERT_TRUE((e.health & PROPID_HEALTH_ROTOR_STALE) != 0u);
+    /* The next correct samples are accepted and the flag clears. */
+    for (uint32_t k = 0; k < 5u; ++k) {
+        now_us += GYRO_PERIOD_US;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, push(now_us, HOVER_SPEED, gyro));
+    }
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &e));
+    TEST_ASSERT_TRUE((e.health & PROPID_HEALTH_ROTOR_STALE) == 0u);
+    /* A small backward step is still refused. */
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_TIME_BACKWARDS,
+                          propid_push_rotor_speeds(&filter, now_us - 1000u, speeds, ROTORS));
+}
+
+/* The same before the gyro clock is anchored (after init, and after resync). */
+static void test_esc_stamp_far_ahead_before_anchor(void)
+{
+    const float gyro[3] = {0.01f, -0.02f, 0.03f};
+    const float speeds[ROTORS] = {HOVER_SPEED, HOVER_SPEED, HOVER_SPEED, HOVER_SPEED};
+    for (int resynced = 0; resynced < 2; ++resynced) {
+        init_filter();
+        if (resynced) {
+            for (uint32_t k = 0; k < 20u; ++k) {
+                now_us += GYRO_PERIOD_US;
+                TEST_ASSERT_EQUAL_INT(PROPID_OK, push(now_us, HOVER_SPEED, gyro));
+            }
+            TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_resync(&filter, now_us + GYRO_PERIOD_US));
+        }
+        TEST_ASSERT_EQUAL_INT(PROPID_OK,
+                              propid_push_rotor_speeds(&filter, now_us + 3600000000u, speeds, ROTORS));
+        now_us += GYRO_PERIOD_US;
+        TEST_ASSERT_EQUAL_INT(PROPID_ERR_ROTOR_STALE, propid_push_gyro(&filter, now_us, gyro));
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, now_us, speeds, ROTORS));
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, now_us, gyro));
+        now_us += GYRO_PERIOD_US;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, push(now_us, HOVER_SPEED, gyro));
+    }
+}
+
+/* The first gyro sample after init or resync is fused at any rate within range,
+ * sets the rate and does not pull the bias; the following ones are not gated. */
+static void test_first_sample_fused_at_high_rate(void)
+{
+    for (int resynced = 0; resynced < 2; ++resynced) {
+        init_filter();
+        const float slow[3] = {0.0f, 0.0f, 0.0f};
+        if (resynced) {
+            for (uint32_t k = 0; k < 50u; ++k) {
+                now_us += GYRO_PERIOD_US;
+                TEST_ASSERT_EQUAL_INT(PROPID_OK, push(now_us, HOVER_SPEED, slow));
+            }
+            TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_resync(&filter, now_us + 100000u));
+            now_us += 100000u;
+        }
+        propid_estimate_t before;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &before));
+        /* A vehicle spinning about z at 25 rad/s (rotor speeds balanced: no
+         * torque, the rate is constant). */
+        const float spin[3] = {0.0f, 0.0f, 25.0f};
+        const float speeds[ROTORS] = {HOVER_SPEED, HOVER_SPEED, HOVER_SPEED, HOVER_SPEED};
+        for (uint32_t k = 0; k < 30u; ++k) {
+            now_us += GYRO_PERIOD_US;
+            TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, now_us, speeds, ROTORS));
+            TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, now_us, spin));
+            if (k == 0u) {
+                propid_estimate_t first;
+                TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &first));
+                TEST_ASSERT_FLOAT_WITHIN(1.0e-3f, 25.0f, first.body_rate[2]);
+                TEST_ASSERT_FLOAT_WITHIN(1.0e-6f, before.gyro_bias[2], first.gyro_bias[2]);
+                TEST_ASSERT_TRUE(first.body_rate_std[2] < 0.1f);
+            }
+        }
+        propid_counters_t counters;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
+        TEST_ASSERT_EQUAL_UINT32(0u, counters.axis_gated[0] + counters.axis_gated[1] + counters.axis_gated[2]);
+    }
+}
+
+/* Noise settings whose one step across the longest gap exceeds the variance
+ * ceiling are refused, by name; so are gates below one sigma and absurd gyro
+ * noise or sample rates. */
+static void check_bad(const char *field)
+{
+    const char *bad = NULL;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING(field, bad);
+    make_config(&config);
+}
+
+static void test_config_bounds_noise_fields(void)
+{
+    const char *bad = NULL;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
+    config.rate_process_noise = 1.0e4f;
+    check_bad("rate_process_noise");
+    config.thrust_coeff_rel_walk = 1.0e3f;
+    check_bad("thrust_coeff_rel_walk");
+    config.drag_coeff_rel_walk = 1.0e3f;
+    check_bad("drag_coeff_rel_walk");
+    config.gyro_bias_walk = 1.0e3f;
+    check_bad("gyro_bias_walk");
+    config.gyro_noise_density = 1.0e15f;
+    check_bad("gyro_noise_density");
+    config.gate_sigma = 0.5f;
+    check_bad("gate_sigma");
+    config.gyro_sample_rate_hz = 1.0e9f;
+    check_bad("gyro_sample_rate_hz");
+    /* A bias prior float32 cannot hold next to the measurement noise (variance
+     * above R / (64 epsilon): P indefinite after the first updates). */
+    config.gyro_noise_density = 5.0e-9f;
+    check_bad("gyro_bias_std0");
+    config.gyro_bias_std0 = 5000.0f;
+    check_bad("gyro_bias_std0");
+    /* Real-vehicle tuning stays valid (docs/design.md: 2-10 rad/s^2/sqrt(Hz)). */
+    config.rate_process_noise = 10.0f;
+    config.gate_sigma = 0.0f;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
+}
+
+/* Cholesky factorisation of the covariance (symmetric view, double precision on
+ * the host, float elsewhere) succeeds: P positive definite. */
+static int covariance_is_positive_definite(void)
+{
+    const uint8_t n = filter.derived.state_count;
+    static double l[PROPID_MAX_STATES][PROPID_MAX_STATES];
+    for (uint8_t i = 0; i < n; ++i) {
+        for (uint8_t j = 0; j <= i; ++j) {
+            double sum = (double)(j <= i ? filter.core.cov[j][i] : filter.core.cov[i][j]);
+            for (uint8_t k = 0; k < j; ++k) {
+                sum -= l[i][k] * l[j][k];
+            }
+            if (i == j) {
+                if (!(sum > 0.0)) {
+                    return 0;
+                }
+                l[i][i] = sqrt(sum);
+            } else {
+                l[i][j] = sum / l[j][j];
+            }
+        }
+    }
+    return 1;
+}
+
+/* Random-call streams of valid samples (random rates, speeds, gaps, occasional
+ * outliers and resyncs) on random valid noise settings: P stays positive
+ * definite after every accepted sample. */
+static void test_covariance_stays_positive_definite_under_random_calls(void)
+{
+    rng_t rng = {2024u};
+    uint32_t checks = 0u;
+    uint32_t failures = 0u;
+    for (uint32_t trial = 0; trial < 12u; ++trial) {
+        make_config(&config);
+        config.gyro_noise_density = 5.0e-4f * (0.01f + rng_range(&rng, 0.0f, 10.0f));
+        config.rate_process_noise = rng_range(&rng, 0.01f, 20.0f);
+        config.thrust_coeff_rel_walk = rng_range(&rng, 0.0f, 0.2f);
+        config.drag_coeff_rel_walk = rng_range(&rng, 0.0f, 0.2f);
+        config.gyro_bias_walk = rng_range(&rng, 0.0f, 1.0e-2f);
+        config.gate_sigma = (trial % 3u == 0u) ? 0.0f : rng_range(&rng, 1.0f, 10.0f);
+        init_filter();
+        for (uint32_t k = 0; k < 600u; ++k) {
+            now_us += 1u + (rng_next(&rng) % (2u * GYRO_PERIOD_US));
+            const float scale = (rng_next(&rng) % 50u == 0u) ? 30.0f : 3.0f;
+            const float gyro[3] = {rng_range(&rng, -scale, scale), rng_range(&rng, -scale, scale),
+                                   rng_range(&rng, -scale, scale)};
+            const float speeds[ROTORS] = {rng_range(&rng, 0.0f, 1500.0f), rng_range(&rng, 0.0f, 1500.0f),
+                                          rng_range(&rng, 0.0f, 1500.0f), rng_range(&rng, 0.0f, 1500.0f)};
+            TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, now_us, speeds, ROTORS));
+            if (rng_next(&rng) % 500u == 0u) {
+                TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_resync(&filter, now_us));
+            }
+            const propid_status_t status = propid_push_gyro(&filter, now_us, gyro);
+            TEST_ASSERT_TRUE_MESSAGE(status >= 0, propid_status_name(status));
+            assert_sane();
+            checks++;
+            failures += covariance_is_positive_definite() ? 0u : 1u;
+        }
+    }
+    TEST_ASSERT_TRUE(checks > 7000u);
+    TEST_ASSERT_EQUAL_UINT32(0u, failures);
+}
+
+int main(void)
+{
+    UNITY_BEGIN();
+    RUN_TEST(test_gated_rate_stays_bounded_and_recovers);
+    RUN_TEST(test_resync_resets_runaway_rate);
+    RUN_TEST(test_gate_off_never_writes_non_finite);
+    RUN_TEST(test_esc_stamp_far_ahead_does_not_freeze_input);
+    RUN_TEST(test_esc_stamp_far_ahead_before_anchor);
+    RUN_TEST(test_first_sample_fused_at_high_rate);
+    RUN_TEST(test_config_bounds_noise_fields);
+    RUN_TEST(test_covariance_stays_positive_definite_under_random_calls);
+    return UNITY_END();
+}
