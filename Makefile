@@ -142,7 +142,6 @@ test: setup
 	stage target-build  $(MAKE) --no-print-directory target; \
 	stage target-tests  $(MAKE) --no-print-directory test-target; \
 	stage python-tests  $(MAKE) --no-print-directory test-python; \
-	stage asan-tests    $(MAKE) --no-print-directory asan; \
 	stage fuzz-short    $(MAKE) --no-print-directory test-fuzz; \
 	stage cppcheck      $(MAKE) --no-print-directory cppcheck; \
 	echo; echo "=== make test: $$(( $$(date +%s) - start )) s"; \
