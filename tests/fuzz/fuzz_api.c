@@ -12,7 +12,7 @@
  *   - every variance is positive and finite, the state finite;
  *   - an accepted gyro sample left P positive definite (Cholesky in double),
  *     counted in `cholesky_failures` rather than aborting when
- *     PROPID_FUZZ_CHOLESKY_ABORT is 0.
+ *     PROPID_FUZZ_CHOLESKY_ABORT is 0 (run_fuzz.sh builds it so).
  * Run under ASan + UBSan (the Makefile builds it so).
  */
 #include <math.h>

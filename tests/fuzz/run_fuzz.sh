@@ -51,7 +51,7 @@ for f in "$repo"/firmware/src/propid_*.c; do
     esac
 done
 binary=$out/fuzz_api
-"$clang" -std=c11 -g -O2 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all \
+"$clang" -std=c11 -g -O2 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all -DPROPID_FUZZ_CHOLESKY_ABORT=0 \
     -I "$repo/firmware/include" "$here/fuzz_api.c" "${sources[@]}" -lm -o "$binary"
 
 cd "$out"
