@@ -32,7 +32,7 @@ export PYTHON
 MAKEFLAGS += --no-print-directory
 
 .PHONY: help setup host target test debug asan clean test-host test-target test-python bench \
-        configure-host configure-target
+        configure-host configure-target fuzz test-fuzz cppcheck
 
 help:
 	@echo "propid make verbs"
@@ -56,6 +56,9 @@ help:
 	@echo "  make damage-bench     randomized propeller-damage flights, detector in the loop (docs/damage.md)"
 	@echo "  make debug    Debug host build in build/debug + host tests"
 	@echo "  make asan     AddressSanitizer + UBSan host build in build/asan + host tests"
+	@echo "  make fuzz     libFuzzer (ASan + UBSan) on the firmware API, FUZZ_RUNS=10000000"
+	@echo "                executions over JOBS processes; writes build/results/fuzz.json"
+	@echo "  make cppcheck static analysis of firmware/ (fails on any finding)"
 	@echo "  make clean    remove build/ (keeps .venv; rm -rf .venv to redo the venv)"
 	@echo "Then: source .venv/bin/activate; propid --help"
 
@@ -99,7 +102,7 @@ debug: setup
 	@cd $(BUILD_DEBUG) && ctest -j$(JOBS) --output-on-failure
 
 asan: setup
-	@cmake -S $(REPO) -B $(BUILD_ASAN) -DCMAKE_BUILD_TYPE=Debug -DPROPID_SANITIZE=ON \
+	@cmake -S $(REPO) -B $(BUILD_ASAN) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DPROPID_SANITIZE=ON \
 	    $(CMAKE_COMMON) >/dev/null
 	@cmake --build $(BUILD_ASAN) -j$(JOBS)
 	@cd $(BUILD_ASAN) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 \
@@ -139,6 +142,8 @@ test: setup
 	stage target-build  $(MAKE) --no-print-directory target; \
 	stage target-tests  $(MAKE) --no-print-directory test-target; \
 	stage python-tests  $(MAKE) --no-print-directory test-python; \
+	stage fuzz-short    $(MAKE) --no-print-directory test-fuzz; \
+	stage cppcheck      $(MAKE) --no-print-directory cppcheck; \
 	echo; echo "=== make test: $$(( $$(date +%s) - start )) s"; \
 	if [ -n "$$failed" ]; then echo "=== FAILED:$$failed"; fi; \
 	$(PYTHON) $(REPO)/tests/count_results.py $$logs; \
@@ -152,6 +157,25 @@ bench: setup host target
 
 clean:
 	rm -rf $(BUILD)
+
+# ---------------------------------------------------------------------------
+# Reliability (docs/reliability.md): fuzzing and static analysis.
+# ---------------------------------------------------------------------------
+FUZZ_RUNS ?= 10000000
+FUZZ_SECONDS_SHORT ?= 30
+
+fuzz: setup
+	@bash $(REPO)/tests/fuzz/run_fuzz.sh --runs $(FUZZ_RUNS) --jobs $(JOBS)
+
+# The short run inside `make test`: the committed seed corpus plus 30 s of fuzzing.
+test-fuzz: setup
+	@bash $(REPO)/tests/fuzz/run_fuzz.sh --seconds $(FUZZ_SECONDS_SHORT) --jobs 1 \
+	    --out $(BUILD)/fuzz-short --json $(BUILD)/results/fuzz-short.json
+
+cppcheck: setup
+	@cppcheck --error-exitcode=1 --enable=warning,style,performance,portability --std=c11 \
+	    --inline-suppr -q -I $(REPO)/firmware/include $(REPO)/firmware/src $(REPO)/firmware/port \
+	    && echo "cppcheck: firmware/ clean"
 
 # Simulator verbs: `sitl` and `table1`. They may use BUILD_HOST, VENV_PYTHON
 # and the `host` / `setup` verbs above.

@@ -70,7 +70,7 @@ propid_status_t port_init(void)
     return PROPID_OK;
 }
 
-static void mailbox_put(port_mailbox_t *box, uint32_t *taken, uint64_t time_us,
+static void mailbox_put(port_mailbox_t *box, const uint32_t *taken, uint64_t time_us,
                         const float *value, uint8_t count)
 {
     if (box->sequence != *taken) {
@@ -98,6 +98,8 @@ static int mailbox_take(port_mailbox_t *box, uint32_t *taken, uint64_t *time_us,
         for (uint8_t i = 0; i < count; ++i) {
             value[i] = box->value[i];
         }
+        /* `sequence` is volatile: the ISR may have moved it since `before`. */
+        // cppcheck-suppress knownConditionTrueFalse
         if (box->sequence == before) {
             *taken = before;
             return 1;

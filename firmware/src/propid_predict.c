@@ -125,7 +125,7 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
      * and the latest one: holding only the latest over the interval leaves a model
      * error that, on agile flights, swamps the small process noise the gyro-bias
      * observability needs (docs/math.md, "Input over the interval"). */
-    float speed_sq_dt[PROPID_MAX_ROTORS + 1u];
+    float speed_sq_dt[PROPID_MAX_ROTORS + 1u] = {0.0f}; /* (entries past rotor_count + 1 are never read) */
     const float half_dt = 0.5f * dt;
     for (uint8_t i = 0; i < rotor_count; ++i) {
         speed_sq_dt[i] = half_dt * (filter->core.input_speed_sq[i] + filter->core.rotor_speed_sq[i]);

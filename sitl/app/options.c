@@ -42,6 +42,7 @@ void sitl_options_default(sitl_options_t *o)
     o->incorrect_random = 0;
     o->incorrect_spread = 0.1;
     sitl_effects_clear(&o->effects);
+    memset(&o->faults, 0, sizeof(o->faults));
     o->start_height_m = 1.0;
     o->ground_enabled = 1;
     o->divergence_distance_m = 2.0;
@@ -190,6 +191,17 @@ static int parse_damage(sitl_options_t *o, const char *opt, const char *val)
     return 0;
 }
 
+static int parse_fault(sitl_options_t *o, const char *opt, const char *val)
+{
+    (void)opt;
+    char err[256];
+    if (sitl_faults_parse(&o->faults, val, err, (int)sizeof(err)) != 0) {
+        fprintf(stderr, "propid_sitl: %s\n", err);
+        return -1;
+    }
+    return 0;
+}
+
 static int parse_esc_quantisation(sitl_options_t *o, const char *opt, const char *val)
 {
     if (strcmp(val, "dshot") == 0) {
@@ -283,6 +295,12 @@ static const opt_t options[] = {
     {"Effects (all off by default = the paper's conditions), repeatable", "effect", OPT_CUSTOM,
      0, 0, 0, 0, parse_effect, "NAME[=STRENGTH]", "NAME one of (none = all off):",
      sitl_effects_names},
+    {"Faults between sensors and filter (all off by default; docs/sitl.md \"Faults\"), repeatable",
+     "fault", OPT_CUSTOM, 0, 0, 0, 0, parse_fault, "NAME=RATE",
+     "RATE per sample of its stream (time_jitter: std [us];\n"
+     "rotor_loss: time [s] at which rotor 0 loses 30 % of its thrust);\n"
+     "NAME one of (none = all off):",
+     sitl_faults_names},
 
     CUSTOM("Propeller damage (docs/damage.md)", "damage", parse_damage, "ROTOR@TIME=FRACTION",
            "at TIME [s] rotor ROTOR (1-based) loses FRACTION of its\n"

@@ -8,6 +8,7 @@
 #include <stdint.h>
 
 #include "effects.h"
+#include "faults.h"
 #include "esc_telemetry.h"
 #include "imu.h"
 #include "trajectory.h"
@@ -56,6 +57,7 @@ typedef struct {
     int incorrect_random;               /* 0: Incorrect uses nominal; 1: random around truth */
     double incorrect_spread;            /* relative std of the random Incorrect draw */
     sitl_effects_t effects;
+    sitl_fault_config_t faults;         /* --fault (all off by default) */
     int quiet;
     char summary_json[SITL_PATH_MAX];   /* "" = none */
     int paper;                          /* --paper was given */

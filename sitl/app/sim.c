@@ -109,6 +109,7 @@ typedef struct {
     propid_filter_t filter;
     sitl_imu_t imu;
     sitl_esc_telemetry_t esc;
+    sitl_faults_t faults;
     sitl_metrics_t metrics;
     sitl_flight_log_t log;
     int log_open;
@@ -240,6 +241,7 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
     }
 
     sitl_imu_init(&f->imu, &o->imu, o->seed, &o->effects);
+    sitl_faults_init(&f->faults, &o->faults, o->seed);
     double history_rate = o->physics_rate_hz + o->imu.rate_hz + o->esc.rate_hz +
                           o->control_rate_hz;
     if (sitl_esc_init(&f->esc, &o->esc, n, sitl_effects_esc_extra_delay(&o->effects),
@@ -478,7 +480,10 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
                     speed_f[i] = (float)speed[i];
                     f->last_omega[i] = speed[i];
                 }
-                propid_push_rotor_speeds(&f->filter, t_us, speed_f, (uint8_t)n);
+                uint64_t esc_us = t_us;
+                if (sitl_faults_esc(&f->faults, &esc_us, speed_f, n)) {
+                    propid_push_rotor_speeds(&f->filter, esc_us, speed_f, (uint8_t)n);
+                }
             }
             schedule_advance(&esc);
         }
@@ -491,11 +496,22 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
             last_imu_t = t;
             float gyro_f[3] = {(float)f->last_gyro[0], (float)f->last_gyro[1],
                                (float)f->last_gyro[2]};
-            f->last_status = (int)propid_push_gyro(&f->filter, t_us, gyro_f);
+            uint64_t gyro_us = t_us;
+            sitl_faults_gyro(&f->faults, &gyro_us, gyro_f, o->imu.gyro.range);
+            f->last_status = (int)propid_push_gyro(&f->filter, gyro_us, gyro_f);
+            if (f->last_status == PROPID_ERR_TIME_JUMP) {
+                /* The integrator's documented answer to a clock jump (propid.h). */
+                propid_resync(&f->filter, gyro_us);
+                f->last_status = (int)propid_push_gyro(&f->filter, gyro_us, gyro_f);
+            }
             if (o->detect_damage && f->last_status >= 0) {
                 step_detector(f, o, r, t);
             }
             schedule_advance(&imu);
+        }
+        if (sitl_faults_rotor_loss_now(&f->faults, t)) {
+            f->plant.thrust_coeff[0] *= 0.7;
+            f->true_kf[0] *= 0.7;
         }
         if (now_ns == control.next_ns || now_ns >= end_ns) {
             sitl_flat_output_t ref;
@@ -625,6 +641,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     }
     propid_get_estimate(&f->filter, &r->estimate);
     propid_get_counters(&f->filter, &r->counters);
+    memcpy(r->faults_injected, f->faults.injected, sizeof(r->faults_injected));
     teardown(f, r);
     r->wall_time_s = wall_seconds() - wall_start;
     return r->exit_code;

@@ -44,6 +44,7 @@ typedef struct {
     double true_bias[3];
     propid_estimate_t estimate;           /* final */
     propid_counters_t counters;
+    long faults_injected[SITL_FAULT_COUNT]; /* per class (faults.h) */
     long control_steps;
     long log_rows;
     /* Damage detector (--detect-damage): every detection, in order. */

@@ -134,6 +134,21 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
     cJSON_AddNumberToObject(root, "gyro_accepted", (double)r->counters.gyro_accepted);
     cJSON_AddNumberToObject(root, "rotor_accepted", (double)r->counters.rotor_accepted);
     cJSON_AddNumberToObject(root, "control_steps", (double)r->control_steps);
+    cJSON *faults = cJSON_AddObjectToObject(root, "faults_injected");
+    for (int k = 0; k < SITL_FAULT_COUNT; k++) {
+        cJSON_AddNumberToObject(faults, sitl_fault_name((sitl_fault_class_t)k), (double)r->faults_injected[k]);
+    }
+    cJSON *rejected = cJSON_AddObjectToObject(root, "rejected");
+    for (int k = 1; k < PROPID_REJECT_SLOTS; k++) {
+        if (r->counters.rejected[k] != 0u) {
+            cJSON_AddNumberToObject(rejected, propid_status_name((propid_status_t)(-k)), (double)r->counters.rejected[k]);
+        }
+    }
+    cJSON_AddNumberToObject(root, "axis_gated", (double)(r->counters.axis_gated[0] + r->counters.axis_gated[1] +
+                                                        r->counters.axis_gated[2]));
+    cJSON_AddNumberToObject(root, "gate_reopened", (double)r->counters.gate_reopened);
+    cJSON_AddNumberToObject(root, "cov_repairs", (double)r->counters.cov_repairs);
+    cJSON_AddNumberToObject(root, "resyncs", (double)r->counters.resyncs);
     snprintf(text, sizeof(text), "%.6g", r->wall_time_s);
     cJSON_AddRawToObject(root, "wall_time_s", text);
     return sitl_write_json_file(path, root);

@@ -12,7 +12,7 @@
  *   - every variance is positive and finite, the state finite;
  *   - an accepted gyro sample left P positive definite (Cholesky in double),
  *     counted in `cholesky_failures` rather than aborting when
- *     PROPID_FUZZ_CHOLESKY_ABORT is 0.
+ *     PROPID_FUZZ_CHOLESKY_ABORT is 0 (run_fuzz.sh builds it so).
  * Run under ASan + UBSan (the Makefile builds it so).
  */
 #include <math.h>
@@ -232,6 +232,22 @@ static void check_rejection(propid_status_t status, const propid_filter_t *befor
 }
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+int LLVMFuzzerInitialize(int *argc, char ***argv);
+
+/* One summary line at exit, read by tests/fuzz/run_fuzz.sh. */
+static void print_stats(void)
+{
+    fprintf(stderr, "propid-fuzz: cholesky_checks %llu cholesky_failures %llu\n",
+            (unsigned long long)cholesky_checks, (unsigned long long)cholesky_failures);
+}
+
+int LLVMFuzzerInitialize(int *argc, char ***argv)
+{
+    (void)argc;
+    (void)argv;
+    atexit(print_stats);
+    return 0;
+}
 #ifdef PROPID_FUZZ_DEBUG
 void propid_fuzz_debug_dump(const propid_filter_t *before, const propid_filter_t *after);
 #endif
