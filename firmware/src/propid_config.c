@@ -7,6 +7,11 @@
 
 #include "propid_internal.h"
 
+/* Largest accepted nominal kf or km [SI]: far above any propeller (a 1 m rotor has
+ * kf ~ 3e-3 N/(rad/s)^2), small enough that coefficient x relative std stays finite
+ * in float32 (relative values are clamped to <= 1e3). */
+#define PROPID_COEFF_NOMINAL_MAX 1.0f
+
 #define PROPID_TWO_PI 6.28318530717958647692f
 
 void propid_config_default(propid_config_t *config)
@@ -343,10 +348,12 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         if (rotor->yaw_sign != 1.0f && rotor->yaw_sign != -1.0f) {
             PROPID_BAD("rotor.yaw_sign");
         }
-        if (!positive_finite(rotor->thrust_coeff_nominal)) {
+        if (!positive_finite(rotor->thrust_coeff_nominal) ||
+            rotor->thrust_coeff_nominal > PROPID_COEFF_NOMINAL_MAX) {
             PROPID_BAD("rotor.thrust_coeff_nominal");
         }
-        if (!positive_finite(rotor->drag_coeff_nominal)) {
+        if (!positive_finite(rotor->drag_coeff_nominal) ||
+            rotor->drag_coeff_nominal > PROPID_COEFF_NOMINAL_MAX) {
             PROPID_BAD("rotor.drag_coeff_nominal");
         }
     }
@@ -414,6 +421,14 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!isfinite(config->coeff_rel_max) || !(config->coeff_rel_max > 1.0f) ||
         config->coeff_rel_max > 1.0e3f) {
         PROPID_BAD("coeff_rel_max");
+    }
+    /* A prior wider than the clamp range says nothing the clamp does not, and it
+     * keeps the reported std (relative std x nominal) finite. */
+    if (config->thrust_coeff_rel_std0 > config->coeff_rel_max) {
+        PROPID_BAD("thrust_coeff_rel_std0");
+    }
+    if (config->drag_coeff_rel_std0 > config->coeff_rel_max) {
+        PROPID_BAD("drag_coeff_rel_std0");
     }
     if (!positive_finite(config->converged_rel_std)) {
         PROPID_BAD("converged_rel_std");

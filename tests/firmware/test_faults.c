@@ -318,6 +318,16 @@ static void test_config_bounds_noise_fields(void)
     check_bad("gyro_bias_std0");
     config.gyro_bias_std0 = 5000.0f;
     check_bad("gyro_bias_std0");
+    /* Fuzz finding: a nominal of 2e35 with a wide relative prior overflowed the
+     * reported std (relative std x nominal) to Inf. */
+    config.rotor[0].drag_coeff_nominal = 2.0e35f;
+    check_bad("rotor.drag_coeff_nominal");
+    config.rotor[1].thrust_coeff_nominal = 2.0f;
+    check_bad("rotor.thrust_coeff_nominal");
+    config.thrust_coeff_rel_std0 = 3.0e4f;
+    check_bad("thrust_coeff_rel_std0");
+    config.drag_coeff_rel_std0 = config.coeff_rel_max * 1.5f;
+    check_bad("drag_coeff_rel_std0");
     /* Real-vehicle tuning stays valid (docs/design.md: 2-10 rad/s^2/sqrt(Hz)). */
     config.rate_process_noise = 10.0f;
     config.gate_sigma = 0.0f;
