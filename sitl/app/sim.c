@@ -361,19 +361,18 @@ static void step_detector(flight_t *f, const sitl_options_t *o, sitl_result_t *r
 #endif
 }
 
-static void take_coefficients(flight_t *f, const sitl_options_t *o)
+/* e: this control step's estimate (estimate_status: what propid_get_estimate
+ * returned for it). */
+static void take_coefficients(flight_t *f, const sitl_options_t *o, const propid_estimate_t *e,
+                              propid_status_t estimate_status)
 {
-    if (o->mode != SITL_MODE_FILTER) {
-        return;
-    }
-    propid_estimate_t e;
-    if (propid_get_estimate(&f->filter, &e) != PROPID_OK) {
+    if (o->mode != SITL_MODE_FILTER || estimate_status != PROPID_OK) {
         return;
     }
     double kf[SITL_MAX_ROTORS], km[SITL_MAX_ROTORS];
     for (int i = 0; i < f->vehicle.rotor_count; i++) {
-        kf[i] = (double)e.thrust_coeff[i];
-        km[i] = (double)e.drag_coeff[i];
+        kf[i] = (double)e->thrust_coeff[i];
+        km[i] = (double)e->drag_coeff[i];
     }
     /* A rejected set (non-positive, singular) leaves the previous one in use. */
     if (sitl_allocation_set_coefficients(&f->allocation, kf, km) == 0) {
@@ -384,14 +383,14 @@ static void take_coefficients(flight_t *f, const sitl_options_t *o)
 
 /* Returns a reason string if the flight has diverged, else NULL. */
 static const char *divergence(const flight_t *f, const sitl_options_t *o,
-                              const sitl_flat_output_t *ref)
+                              const sitl_flat_output_t *ref, double tilt_limit_cos)
 {
     if (!state_finite(&f->state, f->vehicle.rotor_count)) {
         return "non-finite state";
     }
     double r[3][3];
     sitl_quat_to_matrix(f->state.quat, r);
-    if (r[2][2] < cos(o->divergence_tilt_deg * SITL_PI / 180.0)) {
+    if (r[2][2] < tilt_limit_cos) {
         return o->divergence_tilt_deg >= 90.0 ? "upside down" : "tilted beyond the limit";
     }
     double d[3];
@@ -466,6 +465,13 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     double last_imu_t = 0.0;
     propid_estimate_t est;
     memset(&est, 0, sizeof(est));
+    /* The accelerometer feeds only the log and the link: without them it is not
+     * sampled (its noise has its own stream, so nothing else changes). */
+    int accel_read = f->log_open;
+#ifdef PROPID_SITL_WITH_MAVLINK
+    accel_read |= f->link != NULL;
+#endif
+    const double tilt_limit_cos = cos(o->divergence_tilt_deg * SITL_PI / 180.0);
 
     for (;;) {
         const double t = (double)now_ns * 1e-9;
@@ -488,11 +494,15 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
             schedule_advance(&esc);
         }
         if (now_ns == imu.next_ns) {
-            sitl_state_derivative_t d;
-            sitl_loads_t loads;
-            sitl_plant_derivative(&f->plant, &f->state, f->command, &d, &loads);
-            sitl_imu_sample(&f->imu, f->state.body_rate, loads.specific_force_body,
-                            t - last_imu_t, f->last_gyro, f->last_accel);
+            if (accel_read) {
+                double specific_force[3];
+                sitl_plant_specific_force(&f->plant, &f->state, f->command, specific_force);
+                sitl_imu_sample(&f->imu, f->state.body_rate, specific_force, t - last_imu_t,
+                                f->last_gyro, f->last_accel);
+            } else {
+                sitl_imu_sample(&f->imu, f->state.body_rate, NULL, t - last_imu_t, f->last_gyro,
+                                NULL);
+            }
             last_imu_t = t;
             float gyro_f[3] = {(float)f->last_gyro[0], (float)f->last_gyro[1],
                                (float)f->last_gyro[2]};
@@ -516,15 +526,15 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
         if (now_ns == control.next_ns || now_ns >= end_ns) {
             sitl_flat_output_t ref;
             sitl_trajectory_eval(&f->trajectory, t, &ref);
-            propid_get_estimate(&f->filter, &est);
+            const propid_status_t est_status = propid_get_estimate(&f->filter, &est);
             sitl_metrics_add(&f->metrics, t, f->state.position, ref.position,
                              sitl_quat_yaw(f->state.quat), ref.yaw, &est, f->true_kf, f->true_km,
                              f->imu.gyro_bias);
             r->control_steps++;
-            const char *why = divergence(f, o, &ref);
+            const char *why = divergence(f, o, &ref, tilt_limit_cos);
             if (why == NULL && now_ns < end_ns) {
                 /* Controller on the true state (as in the paper). */
-                take_coefficients(f, o);
+                take_coefficients(f, o, &est, est_status);
                 sitl_vehicle_state_t vs;
                 sitl_vec3_copy(vs.position, f->state.position);
                 sitl_vec3_copy(vs.velocity, f->state.velocity);

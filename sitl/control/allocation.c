@@ -28,13 +28,13 @@ int sitl_allocation_init(sitl_allocation_t *alloc, const sitl_allocation_geometr
     return 0;
 }
 
-int sitl_allocation_set_coefficients(sitl_allocation_t *alloc, const double *thrust_coeff,
-                                     const double *drag_coeff)
+/* The body of sitl_allocation_set_coefficients; n is a constant where it is
+ * inlined, so the loops over the rotors unroll (the filter mode calls this at
+ * every control step). */
+static inline __attribute__((always_inline)) int
+set_coefficients(sitl_allocation_t *alloc, const int n, const double *thrust_coeff,
+                 const double *drag_coeff)
 {
-    if (alloc == NULL || thrust_coeff == NULL || drag_coeff == NULL) {
-        return -1;
-    }
-    const int n = alloc->geometry.rotor_count;
     for (int i = 0; i < n; i++) {
         if (!isfinite(thrust_coeff[i]) || !isfinite(drag_coeff[i]) || thrust_coeff[i] <= 0.0 ||
             drag_coeff[i] <= 0.0) {
@@ -105,6 +105,17 @@ int sitl_allocation_set_coefficients(sitl_allocation_t *alloc, const double *thr
     }
     alloc->ready = 1;
     return 0;
+}
+
+int sitl_allocation_set_coefficients(sitl_allocation_t *alloc, const double *thrust_coeff,
+                                     const double *drag_coeff)
+{
+    if (alloc == NULL || thrust_coeff == NULL || drag_coeff == NULL) {
+        return -1;
+    }
+    const int n = alloc->geometry.rotor_count;
+    return n == 4 ? set_coefficients(alloc, 4, thrust_coeff, drag_coeff)
+                  : set_coefficients(alloc, n, thrust_coeff, drag_coeff);
 }
 
 /*

@@ -143,51 +143,190 @@ void sitl_plant_derivative(const sitl_plant_t *plant, const sitl_state_t *state,
     }
 }
 
-static void add_scaled(const sitl_plant_t *plant, const sitl_state_t *base,
+/* Effects that change the rotor loads or add a wrench: with none of them on,
+ * the derivative is the plain rigid body below. */
+static int plain_physics(const sitl_plant_t *plant)
+{
+    const int *on = plant->effects.enabled;
+    return !(on[SITL_EFFECT_THRUST_NONLINEARITY] | on[SITL_EFFECT_TRANSLATIONAL_LIFT] |
+             on[SITL_EFFECT_GROUND_EFFECT] | on[SITL_EFFECT_ROTOR_INERTIA] |
+             on[SITL_EFFECT_ROTOR_GYROSCOPIC] | on[SITL_EFFECT_ROTOR_DRAG] |
+             on[SITL_EFFECT_AERO_DAMPING]);
+}
+
+/*
+ * sitl_plant_derivative without effects and without the loads, for the RK4
+ * stages: the same operations in the same order (so the same bits), minus
+ * what only the loads need (body velocity, specific force) and the products
+ * with the zero x/y body force. clamped_command = sitl_motor_clamp(command),
+ * which is the same at every stage of a step.
+ */
+#define SITL_INLINE static inline __attribute__((always_inline))
+
+SITL_INLINE void plain_derivative(const sitl_plant_t *plant, int n, const sitl_state_t *state,
+                                  const double *clamped_command, sitl_state_derivative_t *deriv)
+{
+    const double *q = state->quat;
+    const double w = q[0], x = q[1], y = q[2], z = q[3];
+    /* Third column of the rotation (sitl_quat_to_matrix): where body z points. */
+    const double r02 = 2.0 * (x * z + w * y);
+    const double r12 = 2.0 * (y * z - w * x);
+    const double r22 = 1.0 - 2.0 * (x * x + y * y);
+
+    double force_z = 0.0, torque[3] = {0.0, 0.0, 0.0};
+    for (int i = 0; i < n; i++) {
+        deriv->rotor_speed[i] =
+            (clamped_command[i] - state->rotor_speed[i]) / plant->motor.time_constant;
+        const double speed = state->rotor_speed[i];
+        const double speed_sq = speed * speed;
+        const double thrust = plant->thrust_coeff[i] * speed_sq;
+        const double drag_torque = plant->drag_coeff[i] * speed_sq;
+        const double *r = plant->rotor_position[i];
+        force_z += thrust;
+        torque[0] += r[1] * thrust;
+        torque[1] -= r[0] * thrust;
+        torque[2] += plant->yaw_sign[i] * drag_torque;
+    }
+
+    /* a = R (0, 0, F) / m - g z: the x and y products are +-0 and add nothing. */
+    double accel[3] = {r02 * force_z / plant->mass, r12 * force_z / plant->mass,
+                       r22 * force_z / plant->mass};
+    accel[2] -= plant->gravity;
+
+    const double *rate = state->body_rate;
+    const double (*J)[3] = plant->inertia;
+    double jw[3], net[3];
+    sitl_mat3_mul_vec(jw, J, rate);
+    net[0] = torque[0] - (rate[1] * jw[2] - rate[2] * jw[1]);
+    net[1] = torque[1] - (rate[2] * jw[0] - rate[0] * jw[2]);
+    net[2] = torque[2] - (rate[0] * jw[1] - rate[1] * jw[0]);
+
+    if (state->on_ground && accel[2] <= 0.0) {
+        memset(deriv->position, 0, sizeof(deriv->position));
+        memset(deriv->velocity, 0, sizeof(deriv->velocity));
+        memset(deriv->quat, 0, sizeof(deriv->quat));
+        memset(deriv->body_rate, 0, sizeof(deriv->body_rate));
+        return;
+    }
+    sitl_mat3_mul_vec(deriv->body_rate, plant->inertia_inv, net);
+    sitl_vec3_copy(deriv->position, state->velocity);
+    sitl_vec3_copy(deriv->velocity, accel);
+    deriv->quat[0] = 0.5 * (-x * rate[0] - y * rate[1] - z * rate[2]);
+    deriv->quat[1] = 0.5 * (w * rate[0] + y * rate[2] - z * rate[1]);
+    deriv->quat[2] = 0.5 * (w * rate[1] + z * rate[0] - x * rate[2]);
+    deriv->quat[3] = 0.5 * (w * rate[2] + x * rate[1] - y * rate[0]);
+}
+
+void sitl_plant_specific_force(const sitl_plant_t *plant, const sitl_state_t *state,
+                               const double *rotor_command, double specific_force_body[3])
+{
+    if (!plain_physics(plant)) {
+        sitl_state_derivative_t deriv;
+        sitl_loads_t loads;
+        sitl_plant_derivative(plant, state, rotor_command, &deriv, &loads);
+        sitl_vec3_copy(specific_force_body, loads.specific_force_body);
+        return;
+    }
+    /* sitl_plant_derivative's arithmetic for the specific force alone. */
+    double rot[3][3];
+    sitl_quat_to_matrix(state->quat, rot);
+    double force_z = 0.0;
+    for (int i = 0; i < plant->rotor_count; i++) {
+        const double speed = state->rotor_speed[i];
+        force_z += plant->thrust_coeff[i] * (speed * speed);
+    }
+    double accel[3];
+    for (int k = 0; k < 3; k++) {
+        accel[k] = rot[k][2] * force_z / plant->mass;
+    }
+    accel[2] -= plant->gravity;
+    if (state->on_ground && accel[2] <= 0.0) {
+        memset(accel, 0, sizeof(accel));
+    }
+    double sf_world[3] = {accel[0], accel[1], accel[2] + plant->gravity};
+    for (int i = 0; i < 3; i++) {
+        specific_force_body[i] =
+            rot[0][i] * sf_world[0] + rot[1][i] * sf_world[1] + rot[2][i] * sf_world[2];
+    }
+}
+
+/* out = base + h d over the integrated fields (on_ground is carried). */
+SITL_INLINE void add_scaled(int rotor_count, const sitl_state_t *base,
                        const sitl_state_derivative_t *d, double h, sitl_state_t *out)
 {
-    *out = *base;
     for (int k = 0; k < 3; k++) {
-        out->position[k] += h * d->position[k];
-        out->velocity[k] += h * d->velocity[k];
-        out->body_rate[k] += h * d->body_rate[k];
+        out->position[k] = base->position[k] + h * d->position[k];
+        out->velocity[k] = base->velocity[k] + h * d->velocity[k];
+        out->body_rate[k] = base->body_rate[k] + h * d->body_rate[k];
     }
     for (int k = 0; k < 4; k++) {
-        out->quat[k] += h * d->quat[k];
+        out->quat[k] = base->quat[k] + h * d->quat[k];
     }
-    for (int i = 0; i < plant->rotor_count; i++) {
-        out->rotor_speed[i] += h * d->rotor_speed[i];
+    for (int i = 0; i < rotor_count; i++) {
+        out->rotor_speed[i] = base->rotor_speed[i] + h * d->rotor_speed[i];
     }
+    out->on_ground = base->on_ground;
+}
+
+/* The four stages without effects; n is a constant where it is inlined, so
+ * the rotor loops unroll. */
+SITL_INLINE void plain_stages(const sitl_plant_t *plant, int n, const sitl_state_t *state,
+                              const double *rotor_command, double dt,
+                              sitl_state_derivative_t k[4])
+{
+    double clamped[SITL_MAX_ROTORS];
+    sitl_state_t tmp;
+    for (int i = 0; i < n; i++) {
+        clamped[i] = sitl_motor_clamp(&plant->motor, rotor_command[i]);
+    }
+    plain_derivative(plant, n, state, clamped, &k[0]);
+    add_scaled(n, state, &k[0], 0.5 * dt, &tmp);
+    plain_derivative(plant, n, &tmp, clamped, &k[1]);
+    add_scaled(n, state, &k[1], 0.5 * dt, &tmp);
+    plain_derivative(plant, n, &tmp, clamped, &k[2]);
+    add_scaled(n, state, &k[2], dt, &tmp);
+    plain_derivative(plant, n, &tmp, clamped, &k[3]);
 }
 
 void sitl_plant_step(const sitl_plant_t *plant, sitl_state_t *state, const double *rotor_command,
                      double dt)
 {
-    sitl_state_derivative_t k1, k2, k3, k4;
-    sitl_state_t tmp;
-    sitl_plant_derivative(plant, state, rotor_command, &k1, NULL);
-    add_scaled(plant, state, &k1, 0.5 * dt, &tmp);
-    sitl_plant_derivative(plant, &tmp, rotor_command, &k2, NULL);
-    add_scaled(plant, state, &k2, 0.5 * dt, &tmp);
-    sitl_plant_derivative(plant, &tmp, rotor_command, &k3, NULL);
-    add_scaled(plant, state, &k3, dt, &tmp);
-    sitl_plant_derivative(plant, &tmp, rotor_command, &k4, NULL);
+    const int n = plant->rotor_count;
+    sitl_state_derivative_t stage[4];
+    if (plain_physics(plant)) {
+        if (n == 4) {
+            plain_stages(plant, 4, state, rotor_command, dt, stage);
+        } else {
+            plain_stages(plant, n, state, rotor_command, dt, stage);
+        }
+    } else {
+        sitl_state_t tmp;
+        sitl_plant_derivative(plant, state, rotor_command, &stage[0], NULL);
+        add_scaled(n, state, &stage[0], 0.5 * dt, &tmp);
+        sitl_plant_derivative(plant, &tmp, rotor_command, &stage[1], NULL);
+        add_scaled(n, state, &stage[1], 0.5 * dt, &tmp);
+        sitl_plant_derivative(plant, &tmp, rotor_command, &stage[2], NULL);
+        add_scaled(n, state, &stage[2], dt, &tmp);
+        sitl_plant_derivative(plant, &tmp, rotor_command, &stage[3], NULL);
+    }
+    const sitl_state_derivative_t *k1 = &stage[0], *k2 = &stage[1], *k3 = &stage[2],
+                                  *k4 = &stage[3];
 
     const double w = dt / 6.0;
     for (int k = 0; k < 3; k++) {
-        state->position[k] += w * (k1.position[k] + 2.0 * k2.position[k] + 2.0 * k3.position[k] +
-                                   k4.position[k]);
-        state->velocity[k] += w * (k1.velocity[k] + 2.0 * k2.velocity[k] + 2.0 * k3.velocity[k] +
-                                   k4.velocity[k]);
-        state->body_rate[k] += w * (k1.body_rate[k] + 2.0 * k2.body_rate[k] +
-                                    2.0 * k3.body_rate[k] + k4.body_rate[k]);
+        state->position[k] += w * (k1->position[k] + 2.0 * k2->position[k] + 2.0 * k3->position[k] +
+                                   k4->position[k]);
+        state->velocity[k] += w * (k1->velocity[k] + 2.0 * k2->velocity[k] + 2.0 * k3->velocity[k] +
+                                   k4->velocity[k]);
+        state->body_rate[k] += w * (k1->body_rate[k] + 2.0 * k2->body_rate[k] +
+                                    2.0 * k3->body_rate[k] + k4->body_rate[k]);
     }
     for (int k = 0; k < 4; k++) {
-        state->quat[k] += w * (k1.quat[k] + 2.0 * k2.quat[k] + 2.0 * k3.quat[k] + k4.quat[k]);
+        state->quat[k] += w * (k1->quat[k] + 2.0 * k2->quat[k] + 2.0 * k3->quat[k] + k4->quat[k]);
     }
-    for (int i = 0; i < plant->rotor_count; i++) {
-        state->rotor_speed[i] += w * (k1.rotor_speed[i] + 2.0 * k2.rotor_speed[i] +
-                                      2.0 * k3.rotor_speed[i] + k4.rotor_speed[i]);
+    for (int i = 0; i < n; i++) {
+        state->rotor_speed[i] += w * (k1->rotor_speed[i] + 2.0 * k2->rotor_speed[i] +
+                                      2.0 * k3->rotor_speed[i] + k4->rotor_speed[i]);
         state->rotor_speed[i] = sitl_motor_clamp(&plant->motor, state->rotor_speed[i]);
     }
     sitl_quat_normalise(state->quat);

@@ -69,6 +69,11 @@ void sitl_plant_derivative(const sitl_plant_t *plant, const sitl_state_t *state,
                            const double *rotor_command, sitl_state_derivative_t *deriv,
                            sitl_loads_t *loads);
 
+/* What an ideal accelerometer reads in the body frame: the specific force of
+ * sitl_plant_derivative's loads, without computing the rest. */
+void sitl_plant_specific_force(const sitl_plant_t *plant, const sitl_state_t *state,
+                               const double *rotor_command, double specific_force_body[3]);
+
 /* Advance state by dt with RK4 (commands held), then normalise the quaternion,
  * clamp rotor speeds and apply the ground contact. */
 void sitl_plant_step(const sitl_plant_t *plant, sitl_state_t *state, const double *rotor_command,

@@ -84,11 +84,14 @@ void sitl_imu_sample(sitl_imu_t *imu, const double true_rate[3],
         /* Draw order is fixed (noise, then walk) so runs stay reproducible. */
         double ng = sitl_rng_normal(&imu->gyro_rng);
         double wg = sitl_rng_normal(&imu->gyro_rng);
-        double na = sitl_rng_normal(&imu->accel_rng);
-        double wa = sitl_rng_normal(&imu->accel_rng);
         imu->gyro_bias[i] += walk_g * wg;
-        imu->accel_bias[i] += walk_a * wa;
         gyro_out[i] = finish(&p->gyro, scaled[i] + imu->gyro_bias[i] + sigma_g * ng);
-        accel_out[i] = finish(&p->accel, specific_force[i] + imu->accel_bias[i] + sigma_a * na);
+        if (accel_out != NULL) {
+            double na = sitl_rng_normal(&imu->accel_rng);
+            double wa = sitl_rng_normal(&imu->accel_rng);
+            imu->accel_bias[i] += walk_a * wa;
+            accel_out[i] =
+                finish(&p->accel, specific_force[i] + imu->accel_bias[i] + sigma_a * na);
+        }
     }
 }

@@ -47,7 +47,10 @@ void sitl_imu_paper_params(sitl_imu_params_t *params);
 void sitl_imu_init(sitl_imu_t *imu, const sitl_imu_params_t *params, uint64_t seed,
                    const sitl_effects_t *effects);
 
-/* One sample; dt = time since the previous sample (bias walk). */
+/* One sample; dt = time since the previous sample (bias walk). With
+ * accel_out NULL only the gyro is sampled (specific_force may be NULL too):
+ * the accelerometer has its own noise stream, so the gyro's draws are the
+ * same either way. */
 void sitl_imu_sample(sitl_imu_t *imu, const double true_rate[3],
                      const double specific_force[3], double dt, double gyro_out[3],
                      double accel_out[3]);
