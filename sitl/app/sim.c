@@ -58,6 +58,13 @@ static double wall_seconds(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+static double cpu_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
 static void sleep_seconds(double s)
 {
     if (s <= 0.0) {
@@ -472,6 +479,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     accel_read |= f->link != NULL;
 #endif
     const double tilt_limit_cos = cos(o->divergence_tilt_deg * SITL_PI / 180.0);
+    const double cpu_start = cpu_seconds();
 
     for (;;) {
         const double t = (double)now_ns * 1e-9;
@@ -629,6 +637,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
         }
     }
 
+    r->flight_cpu_s = cpu_seconds() - cpu_start;
     r->flown_s = (double)now_ns * 1e-9;
     r->rotor_count = n;
     for (int k = 0; k < 3; k++) {

@@ -29,6 +29,7 @@ typedef struct {
     char message[256];                    /* error or divergence reason */
     double flown_s;
     double wall_time_s;
+    double flight_cpu_s;         /* process CPU time of the flight loop (no set-up) */
     double rmse[3];                       /* [m] */
     double rmse_yaw_deg;
     double final_position_error_m;        /* norm */

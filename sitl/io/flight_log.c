@@ -4,12 +4,20 @@
 #include <math.h>
 #include <string.h>
 
-static void put(FILE *f, double x)
+#include "number_format.h"
+
+/* One row is built in memory, then written at once. */
+typedef struct {
+    char text[8192];
+    int len;
+} row_text_t;
+
+/* ",value" (",%.9g"), or "," alone for a missing value. */
+static void put(row_text_t *row, double x)
 {
+    row->text[row->len++] = ',';
     if (isfinite(x)) {
-        fprintf(f, ",%.9g", x);
-    } else {
-        fputc(',', f);
+        row->len += sitl_format_g9(x, row->text + row->len);
     }
 }
 
@@ -27,6 +35,7 @@ int sitl_flight_log_open(sitl_flight_log_t *log, const char *path, int rotor_cou
     if (log->file == NULL) {
         return -1;
     }
+    setvbuf(log->file, NULL, _IOFBF, 1 << 16); /* rows are ~ 1 kB */
     FILE *f = log->file;
     const int n = rotor_count;
     fprintf(f, "t,gyro_x,gyro_y,gyro_z");
@@ -55,66 +64,70 @@ int sitl_flight_log_write(sitl_flight_log_t *log, const sitl_log_row_t *r)
     FILE *f = log->file;
     const int n = log->rotor_count;
     const propid_estimate_t *e = &r->estimate;
-    fprintf(f, "%.9g", r->t);
+    row_text_t row_text;
+    row_text_t *row = &row_text;
+    row->len = sitl_format_g9(r->t, row->text);
     for (int k = 0; k < 3; k++) {
-        put(f, r->gyro[k]);
+        put(row, r->gyro[k]);
     }
     for (int i = 0; i < n; i++) {
-        put(f, r->omega[i]);
+        put(row, r->omega[i]);
     }
     for (int k = 0; k < 3; k++) {
-        put(f, r->acc[k]);
+        put(row, r->acc[k]);
     }
     for (int k = 0; k < 4; k++) {
-        put(f, r->quat[k]);
+        put(row, r->quat[k]);
     }
     for (int k = 0; k < 3; k++) {
-        put(f, r->velocity[k]);
+        put(row, r->velocity[k]);
     }
     for (int k = 0; k < 3; k++) {
-        put(f, r->position[k]);
+        put(row, r->position[k]);
     }
     for (int i = 0; i < n; i++) {
-        put(f, r->cmd[i]);
+        put(row, r->cmd[i]);
     }
     for (int k = 0; k < 3; k++) {
-        put(f, r->ref_position[k]);
+        put(row, r->ref_position[k]);
     }
-    put(f, r->ref_yaw);
+    put(row, r->ref_yaw);
     for (int i = 0; i < n; i++) {
-        put(f, r->true_kf[i]);
-    }
-    for (int i = 0; i < n; i++) {
-        put(f, r->true_km[i]);
-    }
-    for (int k = 0; k < 3; k++) {
-        put(f, r->true_bias[k]);
-    }
-    for (int k = 0; k < 3; k++) {
-        put(f, r->true_rate[k]);
+        put(row, r->true_kf[i]);
     }
     for (int i = 0; i < n; i++) {
-        put(f, (double)e->thrust_coeff[i]);
-        put(f, (double)e->thrust_coeff_std[i]);
+        put(row, r->true_km[i]);
+    }
+    for (int k = 0; k < 3; k++) {
+        put(row, r->true_bias[k]);
+    }
+    for (int k = 0; k < 3; k++) {
+        put(row, r->true_rate[k]);
     }
     for (int i = 0; i < n; i++) {
-        put(f, (double)e->drag_coeff[i]);
-        put(f, (double)e->drag_coeff_std[i]);
+        put(row, (double)e->thrust_coeff[i]);
+        put(row, (double)e->thrust_coeff_std[i]);
     }
-    for (int k = 0; k < 3; k++) {
-        put(f, (double)e->gyro_bias[k]);
-    }
-    for (int k = 0; k < 3; k++) {
-        put(f, (double)e->gyro_bias_std[k]);
-    }
-    for (int k = 0; k < 3; k++) {
-        put(f, (double)e->body_rate[k]);
-    }
-    fprintf(f, ",%lu,%d", (unsigned long)e->health, r->status);
     for (int i = 0; i < n; i++) {
-        put(f, r->true_omega[i]);
+        put(row, (double)e->drag_coeff[i]);
+        put(row, (double)e->drag_coeff_std[i]);
     }
-    fputc('\n', f);
+    for (int k = 0; k < 3; k++) {
+        put(row, (double)e->gyro_bias[k]);
+    }
+    for (int k = 0; k < 3; k++) {
+        put(row, (double)e->gyro_bias_std[k]);
+    }
+    for (int k = 0; k < 3; k++) {
+        put(row, (double)e->body_rate[k]);
+    }
+    row->len += snprintf(row->text + row->len, sizeof(row->text) - (size_t)row->len, ",%lu,%d",
+                         (unsigned long)e->health, r->status);
+    for (int i = 0; i < n; i++) {
+        put(row, r->true_omega[i]);
+    }
+    row->text[row->len++] = '\n';
+    fwrite(row->text, 1, (size_t)row->len, f);
     return ferror(f) ? -1 : 0;
 }
 

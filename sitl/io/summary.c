@@ -151,5 +151,7 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
     cJSON_AddNumberToObject(root, "resyncs", (double)r->counters.resyncs);
     snprintf(text, sizeof(text), "%.6g", r->wall_time_s);
     cJSON_AddRawToObject(root, "wall_time_s", text);
+    snprintf(text, sizeof(text), "%.6g", r->flight_cpu_s);
+    cJSON_AddRawToObject(root, "flight_cpu_time_s", text);
     return sitl_write_json_file(path, root);
 }
