@@ -235,22 +235,34 @@ def jobs_for(config: CampaignConfig) -> list[Job]:
 
 def run_campaign(config: CampaignConfig, progress: bool = True) -> dict:
     """Run every flight, aggregate, write table1.json and table1.md into out_dir."""
+    return run_campaigns([config], progress=progress)[0]
+
+
+def run_campaigns(configs: list[CampaignConfig], progress: bool = True,
+                  desc: str = "campaign") -> list[dict]:
+    """Several campaigns' flights in ONE pool of workers (the cores stay busy across
+    campaigns) under one progress bar; then each campaign's table1.json and
+    table1.md into its own out_dir. Returns the tables in the order given."""
     from tqdm import tqdm
 
-    config.out_dir.mkdir(parents=True, exist_ok=True)
-    jobs = jobs_for(config)
-    records: list[dict] = []
-    bar = tqdm(total=len(jobs), desc="campaign", unit="flight", disable=not progress, mininterval=0.5,
+    for config in configs:
+        config.out_dir.mkdir(parents=True, exist_ok=True)
+    work = [(index, job) for index, config in enumerate(configs) for job in jobs_for(config)]
+    records: list[list[dict]] = [[] for _ in configs]
+    bar = tqdm(total=len(work), desc=desc, unit="flight", disable=not progress, mininterval=0.5,
                file=sys.stderr)
-    pool = ProcessPoolExecutor(max_workers=max(1, config.workers))
+    workers = max(1, max((config.workers for config in configs), default=1))
+    pool = ProcessPoolExecutor(max_workers=workers)
     try:
-        pending = {pool.submit(run_job, config, job) for job in jobs}
+        pending = {pool.submit(run_job, configs[index], job): index for index, job in work}
         while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in done:
+                index = pending.pop(future)
                 record = future.result()
-                records.append(record)
-                bar.set_postfix_str(f"{record['trajectory']}/{record['mode']}/{record['trial']}")
+                records[index].append(record)
+                where = f"{configs[index].vehicle} " if len(configs) > 1 else ""
+                bar.set_postfix_str(f"{where}{record['trajectory']}/{record['mode']}/{record['trial']}")
                 bar.update(1)
     except KeyboardInterrupt:
         pool.shutdown(wait=False, cancel_futures=True)
@@ -259,10 +271,13 @@ def run_campaign(config: CampaignConfig, progress: bool = True) -> dict:
         bar.close()
     pool.shutdown(wait=True)
 
-    records.sort(key=lambda r: (r["trajectory"], r["mode"], r["trial"]))
-    table = build_table(config, records)
-    write_outputs(config.out_dir, table)
-    return table
+    tables = []
+    for config, config_records in zip(configs, records):
+        config_records.sort(key=lambda r: (r["trajectory"], r["mode"], r["trial"]))
+        table = build_table(config, config_records)
+        write_outputs(config.out_dir, table)
+        tables.append(table)
+    return tables
 
 
 def build_table(config: CampaignConfig, records: list[dict]) -> dict:

@@ -9,7 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from propid import table1
-from propid.campaign import CampaignConfig, run_campaign
+from propid.campaign import CampaignConfig, run_campaigns
 
 QUAD_PRESETS = ("crazyflie-plus", "crazyflie-x")
 MULTI_PRESETS = ("hexa-plus", "hexa-x", "octo-plus", "octo-x")
@@ -25,11 +25,13 @@ def presets_and_modes(include_multirotors: bool = True) -> list[tuple[str, tuple
 
 def run_extended(base: CampaignConfig, plan: list[tuple[str, tuple[str, ...]]],
                  progress: bool = True) -> dict:
-    """One campaign per preset (own sub-directory), merged under a `preset` level."""
+    """One campaign per preset (own sub-directory), merged under a `preset` level; all
+    presets' flights share one pool of workers and one progress bar."""
     out: dict = {}
-    for preset, modes in plan:
-        config = replace(base, vehicle=preset, modes=modes, out_dir=base.out_dir / "extended" / preset)
-        table = run_campaign(config, progress=progress)
+    configs = [replace(base, vehicle=preset, modes=modes,
+                       out_dir=base.out_dir / "extended" / preset) for preset, modes in plan]
+    tables = run_campaigns(configs, progress=progress, desc="table1-extended")
+    for (preset, _modes), table in zip(plan, tables):
         conditions = table.pop("_conditions", {})
         out[preset] = table
         out.setdefault("_conditions", {"presets": {}})["presets"][preset] = conditions

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from propid import flightlog
 from propid.errors import UserError
 from propid.flightlog import (
     FlightLog,
@@ -197,3 +198,21 @@ def test_reads_real_crazyflie_log_fast():
     assert 4 <= missing <= 40
     assert np.nanmax(log.rotor_speed) > 30000  # the documented eRPM spike survives reading
     assert json.loads((CRAZYFLIE / "crazyflie21b.vehicle.json").read_text())["kf_nominal"] == 3.72e-08
+
+
+@pytest.mark.parametrize("body", [
+    "1,2,3", ",2,3", "1,,3", "1,2,", ",,", ",", ",,,,", "1,,,,5\n,,\n,\n\n7,,",
+    "a\n,b,\n,,c,,\nd,", ",\n,", "1,2\r\n,3\r\n4,", "", "\n\n,\n",
+])
+def test_empty_field_fill_matches_the_regex(body):
+    assert flightlog._fill_empty_fields(body) == flightlog._EMPTY_FIELD_RE.sub("nan", body)
+
+
+def test_empty_field_fill_matches_the_regex_on_random_rows():
+    rng = np.random.default_rng(3)
+    tokens = np.array(["", "", "1.5", "-2e-08", "nan"])
+    for _ in range(200):
+        rows = [",".join(rng.choice(tokens, size=int(rng.integers(1, 8))))
+                for _ in range(int(rng.integers(1, 6)))]
+        body = "\n".join(rows)
+        assert flightlog._fill_empty_fields(body) == flightlog._EMPTY_FIELD_RE.sub("nan", body)

@@ -246,6 +246,33 @@ def test_campaign_with_a_stand_in_simulator(tmp_path):
     assert not any((tmp_path / "out" / "logs").iterdir())  # logs deleted by default
 
 
+def test_campaigns_share_one_pool_and_keep_their_own_tables(tmp_path):
+    from dataclasses import replace
+
+    from propid.campaign import CampaignConfig, run_campaign, run_campaigns
+
+    fake = tmp_path / "fake_sitl"
+    fake.write_text(FAKE_SITL.format(python=sys.executable, tests_dir=str(Path(__file__).parent),
+                                     kf=KF_NOM, km=KM_NOM))
+    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
+    first = CampaignConfig(out_dir=tmp_path / "a", sitl=fake, trajectories=("circle",),
+                           modes=("oracle", "incorrect"), trials=2, workers=2)
+    second = replace(first, out_dir=tmp_path / "b", modes=("oracle",), trials=3)
+    together = run_campaigns([first, second], progress=False)
+    alone = [run_campaign(replace(config, out_dir=tmp_path / f"alone{k}"), progress=False)
+             for k, config in enumerate((first, second))]
+    for shared, single in zip(together, alone):
+        for table in (shared, single):
+            table.pop("_conditions")
+            for cell in table["circle"].values():
+                for trial in cell["per_trial"]:
+                    trial.pop("wall_s", None)
+        assert shared == single
+    assert together[1]["circle"]["oracle"]["trials"] == 3
+    assert "incorrect" not in together[1]["circle"]
+    assert (tmp_path / "a" / "table1.json").is_file() and (tmp_path / "b" / "table1.md").is_file()
+
+
 def test_campaign_command_carries_the_documented_conditions(tmp_path):
     from propid.campaign import CampaignConfig, Job, sitl_command
 
