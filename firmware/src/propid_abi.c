@@ -6,6 +6,7 @@
 #include "propid/propid.h"
 
 uint32_t propid_abi_max_rotors(void);
+uint32_t propid_abi_delay_slots(void);
 uint32_t propid_abi_sizeof_config(void);
 uint32_t propid_abi_sizeof_filter(void);
 uint32_t propid_abi_sizeof_estimate(void);
@@ -17,6 +18,7 @@ uint32_t propid_abi_offsetof_counters_rejected(void);
 void propid_abi_copy_state(const propid_filter_t *filter, float *state, float *covariance);
 
 uint32_t propid_abi_max_rotors(void) { return PROPID_MAX_ROTORS; }
+uint32_t propid_abi_delay_slots(void) { return PROPID_DELAY_SLOTS; }
 uint32_t propid_abi_sizeof_config(void) { return (uint32_t)sizeof(propid_config_t); }
 uint32_t propid_abi_sizeof_filter(void) { return (uint32_t)sizeof(propid_filter_t); }
 uint32_t propid_abi_sizeof_estimate(void) { return (uint32_t)sizeof(propid_estimate_t); }

@@ -15,6 +15,7 @@
 #include <math.h>
 #include <stddef.h>
 
+#include "propid_delay.h"
 #include "propid_internal.h"
 
 static propid_status_t reject(propid_filter_t *filter, propid_status_t status)
@@ -23,7 +24,11 @@ static propid_status_t reject(propid_filter_t *filter, propid_status_t status)
     return status;
 }
 
-propid_status_t propid_push_accel(propid_filter_t *filter, uint64_t time_us, const float specific_force[3])
+/* Every check of an accelerometer sample that does not need the rotor data;
+ * for a sample to be held, its time against the newest held one. Rejections
+ * counted. Not inlined: held samples are fused under propid_push_accel's frame. */
+static __attribute__((noinline)) propid_status_t accel_sample_check(propid_filter_t *filter, uint64_t time_us,
+                                                                    const float specific_force[3])
 {
     if (filter == NULL) {
         return PROPID_ERR_NULL;
@@ -35,8 +40,7 @@ propid_status_t propid_push_accel(propid_filter_t *filter, uint64_t time_us, con
         return reject(filter, PROPID_ERR_NULL);
     }
     const propid_config_t *config = &filter->config;
-    const propid_derived_t *derived = &filter->derived;
-    if (derived->layout.accel_bias == PROPID_NO_STATE) {
+    if (filter->derived.layout.accel_bias == PROPID_NO_STATE) {
         return reject(filter, PROPID_ERR_CONFIG); /* no mass configured: not used */
     }
     for (uint8_t a = 0; a < 3u; ++a) {
@@ -49,14 +53,51 @@ propid_status_t propid_push_accel(propid_filter_t *filter, uint64_t time_us, con
             return reject(filter, PROPID_ERR_ACCEL_RANGE);
         }
     }
+#if PROPID_DELAY_SLOTS > 0
+    if (config->rotor_delay_us > 0) {
+        uint64_t previous = filter->core.accel_time_us;
+        int has_previous = filter->core.has_accel;
+        has_previous |= propid_delay_newest(filter, PROPID_DELAY_ACCEL, &previous);
+        if (has_previous && time_us <= previous) {
+            return reject(filter, PROPID_ERR_TIME_BACKWARDS);
+        }
+    }
+#endif
+    return PROPID_OK;
+}
+
+propid_status_t propid_push_accel(propid_filter_t *filter, uint64_t time_us, const float specific_force[3])
+{
+    const propid_status_t checked = accel_sample_check(filter, time_us, specific_force);
+    if (checked != PROPID_OK) {
+        return checked;
+    }
+#if PROPID_DELAY_SLOTS > 0
+    if (filter->config.rotor_delay_us > 0) {
+        /* Held until the rotor speeds of its time arrive (propid_delay.c). */
+        propid_delay_release_imu(filter, time_us, 1, 1);
+        return propid_delay_hold_imu(filter, PROPID_DELAY_ACCEL, time_us, specific_force);
+    }
+#endif
+    return propid_fuse_accel(filter, time_us, specific_force);
+}
+
+propid_status_t propid_fuse_accel(propid_filter_t *filter, uint64_t time_us, const float specific_force[3])
+{
+    const propid_config_t *config = &filter->config;
+    const propid_derived_t *derived = &filter->derived;
     propid_core_t *core = &filter->core;
     if (core->has_accel && time_us <= core->accel_time_us) {
         return reject(filter, PROPID_ERR_TIME_BACKWARDS);
     }
+#if PROPID_DELAY_SLOTS > 0
+    propid_delay_release_rotor(filter, time_us); /* held rotor samples that act by now */
+#endif
     if (!core->has_rotor_data) {
         return reject(filter, PROPID_ERR_NO_ROTOR_DATA);
     }
-    if (time_us > core->rotor_time_us && time_us - core->rotor_time_us > (uint64_t)config->rotor_stale_us) {
+    const uint64_t rotor_clock = time_us + propid_delay_imu_shift(config);
+    if (rotor_clock > core->rotor_time_us && rotor_clock - core->rotor_time_us > (uint64_t)config->rotor_stale_us) {
         return reject(filter, PROPID_ERR_ROTOR_STALE);
     }
 

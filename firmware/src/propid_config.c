@@ -5,6 +5,7 @@
 #include <stddef.h>
 #include <string.h>
 
+#include "propid_delay.h"
 #include "propid_internal.h"
 
 /* Largest accepted nominal kf or km [SI]: far above any propeller (a 1 m rotor has
@@ -472,6 +473,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     }
     if (config->torque_scale && (!positive_finite(config->torque_scale_std0) || config->torque_scale_std0 > 10.0f)) {
         PROPID_BAD("torque_scale_std0");
+    }
+    if (!propid_delay_config_ok(config)) {
+        PROPID_BAD("rotor_delay_us"); /* beyond 1 s or what PROPID_DELAY_SLOTS holds */
     }
 
     out.layout.rate = 0u;

@@ -5,6 +5,7 @@
 #include <stddef.h>
 #include <string.h>
 
+#include "propid_delay.h"
 #include "propid_internal.h"
 
 static int initialised(const propid_filter_t *filter)
@@ -24,6 +25,9 @@ static void core_to_prior(propid_filter_t *filter)
     memset(core, 0, sizeof(*core));
     propid_cov_set_prior(&filter->derived, filter->config.rotor_count, core);
     core->stale_mark = filter->counters.rejected[-(int)PROPID_ERR_ROTOR_STALE];
+#if PROPID_DELAY_SLOTS > 0
+    propid_delay_clear(filter);
+#endif
 }
 
 propid_status_t propid_init(propid_filter_t *filter, const propid_config_t *config)
@@ -102,13 +106,20 @@ propid_status_t propid_resync(propid_filter_t *filter, uint64_t time_us)
     }
     core->time_us = time_us;
     core->has_time = 0u;
+#if PROPID_DELAY_SLOTS > 0
+    propid_delay_clear(filter); /* held samples belong to the time before the gap */
+#endif
     core->health |= PROPID_HEALTH_TIME_RESYNCED;
     filter->counters.resyncs++;
     return PROPID_OK;
 }
 
-propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_us,
-                                         const float *rotor_speed_rad_s, uint8_t rotor_count)
+/* Every check of a rotor sample (nothing written unless it passes; rejections
+ * counted). Not inlined, like the gyro's: the push functions' own frames stay
+ * small because held IMU samples are fused under them (propid_delay.h). */
+static __attribute__((noinline)) propid_status_t rotor_sample_check(propid_filter_t *filter, uint64_t time_us,
+                                                                    const float *rotor_speed_rad_s,
+                                                                    uint8_t rotor_count)
 {
     if (filter == NULL) {
         return PROPID_ERR_NULL;
@@ -135,23 +146,57 @@ propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_
             return reject(filter, PROPID_ERR_ROTOR_SPEED_RANGE);
         }
     }
-    propid_core_t *core = &filter->core;
+    const propid_core_t *core = &filter->core;
     const uint64_t max_gap = config->max_gyro_gap_us;
-    if (core->has_rotor_data && time_us <= core->rotor_time_us) {
+    /* Stamps on the rotor clock of the filter: shifted by |delay| when the gyro lags. */
+    const uint64_t stamp = time_us + propid_delay_rotor_shift(config);
+    uint64_t previous = core->rotor_time_us;
+    int has_previous = core->has_rotor_data;
+#if PROPID_DELAY_SLOTS > 0
+    const int held = propid_delay_newest(filter, PROPID_DELAY_ROTOR, &previous);
+    has_previous |= held;
+#endif
+    if (has_previous && stamp <= previous) {
         /* Not after the previous sample: going backwards, unless the stored
          * stamp is the fault, more than max_gyro_gap_us ahead of the gyro clock
          * (or, before the clock is anchored, of this sample). Such data is never
          * used (propid_push_gyro finds it stale, which raises ROTOR_STALE), and
          * this sample replaces it: one wild stamp must not lock out the stream. */
-        const uint64_t reference = core->has_time ? core->time_us : time_us;
-        if (!(core->rotor_time_us > reference && core->rotor_time_us - reference > max_gap)) {
+        const uint64_t reference = core->has_time ? core->time_us + propid_delay_imu_shift(config) : stamp;
+        if (!(previous > reference && previous - reference > max_gap)) {
             return reject(filter, PROPID_ERR_TIME_BACKWARDS);
         }
+#if PROPID_DELAY_SLOTS > 0
+        if (held) {
+            propid_delay_clear(filter); /* the held samples follow the wild one */
+        }
+#endif
     }
+    return PROPID_OK;
+}
+
+propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_us,
+                                         const float *rotor_speed_rad_s, uint8_t rotor_count)
+{
+    const propid_status_t checked = rotor_sample_check(filter, time_us, rotor_speed_rad_s, rotor_count);
+    if (checked != PROPID_OK) {
+        return checked;
+    }
+    const uint64_t stamp = time_us + propid_delay_rotor_shift(&filter->config);
+#if PROPID_DELAY_SLOTS > 0
+    if (filter->config.rotor_delay_us < 0) {
+        return propid_delay_push_rotor(filter, stamp, rotor_speed_rad_s);
+    }
+    if (filter->config.rotor_delay_us > 0) {
+        /* IMU samples of an earlier time are fused with the speeds before this one. */
+        propid_delay_release_imu(filter, stamp, 0, 0);
+    }
+#endif
+    propid_core_t *core = &filter->core;
     for (uint8_t i = 0; i < rotor_count; ++i) {
         core->rotor_speed_sq[i] = rotor_speed_rad_s[i] * rotor_speed_rad_s[i];
     }
-    core->rotor_time_us = time_us;
+    core->rotor_time_us = stamp;
     core->has_rotor_data = 1u;
     filter->counters.rotor_accepted++;
     return PROPID_OK;
@@ -196,8 +241,28 @@ static __attribute__((noinline)) propid_status_t predict_step(propid_filter_t *f
     return PROPID_OK;
 }
 
-propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
-                                 const float gyro_rad_s[3])
+/* Time checks of a gyro sample against the previous one (previous: its stamp,
+ * or the resync time when anchor): backwards, jump. */
+static propid_status_t gyro_time_check(const propid_config_t *config, uint64_t previous, int anchor,
+                                       uint64_t time_us)
+{
+    if (anchor) {
+        /* After propid_resync(t) the anchoring sample may carry t itself (the
+         * sample that was rejected as a time jump), not an earlier time. */
+        return time_us < previous ? PROPID_ERR_TIME_BACKWARDS : PROPID_OK;
+    }
+    if (time_us <= previous) {
+        return PROPID_ERR_TIME_BACKWARDS;
+    }
+    return time_us - previous > (uint64_t)config->max_gyro_gap_us ? PROPID_ERR_TIME_JUMP : PROPID_OK;
+}
+
+/* Every check of a gyro sample that does not need the rotor data: pointer,
+ * finite, range, time (for a sample to be held, the rotor speeds lagging,
+ * against the newest held one, else the filter's clock). Rejections counted.
+ * Not inlined (see rotor_sample_check). */
+static __attribute__((noinline)) propid_status_t gyro_sample_check(propid_filter_t *filter, uint64_t time_us,
+                                                                   const float gyro_rad_s[3])
 {
     if (filter == NULL) {
         return PROPID_ERR_NULL;
@@ -219,35 +284,62 @@ propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
             return reject(filter, PROPID_ERR_GYRO_RANGE);
         }
     }
+    uint64_t previous = filter->core.time_us;
+    int anchor = !filter->core.has_time;
+#if PROPID_DELAY_SLOTS > 0
+    if (config->rotor_delay_us > 0 && propid_delay_newest(filter, PROPID_DELAY_GYRO, &previous)) {
+        anchor = 0;
+    }
+#endif
+    const propid_status_t timing = gyro_time_check(config, previous, anchor, time_us);
+    if (timing != PROPID_OK) {
+        return reject(filter, timing);
+    }
+    return PROPID_OK;
+}
+
+propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
+                                 const float gyro_rad_s[3])
+{
+    const propid_status_t checked = gyro_sample_check(filter, time_us, gyro_rad_s);
+    if (checked != PROPID_OK) {
+        return checked;
+    }
+#if PROPID_DELAY_SLOTS > 0
+    if (filter->config.rotor_delay_us > 0) {
+        /* Held until the rotor speeds of its time arrive. */
+        propid_delay_release_imu(filter, time_us, 1, 1);
+        return propid_delay_hold_imu(filter, PROPID_DELAY_GYRO, time_us, gyro_rad_s);
+    }
+    /* Held rotor samples (the gyro lags) that act by now. */
+    propid_delay_release_rotor(filter, time_us);
+#endif
+    return propid_fuse_gyro(filter, time_us, gyro_rad_s);
+}
+
+propid_status_t propid_fuse_gyro(propid_filter_t *filter, uint64_t time_us, const float gyro_rad_s[3])
+{
+    const propid_config_t *config = &filter->config;
     propid_core_t *core = &filter->core;
     const int anchor = !core->has_time; /* first sample after init/reset/resync */
-    float dt = 0.0f;
-    if (anchor) {
-        /* After propid_resync(t) the anchoring sample may carry t itself (the
-         * sample that was rejected as a time jump), not an earlier time. */
-        if (time_us < core->time_us) {
-            return reject(filter, PROPID_ERR_TIME_BACKWARDS);
-        }
-    } else {
-        if (time_us <= core->time_us) {
-            return reject(filter, PROPID_ERR_TIME_BACKWARDS);
-        }
-        const uint64_t gap = time_us - core->time_us;
-        if (gap > (uint64_t)config->max_gyro_gap_us) {
-            return reject(filter, PROPID_ERR_TIME_JUMP);
-        }
-        dt = (float)(uint32_t)gap * 1.0e-6f;
+    const propid_status_t timing = gyro_time_check(config, core->time_us, anchor, time_us);
+    if (timing != PROPID_OK) {
+        return reject(filter, timing);
     }
+    const float dt = anchor ? 0.0f : (float)(uint32_t)(time_us - core->time_us) * 1.0e-6f;
     if (!core->has_rotor_data) {
         return reject(filter, PROPID_ERR_NO_ROTOR_DATA);
     }
     /* Rotor data stamped after the gyro sample is the freshest we have (ZOH),
-     * unless it is stamped beyond any plausible gap (a clock fault: stale). */
-    if (time_us > core->rotor_time_us) {
-        if (time_us - core->rotor_time_us > (uint64_t)config->rotor_stale_us) {
+     * unless it is stamped beyond any plausible gap (a clock fault: stale).
+     * Compared on the rotor clock (the gyro stamp + the delay when the rotor
+     * speeds lag). */
+    const uint64_t rotor_clock = time_us + propid_delay_imu_shift(config);
+    if (rotor_clock > core->rotor_time_us) {
+        if (rotor_clock - core->rotor_time_us > (uint64_t)config->rotor_stale_us) {
             return reject(filter, PROPID_ERR_ROTOR_STALE);
         }
-    } else if (core->rotor_time_us - time_us > (uint64_t)config->max_gyro_gap_us) {
+    } else if (core->rotor_time_us - rotor_clock > (uint64_t)config->max_gyro_gap_us) {
         return reject(filter, PROPID_ERR_ROTOR_STALE);
     }
 

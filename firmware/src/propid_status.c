@@ -6,6 +6,7 @@ const char *propid_status_name(propid_status_t status)
     switch (status) {
     case PROPID_OK: return "PROPID_OK";
     case PROPID_OK_GATED: return "PROPID_OK_GATED";
+    case PROPID_OK_QUEUED: return "PROPID_OK_QUEUED";
     case PROPID_ERR_NULL: return "PROPID_ERR_NULL";
     case PROPID_ERR_NOT_INITIALISED: return "PROPID_ERR_NOT_INITIALISED";
     case PROPID_ERR_CONFIG: return "PROPID_ERR_CONFIG";

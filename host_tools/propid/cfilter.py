@@ -48,11 +48,14 @@ TORQUE_SCALE_STATES = 1
 MAX_STATES = (RATE_STATES + 2 * MAX_ROTORS + BIAS_STATES + DISTURBANCE_STATES + ACCEL_BIAS_STATES
               + TORQUE_SCALE_STATES)
 REJECT_SLOTS = 16
+# Telemetry-delay buffer capacity (propid_config.h PROPID_DELAY_SLOTS default; checked at load).
+DELAY_SLOTS = 32
 
 # propid_status_t (propid.h). Negative = rejected, filter state unchanged.
 STATUS = {
     "PROPID_OK": 0,
     "PROPID_OK_GATED": 1,
+    "PROPID_OK_QUEUED": 2,
     "PROPID_ERR_NULL": -1,
     "PROPID_ERR_NOT_INITIALISED": -2,
     "PROPID_ERR_CONFIG": -3,
@@ -136,8 +139,9 @@ _OPTIONAL_FIELDS = [
     ("accel_range", ctypes.c_float),
     ("torque_scale", ctypes.c_uint8),
     ("torque_scale_std0", ctypes.c_float),
+    ("rotor_delay_us", ctypes.c_int32),
 ]
-_INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32)
+_INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int32)
 
 
 class ConfigStruct(ctypes.Structure):
@@ -191,6 +195,7 @@ class CountersStruct(ctypes.Structure):
         ("accel_accepted", ctypes.c_uint32),
         ("accel_gated", ctypes.c_uint32),
         ("accel_reanchored", ctypes.c_uint32),
+        ("delay_overflows", ctypes.c_uint32),
     ]
 
 
@@ -230,6 +235,8 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "accel_range": 160.0,
     "torque_scale": 0,
     "torque_scale_std0": 0.5,
+    # Telemetry delay (docs/math.md §12): > 0 rotor speeds lag the gyro, < 0 the gyro lags.
+    "rotor_delay_us": 0,
 }
 
 
@@ -279,6 +286,7 @@ class FilterConfig:
     accel_range: float = DEFAULT_TUNING["accel_range"]
     torque_scale: int = DEFAULT_TUNING["torque_scale"]
     torque_scale_std0: float = DEFAULT_TUNING["torque_scale_std0"]
+    rotor_delay_us: int = DEFAULT_TUNING["rotor_delay_us"]
 
     @property
     def rotor_count(self) -> int:
@@ -452,7 +460,8 @@ def _declare(lib: ctypes.CDLL) -> None:
     for name in ("propid_abi_max_rotors", "propid_abi_sizeof_config", "propid_abi_sizeof_filter",
                  "propid_abi_sizeof_estimate", "propid_abi_sizeof_counters",
                  "propid_abi_offsetof_config_gate_sigma", "propid_abi_offsetof_config_converged_rel_std",
-                 "propid_abi_offsetof_estimate_health", "propid_abi_offsetof_counters_rejected"):
+                 "propid_abi_offsetof_estimate_health", "propid_abi_offsetof_counters_rejected",
+                 "propid_abi_delay_slots"):
         getattr(lib, name).restype = u32
         getattr(lib, name).argtypes = []
     lib.propid_config_default.restype = None
@@ -488,6 +497,7 @@ def _declare(lib: ctypes.CDLL) -> None:
 def _check_abi(lib: ctypes.CDLL, lib_path: Path) -> None:
     expected = {
         "max_rotors": (lib.propid_abi_max_rotors(), MAX_ROTORS),
+        "delay_slots": (lib.propid_abi_delay_slots(), DELAY_SLOTS),
         "sizeof(propid_config_t)": (lib.propid_abi_sizeof_config(), ctypes.sizeof(ConfigStruct)),
         "sizeof(propid_estimate_t)": (lib.propid_abi_sizeof_estimate(), ctypes.sizeof(EstimateStruct)),
         "sizeof(propid_counters_t)": (lib.propid_abi_sizeof_counters(), ctypes.sizeof(CountersStruct)),
@@ -629,6 +639,7 @@ class CFilter:
             "accel_accepted": int(c.accel_accepted),
             "accel_gated": int(c.accel_gated),
             "accel_reanchored": int(c.accel_reanchored),
+            "delay_overflows": int(c.delay_overflows),
         }
 
     def scaled_state(self) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from propid.cfilter import HEALTH, STATUS, Estimate, FilterConfig, health_names
+from propid.cfilter import DELAY_SLOTS, HEALTH, STATUS, Estimate, FilterConfig, health_names
 
 _F32_MAX = float(np.finfo(np.float32).max)
 # Covariance health constants of the C filter (propid_internal.h): the rounding
@@ -68,6 +68,12 @@ class ReferenceFilter:
         self.gate_max_consecutive = int(config.gate_max_consecutive)
         self.rotor_stale_us = int(config.rotor_stale_us)
         self.max_gyro_gap_us = int(config.max_gyro_gap_us)
+        # Telemetry delay (docs/math.md §12, C: propid_delay.c): > 0 the IMU samples are held,
+        # < 0 the rotor samples; the C buffer's capacity (cfilter.DELAY_SLOTS) is mirrored.
+        self.rotor_delay_us = int(getattr(config, "rotor_delay_us", 0))
+        self.imu_shift = max(self.rotor_delay_us, 0)
+        self.rotor_shift = max(-self.rotor_delay_us, 0)
+        self.held: list[tuple[int, str, list[float]]] = []  # (time, kind, values), oldest first
 
         inertia = np.array([[_f32(v) for v in row] for row in config.inertia])
         self.inertia = 0.5 * (inertia + inertia.T)
@@ -139,7 +145,7 @@ class ReferenceFilter:
         self.counters_data = {
             "gyro_accepted": 0, "rotor_accepted": 0, "axis_gated": [0, 0, 0], "gate_reopened": 0,
             "cov_repairs": 0, "state_clamps": 0, "resyncs": 0, "rejected": [0] * 16,
-            "accel_accepted": 0, "accel_gated": 0, "accel_reanchored": 0,
+            "accel_accepted": 0, "accel_gated": 0, "accel_reanchored": 0, "delay_overflows": 0,
         }
         self._core_to_prior()
 
@@ -168,6 +174,7 @@ class ReferenceFilter:
         self.innovation_test_ratio = np.zeros(3)
         self.stale_mark = self.counters_data["rejected"][-STATUS["PROPID_ERR_ROTOR_STALE"]]
         self.check_row = 0
+        self.held = []
 
     def reset(self) -> int:
         self._core_to_prior()
@@ -193,6 +200,7 @@ class ReferenceFilter:
             self.gated_run[a] = 0
         self.time_us = int(t_us)
         self.has_time = False
+        self.held = []
         self.health |= HEALTH["TIME_RESYNCED"]
         self.counters_data["resyncs"] += 1
         return STATUS["PROPID_OK"]
@@ -300,16 +308,64 @@ class ReferenceFilter:
             if v > self.c["max_rotor_speed"]:
                 return self._reject("PROPID_ERR_ROTOR_SPEED_RANGE")
         max_gap = self.max_gyro_gap_us
-        if self.has_rotor_data and t_us <= self.rotor_time_us:
+        stamp = int(t_us) + self.rotor_shift
+        held = [h for h in self.held if h[1] == "rotor"]
+        previous, has_previous = (held[-1][0], True) if held else (self.rotor_time_us, self.has_rotor_data)
+        if has_previous and stamp <= previous:
             # ... unless the stored stamp is the clock fault (C: same rule).
-            reference = self.time_us if self.has_time else t_us
-            if not self.rotor_time_us - reference > max_gap:
+            reference = self.time_us + self.imu_shift if self.has_time else stamp
+            if not previous - reference > max_gap:
                 return self._reject("PROPID_ERR_TIME_BACKWARDS")
-        self.rotor_speed_sq = np.array(values) ** 2
-        self.rotor_time_us = int(t_us)
+            if held:
+                self.held = []
+        speed_sq = [v * v for v in values]
+        if self.rotor_delay_us < 0:
+            if len(self.held) >= DELAY_SLOTS:
+                self._apply_held_rotor()
+                self.counters_data["delay_overflows"] += 1
+            self.held.append((stamp, "rotor", speed_sq))
+            self.counters_data["rotor_accepted"] += 1
+            return STATUS["PROPID_OK_QUEUED"]
+        if self.rotor_delay_us > 0:
+            self._release_imu(stamp, inclusive=False)
+        self.rotor_speed_sq = np.array(speed_sq)
+        self.rotor_time_us = stamp
         self.has_rotor_data = True
         self.counters_data["rotor_accepted"] += 1
         return STATUS["PROPID_OK"]
+
+    # ------------------------------------------------------------------ telemetry delay
+    def _apply_held_rotor(self) -> None:
+        stamp, _, speed_sq = self.held.pop(0)
+        self.rotor_speed_sq = np.array(speed_sq)
+        self.rotor_time_us = stamp
+        self.has_rotor_data = True
+
+    def _release_rotor(self, t_us: int) -> None:
+        while self.held and self.held[0][0] <= t_us:
+            self._apply_held_rotor()
+
+    def _fuse_held_imu(self) -> None:
+        stamp, kind, values = self.held.pop(0)
+        if kind == "gyro":
+            self._fuse_gyro(stamp, values)
+        else:
+            self._fuse_accel(stamp, values)
+
+    def _release_imu(self, t_us: int, inclusive: bool) -> None:
+        while self.held:
+            due = self.held[0][0] + self.imu_shift
+            if (due > t_us) if inclusive else (due >= t_us):
+                break
+            self._fuse_held_imu()
+
+    def _hold_imu(self, t_us: int, kind: str, values: list[float]) -> int:
+        self._release_imu(t_us, inclusive=True)
+        if len(self.held) >= DELAY_SLOTS:
+            self._fuse_held_imu()
+            self.counters_data["delay_overflows"] += 1
+        self.held.append((int(t_us), kind, list(values)))
+        return STATUS["PROPID_OK_QUEUED"]
 
     def push_gyro(self, t_us: int, gyro: Sequence[float]) -> int:
         y = [_f32(v) for v in gyro]
@@ -317,6 +373,17 @@ class ReferenceFilter:
             return self._reject("PROPID_ERR_NOT_FINITE")
         if any(abs(v) > self.c["gyro_range"] for v in y):
             return self._reject("PROPID_ERR_GYRO_RANGE")
+        if self.rotor_delay_us > 0:
+            held = [h for h in self.held if h[1] == "gyro"]
+            previous, anchor = (held[-1][0], False) if held else (self.time_us, not self.has_time)
+            if anchor and t_us < previous or not anchor and t_us <= previous:
+                return self._reject("PROPID_ERR_TIME_BACKWARDS")
+            if not anchor and t_us - previous > self.max_gyro_gap_us:
+                return self._reject("PROPID_ERR_TIME_JUMP")
+            return self._hold_imu(t_us, "gyro", y)
+        return self._fuse_gyro(t_us, y)
+
+    def _fuse_gyro(self, t_us: int, y: list[float]) -> int:
         anchor = not self.has_time
         dt = 0.0
         if anchor:
@@ -329,11 +396,14 @@ class ReferenceFilter:
             if gap > self.max_gyro_gap_us:
                 return self._reject("PROPID_ERR_TIME_JUMP")
             dt = gap * 1e-6
+        if self.rotor_delay_us < 0:
+            self._release_rotor(t_us)
         if not self.has_rotor_data:
             return self._reject("PROPID_ERR_NO_ROTOR_DATA")
-        if t_us > self.rotor_time_us and t_us - self.rotor_time_us > self.rotor_stale_us:
+        rotor_clock = t_us + self.imu_shift  # the gyro stamp on the rotor stream's clock
+        if rotor_clock > self.rotor_time_us and rotor_clock - self.rotor_time_us > self.rotor_stale_us:
             return self._reject("PROPID_ERR_ROTOR_STALE")
-        if self.rotor_time_us - t_us > self.max_gyro_gap_us:
+        if self.rotor_time_us - rotor_clock > self.max_gyro_gap_us:
             return self._reject("PROPID_ERR_ROTOR_STALE")
         if not anchor:
             # Trapezoid input over the interval, as the C filter (docs/math.md).
@@ -467,11 +537,23 @@ class ReferenceFilter:
             return self._reject("PROPID_ERR_NOT_FINITE")
         if any(abs(v) > self.c["accel_range"] for v in f):
             return self._reject("PROPID_ERR_ACCEL_RANGE")
+        if self.rotor_delay_us > 0:
+            held = [h for h in self.held if h[1] == "accel"]
+            previous, has_previous = (held[-1][0], True) if held else (self.accel_time_us, self.has_accel)
+            if has_previous and t_us <= previous:
+                return self._reject("PROPID_ERR_TIME_BACKWARDS")
+            return self._hold_imu(t_us, "accel", f)
+        return self._fuse_accel(t_us, f)
+
+    def _fuse_accel(self, t_us: int, f: list[float]) -> int:
         if self.has_accel and t_us <= self.accel_time_us:
             return self._reject("PROPID_ERR_TIME_BACKWARDS")
+        if self.rotor_delay_us < 0:
+            self._release_rotor(t_us)
         if not self.has_rotor_data:
             return self._reject("PROPID_ERR_NO_ROTOR_DATA")
-        if t_us > self.rotor_time_us and t_us - self.rotor_time_us > self.rotor_stale_us:
+        rotor_clock = t_us + self.imu_shift
+        if rotor_clock > self.rotor_time_us and rotor_clock - self.rotor_time_us > self.rotor_stale_us:
             return self._reject("PROPID_ERR_ROTOR_STALE")
         n_rot, b = self.rotor_count, self.accel_bias
         h = np.zeros(self.n)

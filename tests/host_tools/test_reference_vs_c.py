@@ -114,7 +114,7 @@ def replay(filt, events, perturb_at=None):
     trace = []
     for t_us, kind, values in events:
         if kind == "rotor":
-            assert filt.push_rotor_speeds(t_us, values) == STATUS["PROPID_OK"]
+            assert filt.push_rotor_speeds(t_us, values) in (STATUS["PROPID_OK"], STATUS["PROPID_OK_QUEUED"])
         elif kind == "accel":
             if filt.config.mass > 0.0:
                 status = filt.push_accel(t_us, values)
@@ -167,6 +167,75 @@ def test_c_agrees_with_reference_with_every_option(flight):
     print(f"C vs reference, every option: max |dx|/std = {state_err:.3g}, max |dP_ii|/P_ii = {cov_err:.3g}")
     assert state_err < STATE_TOL_SIGMA
     assert cov_err < COV_TOL_REL
+
+
+def arriving(events, rotor_shift_us: int, offset_us: int = 10_000):
+    """The flight as it arrives when the rotor telemetry is stamped rotor_shift_us late (> 0: the
+    rotor speeds lag) or early (< 0: the gyro lags), in arrival order (rotor speeds first at equal
+    stamps, otherwise the recorded order); every stamp moved by offset_us so that none is negative."""
+    moved = [(t + offset_us + (rotor_shift_us if kind == "rotor" else 0), kind, values)
+             for t, kind, values in events]
+    return sorted(moved, key=lambda event: (event[0], event[1] != "rotor"))
+
+
+@pytest.mark.parametrize("options", ["plain", "all"])
+@pytest.mark.parametrize("delay_us", [6000, -6000])
+def test_c_agrees_with_reference_with_a_telemetry_delay(flight, options, delay_us):
+    """The delay buffer (docs/math.md §12): the flight with its rotor stamps moved by the delay,
+    both filters configured with it; per push the same status and the same bounds. With the
+    accelerometer ("all") the held IMU stream carries both sensors."""
+    config = make_config(options).with_overrides(rotor_delay_us=delay_us)
+    events = arriving(flight, delay_us)
+    ref, c_filter = ReferenceFilter(config), CFilter(config)
+    trace_ref, trace_c = replay(ref, events), replay(c_filter, events)
+    statuses = [s for s, _, _ in trace_c]
+    if delay_us > 0:
+        assert statuses.count(STATUS["PROPID_OK_QUEUED"]) == len(statuses)
+    else:
+        assert STATUS["PROPID_OK_QUEUED"] not in statuses
+    counters_c, counters_ref = c_filter.counters(), ref.counters()
+    for name in ("gyro_accepted", "rotor_accepted", "accel_accepted", "delay_overflows", "rejected"):
+        assert counters_c[name] == counters_ref[name], name
+    assert counters_c["delay_overflows"] == 0 and not counters_c["rejected"]
+    assert counters_c["gyro_accepted"] >= 2490  # all but the last few held samples of 2500
+    state_err, cov_err = disagreement(trace_c, trace_ref)
+    print(f"C vs reference, delay {delay_us} us, {options}: max |dx|/std = {state_err:.3g}, "
+          f"max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+
+
+def states_by_fused_gyro(filt, events):
+    """{number of gyro samples fused: scaled state right after that many} over a run."""
+    states = {}
+    for t_us, kind, values in events:
+        if kind == "rotor":
+            filt.push_rotor_speeds(t_us, values)
+        elif kind == "gyro":
+            filt.push_gyro(t_us, values)
+        elif kind == "reset_rotor":
+            filt.reset_rotor(values)
+        count = filt.counters()["gyro_accepted"]
+        if count not in states:
+            states[count] = filt.scaled_state()[0]
+    return states
+
+
+def test_delay_compensates_a_shifted_stream(flight):
+    """The reference with the delay configured, on the flight with shifted rotor stamps, passes
+    through the states of the undelayed reference on the aligned flight (compared whenever it
+    has fused as many gyro samples); without the delay configured it does not."""
+    flight = [event for event in flight if event[1] in ("rotor", "gyro")]  # reset_rotor acts at once
+    aligned = states_by_fused_gyro(ReferenceFilter(make_config()), arriving(flight, 0))
+    for delay_us in (6000, -6000):
+        for configured, expect_equal in ((delay_us, True), (0, False)):
+            shifted = states_by_fused_gyro(ReferenceFilter(make_config().with_overrides(rotor_delay_us=configured)),
+                                           arriving(flight, delay_us))
+            common = sorted(set(shifted) & set(aligned))
+            assert len(common) > 2400
+            worst = max(float(np.max(np.abs(shifted[k] - aligned[k]))) for k in common)
+            print(f"rotor stamps moved {delay_us} us, delay configured {configured}: max |dx| {worst:.3g}")
+            assert (worst < 1e-9) == expect_equal
 
 
 def test_accel_rejections_agree(flight):

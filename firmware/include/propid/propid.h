@@ -38,6 +38,8 @@ extern "C" {
 typedef enum {
     PROPID_OK = 0,
     PROPID_OK_GATED = 1,              /* predicted; at least one axis' update was gated out */
+    PROPID_OK_QUEUED = 2,             /* valid, held in the telemetry-delay buffer: fused when the
+                                         other stream catches up (outcome in counters and health) */
 
     PROPID_ERR_NULL = -1,             /* a pointer argument was NULL */
     PROPID_ERR_NOT_INITIALISED = -2,  /* propid_init() has not succeeded on this filter */
@@ -131,6 +133,11 @@ typedef struct {
                                          J^-1 (r x z) kf relative to the configured J and arms (1 more
                                          state): kf's scale then comes from the accelerometer alone */
     float torque_scale_std0;          /* prior std of that scale (nominal 1) */
+    int32_t rotor_delay_us;           /* telemetry delay [us] (docs/math.md §12): > 0, the rotor speeds
+                                         lag the gyro (the speed the body had at t arrives stamped
+                                         t + delay): gyro and accelerometer samples are held until
+                                         then; < 0, the gyro lags the rotor speeds: rotor samples are
+                                         held |delay|. 0: none. Bounded by PROPID_DELAY_SLOTS. */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -192,6 +199,7 @@ typedef struct {
     uint32_t accel_accepted;
     uint32_t accel_gated;             /* accelerometer updates skipped by the gate */
     uint32_t accel_reanchored;        /* z bias re-anchored after too many gated samples */
+    uint32_t delay_overflows;         /* samples released early because the delay buffer was full */
 } propid_counters_t;
 
 /* State layout: the first index of each block of the scaled state. Fixed blocks
@@ -253,11 +261,30 @@ typedef struct {
                                                        entry p (column b) of row a, c the third axis */
 } propid_derived_t;
 
+#if PROPID_DELAY_SLOTS > 0
+/* Telemetry-delay buffer (private; propid_delay.c): a FIFO of held samples. */
+#define PROPID_DELAY_VALUES (PROPID_MAX_ROTORS > 3 ? PROPID_MAX_ROTORS : 3)
+typedef struct {
+    uint64_t time_us;                               /* release time (rotor) or own stamp (IMU) */
+    float value[PROPID_DELAY_VALUES];               /* gyro [rad/s], specific force [m/s^2] or
+                                                       rotor speeds squared [(rad/s)^2] */
+    uint8_t kind;
+} propid_delay_entry_t;
+typedef struct {
+    propid_delay_entry_t entry[PROPID_DELAY_SLOTS];
+    uint8_t head;                                   /* oldest entry */
+    uint8_t count;
+} propid_delay_t;
+#endif
+
 typedef struct {
     propid_config_t config;
     propid_derived_t derived;
     propid_core_t core;
     propid_counters_t counters;
+#if PROPID_DELAY_SLOTS > 0
+    propid_delay_t delay;
+#endif
     uint32_t magic;                                 /* set by a successful propid_init() */
 } propid_filter_t;
 
@@ -282,6 +309,11 @@ propid_status_t propid_resync(propid_filter_t *filter, uint64_t time_us);
 /* ------------------------------------------------------------------------ */
 /* Inputs                                                                   */
 /* ------------------------------------------------------------------------ */
+/* With config.rotor_delay_us != 0 the stream that leads is held in a fixed buffer
+ * (docs/math.md §12): its samples are validated at once (a negative status: not
+ * held, nothing changed) and return PROPID_OK_QUEUED; each is fused when the
+ * other stream's time reaches it, during a later push, and its outcome then shows
+ * in the counters and health only. The estimates lag real time by |delay|. */
 propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_us,
                                          const float *rotor_speed_rad_s, uint8_t rotor_count);
 

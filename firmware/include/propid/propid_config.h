@@ -29,4 +29,16 @@
 #error "PROPID_MAX_ROTORS must be in 1..16"
 #endif
 
+/* Telemetry-delay buffer (docs/math.md §12): samples of the leading stream held
+ * until the lagging one catches up. Its capacity bounds config.rotor_delay_us
+ * (propid_config_check). 0 compiles the buffer out: every nonzero delay is then
+ * a configuration error and propid_filter_t is that much smaller. */
+#ifndef PROPID_DELAY_SLOTS
+#define PROPID_DELAY_SLOTS 32
+#endif
+
+#if PROPID_DELAY_SLOTS < 0 || PROPID_DELAY_SLOTS > 255
+#error "PROPID_DELAY_SLOTS must be in 0..255"
+#endif
+
 #endif /* PROPID_CONFIG_H */
