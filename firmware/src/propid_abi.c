@@ -7,6 +7,7 @@
 
 uint32_t propid_abi_max_rotors(void);
 uint32_t propid_abi_delay_slots(void);
+uint32_t propid_abi_max_states(void);
 uint32_t propid_abi_sizeof_config(void);
 uint32_t propid_abi_sizeof_filter(void);
 uint32_t propid_abi_sizeof_estimate(void);
@@ -19,6 +20,7 @@ void propid_abi_copy_state(const propid_filter_t *filter, float *state, float *c
 
 uint32_t propid_abi_max_rotors(void) { return PROPID_MAX_ROTORS; }
 uint32_t propid_abi_delay_slots(void) { return PROPID_DELAY_SLOTS; }
+uint32_t propid_abi_max_states(void) { return PROPID_MAX_STATES; }
 uint32_t propid_abi_sizeof_config(void) { return (uint32_t)sizeof(propid_config_t); }
 uint32_t propid_abi_sizeof_filter(void) { return (uint32_t)sizeof(propid_filter_t); }
 uint32_t propid_abi_sizeof_estimate(void) { return (uint32_t)sizeof(propid_estimate_t); }

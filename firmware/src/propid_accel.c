@@ -40,8 +40,9 @@ static __attribute__((noinline)) propid_status_t accel_sample_check(propid_filte
         return reject(filter, PROPID_ERR_NULL);
     }
     const propid_config_t *config = &filter->config;
-    if (filter->derived.layout.accel_bias == PROPID_NO_STATE) {
-        return reject(filter, PROPID_ERR_CONFIG); /* no mass configured: not used */
+    if (!PROPID_WITH_ACCEL || filter->derived.layout.accel_bias == PROPID_NO_STATE) {
+        /* No mass configured, or compiled out (propid_config.h). */
+        return reject(filter, PROPID_ERR_CONFIG);
     }
     for (uint8_t a = 0; a < 3u; ++a) {
         if (!isfinite(specific_force[a])) {

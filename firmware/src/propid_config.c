@@ -436,11 +436,12 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     }
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const float rotor_inertia = config->rotor_inertia[i];
-        if (!isfinite(rotor_inertia) || rotor_inertia < 0.0f || rotor_inertia > 1.0f) {
+        if (!isfinite(rotor_inertia) || rotor_inertia < 0.0f || rotor_inertia > 1.0f ||
+            (!PROPID_WITH_ROTOR_INERTIA && rotor_inertia > 0.0f)) { /* compiled out */
             PROPID_BAD("rotor_inertia");
         }
     }
-    if (config->disturbance_torque > 1u) {
+    if (config->disturbance_torque > (PROPID_WITH_DISTURBANCE ? 1u : 0u)) {
         PROPID_BAD("disturbance_torque");
     }
     if (config->disturbance_torque) {
@@ -451,7 +452,8 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             PROPID_BAD("disturbance_walk");
         }
     }
-    if (!isfinite(config->mass) || config->mass < 0.0f || config->mass > 1.0e4f) {
+    if (!isfinite(config->mass) || config->mass < 0.0f || config->mass > 1.0e4f ||
+        (!PROPID_WITH_ACCEL && config->mass > 0.0f)) { /* compiled out */
         PROPID_BAD("mass");
     }
     if (config->mass > 0.0f) {

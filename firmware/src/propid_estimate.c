@@ -66,7 +66,7 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         }
     }
     const uint8_t disturbance = derived->layout.disturbance;
-    if (disturbance != PROPID_NO_STATE) {
+    if (PROPID_WITH_DISTURBANCE && disturbance != PROPID_NO_STATE) {
         for (uint8_t a = 0; a < 3u; ++a) {
             float torque = 0.0f;
             float torque_var = 0.0f;
@@ -80,14 +80,14 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         }
     }
     const uint8_t accel_bias = derived->layout.accel_bias;
-    if (accel_bias != PROPID_NO_STATE) {
+    if (PROPID_WITH_ACCEL && accel_bias != PROPID_NO_STATE) {
         estimate->accel_bias = core->state[accel_bias];
         estimate->accel_bias_std = std_of(core->cov[accel_bias][accel_bias]);
         estimate->accel_innovation = core->accel_innovation;
         estimate->accel_innovation_test_ratio = core->accel_innovation_test_ratio;
     }
     estimate->torque_scale = 1.0f;
-    if (derived->layout.torque_scale != PROPID_NO_STATE) {
+    if (PROPID_WITH_ACCEL && derived->layout.torque_scale != PROPID_NO_STATE) {
         estimate->torque_scale = core->state[derived->layout.torque_scale];
         estimate->torque_scale_std = std_of(core->cov[derived->layout.torque_scale][derived->layout.torque_scale]);
     }

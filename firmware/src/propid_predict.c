@@ -136,10 +136,11 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
      * rotors' angular momentum h (trapezoid mean of the speeds) makes a
      * gyroscopic torque linear in omega, A_ab += rotor_gyro[a][b] h. */
     const float torque_scale =
-        derived->layout.torque_scale != PROPID_NO_STATE ? filter->core.state[derived->layout.torque_scale] : 1.0f;
+        PROPID_WITH_ACCEL && derived->layout.torque_scale != PROPID_NO_STATE
+            ? filter->core.state[derived->layout.torque_scale] : 1.0f;
     float reaction[3] = {0.0f, 0.0f, 0.0f};
     float momentum_dt = 0.0f;
-    if (derived->rotor_inertia_on) {
+    if (PROPID_WITH_ROTOR_INERTIA && derived->rotor_inertia_on) {
         for (uint8_t i = 0; i < rotor_count; ++i) {
             const float start = sqrtf(filter->core.input_speed_sq[i]);
             const float end = sqrtf(filter->core.rotor_speed_sq[i]);
@@ -181,7 +182,7 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
         const float *torque = derived->jac_torque[a];
         const uint8_t *rotor = derived->jac_rotor[a];
         for (uint8_t p = rate_count; p < count; ++p) {
-            if (rotor[p] == PROPID_SCALE_ENTRY) {
+            if (PROPID_WITH_ACCEL && rotor[p] == PROPID_SCALE_ENTRY) {
                 g[p] = thrust_part;
                 continue;
             }
@@ -250,17 +251,30 @@ static __attribute__((noinline)) void name(                                     
     float rows[3][PROPID_MAX_STATES];                                                           \
     for (uint8_t a = 0; a < 3u; ++a) {                                                          \
         float acc[PROPID_MAX_STATES]; /* registers in the unrolled quad copy */                 \
+        /* Row `a` of the stored triangle: column a above the diagonal, then the row. */        \
 UNROLL                                                                                          \
-        for (uint8_t j = 0; j < n; ++j) {                                                       \
-            acc[j] = propid_cov_at(cov, a, j);                                                  \
+        for (uint8_t j = 0; j < a; ++j) {                                                       \
+            acc[j] = cov[j][a];                                                                 \
+        }                                                                                       \
+UNROLL                                                                                          \
+        for (uint8_t j = a; j < n; ++j) {                                                       \
+            acc[j] = cov[a][j];                                                                 \
         }                                                                                       \
         const uint8_t count = derived->jac_count[a];                                            \
         for (uint8_t p = 0; p < count; ++p) {                                                   \
             const float g = jacobian_dt[a][p];                                                  \
             const uint8_t source = derived->jac_column[a][p];                                   \
+            if (source >= n) { /* never (propid_config.c); bounds the index for the compiler */ \
+                continue;                                                                       \
+            }                                                                                   \
+            /* P_(source, j) from the stored triangle, without a branch per element. */         \
 UNROLL                                                                                          \
-            for (uint8_t j = 0; j < n; ++j) {                                                   \
-                acc[j] += g * propid_cov_at(cov, source, j);                                    \
+            for (uint8_t j = 0; j < source; ++j) {                                              \
+                acc[j] += g * cov[j][source];                                                   \
+            }                                                                                   \
+UNROLL                                                                                          \
+            for (uint8_t j = source; j < n; ++j) {                                              \
+                acc[j] += g * cov[source][j];                                                   \
             }                                                                                   \
         }                                                                                       \
         float *row = rows[a];                                                                   \
@@ -300,7 +314,9 @@ UNROLL                                                                          
     }                                                                                           \
 }
 
+#if !PROPID_QUAD_BUILD /* the quad build keeps flash small: a quad off the fixed layout takes the loops */
 PROPID_DEFINE_PREDICT(predict_covariance_quad, PROPID_UNROLL_QUAD)
+#endif
 PROPID_DEFINE_PREDICT(predict_covariance_any, PROPID_NO_UNROLL)
 
 /* The propagation for the quad layout, column by column: column j of T needs
@@ -403,8 +419,10 @@ void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *c
     const uint8_t n = derived->state_count;
     if (derived->quad_layout) {
         predict_covariance_quad_layout(derived, core->cov, dt, jacobian_dt);
+#if !PROPID_QUAD_BUILD
     } else if (n == PROPID_QUAD_STATES) {
         predict_covariance_quad(derived, core->cov, dt, jacobian_dt, PROPID_QUAD_STATES);
+#endif
     } else {
         predict_covariance_any(derived, core->cov, dt, jacobian_dt, n);
     }

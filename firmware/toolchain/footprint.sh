@@ -16,7 +16,8 @@ nm=${NM:-arm-none-eabi-nm}
 cpu_flags=(-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard)
 
 libraries=()
-for lib in "$build/firmware/libpropid.a" "$build/firmware/mavlink/libpropid_mavlink.a"; do
+for lib in "$build/firmware/libpropid.a" "$build/firmware/libpropid_quad.a" \
+           "$build/firmware/mavlink/libpropid_mavlink.a"; do
     [ -f "$lib" ] && libraries+=("$lib")
 done
 [ ${#libraries[@]} -gt 0 ] || { echo "footprint: no firmware library in $build" >&2; exit 1; }
@@ -57,12 +58,11 @@ probe=$(mktemp -d)
 trap 'rm -rf "$probe"' EXIT
 echo '#include "propid/propid.h"
 propid_filter_t propid_footprint_probe;' > "$probe/probe.c"
-for rotors in 4 8; do
-    "$gcc" "${cpu_flags[@]}" -std=c11 -O2 -DPROPID_MAX_ROTORS=$rotors \
-        -I "$repo/firmware/include" -c "$probe/probe.c" -o "$probe/probe$rotors.o"
-    bytes=$("$nm" -S --radix=d "$probe/probe$rotors.o" | awk '$4 == "propid_footprint_probe" { print $2 + 0 }')
-    states=$((6 + 2 * rotors))
-    printf "  PROPID_MAX_ROTORS=%d (%d states): %d bytes\n" "$rotors" "$states" "$bytes"
+for flag in -DPROPID_QUAD_BUILD=1 -DPROPID_MAX_ROTORS=4 -DPROPID_MAX_ROTORS=8; do
+    "$gcc" "${cpu_flags[@]}" -std=c11 -O2 "$flag" \
+        -I "$repo/firmware/include" -c "$probe/probe.c" -o "$probe/probe.o"
+    bytes=$("$nm" -S --radix=d "$probe/probe.o" | awk '$4 == "propid_footprint_probe" { print $2 + 0 }')
+    printf "  %-24s %d bytes\n" "${flag#-D}:" "$bytes"
 done
 
 echo
@@ -75,7 +75,7 @@ if [ ${#su_files[@]} -eq 0 ]; then
 else
     # line format: file:line:col:function<TAB>bytes<TAB>static|dynamic|bounded
     cat "${su_files[@]}" | awk -F'\t' '{ n = split($1, p, ":"); printf "%d\t%s\t%s\t%s:%s\n", $2, p[n], $3, p[1], p[2] }' \
-        | sort -t$'\t' -k1,1nr | head -5 \
+        | sort -t$'\t' -k1,1nr | awk 'NR <= 5' \
         | awk -F'\t' '{ sub(/.*\//, "", $4); printf "  %6d bytes  %-36s %-8s %s\n", $1, $2, $3, $4 }'
     # The per-sample entry points (their own frames; static callees not inlined add theirs).
     entry=()

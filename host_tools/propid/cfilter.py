@@ -144,24 +144,26 @@ _OPTIONAL_FIELDS = [
 _INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int32)
 
 
-class ConfigStruct(ctypes.Structure):
-    _fields_ = [
+def _config_struct(max_rotors: int) -> type:
+    """propid_config_t of a build with PROPID_MAX_ROTORS = max_rotors."""
+    return type(f"ConfigStruct{max_rotors}", (ctypes.Structure,), {"_fields_": [
         ("rotor_count", ctypes.c_uint8),
-        ("rotor", RotorConfigStruct * MAX_ROTORS),
+        ("rotor", RotorConfigStruct * max_rotors),
         ("inertia", (ctypes.c_float * 3) * 3),
-    ] + _TUNING_FIELDS + [("rotor_inertia", ctypes.c_float * MAX_ROTORS)] + _OPTIONAL_FIELDS
+    ] + _TUNING_FIELDS + [("rotor_inertia", ctypes.c_float * max_rotors)] + _OPTIONAL_FIELDS})
 
 
-class EstimateStruct(ctypes.Structure):
-    _fields_ = [
+def _estimate_struct(max_rotors: int) -> type:
+    """propid_estimate_t of a build with PROPID_MAX_ROTORS = max_rotors."""
+    return type(f"EstimateStruct{max_rotors}", (ctypes.Structure,), {"_fields_": [
         ("time_us", ctypes.c_uint64),
         ("rotor_count", ctypes.c_uint8),
         ("body_rate", ctypes.c_float * 3),
         ("body_rate_std", ctypes.c_float * 3),
-        ("thrust_coeff", ctypes.c_float * MAX_ROTORS),
-        ("thrust_coeff_std", ctypes.c_float * MAX_ROTORS),
-        ("drag_coeff", ctypes.c_float * MAX_ROTORS),
-        ("drag_coeff_std", ctypes.c_float * MAX_ROTORS),
+        ("thrust_coeff", ctypes.c_float * max_rotors),
+        ("thrust_coeff_std", ctypes.c_float * max_rotors),
+        ("drag_coeff", ctypes.c_float * max_rotors),
+        ("drag_coeff_std", ctypes.c_float * max_rotors),
         ("gyro_bias", ctypes.c_float * 3),
         ("gyro_bias_std", ctypes.c_float * 3),
         ("innovation", ctypes.c_float * 3),
@@ -179,7 +181,21 @@ class EstimateStruct(ctypes.Structure):
         ("accel_innovation_test_ratio", ctypes.c_float),
         ("torque_scale", ctypes.c_float),
         ("torque_scale_std", ctypes.c_float),
-    ]
+    ]})
+
+
+# The default build (PROPID_MAX_ROTORS = 8); a quad build's library gets its own
+# (struct_types(), load_library).
+ConfigStruct = _config_struct(MAX_ROTORS)
+EstimateStruct = _estimate_struct(MAX_ROTORS)
+_STRUCTS: dict[int, tuple[type, type]] = {MAX_ROTORS: (ConfigStruct, EstimateStruct)}
+
+
+def struct_types(max_rotors: int) -> tuple[type, type]:
+    """(ConfigStruct, EstimateStruct) for a build's PROPID_MAX_ROTORS."""
+    if max_rotors not in _STRUCTS:
+        _STRUCTS[max_rotors] = (_config_struct(max_rotors), _estimate_struct(max_rotors))
+    return _STRUCTS[max_rotors]
 
 
 class CountersStruct(ctypes.Structure):
@@ -343,10 +359,10 @@ class FilterConfig:
         return cls(positions, yaw_signs, [float(v) for v in vehicle.kf_nominal],
                    [float(v) for v in vehicle.km_nominal], inertia).with_overrides(**overrides)
 
-    def to_struct(self) -> ConfigStruct:
-        if not 1 <= self.rotor_count <= MAX_ROTORS:
-            raise UserError(f"rotor count {self.rotor_count} outside 1..{MAX_ROTORS}")
-        s = ConfigStruct()
+    def to_struct(self, max_rotors: int = MAX_ROTORS) -> ConfigStruct:
+        if not 1 <= self.rotor_count <= max_rotors:
+            raise UserError(f"rotor count {self.rotor_count} outside 1..{max_rotors}")
+        s = struct_types(max_rotors)[0]()
         s.rotor_count = self.rotor_count
         for i in range(self.rotor_count):
             r = s.rotor[i]
@@ -448,6 +464,20 @@ def load_library(path: Optional[os.PathLike] = None) -> ctypes.CDLL:
         lib = ctypes.CDLL(str(lib_path))
     except OSError as exc:
         raise UserError(f"cannot load C filter library {lib_path}: {exc}") from exc
+    lib.propid_abi_max_rotors.restype = ctypes.c_uint32
+    lib.propid_abi_max_rotors.argtypes = []
+    max_rotors = int(lib.propid_abi_max_rotors())
+    if not 1 <= max_rotors <= 16:
+        raise UserError(f"{lib_path}: PROPID_MAX_ROTORS = {max_rotors} is not a propid build")
+    lib.propid_max_rotors = max_rotors
+    # The state-vector capacity (smaller in a build with optional blocks compiled out).
+    if hasattr(lib, "propid_abi_max_states"):
+        lib.propid_abi_max_states.restype = ctypes.c_uint32
+        lib.propid_abi_max_states.argtypes = []
+        lib.propid_max_states = int(lib.propid_abi_max_states())
+    else:
+        lib.propid_max_states = MAX_STATES
+    lib.propid_structs = struct_types(max_rotors)
     _declare(lib)
     _check_abi(lib, lib_path)
     _loaded[key] = lib
@@ -455,6 +485,7 @@ def load_library(path: Optional[os.PathLike] = None) -> ctypes.CDLL:
 
 
 def _declare(lib: ctypes.CDLL) -> None:
+    ConfigStruct, EstimateStruct = lib.propid_structs  # noqa: N806 (this library's layout)
     c_filter_p = ctypes.c_void_p
     u32 = ctypes.c_uint32
     for name in ("propid_abi_max_rotors", "propid_abi_sizeof_config", "propid_abi_sizeof_filter",
@@ -495,9 +526,8 @@ def _declare(lib: ctypes.CDLL) -> None:
 
 
 def _check_abi(lib: ctypes.CDLL, lib_path: Path) -> None:
+    ConfigStruct, EstimateStruct = lib.propid_structs  # noqa: N806 (this library's layout)
     expected = {
-        "max_rotors": (lib.propid_abi_max_rotors(), MAX_ROTORS),
-        "delay_slots": (lib.propid_abi_delay_slots(), DELAY_SLOTS),
         "sizeof(propid_config_t)": (lib.propid_abi_sizeof_config(), ctypes.sizeof(ConfigStruct)),
         "sizeof(propid_estimate_t)": (lib.propid_abi_sizeof_estimate(), ctypes.sizeof(EstimateStruct)),
         "sizeof(propid_counters_t)": (lib.propid_abi_sizeof_counters(), ctypes.sizeof(CountersStruct)),
@@ -510,6 +540,10 @@ def _check_abi(lib: ctypes.CDLL, lib_path: Path) -> None:
         "offsetof(counters.rejected)": (lib.propid_abi_offsetof_counters_rejected(),
                                         CountersStruct.rejected.offset),
     }
+    if lib.propid_max_rotors == MAX_ROTORS:
+        # The default build's delay buffer is mirrored by the reference filter; a
+        # smaller build (the quad build: none) rejects the delays it cannot hold.
+        expected["delay_slots"] = (lib.propid_abi_delay_slots(), DELAY_SLOTS)
     bad = [f"{what}: library {got}, binding {want}" for what, (got, want) in expected.items() if got != want]
     if bad:
         raise UserError(f"{lib_path} does not match propid.cfilter's struct layout ({'; '.join(bad)}); "
@@ -523,7 +557,7 @@ def _check_abi(lib: ctypes.CDLL, lib_path: Path) -> None:
 def c_default_tuning(path: Optional[os.PathLike] = None) -> dict:
     """propid_config_default() as the library has it (for checking DEFAULT_TUNING)."""
     lib = load_library(path)
-    s = ConfigStruct()
+    s = lib.propid_structs[0]()
     lib.propid_config_default(ctypes.byref(s))
     return {name: getattr(s, name) for name, _ in _TUNING_FIELDS + _OPTIONAL_FIELDS}
 
@@ -537,7 +571,8 @@ class CFilter:
     def __init__(self, config: FilterConfig, library: Optional[os.PathLike] = None):
         self._lib = load_library(library)
         self.config = config
-        self._config_struct = config.to_struct()
+        self._max_rotors = self._lib.propid_max_rotors
+        self._config_struct = config.to_struct(self._max_rotors)
         bad_field = ctypes.c_char_p()
         status = self._lib.propid_config_check(ctypes.byref(self._config_struct), ctypes.byref(bad_field))
         if status != 0:
@@ -551,7 +586,7 @@ class CFilter:
         if status != 0:
             raise UserError(f"propid_init failed: {self.status_name(status)}")
         self._rotor_count = config.rotor_count
-        self._speeds = (ctypes.c_float * MAX_ROTORS)()
+        self._speeds = (ctypes.c_float * self._max_rotors)()
         self._gyro = (ctypes.c_float * 3)()
         self._accel = (ctypes.c_float * 3)()
 
@@ -561,7 +596,7 @@ class CFilter:
 
     def push_rotor_speeds(self, t_us: int, speeds: Sequence[float]) -> int:
         count = len(speeds)
-        if count > MAX_ROTORS:
+        if count > self._max_rotors:
             # Never a valid count: C rejects it (and counts it) before reading the buffer.
             return self._lib.propid_push_rotor_speeds(self._handle, int(t_us), self._speeds, 255)
         for i in range(count):
@@ -594,7 +629,7 @@ class CFilter:
         return self._lib.propid_resync(self._handle, int(t_us))
 
     def estimate(self) -> Estimate:
-        e = EstimateStruct()
+        e = self._lib.propid_structs[1]()
         status = self._lib.propid_get_estimate(self._handle, ctypes.byref(e))
         if status != 0:
             raise RuntimeError(f"propid_get_estimate: {self.status_name(status)}")
@@ -644,9 +679,10 @@ class CFilter:
 
     def scaled_state(self) -> tuple[np.ndarray, np.ndarray]:
         """(state, covariance) in the filter's scaled units, sized to the state count."""
-        state = (ctypes.c_float * MAX_STATES)()
-        cov = (ctypes.c_float * (MAX_STATES * MAX_STATES))()
+        capacity = self._lib.propid_max_states
+        state = (ctypes.c_float * capacity)()
+        cov = (ctypes.c_float * (capacity * capacity))()
         self._lib.propid_abi_copy_state(self._handle, state, cov)
         n = self.config.state_count
-        full = np.array(cov, dtype=float).reshape(MAX_STATES, MAX_STATES)
+        full = np.array(cov, dtype=float).reshape(capacity, capacity)
         return np.array(state[:n], dtype=float), full[:n, :n].copy()

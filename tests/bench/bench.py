@@ -7,15 +7,17 @@ A benchmark, not a test: it measures and reports, it does not pass or fail on
 the figures (it fails only when a measurement cannot be made). Measurements:
 
   mcu        Cortex-M4 instructions per gyro step (tests/qemu/count_step.sh: QEMU
-             instruction trace, target build flags) for 4, 6 and 8 rotors, and the
-             dense baseline (tests/qemu/dense_ekf.c) on the quad, checked to give
-             the same estimates.
-  footprint  flash (.text + .rodata) of the filter alone: the library
-             (build/target/firmware/libpropid.a) and linked into a minimal quad
-             application with --gc-sections (PROPID_MAX_ROTORS=4, step code and
-             init-only code apart); RAM: sizeof(propid_filter_t) for 4, 6, 8
-             rotors; worst stack of every public call (-fcallgraph-info of the
-             target build).
+             instruction trace, target build flags): the quad build
+             (PROPID_QUAD_BUILD=1, propid_config.h) for the quad and the dense
+             baseline (tests/qemu/dense_ekf.c) beside it, checked to give the same
+             estimates; the full build for 4, 6 and 8 rotors (*_full keys).
+  footprint  of the quad build (the issue's keys) and of the full build (*_full):
+             flash (.text + .rodata) of the filter alone, the library
+             (build/target/firmware/libpropid_quad.a, libpropid.a) and linked
+             into a minimal quad application with --gc-sections (step code and
+             init-only code apart); RAM: sizeof(propid_filter_t) (full build for
+             4, 6, 8 rotors); worst stack of every public call (-fcallgraph-info
+             of the target build).
   sitl       propid_sitl's real-time factor (simulated s / CPU s, best of 7) for
              the default 10 s Lissajous with default and with --paper sensors:
              the whole process, and the flight loop alone (its --summary-json
@@ -66,20 +68,32 @@ def run(cmd: list[str], **kw) -> subprocess.CompletedProcess:
 
 
 # ---------------------------------------------------------------------------
+def count_steps(repo: pathlib.Path, work: pathlib.Path, name: str, cflags: str) -> dict:
+    out = work / f"count_step_{name}.json"
+    env = {**os.environ, "COUNT_STEP_CFLAGS": cflags}
+    run(["bash", str(repo / "tests/qemu/count_step.sh"), "--json", str(out), str(work / f"count_{name}")],
+        env=env)
+    return json.loads(out.read_text())
+
+
 def bench_mcu(repo: pathlib.Path, work: pathlib.Path) -> dict:
-    say("Cortex-M4 instruction counts under QEMU (quad, hexa, octo, dense baseline)...")
-    out = work / "count_step.json"
-    run(["bash", str(repo / "tests/qemu/count_step.sh"), "--json", str(out), str(work / "count")])
-    counts = json.loads(out.read_text())
+    say("Cortex-M4 instruction counts under QEMU: quad build (quad, dense baseline)...")
+    counts = count_steps(repo, work, "quad", "-DPROPID_QUAD_BUILD=1")
+    say("Cortex-M4 instruction counts under QEMU: full build (quad, hexa, octo)...")
+    full = count_steps(repo, work, "full", "-DCOUNT_STEP_NO_DENSE")
     variants = counts["variants"]
+    full_variants = full["variants"]
     result = {"variants": {k: {x: v[x] for x in ("median", "min", "max", "steps")}
                            for k, v in variants.items()},
+              "variants_full": {k: {x: v[x] for x in ("median", "min", "max", "steps")}
+                                for k, v in full_variants.items()},
               "dense_max_state_diff_in_std": counts.get("dense_max_state_diff_in_std"),
-              "harness_output": counts["harness_output"]}
+              "harness_output": counts["harness_output"] + full["harness_output"]}
     result["mcu_instr_per_step_quad"] = variants["quad_plus"]["median"]
     result["mcu_instr_per_step_quad_x"] = variants["quad_x"]["median"]
-    result["mcu_instr_per_step_hexa"] = variants.get("hexa", {}).get("median")
-    result["mcu_instr_per_step_octo"] = variants.get("octo", {}).get("median")
+    result["mcu_instr_per_step_quad_full"] = full_variants["quad_plus"]["median"]
+    result["mcu_instr_per_step_hexa"] = full_variants.get("hexa", {}).get("median")
+    result["mcu_instr_per_step_octo"] = full_variants.get("octo", {}).get("median")
     result["dense_instr_per_step_quad"] = variants["dense_quad_plus"]["median"]
     result["dense_ratio_quad"] = result["dense_instr_per_step_quad"] / result["mcu_instr_per_step_quad"]
     load = {}
@@ -111,18 +125,19 @@ def section_sizes(size_tool: str, path: pathlib.Path) -> dict[str, int]:
     return sizes
 
 
-def linked_filter_size(repo: pathlib.Path, work: pathlib.Path, rotors: int,
+def linked_filter_size(repo: pathlib.Path, work: pathlib.Path, build_flag: str,
                        per_sample: set[str]) -> dict:
     """Flash of the filter linked into a minimal application (--gc-sections),
     split into what the per-sample calls reach and the rest (init-only)."""
     sources = [p for p in sorted((repo / "firmware/src").glob("propid_*.c"))
                if p.name not in ("propid_abi.c", "propid_mavlink.c")]
-    elf = work / f"footprint_app_{rotors}.elf"
-    map_file = work / f"footprint_app_{rotors}.map"
+    tag = build_flag.lstrip("-D").replace("=", "_").lower()
+    elf = work / f"footprint_app_{tag}.elf"
+    map_file = work / f"footprint_app_{tag}.map"
     qemu = repo / "tests/qemu"
-    objects_dir = work / f"footprint_objects_{rotors}"
+    objects_dir = work / f"footprint_objects_{tag}"
     objects_dir.mkdir(exist_ok=True)
-    flags = [*TARGET_CFLAGS, f"-DPROPID_MAX_ROTORS={rotors}", "-I", str(repo / "firmware/include"),
+    flags = [*TARGET_CFLAGS, build_flag, "-I", str(repo / "firmware/include"),
              "-I", str(qemu)]
     inputs = []
     for source in [*sources, repo / "tests/bench/footprint_app.c", qemu / "startup.c",
@@ -156,11 +171,11 @@ def linked_filter_size(repo: pathlib.Path, work: pathlib.Path, rotors: int,
             "per_section": dict(sorted(by_symbol.items(), key=lambda kv: -kv[1]))}
 
 
-def sizeof_filter(repo: pathlib.Path, work: pathlib.Path, rotors: int) -> int:
+def sizeof_filter(repo: pathlib.Path, work: pathlib.Path, build_flag: str) -> int:
     probe = work / "probe.c"
     probe.write_text('#include "propid/propid.h"\npropid_filter_t propid_footprint_probe;\n')
-    obj = work / f"probe{rotors}.o"
-    run(["arm-none-eabi-gcc", *CPU, "-std=c11", "-O2", f"-DPROPID_MAX_ROTORS={rotors}",
+    obj = work / f"probe{build_flag.lstrip('-D').replace('=', '_')}.o"
+    run(["arm-none-eabi-gcc", *CPU, "-std=c11", "-O2", build_flag,
          "-I", str(repo / "firmware/include"), "-c", str(probe), "-o", str(obj)])
     for line in run(["arm-none-eabi-nm", "-S", "--radix=d", str(obj)]).stdout.splitlines():
         parts = line.split()
@@ -175,9 +190,10 @@ def public_functions(repo: pathlib.Path) -> list[str]:
     return sorted(set(re.findall(r"\b(propid_[a-z_0-9]+)\s*\(", header)))
 
 
-def bench_footprint(repo: pathlib.Path, build: pathlib.Path, work: pathlib.Path) -> dict:
-    say("footprint of the target build (flash, RAM, stack)...")
-    library = build / "target/firmware/libpropid.a"
+def footprint_of(repo: pathlib.Path, build: pathlib.Path, work: pathlib.Path, target: str,
+                 build_flag: str) -> dict:
+    """Flash, stack and linked size of one library of the target build."""
+    library = build / f"target/firmware/lib{target}.a"
     if not library.exists():
         raise RuntimeError(f"{library} missing: run `make target` first")
     per_object = section_sizes("arm-none-eabi-size", library)
@@ -185,12 +201,10 @@ def bench_footprint(repo: pathlib.Path, build: pathlib.Path, work: pathlib.Path)
     optional = {name: size for name, size in per_object.items() if "damage" in name}
     result: dict = {"flash_bytes": sum(per_object.values()) - sum(optional.values()),
                     "flash_bytes_optional_modules": optional, "flash_per_object": per_object}
-    for rotors, key in ((4, "ram_bytes_quad"), (6, "ram_bytes_hexa"), (8, "ram_bytes_octo")):
-        result[key] = sizeof_filter(repo, work, rotors)
     sys.path.insert(0, str(repo / "firmware/toolchain"))
     import stack_report  # noqa: E402  (the firmware's own call-graph reader)
 
-    dirs = [str(d) for d in (build / "target/firmware/CMakeFiles/propid.dir",) if d.exists()]
+    dirs = [str(d) for d in (build / f"target/firmware/CMakeFiles/{target}.dir",) if d.exists()]
     frames, _kinds, calls = stack_report.load(dirs)
     stacks = {}
     for function in public_functions(repo):
@@ -206,10 +220,28 @@ def bench_footprint(repo: pathlib.Path, build: pathlib.Path, work: pathlib.Path)
         if function not in per_sample:
             per_sample.add(function)
             todo.extend(calls.get(function, ()))
-    result["linked_quad"] = linked_filter_size(repo, work, 4, per_sample)
-    result["flash_bytes_linked_quad"] = result["linked_quad"]["flash_bytes"]
+    result["linked_quad"] = linked_filter_size(repo, work, build_flag, per_sample)
     result["stack_bytes_max"] = max(v["bytes"] for v in stacks.values())
     result["stack_bytes_push_gyro"] = stacks.get("propid_push_gyro", {}).get("bytes")
+    return result
+
+
+def bench_footprint(repo: pathlib.Path, build: pathlib.Path, work: pathlib.Path) -> dict:
+    say("footprint of the target build (flash, RAM, stack), quad build and full build...")
+    quad = footprint_of(repo, build, work, "propid_quad", "-DPROPID_QUAD_BUILD=1")
+    full = footprint_of(repo, build, work, "propid", "-DPROPID_MAX_ROTORS=4")
+    result: dict = {"quad_build": quad, "full_build": full}
+    result["flash_bytes"] = quad["flash_bytes"]
+    result["flash_bytes_linked_quad"] = quad["linked_quad"]["flash_bytes"]
+    result["flash_bytes_full"] = full["flash_bytes"]
+    result["flash_bytes_linked_quad_full"] = full["linked_quad"]["flash_bytes"]
+    result["ram_bytes_quad"] = sizeof_filter(repo, work, "-DPROPID_QUAD_BUILD=1")
+    for rotors, key in ((4, "ram_bytes_quad_full"), (6, "ram_bytes_hexa"), (8, "ram_bytes_octo")):
+        result[key] = sizeof_filter(repo, work, f"-DPROPID_MAX_ROTORS={rotors}")
+    result["stack_bytes_max"] = quad["stack_bytes_max"]
+    result["stack_bytes_push_gyro"] = quad["stack_bytes_push_gyro"]
+    result["stack_bytes_max_full"] = full["stack_bytes_max"]
+    result["stack_bytes_push_gyro_full"] = full["stack_bytes_push_gyro"]
     return result
 
 
@@ -300,12 +332,12 @@ def print_table(r: dict) -> None:
     rows = []
     mcu, fp, sitl, rp, t1 = (r.get(k, {}) for k in SECTIONS)
     if mcu:
-        v = mcu["variants"]
         names = {"quad_plus": "quad (plus)", "quad_x": "quad (X)",
                  "dense_quad_plus": "dense baseline, quad"}
-        for label, counts in v.items():  # every variant the harness flew, in its order
-            rows.append((f"Cortex-M4 instructions per step, {names.get(label, label)}",
-                         f"{fmt(counts['median'])} ({fmt(counts['min'])}-{fmt(counts['max'])})"))
+        for build_name, key in (("quad build", "variants"), ("full build", "variants_full")):
+            for label, counts in mcu.get(key, {}).items():  # every variant the harness flew
+                rows.append((f"Cortex-M4 instructions per step, {build_name}, {names.get(label, label)}",
+                             f"{fmt(counts['median'])} ({fmt(counts['min'])}-{fmt(counts['max'])})"))
         for key, percent in mcu["cpu_percent_quad"].items():
             rows.append((f"CPU load, quad, {key} (CPI {mcu['cpu_model_cpi'][key.split(',')[0]]})",
                          f"{percent:.2f} %"))
@@ -313,17 +345,21 @@ def print_table(r: dict) -> None:
                      f"{'yes' if mcu['dense_same_estimates'] else 'NO'} (max diff "
                      f"{mcu['dense_max_state_diff_in_std']:.1e} std)"))
     if fp:
-        rows.append(("filter flash, libpropid.a .text+.rodata (B)", fmt(fp["flash_bytes"]) +
-                     "".join(f" (+ {name}: {fmt(size)}, optional)"
-                             for name, size in fp.get("flash_bytes_optional_modules", {}).items())))
-        lq = fp["linked_quad"]
-        rows.append(("filter flash linked, quad build, --gc-sections (B)",
-                     f"{fmt(lq['flash_bytes'])} (per-sample path {fmt(lq['flash_bytes_per_sample_path'])}, "
-                     f"init and rest {fmt(lq['flash_bytes_init_and_rest'])})"))
-        rows.append(("RAM sizeof(propid_filter_t) quad / hexa / octo (B)",
-                     f"{fmt(fp['ram_bytes_quad'])} / {fmt(fp['ram_bytes_hexa'])} / {fmt(fp['ram_bytes_octo'])}"))
-        for name, s in sorted(fp["stack"].items(), key=lambda kv: -kv[1]["bytes"]):
-            rows.append((f"worst stack {name} (B)", fmt(s["bytes"])))
+        for build_name, key in (("quad build", "quad_build"), ("full build", "full_build")):
+            b = fp[key]
+            rows.append((f"filter flash, {build_name}, library .text+.rodata (B)", fmt(b["flash_bytes"]) +
+                         "".join(f" (+ {name}: {fmt(size)}, optional)"
+                                 for name, size in b.get("flash_bytes_optional_modules", {}).items())))
+            lq = b["linked_quad"]
+            rows.append((f"filter flash, {build_name}, linked quad app, --gc-sections (B)",
+                         f"{fmt(lq['flash_bytes'])} (per-sample path {fmt(lq['flash_bytes_per_sample_path'])}, "
+                         f"init and rest {fmt(lq['flash_bytes_init_and_rest'])})"))
+        rows.append(("RAM sizeof(propid_filter_t), quad build (B)", fmt(fp["ram_bytes_quad"])))
+        rows.append(("RAM sizeof(propid_filter_t), full build quad / hexa / octo (B)",
+                     f"{fmt(fp['ram_bytes_quad_full'])} / {fmt(fp['ram_bytes_hexa'])} / {fmt(fp['ram_bytes_octo'])}"))
+        for build_name, key in (("quad build", "quad_build"), ("full build", "full_build")):
+            for name, st in sorted(fp[key]["stack"].items(), key=lambda kv: -kv[1]["bytes"]):
+                rows.append((f"worst stack, {build_name}, {name} (B)", fmt(st["bytes"])))
     if sitl:
         rows.append(("SITL 10 s Lissajous, real-time factor (CPU, whole process)",
                      f"{fmt(sitl['sitl_realtime_factor'])}x (flight loop alone "
@@ -385,10 +421,13 @@ def main() -> int:
         return 1
     flat = {}
     for section in results.values():
-        for key in ("mcu_instr_per_step_quad", "mcu_instr_per_step_hexa", "mcu_instr_per_step_octo",
-                    "dense_instr_per_step_quad", "dense_ratio_quad", "flash_bytes",
-                    "flash_bytes_linked_quad", "ram_bytes_quad", "stack_bytes_max",
-                    "stack_bytes_push_gyro", "sitl_realtime_factor", "sitl_realtime_factor_paper",
+        for key in ("mcu_instr_per_step_quad", "mcu_instr_per_step_quad_full", "mcu_instr_per_step_hexa",
+                    "mcu_instr_per_step_octo", "dense_instr_per_step_quad", "dense_ratio_quad",
+                    "flash_bytes", "flash_bytes_linked_quad", "flash_bytes_full",
+                    "flash_bytes_linked_quad_full", "ram_bytes_quad", "ram_bytes_quad_full",
+                    "ram_bytes_hexa", "ram_bytes_octo", "stack_bytes_max", "stack_bytes_push_gyro",
+                    "stack_bytes_max_full", "stack_bytes_push_gyro_full",
+                    "sitl_realtime_factor", "sitl_realtime_factor_paper",
                     "sitl_realtime_factor_flight", "sitl_realtime_factor_paper_flight",
                     "rotorpy_speed_ratio", "rotorpy_speed_ratio_whole_process",
                     "table1_wall_s"):

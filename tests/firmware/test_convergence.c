@@ -325,9 +325,11 @@ static const scenario_t hummingbird_x = {
     4u, 0.17f, SIM_PI / 4.0f, {3.65e-3f, 3.68e-3f, 7.03e-3f}, 5.57e-6f, 1.36e-7f, 1500.0f,
     1000.0f, 250.0f, 6.0f, 20.0f, 777u, 0.0f, 1.0f, 0.5f, -1.0f};
 
+#if PROPID_MAX_ROTORS >= 6
 static const scenario_t hexa = {
     6u, 0.25f, 0.0f, {1.0e-2f, 1.0e-2f, 1.8e-2f}, 1.0e-5f, 2.0e-7f, 1200.0f,
     500.0f, 500.0f, 8.0f, 20.0f, 4242u, 0.0f, 1.0f, 1.0f, -1.0f};
+#endif
 
 static void test_crazyflie_plus_converges(void)
 {
@@ -343,6 +345,7 @@ static void test_hummingbird_x_converges_with_slow_esc(void)
     assert_converged(&out);
 }
 
+#if PROPID_MAX_ROTORS >= 6
 static void test_hexa_converges(void)
 {
     outcome_t out;
@@ -351,6 +354,7 @@ static void test_hexa_converges(void)
      * its bound is wider (its std after 8 s is about 12 %). */
     assert_converged_within(&out, KF_REL_BOUND, 0.15f);
 }
+#endif
 
 static void test_crazyflie_x_at_100hz_logs(void)
 {
@@ -423,7 +427,9 @@ int main(void)
     UNITY_BEGIN();
     RUN_TEST(test_crazyflie_plus_converges);
     RUN_TEST(test_hummingbird_x_converges_with_slow_esc);
+#if PROPID_MAX_ROTORS >= 6
     RUN_TEST(test_hexa_converges);
+#endif
     RUN_TEST(test_crazyflie_x_at_100hz_logs);
     RUN_TEST(test_gyro_bias_with_strong_excitation);
     RUN_TEST(test_follows_damaged_propeller);

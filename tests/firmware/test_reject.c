@@ -393,8 +393,10 @@ static void test_rotor_speed_absurd(void)
 
 static void test_rotor_count_wrong(void)
 {
-    const float speeds[PROPID_MAX_ROTORS] = {HOVER_SPEED, HOVER_SPEED, HOVER_SPEED, HOVER_SPEED,
-                                             HOVER_SPEED, HOVER_SPEED, HOVER_SPEED, HOVER_SPEED};
+    float speeds[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < PROPID_MAX_ROTORS; ++i) {
+        speeds[i] = HOVER_SPEED;
+    }
     now_us += GYRO_PERIOD_US;
     assert_rejected(PROPID_ERR_ROTOR_COUNT, propid_push_rotor_speeds(&filter, now_us, speeds, 0u));
     assert_rejected(PROPID_ERR_ROTOR_COUNT, propid_push_rotor_speeds(&filter, now_us, speeds, ROTORS - 1u));
@@ -553,6 +555,45 @@ static void test_counters_separate_reasons(void)
     TEST_ASSERT_EQUAL_UINT32(0u, counters.rejected[0]);
 }
 
+/* ---- Features compiled out (the quad build, propid_config.h) -------------- */
+
+/* A configuration asking for a compiled-out term is rejected by name, and the
+ * compiled-out call rejects like a missing configuration. */
+static void test_compiled_out_features_rejected(void)
+{
+    int checked = 0;
+    const char *bad = NULL;
+    propid_config_t asked;
+#if !PROPID_WITH_ACCEL
+    make_config(&asked);
+    asked.mass = 0.03f;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&asked, &bad));
+    TEST_ASSERT_EQUAL_STRING("mass", bad);
+    const float specific_force[3] = {0.0f, 0.0f, 9.81f};
+    assert_rejected(PROPID_ERR_CONFIG, propid_push_accel(&filter, now_us + 1u, specific_force));
+    checked++;
+#endif
+#if !PROPID_WITH_DISTURBANCE
+    make_config(&asked);
+    asked.disturbance_torque = 1u;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&asked, &bad));
+    TEST_ASSERT_EQUAL_STRING("disturbance_torque", bad);
+    checked++;
+#endif
+#if !PROPID_WITH_ROTOR_INERTIA
+    make_config(&asked);
+    asked.rotor_inertia[1] = 1.0e-6f;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&asked, &bad));
+    TEST_ASSERT_EQUAL_STRING("rotor_inertia", bad);
+    checked++;
+#endif
+    (void)bad;
+    (void)asked;
+    if (checked == 0) {
+        TEST_IGNORE_MESSAGE("every optional feature is compiled in");
+    }
+}
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -582,5 +623,6 @@ int main(void)
     RUN_TEST(test_gyro_with_stale_rotor_data);
     RUN_TEST(test_reset_rotor_index_out_of_range);
     RUN_TEST(test_counters_separate_reasons);
+    RUN_TEST(test_compiled_out_features_rejected);
     return UNITY_END();
 }

@@ -15,7 +15,8 @@ import math
 import numpy as np
 import pytest
 
-from propid.cfilter import STATUS, CFilter, FilterConfig, c_default_tuning, DEFAULT_TUNING, load_library
+from propid.cfilter import (STATUS, CFilter, FilterConfig, c_default_tuning, DEFAULT_TUNING, library_path,
+                            load_library)
 from propid.errors import UserError
 from propid.reference_filter import ReferenceFilter
 
@@ -272,6 +273,34 @@ def test_c_agrees_with_reference(flight, reference_trace):
     print(f"C vs reference: max |dx|/std = {state_err:.3g}, max |dP_ii|/P_ii = {cov_err:.3g}")
     assert state_err < STATE_TOL_SIGMA
     assert cov_err < COV_TOL_REL
+
+
+def quad_library():
+    """The quad build (PROPID_QUAD_BUILD: 4 rotors, optional terms compiled out),
+    built next to the full library (cmake target propid_quad_shared)."""
+    path = library_path().with_name("libpropid_quad_shared.so")
+    try:
+        return load_library(path), path
+    except UserError as exc:
+        pytest.fail(str(exc))
+
+
+def test_quad_build_agrees_with_reference(flight, reference_trace):
+    lib, path = quad_library()
+    assert lib.propid_max_rotors == 4 and lib.propid_max_states == 14
+    trace_c = replay(CFilter(make_config(), library=path), flight)
+    assert len(trace_c) == len(reference_trace)
+    assert [s for s, _, _ in trace_c].count(STATUS["PROPID_OK_GATED"]) == 3
+    state_err, cov_err = disagreement(trace_c, reference_trace)
+    print(f"quad build vs reference: max |dx|/std = {state_err:.3g}, max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+
+
+def test_quad_build_rejects_compiled_out_options():
+    _, path = quad_library()
+    with pytest.raises(UserError, match="bad"):
+        CFilter(make_config("all"), library=path)
 
 
 def test_disagreement_is_detected(flight, reference_trace):

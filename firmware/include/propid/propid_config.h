@@ -7,9 +7,37 @@
 #ifndef PROPID_CONFIG_H
 #define PROPID_CONFIG_H
 
+/* The quad build (-DPROPID_QUAD_BUILD=1): at most 4 rotors and every optional
+ * model term and sensor compiled out, unless switched on one by one below. It is
+ * the small library an autopilot of a quadrotor links (docs/performance.md). */
+#ifndef PROPID_QUAD_BUILD
+#define PROPID_QUAD_BUILD 0
+#endif
+#if PROPID_QUAD_BUILD
+#ifndef PROPID_MAX_ROTORS
+#define PROPID_MAX_ROTORS 4
+#endif
+#define PROPID_DEFAULT_FEATURES 0
+#else
+#define PROPID_DEFAULT_FEATURES 1
+#endif
+
 /* Largest rotor count the filter is built for (quad 4, hexa 6, octo 8). */
 #ifndef PROPID_MAX_ROTORS
 #define PROPID_MAX_ROTORS 8
+#endif
+
+/* Optional model terms and sensors, each 1 (compiled in) or 0 (compiled out: a
+ * configuration that asks for it is rejected by propid_config_check, its state
+ * block and its derived data take no RAM, its code no flash). */
+#ifndef PROPID_WITH_ACCEL               /* propid_push_accel(), accelerometer z bias, thrust-torque scale */
+#define PROPID_WITH_ACCEL PROPID_DEFAULT_FEATURES
+#endif
+#ifndef PROPID_WITH_DISTURBANCE         /* disturbance-torque states */
+#define PROPID_WITH_DISTURBANCE PROPID_DEFAULT_FEATURES
+#endif
+#ifndef PROPID_WITH_ROTOR_INERTIA       /* rotor yaw reaction and gyroscopic torque */
+#define PROPID_WITH_ROTOR_INERTIA PROPID_DEFAULT_FEATURES
 #endif
 
 /* State layout: body rate (3), thrust coefficient (N), drag coefficient (N),
@@ -18,10 +46,11 @@
 #define PROPID_RATE_STATES 3
 #define PROPID_BIAS_STATES 3
 /* Optional blocks the configuration may enable after them: disturbance torque (3),
- * accelerometer z bias (1), thrust-torque scale (1, with the accelerometer). */
-#define PROPID_DISTURBANCE_STATES 3
-#define PROPID_ACCEL_BIAS_STATES 1
-#define PROPID_TORQUE_SCALE_STATES 1
+ * accelerometer z bias (1), thrust-torque scale (1, with the accelerometer);
+ * 0 when compiled out. */
+#define PROPID_DISTURBANCE_STATES (3 * PROPID_WITH_DISTURBANCE)
+#define PROPID_ACCEL_BIAS_STATES (1 * PROPID_WITH_ACCEL)
+#define PROPID_TORQUE_SCALE_STATES (1 * PROPID_WITH_ACCEL)
 #define PROPID_MAX_STATES (PROPID_RATE_STATES + 2 * PROPID_MAX_ROTORS + PROPID_BIAS_STATES + \
                            PROPID_DISTURBANCE_STATES + PROPID_ACCEL_BIAS_STATES + PROPID_TORQUE_SCALE_STATES)
 
@@ -34,7 +63,7 @@
  * (propid_config_check). 0 compiles the buffer out: every nonzero delay is then
  * a configuration error and propid_filter_t is that much smaller. */
 #ifndef PROPID_DELAY_SLOTS
-#define PROPID_DELAY_SLOTS 32
+#define PROPID_DELAY_SLOTS (PROPID_DEFAULT_FEATURES ? 32 : 0) /* the quad build: compiled out */
 #endif
 
 #if PROPID_DELAY_SLOTS < 0 || PROPID_DELAY_SLOTS > 255
