@@ -260,9 +260,99 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
     return 1;
 }
 
-/* Every sample the quad's one pass does not take (a gated axis, S < R, a
- * non-finite vector) and every other vehicle: the generic scalar update per
- * axis. Not inlined: its callees' frames stay off the quad path's stack. */
+/* The usual sample of any other vehicle (hexa, octo, optional states): the same
+ * one pass as the quad's (fuse_quad_usual, apply_three_quad) over loops, for any
+ * state count n and the layout's bias block. Returns 1 with the three axes
+ * queued in `pending` and their innovations recorded, or 0 without writing
+ * anything (the per-axis path then handles the sample). */
+static __attribute__((noinline)) int
+fuse_usual_any(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *restrict core,
+               const propid_derived_t *restrict derived, pending_t *restrict pending,
+               const float *restrict gyro)
+{
+    const uint8_t n = derived->state_count;
+    const uint8_t first_bias = derived->layout.gyro_bias;
+    const float *state = core->state;
+    const float noise_var = derived->gyro_var;
+    const float gate_sq = derived->gate_sq;
+    const uint32_t var_bits = derived->innovation_var_bits;
+    const uint32_t var_range_bits = derived->innovation_range_bits;
+    const float *h0 = pending->h[0];
+    const float *h1 = pending->h[1];
+    /* The three vectors h_a = P H_a^T - sum_{p<a} c_ap h_p, c_ap = (h_p . H_a) / S_p,
+     * axis by axis (each needs the previous axes' S). */
+    float inv[3];
+    float nu[3];
+    float nu_sq[3];
+    for (uint8_t a = 0; a < 3u; ++a) {
+        const uint8_t bias = (uint8_t)(first_bias + a);
+        const float c0 = a > 0u ? (h0[a] + h0[bias]) * inv[0] : 0.0f;
+        const float c1 = a > 1u ? (h1[a] + h1[bias]) * inv[1] : 0.0f;
+        float check = 0.0f;
+        for (uint8_t i = 0; i < n; ++i) {
+            float value = propid_cov_at(cov, i, a) + propid_cov_at(cov, i, bias);
+            if (a > 0u) {
+                value -= c0 * h0[i];
+            }
+            if (a > 1u) {
+                value -= c1 * h1[i];
+            }
+            pending->h[a][i] = value;
+            check += value;
+        }
+        const float var = pending->h[a][a] + pending->h[a][bias] + noise_var;
+        /* The earlier axes' state updates shift this axis' prediction. */
+        float predicted = state[a] + state[bias];
+        for (uint8_t p = 0; p < a; ++p) {
+            predicted += (pending->h[p][a] + pending->h[p][bias]) * (nu[p] * inv[p]);
+        }
+        nu[a] = gyro[a] - predicted;
+        nu_sq[a] = nu[a] * nu[a];
+        if (!isfinite(check) || propid_outside_positive_range(var, var_bits, var_range_bits) ||
+            !(nu_sq[a] <= gate_sq * var)) {
+            return 0;
+        }
+        inv[a] = 1.0f / var;
+    }
+    for (uint8_t a = 0; a < 3u; ++a) {
+        core->innovation[a] = nu[a];
+        core->innovation_test_ratio[a] = nu_sq[a] * inv[a] * derived->inv_gate_sq;
+        core->gated_run[a] = 0u;
+        pending->innovation[a] = nu[a];
+        pending->inv_var[a] = inv[a];
+    }
+    pending->count = 3u;
+    return 1;
+}
+
+/* P_ij -= sum_k g_k,i h_k,j on the stored upper triangle, x += sum_k g_k nu_k, for
+ * any n; returns 1 when every new variance is inside its floor and ceiling. */
+static __attribute__((noinline)) int
+apply_three_any(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
+                const pending_t *restrict pending, const propid_derived_t *restrict derived)
+{
+    const uint8_t n = derived->state_count;
+    const float *h0 = pending->h[0];
+    const float *h1 = pending->h[1];
+    const float *h2 = pending->h[2];
+    uint32_t outside = 0u;
+    for (uint8_t i = 0; i < n; ++i) {
+        const float g0 = h0[i] * pending->inv_var[0];
+        const float g1 = h1[i] * pending->inv_var[1];
+        const float g2 = h2[i] * pending->inv_var[2];
+        state[i] += g0 * pending->innovation[0] + g1 * pending->innovation[1] + g2 * pending->innovation[2];
+        float *row = cov[i];
+        for (uint8_t j = i; j < n; ++j) {
+            row[j] = row[j] - g0 * h0[j] - g1 * h1[j] - g2 * h2[j];
+        }
+        outside |= propid_outside_positive_range(row[i], derived->var_floor_bits[i], derived->var_range_bits[i]);
+    }
+    return outside == 0u;
+}
+
+/* Every sample the one pass does not take (a gated axis, S < R, a non-finite
+ * vector): the generic scalar update per axis. Not inlined: its callees' frames
+ * stay off the one pass's stack. */
 static __attribute__((noinline)) uint32_t fuse_generic(propid_filter_t *filter, const float gyro[3])
 {
     /* A prediction across a long gap at high rates can inflate the rate
@@ -279,22 +369,41 @@ static __attribute__((noinline)) uint32_t fuse_generic(propid_filter_t *filter, 
     return gated_mask;
 }
 
-uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
+/* The one pass over P for the usual sample (every axis inside its gate): the
+ * quad's straight-line kernels or the loops for any other vehicle. Returns 1
+ * when it fused the sample, 0 with nothing written. Not inlined: `pending` lives
+ * in this frame only, not under the per-axis path's. */
+static __attribute__((noinline)) int fuse_one_pass(propid_filter_t *filter, const float gyro[3])
 {
     propid_core_t *core = &filter->core;
     const propid_derived_t *derived = &filter->derived;
+    const float (*cov)[PROPID_MAX_STATES] = (const float (*)[PROPID_MAX_STATES])core->cov;
+    pending_t pending;
+    int inside;
     if (derived->quad_core) {
-        pending_t pending;
-        if (fuse_quad_usual((const float (*)[PROPID_MAX_STATES])core->cov, core, derived, &pending, gyro)) {
-            /* Variance floors and ceilings: tested inside the pass; the full
-             * pass (which also repairs) only when one is outside. */
-            if (!apply_three_quad(core->cov, core->state, &pending, derived) &&
-                propid_cov_enforce_bounds(derived, core)) {
-                core->health |= PROPID_HEALTH_COV_REPAIRED;
-                filter->counters.cov_repairs++;
-            }
-            return 0u;
+        if (!fuse_quad_usual(cov, core, derived, &pending, gyro)) {
+            return 0;
         }
+        inside = apply_three_quad(core->cov, core->state, &pending, derived);
+    } else {
+        if (!fuse_usual_any(cov, core, derived, &pending, gyro)) {
+            return 0;
+        }
+        inside = apply_three_any(core->cov, core->state, &pending, derived);
+    }
+    /* Variance floors and ceilings: tested inside the pass; the full pass (which
+     * also repairs) only when one is outside. */
+    if (!inside && propid_cov_enforce_bounds(derived, core)) {
+        core->health |= PROPID_HEALTH_COV_REPAIRED;
+        filter->counters.cov_repairs++;
+    }
+    return 1;
+}
+
+uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
+{
+    if (fuse_one_pass(filter, gyro)) {
+        return 0u;
     }
     return fuse_generic(filter, gyro);
 }
