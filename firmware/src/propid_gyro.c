@@ -277,13 +277,15 @@ fuse_usual_any(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *re
     const float gate_sq = derived->gate_sq;
     const uint32_t var_bits = derived->innovation_var_bits;
     const uint32_t var_range_bits = derived->innovation_range_bits;
+    /* Rows 0 and 1 are written (axes 0 and 1) before they are read (axes 1 and 2). */
+    // cppcheck-suppress [uninitvar,ctuuninitvar]
     const float *h0 = pending->h[0];
     const float *h1 = pending->h[1];
     /* The three vectors h_a = P H_a^T - sum_{p<a} c_ap h_p, c_ap = (h_p . H_a) / S_p,
      * axis by axis (each needs the previous axes' S). */
-    float inv[3];
-    float nu[3];
-    float nu_sq[3];
+    float inv[3] = {0.0f, 0.0f, 0.0f};
+    float nu[3] = {0.0f, 0.0f, 0.0f};
+    float nu_sq[3] = {0.0f, 0.0f, 0.0f};
     for (uint8_t a = 0; a < 3u; ++a) {
         const uint8_t bias = (uint8_t)(first_bias + a);
         const float c0 = a > 0u ? (h0[a] + h0[bias]) * inv[0] : 0.0f;
