@@ -54,7 +54,9 @@ static __attribute__((noinline)) propid_status_t accel_sample_check(propid_filte
             return reject(filter, PROPID_ERR_ACCEL_RANGE);
         }
     }
-#if PROPID_DELAY_SLOTS > 0
+#if PROPID_DELAY_SLOTS == 0
+    (void)time_us; /* only a held sample's time is checked here */
+#else
     if (config->rotor_delay_us > 0) {
         uint64_t previous = filter->core.accel_time_us;
         int has_previous = filter->core.has_accel;
