@@ -59,7 +59,7 @@ class Vehicle:
     rotor_radius: float | None = None
     rotor_inertia: float | list[float] | None = None  # [kg m^2], one for all rotors or one per rotor
     # Optional extension keys (docs/flightlog.md): None means "not modelled".
-    esc_delay_s: float | None = None  # logged rotor speed lags the physical one by this [s]
+    esc_delay_s: float | None = None  # logged rotor speed lags the gyro by this [s]; < 0: the gyro lags
     gyro_scale: list[float] | None = None  # gyro reads scale * true rate, per axis
     aero_damping: list[float] | None = None  # body torque -d_a * omega_a [N m s/rad]
     com_offset: list[float] | None = None  # CoM offset already applied to the rotor positions [m]
@@ -209,7 +209,7 @@ def parse_vehicle(data: dict, where: str = "vehicle") -> Vehicle:
         km_nominal=_per_rotor_coeff(data, "km_nominal", len(rotors), where),
         rotor_radius=_positive_or_null(data, "rotor_radius", where),
         rotor_inertia=_rotor_inertia(data, len(rotors), where),
-        esc_delay_s=_non_negative_or_null(data, "esc_delay_s", where),
+        esc_delay_s=_number_or_null(data, "esc_delay_s", where, limit=1.0),
         gyro_scale=_vector3_or_null(data, "gyro_scale", where, "", positive=True),
         aero_damping=_vector3_or_null(data, "aero_damping", where, " [N m s/rad]"),
         com_offset=_vector3_or_null(data, "com_offset", where, " [m]"),
@@ -217,12 +217,12 @@ def parse_vehicle(data: dict, where: str = "vehicle") -> Vehicle:
     )
 
 
-def _non_negative_or_null(data: dict, key: str, where: str) -> float | None:
+def _number_or_null(data: dict, key: str, where: str, limit: float) -> float | None:
     value = data.get(key)
     if value is None:
         return None
-    if not _is_number(value) or value < 0:
-        raise UserError(f"{where}: '{key}' must be a number >= 0 or null, got {value!r}")
+    if not _is_number(value) or not -limit <= value <= limit:
+        raise UserError(f"{where}: '{key}' must be a number within -{limit:g}..{limit:g} or null, got {value!r}")
     return float(value)
 
 

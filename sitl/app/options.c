@@ -286,6 +286,20 @@ static const opt_t options[] = {
            "filter kf/km relative random walk [1/sqrt(s)] (default: library)"),
     NUMBER(NULL, "filter-bias-walk", filter_bias_walk, 0.0, 10.0, "X",
            "filter gyro-bias random walk [rad/s/sqrt(s)] (default: library)"),
+    FLAG(NULL, "filter-disturbance", filter_disturbance, 1,
+         "filter: disturbance-torque states (docs/math.md §7)"),
+    FLAG(NULL, "filter-accel", filter_accel, 1,
+         "filter: fuse the accelerometer's z specific force with the\n"
+         "vehicle's mass (docs/math.md §9)"),
+    FLAG(NULL, "filter-torque-scale", filter_torque_scale, 1,
+         "filter: with --filter-accel, the thrust-torque scale state"),
+    FLAG(NULL, "filter-rotor-inertia", filter_rotor_inertia, 1,
+         "filter: the vehicle's rotor inertia (yaw reaction, gyroscopic\n"
+         "torque) in its model (docs/math.md §8)"),
+    NUMBER(NULL, "filter-esc-delay", filter_esc_delay_s, -1.0, 1.0, "S",
+           "filter: telemetry delay it holds [s] (> 0: rotor speeds lag the\n"
+           "gyro; docs/math.md §12). Default 0. The ESC telemetry lags by\n"
+           "--esc-latency plus the esc_delay effect"),
 
     NUMBER("Vehicle overrides", "motor-tau", motor_time_constant, 1e-5, 10.0, "S",
            "motor time constant [s]"),

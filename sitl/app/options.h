@@ -87,6 +87,12 @@ typedef struct {
     double filter_rate_noise;           /* rate_process_noise [rad/s^2/sqrt(Hz)] */
     double filter_coeff_walk;           /* thrust_ and drag_coeff_rel_walk [1/sqrt(s)] */
     double filter_bias_walk;            /* gyro_bias_walk [rad/s/sqrt(s)] */
+    /* The filter's optional model terms and sensors (docs/math.md §7-9, §12). */
+    int filter_disturbance;             /* 1: disturbance-torque states */
+    int filter_accel;                   /* 1: accelerometer aiding with the vehicle's mass */
+    int filter_torque_scale;            /* 1: with filter_accel, the thrust-torque scale state */
+    int filter_rotor_inertia;           /* 1: the vehicle's rotor inertia in the filter's model */
+    double filter_esc_delay_s;          /* telemetry delay the filter holds [s]: > 0 rotor speeds lag */
 
     /* Propeller damage scenario and the firmware's damage detector. */
     sitl_damage_t damage[SITL_MAX_DAMAGE];

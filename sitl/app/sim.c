@@ -472,9 +472,10 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     double last_imu_t = 0.0;
     propid_estimate_t est;
     memset(&est, 0, sizeof(est));
-    /* The accelerometer feeds only the log and the link: without them it is not
-     * sampled (its noise has its own stream, so nothing else changes). */
-    int accel_read = f->log_open;
+    /* The accelerometer feeds only the log, the link and the filter's aiding
+     * (--filter-accel): without them it is not sampled (its noise has its own
+     * stream, so nothing else changes). */
+    int accel_read = f->log_open || o->filter_accel;
 #ifdef PROPID_SITL_WITH_MAVLINK
     accel_read |= f->link != NULL;
 #endif
@@ -521,6 +522,12 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
                 /* The integrator's documented answer to a clock jump (propid.h). */
                 propid_resync(&f->filter, gyro_us);
                 f->last_status = (int)propid_push_gyro(&f->filter, gyro_us, gyro_f);
+            }
+            if (o->filter_accel) {
+                /* Same IMU sample, same stamp: its z specific force pins the kf scale. */
+                const float accel_f[3] = {(float)f->last_accel[0], (float)f->last_accel[1],
+                                          (float)f->last_accel[2]};
+                (void)propid_push_accel(&f->filter, gyro_us, accel_f);
             }
             if (o->detect_damage && f->last_status >= 0) {
                 step_detector(f, o, r, t);

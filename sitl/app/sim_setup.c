@@ -142,5 +142,16 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
     if (opts->filter_bias_walk >= 0.0) {
         c->gyro_bias_walk = (float)opts->filter_bias_walk;
     }
+    c->disturbance_torque = opts->filter_disturbance ? 1u : 0u;
+    if (opts->filter_accel) {
+        c->mass = (float)v->mass;
+    }
+    c->torque_scale = opts->filter_torque_scale ? 1u : 0u; /* without the accelerometer: a config error */
+    if (opts->filter_rotor_inertia) {
+        for (int i = 0; i < v->rotor_count; i++) {
+            c->rotor_inertia[i] = (float)v->rotor_inertia;
+        }
+    }
+    c->rotor_delay_us = (int32_t)lround(opts->filter_esc_delay_s * 1e6);
     return propid_config_check(c, bad_field);
 }

@@ -216,3 +216,19 @@ def test_empty_field_fill_matches_the_regex_on_random_rows():
                 for _ in range(int(rng.integers(1, 6)))]
         body = "\n".join(rows)
         assert flightlog._fill_empty_fields(body) == flightlog._EMPTY_FIELD_RE.sub("nan", body)
+
+
+def test_esc_delay_s_sign_and_range():
+    """esc_delay_s > 0: the logged rotor speeds lag the gyro; < 0: the gyro lags (docs/flightlog.md);
+    beyond 1 s either way, or not a number, is refused naming the key."""
+    from propid.flightlog import parse_vehicle
+
+    base = {"name": "q", "mass": 0.03, "inertia": [1e-5, 1e-5, 2e-5], "kf_nominal": 2e-8, "km_nominal": 8e-10,
+            "rotors": [{"position": [0.03, 0.03 * s, 0.0], "yaw_sign": s} for s in (1, -1)]
+            + [{"position": [-0.03, 0.03 * s, 0.0], "yaw_sign": -s} for s in (1, -1)]}
+    assert parse_vehicle({**base, "esc_delay_s": 0.02}).esc_delay_s == 0.02
+    assert parse_vehicle({**base, "esc_delay_s": -0.012}).esc_delay_s == -0.012
+    assert parse_vehicle(base).esc_delay_s is None
+    for bad in (1.5, -2.0, "0.02", True):
+        with pytest.raises(UserError, match="esc_delay_s"):
+            parse_vehicle({**base, "esc_delay_s": bad})

@@ -329,6 +329,43 @@ def test_rotor_delay_auto_finds_the_streams_offset(cfilter_available):
     np.testing.assert_allclose(s["kf_mean"], KF_TRUE, rtol=0.05)
 
 
+def test_esc_delay_is_held_by_the_filter(cfilter_available, tmp_path):
+    """Rotor speeds stamped 15 samples late (telemetry lagging the gyro): the filter configured
+    with that delay (its own buffer holds the gyro) recovers kf, as recorded it does not; the
+    per-log rule finds the lag (up to the library's input convention), and the vehicle file's
+    esc_delay_s is used when given. The same with the rotor speeds stamped early (negative)."""
+    from propid.replay import filter_input_rule
+
+    offsets = (-1,) if filter_input_rule() == "zoh" else (-1, 0)  # aligned: see the test above
+    log = synthetic_log(duration=12.0)
+    vehicle = parse_vehicle(VEHICLE)
+    late = FlightLog(t=log.t[15:], gyro=log.gyro[15:], rotor_speed=log.rotor_speed[:-15], extra={})
+    options = dict(progress=False, rotor_inertia="off")
+    given = replay(late, vehicle, ReplayOptions(esc_delay=14 / 500.0, **options)).summary
+    assert given["esc_delay_s"] == pytest.approx(0.028) and given["rotor_delay_s"] == pytest.approx(-0.028)
+    assert given["counters"]["delay_overflows"] == 0 and given["rejected"].get("PROPID_ERR_NO_ROTOR_DATA") is None
+    np.testing.assert_allclose(given["kf_mean"], KF_TRUE, rtol=0.05)
+    recorded = replay(late, vehicle, ReplayOptions(esc_delay=0.0, **options)).summary
+    print("kf / true as recorded:", np.array(recorded["kf_mean"]) / KF_TRUE, "held:", np.array(given["kf_mean"]) / KF_TRUE)
+    assert np.max(np.abs(np.array(recorded["kf_mean"]) / KF_TRUE - 1.0)) > 0.08
+    auto = replay(late, vehicle, ReplayOptions(esc_delay="auto", **options)).summary
+    assert round(auto["esc_delay_s"] * 500.0) in [15 + offset for offset in offsets]
+    np.testing.assert_allclose(auto["kf_mean"], KF_TRUE, rtol=0.05)
+    # the vehicle file's esc_delay_s: "default" uses it, "auto" ignores it
+    with_delay = parse_vehicle({**VEHICLE, "esc_delay_s": 0.028})
+    from_file = replay(late, with_delay, ReplayOptions(esc_delay="default", **options)).summary
+    assert from_file["esc_delay_s"] == 0.028 and from_file["esc_delay_rule"] == "vehicle file esc_delay_s"
+    assert replay(late, vehicle, ReplayOptions(esc_delay="default", **options)).summary["esc_delay_rule"].startswith("auto")
+    # rotor speeds stamped early: a negative delay, the filter holds the rotor samples
+    early = FlightLog(t=log.t[:-4], gyro=log.gyro[:-4], rotor_speed=log.rotor_speed[4:], extra={})
+    negative = replay(early, vehicle, ReplayOptions(esc_delay="auto", **options)).summary
+    assert round(negative["esc_delay_s"] * 500.0) in [-4 + offset for offset in offsets]
+    np.testing.assert_allclose(negative["kf_mean"], KF_TRUE, rtol=0.05)
+    # beyond what the firmware's buffer holds at this rate: a one-line error naming the field
+    with pytest.raises(UserError, match="rotor_delay_us"):
+        replay(late, vehicle, ReplayOptions(esc_delay=0.5, **options))
+
+
 def test_filter_input_probe_reads_the_library(cfilter_available):
     """The delay rule mirrors the library's prediction input; the probe must see either the
     full step (zero-order hold) or half of it (trapezoid), nothing in between."""

@@ -92,6 +92,30 @@ expect_rc 3 "divergence" "$SITL" --vehicle hummingbird-plus --mode oracle --moto
 grep -q "diverged" "$WORK/err.txt" || fail "no divergence message"
 [ "$(wc -l <"$WORK/d.csv")" -gt 100 ] || fail "divergence log too short"
 
+# The filter's optional terms: a configuration the library refuses names its field
+# (exit 1); a telemetry delay held by the filter removes the bias the delay causes.
+expect_rc 1 "torque scale without the accelerometer" "$SITL" --duration 1 --quiet --filter-torque-scale
+grep -q "field 'torque_scale'" "$WORK/err.txt" || fail "torque-scale message: $(cat "$WORK/err.txt")"
+expect_rc 1 "delay beyond the filter's buffer" "$SITL" --duration 1 --quiet --filter-esc-delay 0.5
+grep -q "field 'rotor_delay_us'" "$WORK/err.txt" || fail "delay message: $(cat "$WORK/err.txt")"
+expect_rc 0 "every optional term" "$SITL" --duration 2 --quiet --filter-disturbance --filter-accel \
+    --filter-torque-scale --filter-rotor-inertia --filter-esc-delay 0.001 --summary-json "$WORK/opt.json"
+for held in 0 0.02; do
+    expect_rc 0 "esc_delay effect, filter delay $held" "$SITL" --paper --vehicle crazyflie-x --trajectory step \
+        --duration 6 --quiet --effect esc_delay --filter-esc-delay "$held" --summary-json "$WORK/delay_$held.json"
+done
+if command -v python3 >/dev/null; then
+    python3 - "$WORK" <<'PY' || fail "telemetry delay: held vs not held"
+import json, sys
+w = sys.argv[1]
+opt = json.load(open(w + "/opt.json"))
+assert opt["stable"] and opt["gyro_accepted"] > 1900, opt
+off, on = (json.load(open(f"{w}/delay_{d}.json"))["kf_rel_error_max"] for d in ("0", "0.02"))
+print(f"esc_delay 20 ms: max |kf/kf_true - 1| {off:.4f} not held, {on:.4f} held")
+assert on < 0.01 < 0.1 < off, (off, on)
+PY
+fi
+
 # MAVLink: flies when the link is built in, otherwise a clear usage error.
 "$SITL" --duration 10 --quiet --mavlink udp:127.0.0.1:14599 >"$WORK/out.txt" 2>"$WORK/err.txt"
 rc=$?

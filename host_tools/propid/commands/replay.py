@@ -57,10 +57,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--skip-repeats", action="store_true",
                         help="treat a row whose gyro (or rotor speeds) exactly repeat the previous row as no new "
                              "sample (logs resampled by sample-and-hold)")
-    parser.add_argument("--rotor-delay", type=_delay, default="auto", metavar="S|auto",
-                        help="push rotor speeds S seconds after their logged time (align streams). auto (default): "
-                             "the whole-sample lag, 0-50 ms, that maximises the 2-10 Hz correlation of modelled and "
-                             "measured roll/pitch torque in the filter's own discretisation; 0: replay as recorded")
+    delay = parser.add_mutually_exclusive_group()
+    delay.add_argument("--esc-delay", type=_esc_delay, default="default", metavar="auto|vehicle|S",
+                       help="telemetry delay the filter holds (its own delay buffer, docs/math.md §12): S seconds, "
+                            "> 0 the logged rotor speeds lag the gyro, < 0 the gyro lags; auto: the per-log rule (the "
+                            "whole-sample lag, -50..50 ms, that maximises the 2-10 Hz correlation of modelled and "
+                            "measured roll/pitch torque in the filter's own discretisation; 0 for event-style logs); "
+                            "vehicle: the vehicle file's esc_delay_s. Default: the vehicle file's esc_delay_s when it "
+                            "has one, else auto. 0: replay as recorded")
+    delay.add_argument("--rotor-delay", type=_delay, default=None, metavar="S|auto",
+                       help="older spelling: rotor speeds act S seconds after their logged time, i.e. --esc-delay -S")
     parser.add_argument("--prefilter", type=_prefilter, default=None, metavar="HZ|auto|off",
                         help="matched causal low-pass (critically damped, 2nd order) of the gyro AND the rotor "
                              "speed squared before the filter; auto: cut-off where the torque-model coherence "
@@ -115,8 +121,20 @@ def _delay(text: str):
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError("expected seconds or 'auto'") from None
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError("rotor delay must be within 0..1 s")
+    if not -1.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError("rotor delay must be within -1..1 s")
+    return value
+
+
+def _esc_delay(text: str):
+    if text in ("auto", "vehicle", "default"):
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError("expected seconds, 'auto' or 'vehicle'") from None
+    if not -1.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError("the ESC delay must be within -1..1 s")
     return value
 
 
@@ -203,7 +221,7 @@ def report(summary: dict, out) -> None:
     name = Path(summary["log"]).name if summary["log"] else "log"
     print(f"{name}: {summary['duration_s']:.1f} s, {summary['rows_replayed']} rows ({summary['segment']}), "
           f"gyro {summary['gyro_rate_hz']:.0f} Hz, rotor speeds {summary['rotor_rate_hz']:.0f} Hz, "
-          f"rotor delay {1e3 * summary['rotor_delay_s']:.0f} ms", file=out)
+          f"ESC delay {1e3 * summary['esc_delay_s']:.0f} ms", file=out)
     print("  kf, km: mean over the converged part +- final 1 sigma", file=out)
     print(rotor_table(summary), file=out)
     if summary["rejected"]:
@@ -237,7 +255,8 @@ def run(args: argparse.Namespace) -> int:
         max_rotor_speed=args.max_rotor_speed,
         overrides=overrides,
         skip_repeats=args.skip_repeats,
-        rotor_delay_s=args.rotor_delay,
+        esc_delay=None if args.rotor_delay is not None else args.esc_delay,
+        rotor_delay_s=args.rotor_delay if args.rotor_delay is not None else 0.0,
         prefilter_hz=args.prefilter,
         diagnostic_highpass_hz=args.diagnostic_highpass,
         aiding=args.aiding,

@@ -57,15 +57,23 @@ DELAY_BAND_HZ = (2.0, 10.0)
 MAX_ROTOR_DELAY_S = 0.05
 
 
+def estimate_esc_delay(log: FlightLog, vehicle: Vehicle, mask: np.ndarray | None = None,
+                       unit_inertia: bool = False) -> float:
+    """The per-log telemetry-delay rule (docs/real-data.md): esc_delay_s [s], > 0 when the logged
+    rotor speeds lag the gyro, < 0 when the gyro lags; -estimate_rotor_delay."""
+    return -estimate_rotor_delay(log, vehicle, mask, unit_inertia)
+
+
 def estimate_rotor_delay(log: FlightLog, vehicle: Vehicle, mask: np.ndarray | None = None,
                          unit_inertia: bool = False) -> float:
     """Delay of the angular-acceleration response behind the logged rotor speeds, in whole
-    samples of the log, by the filter's own discretisation: the replay pushes rotor sample n
-    at t_n + m dt before gyro sample n + m, so the Euler step (t_{n+m-1}, t_{n+m}] integrates
-    u[n]. The rule regresses the measured torque of that step, J (w[k] - w[k-1])/dt + w x Jw,
-    on the model's roll and pitch regressors u[k - m] (with a trapezoidal library input,
+    samples of the log (negative: the response leads, i.e. the rotor telemetry lags), by the
+    filter's own discretisation: with the rotor samples held m samples (the firmware's delay
+    buffer, or pushed m samples late) the Euler step (t_{n+m-1}, t_{n+m}] integrates u[n].
+    The rule regresses the measured torque of that step, J (w[k] - w[k-1])/dt + w x Jw, on
+    the model's roll and pitch regressors u[k - m] (with a trapezoidal library input,
     0.5 (u[k - m] + u[k - m - 1]): filter_input_rule) (both band-passed to 2-10 Hz per flying
-    segment) for m = 0 .. 50 ms and takes the m with the largest R^2 (sum over roll and
+    segment) for m = -50 .. 50 ms and takes the m with the largest R^2 (sum over roll and
     pitch), i.e. the peak of the normalised cross-correlation of modelled and measured
     torque. Scale-free: it uses no coefficient value."""
     from propid.realdata_checks import clean_rotor_speeds, lagged_fit
@@ -94,7 +102,8 @@ def estimate_rotor_delay(log: FlightLog, vehicle: Vehicle, mask: np.ndarray | No
     regs = [(u * pos[:, 1]).sum(axis=1, keepdims=True), (-u * pos[:, 0]).sum(axis=1, keepdims=True)]
     segs = [(max(a, 1), b) for a, b in segs]  # the first row of a segment has no step
     best, best_score = 0, -np.inf
-    for lag in range(0, int(round(MAX_ROTOR_DELAY_S * rate)) + 1):
+    max_lag = int(round(MAX_ROTOR_DELAY_S * rate))
+    for lag in sorted(range(-max_lag, max_lag + 1), key=abs):  # ties: the smaller shift
         score = sum(lagged_fit(torque[:, axis], regs[axis], segs, rate, DELAY_BAND_HZ, range(lag, lag + 1)).r2
                     for axis in range(2))
         if np.isfinite(score) and score > best_score:

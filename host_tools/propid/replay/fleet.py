@@ -55,7 +55,7 @@ def fleet_summary(summaries: list[dict], reference_kf: float | None = None) -> d
 def validation_table(summaries: list[dict], reference_kf: float | None = None) -> str:
     """Markdown table, one row per run (the docs' validation table)."""
     ref = reference_kf or float("nan")
-    head = ("| run | s | rotor delay [ms] | rotor samples rejected | gated gyro axes | clamped steps | filter kf (x ref) | kf rotor spread | filter km | km conv. "
+    head = ("| run | s | ESC delay [ms] | rotor samples rejected | gated gyro axes | clamped steps | filter kf (x ref) | kf rotor spread | filter km | km conv. "
             "| acc thrust kf | LS roll/pitch kf raw | raw + velocity moment | 2-10 Hz | 2-10 Hz km |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for s in summaries:
@@ -71,7 +71,7 @@ def validation_table(summaries: list[dict], reference_kf: float | None = None) -
                 return "n/a"
 
         lines.append(
-            f"| {name} | {s['duration_s']:.0f} | {1e3 * s.get('rotor_delay_s', 0.0):.0f} | {rejected} | "
+            f"| {name} | {s['duration_s']:.0f} | {1e3 * s.get('esc_delay_s', -s.get('rotor_delay_s', 0.0)):.0f} | {rejected} | "
             f"{sum(s['counters'].get('axis_gated', [0]))} | {s['counters'].get('state_clamps', 0)} | "
             f"{kf.mean():.3g} ({kf.mean() / ref:.2f}) | "
             f"{_cv(kf):.0%} | {np.mean(s['km_mean']):.3g} | {sum(s['converged']['km'])}/{len(kf)} | "

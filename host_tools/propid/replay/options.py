@@ -18,7 +18,13 @@ class ReplayOptions:
     max_rotor_speed: float | None = None  # None: 2x the 99.9th percentile of finite speeds
     overrides: dict = field(default_factory=dict)  # any other propid_config_t field
     skip_repeats: bool = False  # a row whose gyro (or rotor speeds) exactly repeat the previous row is no new sample
-    rotor_delay_s: float | str = 0.0  # push rotor speeds this much later than logged, or "auto"
+    # Telemetry delay, held by the filter itself (config.rotor_delay_us, docs/math.md §12):
+    # esc_delay: seconds (> 0 the logged rotor speeds lag the gyro, < 0 the gyro lags), "auto" (the per-log
+    # rule), "vehicle" (the vehicle file's esc_delay_s, 0 when absent), "default" (the file's when it has
+    # one, else auto) or None: then the older rotor_delay_s applies, "push the rotor speeds this much
+    # later" = esc_delay -rotor_delay_s ("auto" = the rule).
+    esc_delay: float | str | None = None
+    rotor_delay_s: float | str = 0.0
     prefilter_hz: float | str | None = None  # matched causal low-pass of gyro and rotor speed^2: Hz, "auto" or None
     diagnostic_highpass_hz: float | None = None  # diagnostic only: emulate removing slow content (docs/real-data.md)
     aiding: str = "auto"  # "gyro", "gyro+accel", or "auto": gyro+accel when the log has acc_* and the vehicle a mass

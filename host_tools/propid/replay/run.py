@@ -6,7 +6,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
-from propid.replay.alignment import detect_streams, estimate_rotor_delay, filter_input_rule
+from propid.replay.alignment import detect_streams, estimate_esc_delay, filter_input_rule
 from propid.replay.config import build_config
 from propid.replay.noise import nis_mean, replay_nis
 from propid.replay.options import US, ReplayOptions, ReplayResult
@@ -47,6 +47,9 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
             raise UserError("--diagnostic-highpass needs a rows log and cannot be combined with --skip-repeats")
         log, highpass_info = highpass_emulation_log(log, vehicle, mask, float(options.diagnostic_highpass_hz))
     config_fields, notes = build_config(vehicle, log, options)
+    esc_delay_s, delay_rule = resolve_esc_delay(log, vehicle, mask, options, logged_streams)
+    delay_us = int(round(esc_delay_s * US))
+    config_fields["rotor_delay_us"] = delay_us  # the firmware holds the leading stream (docs/math.md §12)
     if prefilter_info is not None:
         notes["prefilter"] = prefilter_info
     if highpass_info is not None:
@@ -71,17 +74,6 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         has_rotor &= ~same_rotor
         if streams == "rows":
             streams = "events"  # rows now carry one stream or the other
-    if options.rotor_delay_s == "auto" and logged_streams == "rows":
-        rotor_delay_s = estimate_rotor_delay(log, vehicle, mask, unit_inertia=options.unit_inertia)
-        delay_rule = ("auto: whole-sample lag (0-50 ms) maximising the 2-10 Hz R^2 of measured vs modelled "
-                      "roll/pitch torque in the filter's Euler step")
-    elif options.rotor_delay_s == "auto":
-        rotor_delay_s = 0.0  # event-style logs carry each stream's own time stamps
-        delay_rule = "auto: 0 for an event-style log (each stream keeps its own time stamps)"
-    else:
-        rotor_delay_s = float(options.rotor_delay_s)
-        delay_rule = "given"
-    delay_us = int(round(rotor_delay_s * US))
     status_counts: dict[str, int] = {}
     n = vehicle.rotor_count
     rec_t, rec_kf, rec_kfs, rec_km, rec_kms, rec_bg, rec_bgs, rec_conv_kf, rec_conv_km, rec_nis = ([] for _ in range(10))
@@ -96,14 +88,15 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         from tqdm import tqdm
 
         iterator = tqdm(rows, desc="replay", unit="row", mininterval=0.5, leave=False)
-    # Rotor rows are pushed at t + delay: interleave the two streams in time order.
+    # Every sample at its logged time, the two streams interleaved in time order (rotor speeds
+    # first at equal stamps); the filter realigns them by its configured delay.
     rotor_rows = [i for i in rows if streams == "rows" or has_rotor[i]]
     next_rotor = 0
     for i in iterator:
-        while next_rotor < len(rotor_rows) and t_us[rotor_rows[next_rotor]] + delay_us <= t_us[i]:
+        while next_rotor < len(rotor_rows) and t_us[rotor_rows[next_rotor]] <= t_us[i]:
             j = rotor_rows[next_rotor]
             next_rotor += 1
-            status = filt.push_rotor_speeds(int(t_us[j] + delay_us), speeds[j])
+            status = filt.push_rotor_speeds(int(t_us[j]), speeds[j])
             if status < 0:
                 name = filt.status_name(status)
                 status_counts[name] = status_counts.get(name, 0) + 1
@@ -155,6 +148,11 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     }
     final = filt.estimate()
     counters = filt.counters()
+    if delay_us != 0:
+        # Held samples are fused (or rejected) after their push returned PROPID_OK_QUEUED: their
+        # outcome is in the filter's counters only.
+        status_counts = {name: int(count) for name, count in counters["rejected"].items()}
+        gyro_accepted = int(counters["gyro_accepted"])
 
     def converged_mean(values: np.ndarray, flags: np.ndarray) -> tuple[list[float], list[bool], list[float]]:
         means, conv, starts = [], [], []
@@ -183,7 +181,9 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "streams": streams,
         "rows_replayed": int(rows.size),
         "repeated_rows_skipped": repeats,
-        "rotor_delay_s": rotor_delay_s,
+        "esc_delay_s": esc_delay_s,
+        "esc_delay_rule": delay_rule,
+        "rotor_delay_s": -esc_delay_s,  # the older convention: rotor speeds acting this much after their stamp
         "rotor_delay_rule": delay_rule,
         "filter_rotor_input": filter_input_rule(),
         "duration_s": float(log.t[rows[-1]] - log.t[rows[0]]),
@@ -230,6 +230,29 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     }
     return ReplayResult(summary=summary, series=series)
 
+
+
+def resolve_esc_delay(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, options: ReplayOptions,
+                      streams: str) -> tuple[float, str]:
+    """(esc_delay_s, how it was chosen): the delay the filter is configured with."""
+    choice = options.esc_delay
+    if choice is None:  # the older option: rotor speeds pushed rotor_delay_s late
+        if options.rotor_delay_s == "auto":
+            choice = "auto"
+        else:
+            return -float(options.rotor_delay_s), "given (rotor delay)"
+    if choice == "default":
+        choice = "vehicle" if vehicle.esc_delay_s is not None else "auto"
+    if choice == "vehicle":
+        value = float(vehicle.esc_delay_s or 0.0)
+        return value, "vehicle file esc_delay_s" if vehicle.esc_delay_s is not None else "vehicle file: none (0)"
+    if choice == "auto":
+        if streams != "rows":
+            return 0.0, "auto: 0 for an event-style log (each stream keeps its own time stamps)"
+        return (estimate_esc_delay(log, vehicle, mask, unit_inertia=options.unit_inertia),
+                "auto: whole-sample lag (-50..50 ms) maximising the 2-10 Hz R^2 of measured vs modelled "
+                "roll/pitch torque in the filter's Euler step")
+    return float(choice), "given"
 
 
 # Below these rates the filter's discretisation (one Euler step per gyro sample, rotor speed
