@@ -54,7 +54,7 @@ static __attribute__((noinline)) propid_status_t accel_sample_check(propid_filte
             return reject(filter, PROPID_ERR_ACCEL_RANGE);
         }
     }
-#if PROPID_DELAY_SLOTS == 0
+#if PROPID_DELAY_SLOTS == 0 || !PROPID_WITH_ACCEL
     (void)time_us; /* only a held sample's time is checked here */
 #else
     if (config->rotor_delay_us > 0) {
@@ -87,6 +87,11 @@ propid_status_t propid_push_accel(propid_filter_t *filter, uint64_t time_us, con
 
 propid_status_t propid_fuse_accel(propid_filter_t *filter, uint64_t time_us, const float specific_force[3])
 {
+#if !PROPID_WITH_ACCEL
+    (void)time_us;
+    (void)specific_force;
+    return reject(filter, PROPID_ERR_CONFIG); /* compiled out (propid_config.h) */
+#else
     const propid_config_t *config = &filter->config;
     const propid_derived_t *derived = &filter->derived;
     propid_core_t *core = &filter->core;
@@ -155,4 +160,5 @@ propid_status_t propid_fuse_accel(propid_filter_t *filter, uint64_t time_us, con
         filter->counters.state_clamps += clamped;
     }
     return PROPID_OK;
+#endif
 }

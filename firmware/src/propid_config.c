@@ -206,7 +206,7 @@ static void cross3(const float a[3], const float b[3], float out[3])
 static void derive_quad_layout(const propid_config_t *config, propid_derived_t *out)
 {
     out->quad_layout = 0u;
-    if (config->rotor_count != 4u || out->state_count != PROPID_QUAD_STATES || out->rotor_inertia_on) {
+    if (config->rotor_count != 4u || out->state_count != PROPID_QUAD_STATES || propid_rotor_inertia_on(out)) {
         return; /* the fixed kernels know neither the optional states nor the rotor terms */
     }
     for (uint8_t a = 0; a < 3u; ++a) {
@@ -274,7 +274,7 @@ static void derive_sparsity(const propid_config_t *config, propid_derived_t *out
         uint8_t count = 0u;
         for (uint8_t b = 0; b < 3u; ++b) {
             const float *coeff = out->gyro_jacobian[a][b];
-            const int rotor_term = b < 2u && out->rotor_gyro[a][b] != 0.0f;
+            const int rotor_term = b < 2u && propid_rotor_gyro(out, a, b) != 0.0f;
             if (coeff[0] != 0.0f || coeff[1] != 0.0f || coeff[2] != 0.0f || rotor_term) {
                 out->jac_column[a][count] = b;
                 out->jac_rotor[a][count] = 0u;
@@ -495,16 +495,19 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (config->mass > 0.0f) {
         out.layout.accel_bias = next;
         next = (uint8_t)(next + PROPID_ACCEL_BIAS_STATES);
+#if PROPID_WITH_ACCEL
         out.accel_var = config->accel_noise_std * config->accel_noise_std;
         for (uint8_t i = 0; i < rotor_count; ++i) {
             out.thrust_per_mass[i] = config->rotor[i].thrust_coeff_nominal / config->mass;
         }
+#endif
     }
     if (config->torque_scale) {
         out.layout.torque_scale = next;
         next = (uint8_t)(next + PROPID_TORQUE_SCALE_STATES);
     }
     out.state_count = next;
+#if PROPID_WITH_ROTOR_INERTIA
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const float rotor_inertia = config->rotor_inertia[i];
         if (rotor_inertia > 0.0f) {
@@ -522,6 +525,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         out.rotor_gyro[a][0] = out.rotor_inertia_on ? -out.inertia_inv[a][1] : 0.0f;
         out.rotor_gyro[a][1] = out.rotor_inertia_on ? out.inertia_inv[a][0] : 0.0f;
     }
+#endif
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const propid_rotor_config_t *rotor = &config->rotor[i];
         /* r x z = (r_y, -r_x, 0) */

@@ -83,8 +83,10 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     if (PROPID_WITH_ACCEL && accel_bias != PROPID_NO_STATE) {
         estimate->accel_bias = core->state[accel_bias];
         estimate->accel_bias_std = std_of(core->cov[accel_bias][accel_bias]);
+#if PROPID_WITH_ACCEL
         estimate->accel_innovation = core->accel_innovation;
         estimate->accel_innovation_test_ratio = core->accel_innovation_test_ratio;
+#endif
     }
     estimate->torque_scale = 1.0f;
     if (PROPID_WITH_ACCEL && derived->layout.torque_scale != PROPID_NO_STATE) {

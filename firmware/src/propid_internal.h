@@ -76,6 +76,28 @@ static inline float propid_cov_at(const float (*cov)[PROPID_MAX_STATES], uint8_t
 #define PROPID_UNROLL_QUAD _Pragma("GCC unroll 14")
 #define PROPID_NO_UNROLL
 
+/* The rotor-inertia terms' data (0 when compiled out, propid_config.h). */
+static inline int propid_rotor_inertia_on(const propid_derived_t *derived)
+{
+#if PROPID_WITH_ROTOR_INERTIA
+    return derived->rotor_inertia_on != 0u;
+#else
+    (void)derived;
+    return 0;
+#endif
+}
+static inline float propid_rotor_gyro(const propid_derived_t *derived, uint8_t a, uint8_t b)
+{
+#if PROPID_WITH_ROTOR_INERTIA
+    return derived->rotor_gyro[a][b];
+#else
+    (void)derived;
+    (void)a;
+    (void)b;
+    return 0.0f;
+#endif
+}
+
 /* Index of the first thrust coefficient, first drag coefficient, first bias. */
 static inline uint8_t propid_first_thrust(void) { return PROPID_RATE_STATES; }
 static inline uint8_t propid_first_drag(uint8_t rotor_count)

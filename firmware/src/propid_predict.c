@@ -140,7 +140,8 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
             ? filter->core.state[derived->layout.torque_scale] : 1.0f;
     float reaction[3] = {0.0f, 0.0f, 0.0f};
     float momentum_dt = 0.0f;
-    if (PROPID_WITH_ROTOR_INERTIA && derived->rotor_inertia_on) {
+#if PROPID_WITH_ROTOR_INERTIA
+    if (derived->rotor_inertia_on) {
         for (uint8_t i = 0; i < rotor_count; ++i) {
             const float start = sqrtf(filter->core.input_speed_sq[i]);
             const float end = sqrtf(filter->core.rotor_speed_sq[i]);
@@ -151,6 +152,7 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
         }
         momentum_dt *= half_dt;
     }
+#endif
     const uint8_t n = derived->state_count;
     float check = 0.0f;
     float rotors[3];
@@ -169,7 +171,7 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
             const float entry = dt * (coeff[0] * rate[0] + coeff[1] * rate[1] + coeff[2] * rate[2]);
             /* The rotor term is linear in omega: twice its share in this sum,
              * which holds twice the (quadratic) gyroscopic acceleration. */
-            const float rotor_entry = column[p] < 2u ? derived->rotor_gyro[a][column[p]] * momentum_dt : 0.0f;
+            const float rotor_entry = column[p] < 2u ? propid_rotor_gyro(derived, a, column[p]) * momentum_dt : 0.0f;
             sum += (entry + 2.0f * rotor_entry) * rate[column[p]];
             g[p] = entry + rotor_entry;
         }
@@ -210,7 +212,7 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
             const float *coeff = derived->gyro_jacobian[a][column[p]];
             const float entry = dt * (coeff[0] * predictor[0] + coeff[1] * predictor[1] +
                                       coeff[2] * predictor[2]);
-            const float rotor_entry = column[p] < 2u ? derived->rotor_gyro[a][column[p]] * momentum_dt : 0.0f;
+            const float rotor_entry = column[p] < 2u ? propid_rotor_gyro(derived, a, column[p]) * momentum_dt : 0.0f;
             corrector += (entry + 2.0f * rotor_entry) * predictor[column[p]];
             g[p] = 0.5f * (entry + g[p] + rotor_entry); /* g[p] held entry(omega) + rotor_entry */
         }

@@ -174,15 +174,19 @@ typedef struct {
     uint8_t has_rotor_data;
     uint8_t has_time;
     uint16_t gated_run[3];                            /* consecutive gated samples per axis */
+#if PROPID_WITH_ACCEL
     uint16_t accel_gated_run;                         /* consecutive gated accelerometer samples */
     uint8_t has_accel;
     uint64_t accel_time_us;                           /* time of the latest accepted accelerometer sample */
+#endif
     uint32_t health;                                  /* PROPID_HEALTH_* (sticky and per-step bits) */
     /* Private (not part of the API contract): */
     float innovation[3];                              /* last gyro innovation per axis [rad/s] */
     float innovation_test_ratio[3];                   /* last innovation^2 / (gate^2 * S) */
+#if PROPID_WITH_ACCEL
     float accel_innovation;                           /* last accelerometer z innovation [m/s^2] */
     float accel_innovation_test_ratio;
+#endif
     uint32_t stale_mark;                              /* counters.rejected[-ROTOR_STALE] at last accepted gyro */
     uint8_t check_row;                                /* next covariance row of the round-robin integrity check */
 } propid_core_t;
@@ -251,12 +255,17 @@ typedef struct {
     uint8_t jac_rotor[3][PROPID_MAX_STATES - 3];    /* coefficient entry: its rotor */
     float jac_torque[3][PROPID_MAX_STATES - 3];     /* coefficient entry: A = jac_torque * u_rotor */
     float gyro_jacobian[3][3][3];                   /* A_ab = sum_c gyro_jacobian[a][b][c] omega_c */
+    /* Optional terms' data: compiled out with their terms (propid_config.h). */
+#if PROPID_WITH_ROTOR_INERTIA
     uint8_t rotor_inertia_on;                       /* any config.rotor_inertia > 0 */
     float rotor_momentum[PROPID_MAX_ROTORS];        /* yaw_sign_i J_r,i: h = sum_i rotor_momentum_i Omega_i */
     float rotor_gyro[3][2];                         /* rotor gyroscopic term: A_ab += rotor_gyro[a][b] h, b < 2 */
     float rotor_reaction[PROPID_MAX_ROTORS][3];     /* J^-1 z yaw_sign_i J_r,i: delta omega per delta Omega_i */
+#endif
+#if PROPID_WITH_ACCEL
     float thrust_per_mass[PROPID_MAX_ROTORS];       /* kf_nominal_i / mass (accelerometer row) */
     float accel_var;                                /* accel_noise_std^2 */
+#endif
     float quad_gyro[3][2];                          /* quad layout only: A_ab = quad_gyro[a][p] omega_c for
                                                        entry p (column b) of row a, c the third axis */
 } propid_derived_t;
