@@ -93,6 +93,14 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         estimate->torque_scale = core->state[derived->layout.torque_scale];
         estimate->torque_scale_std = std_of(core->cov[derived->layout.torque_scale][derived->layout.torque_scale]);
     }
+    uint8_t terms = 0u;
+    terms |= disturbance != PROPID_NO_STATE ? PROPID_TERM_DISTURBANCE : 0u;
+    terms |= accel_bias != PROPID_NO_STATE ? PROPID_TERM_ACCEL : 0u;
+    terms |= derived->layout.torque_scale != PROPID_NO_STATE ? PROPID_TERM_TORQUE_SCALE : 0u;
+    terms |= derived->rotor_inertia_on ? PROPID_TERM_ROTOR_INERTIA : 0u;
+    terms |= config->rotor_delay_us != 0 ? PROPID_TERM_ESC_DELAY : 0u;
+    estimate->model_terms = terms;
+    estimate->rotor_delay_us = config->rotor_delay_us;
     uint32_t health = core->health;
     if (!core->has_rotor_data) {
         health |= PROPID_HEALTH_NO_ROTOR_DATA;

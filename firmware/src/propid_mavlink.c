@@ -30,6 +30,16 @@ _Static_assert(MAVLINK_NUM_NON_PAYLOAD_BYTES + MAVLINK_MSG_ID_PROPID_GYRO_LEN ==
 _Static_assert(MAVLINK_NUM_NON_PAYLOAD_BYTES + MAVLINK_MSG_ID_PROPID_STATUS_LEN ==
                    PROPID_MAVLINK_STATUS_MAX_LEN,
                "status frame size");
+_Static_assert(MAVLINK_MSG_ID_PROPID_MODEL == PROPID_MAVLINK_MSG_ID_MODEL, "dialect id");
+_Static_assert(MAVLINK_NUM_NON_PAYLOAD_BYTES + MAVLINK_MSG_ID_PROPID_MODEL_LEN ==
+                   PROPID_MAVLINK_MODEL_MAX_LEN,
+               "model frame size");
+_Static_assert(PROPID_TERM_DISTURBANCE == PROPID_MODEL_TERMS_DISTURBANCE &&
+                   PROPID_TERM_ACCEL == PROPID_MODEL_TERMS_ACCEL &&
+                   PROPID_TERM_TORQUE_SCALE == PROPID_MODEL_TERMS_TORQUE_SCALE &&
+                   PROPID_TERM_ROTOR_INERTIA == PROPID_MODEL_TERMS_ROTOR_INERTIA &&
+                   PROPID_TERM_ESC_DELAY == PROPID_MODEL_TERMS_ESC_DELAY,
+               "model term bits mirror propid.h");
 _Static_assert(PROPID_REJECT_SLOTS <= 16, "PROPID_STATUS.rejected holds 16 reasons");
 _Static_assert(MAV_RESULT_ACCEPTED == PROPID_MAVLINK_RESULT_ACCEPTED &&
                    MAV_RESULT_DENIED == PROPID_MAVLINK_RESULT_DENIED &&
@@ -145,6 +155,22 @@ static void build_status(const propid_mavlink_sender_t *sender, mavlink_status_t
         counters->state_clamps, counters->resyncs, rejected_total, rejected);
 }
 
+static void build_model(const propid_mavlink_sender_t *sender, mavlink_status_t *link,
+                        const propid_estimate_t *estimate, const propid_counters_t *counters,
+                        mavlink_message_t *msg)
+{
+    float torque[3];
+    flu_to_frd(estimate->disturbance_torque, torque);
+    /* The z bias and innovation: FLU z up -> FRD z down. */
+    (void)mavlink_msg_propid_model_pack_status(
+        sender->system_id, sender->component_id, link, msg, estimate->time_us, torque,
+        estimate->disturbance_torque_std, -estimate->accel_bias, estimate->accel_bias_std,
+        -estimate->accel_innovation, estimate->torque_scale, estimate->torque_scale_std,
+        counters != NULL ? counters->accel_accepted : 0u, counters != NULL ? counters->accel_gated : 0u,
+        counters != NULL ? counters->delay_overflows : 0u, estimate->rotor_delay_us,
+        estimate->model_terms);
+}
+
 static propid_mavlink_status_t check_estimate(const propid_estimate_t *estimate)
 {
     if (estimate == NULL) {
@@ -157,7 +183,7 @@ static propid_mavlink_status_t check_estimate(const propid_estimate_t *estimate)
     return PROPID_MAVLINK_OK;
 }
 
-typedef enum { FRAME_COEFFICIENTS, FRAME_GYRO, FRAME_STATUS } frame_kind_t;
+typedef enum { FRAME_COEFFICIENTS, FRAME_GYRO, FRAME_STATUS, FRAME_MODEL } frame_kind_t;
 
 /* Shared body of the three single-frame packers. */
 static propid_mavlink_status_t pack_one(frame_kind_t kind, propid_mavlink_sender_t *sender,
@@ -184,6 +210,8 @@ static propid_mavlink_status_t pack_one(frame_kind_t kind, propid_mavlink_sender
         build_coefficients(sender, &link, estimate, &msg);
     } else if (kind == FRAME_GYRO) {
         build_gyro(sender, &link, estimate, &msg);
+    } else if (kind == FRAME_MODEL) {
+        build_model(sender, &link, estimate, counters, &msg);
     } else {
         build_status(sender, &link, estimate, counters, &msg);
     }
@@ -221,6 +249,15 @@ propid_mavlink_status_t propid_mavlink_pack_status(propid_mavlink_sender_t *send
     return pack_one(FRAME_STATUS, sender, estimate, counters, buf, buf_size, frame_len);
 }
 
+propid_mavlink_status_t propid_mavlink_pack_model(propid_mavlink_sender_t *sender,
+                                                  const propid_estimate_t *estimate,
+                                                  const propid_counters_t *counters,
+                                                  uint8_t *buf, uint16_t buf_size,
+                                                  uint16_t *frame_len)
+{
+    return pack_one(FRAME_MODEL, sender, estimate, counters, buf, buf_size, frame_len);
+}
+
 propid_mavlink_status_t propid_mavlink_pack_report(propid_mavlink_sender_t *sender,
                                                    const propid_estimate_t *estimate,
                                                    const propid_counters_t *counters,
@@ -236,16 +273,19 @@ propid_mavlink_status_t propid_mavlink_pack_report(propid_mavlink_sender_t *send
         return status;
     }
 
-    /* Build every frame first (about 900 bytes of stack), so that a report that does
+    /* Build every frame first (about 1200 bytes of stack), so that a report that does
      * not fit writes nothing at all. */
     mavlink_status_t link;
-    mavlink_message_t msgs[3];
+    mavlink_message_t msgs[4];
     uint8_t count = 0u;
     link_from_sequence(sender->sequence, &link);
     /* Coefficients last: receivers that assemble a row per PROPID_COEFFICIENTS then
      * already hold the status and gyro frames of the same instant. */
     if (counters != NULL) {
         build_status(sender, &link, estimate, counters, &msgs[count++]);
+    }
+    if (estimate->model_terms != 0u) {
+        build_model(sender, &link, estimate, counters, &msgs[count++]);
     }
     build_gyro(sender, &link, estimate, &msgs[count++]);
     build_coefficients(sender, &link, estimate, &msgs[count++]);

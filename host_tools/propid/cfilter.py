@@ -88,6 +88,16 @@ HEALTH = {
 }
 
 
+# propid_estimate_t.model_terms (PROPID_TERM_*).
+MODEL_TERMS = {
+    "DISTURBANCE": 1 << 0,
+    "ACCEL": 1 << 1,
+    "TORQUE_SCALE": 1 << 2,
+    "ROTOR_INERTIA": 1 << 3,
+    "ESC_DELAY": 1 << 4,
+}
+
+
 def health_names(health: int) -> list[str]:
     """Names of the flags set in a health word, e.g. ['GATED', 'COV_REPAIRED']."""
     return [name for name, bit in HEALTH.items() if health & bit]
@@ -181,6 +191,8 @@ def _estimate_struct(max_rotors: int) -> type:
         ("accel_innovation_test_ratio", ctypes.c_float),
         ("torque_scale", ctypes.c_float),
         ("torque_scale_std", ctypes.c_float),
+        ("rotor_delay_us", ctypes.c_int32),
+        ("model_terms", ctypes.c_uint8),
     ]})
 
 
@@ -428,6 +440,8 @@ class Estimate:
     accel_innovation_test_ratio: float = 0.0
     torque_scale: float = 1.0
     torque_scale_std: float = 0.0
+    rotor_delay_us: int = 0
+    model_terms: int = 0  # MODEL_TERMS bits: the optional terms configured
 
 
 # ---------------------------------------------------------------------------
@@ -656,6 +670,7 @@ class CFilter:
             accel_innovation=float(e.accel_innovation),
             accel_innovation_test_ratio=float(e.accel_innovation_test_ratio),
             torque_scale=float(e.torque_scale), torque_scale_std=float(e.torque_scale_std),
+            rotor_delay_us=int(e.rotor_delay_us), model_terms=int(e.model_terms),
         )
 
     def counters(self) -> dict:

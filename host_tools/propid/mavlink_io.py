@@ -59,6 +59,7 @@ GCS_COMPONENT_ID = 190
 MSG_COEFFICIENTS = "PROPID_COEFFICIENTS"
 MSG_GYRO = "PROPID_GYRO"
 MSG_STATUS = "PROPID_STATUS"
+MSG_MODEL = "PROPID_MODEL"
 
 _dialect_module: ModuleType | None = None
 
@@ -450,23 +451,32 @@ def estimate_columns(rotor_count: int) -> list[str]:
     cols += ["est_bg_x", "est_bg_y", "est_bg_z", "std_bg_x", "std_bg_y", "std_bg_z",
              "est_wx", "est_wy", "est_wz",
              "kf_converging", "kf_converged", "km_converging", "km_converged",
-             "health", "gyro_accepted", "rejected_total", "gated_total", "cov_repairs"]
+             "health", "gyro_accepted", "rejected_total", "gated_total", "cov_repairs",
+             # the optional terms (PROPID_MODEL; empty when the vehicle sends none)
+             "est_dist_x", "est_dist_y", "est_dist_z", "std_dist_x", "std_dist_y", "std_dist_z",
+             "est_accel_bias_z", "std_accel_bias_z", "est_torque_scale", "std_torque_scale",
+             "esc_delay_s", "model_terms"]
     return cols
 
 
 class EstimateRows:
     """Feed it messages in arrival order; each PROPID_COEFFICIENTS yields one row
-    combined with the latest PROPID_GYRO and PROPID_STATUS (columns: estimate_columns)."""
+    combined with the latest PROPID_GYRO, PROPID_STATUS and PROPID_MODEL (columns:
+    estimate_columns)."""
 
     def __init__(self) -> None:
         self.rotor_count: int | None = None
         self._gyro = None
         self._status = None
+        self._model = None
 
     def feed(self, msg) -> dict[str, Any] | None:
         kind = msg.get_type()
         if kind == MSG_GYRO:
             self._gyro = msg
+            return None
+        if kind == MSG_MODEL:
+            self._model = msg
             return None
         if kind == MSG_STATUS:
             self._status = msg
@@ -513,7 +523,22 @@ class EstimateRows:
                 row["health"] = status.health
         else:
             row.update(gyro_accepted=nan, rejected_total=nan, gated_total=nan, cov_repairs=nan)
+        row.update(model_columns(self._model))
         return row
+
+
+def model_columns(model) -> dict[str, Any]:
+    """The PROPID_MODEL part of a row, body FLU (None: every column NaN)."""
+    nan = float("nan")
+    names = ("est_dist_x", "est_dist_y", "est_dist_z", "std_dist_x", "std_dist_y", "std_dist_z",
+             "est_accel_bias_z", "std_accel_bias_z", "est_torque_scale", "std_torque_scale",
+             "esc_delay_s", "model_terms")
+    if model is None:
+        return {name: nan for name in names}
+    torque = frd_to_flu(model.disturbance_torque)
+    values = [*torque, *model.disturbance_torque_std, -model.accel_bias, model.accel_bias_std,
+              model.torque_scale, model.torque_scale_std, model.esc_delay_us * 1e-6, model.terms]
+    return dict(zip(names, values))
 
 
 # --------------------------------------------------------------------------

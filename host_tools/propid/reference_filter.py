@@ -20,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from propid.cfilter import DELAY_SLOTS, HEALTH, STATUS, Estimate, FilterConfig, health_names
+from propid.cfilter import DELAY_SLOTS, HEALTH, MODEL_TERMS, STATUS, Estimate, FilterConfig, health_names
 
 _F32_MAX = float(np.finfo(np.float32).max)
 # Covariance health constants of the C filter (propid_internal.h): the rounding
@@ -662,6 +662,12 @@ class ReferenceFilter:
             out["accel_bias_std"] = float(std[self.accel_bias])
             out["accel_innovation"] = float(self.accel_innovation)
             out["accel_innovation_test_ratio"] = float(self.accel_innovation_test_ratio)
+        out["rotor_delay_us"] = self.rotor_delay_us
+        out["model_terms"] = ((MODEL_TERMS["DISTURBANCE"] if self.first_disturbance is not None else 0)
+                              | (MODEL_TERMS["ACCEL"] if self.accel_bias is not None else 0)
+                              | (MODEL_TERMS["TORQUE_SCALE"] if self.torque_scale is not None else 0)
+                              | (MODEL_TERMS["ROTOR_INERTIA"] if self.rotor_inertia_on else 0)
+                              | (MODEL_TERMS["ESC_DELAY"] if self.rotor_delay_us else 0))
         return out
 
     def counters(self) -> dict:

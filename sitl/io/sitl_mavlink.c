@@ -416,6 +416,11 @@ static void send_estimate(sitl_mavlink_t *link, const propid_filter_t *filter, i
         }
     }
     if (estimate_due) {
+        if (estimate.model_terms != 0u &&
+            propid_mavlink_pack_model(&link->sender, &estimate, &counters, buf, sizeof buf, &len) ==
+                PROPID_MAVLINK_OK) {
+            send_bytes(link, buf, len, (const struct sockaddr *)&link->dest, link->dest_len);
+        }
         if (propid_mavlink_pack_gyro(&link->sender, &estimate, buf, sizeof buf, &len) ==
             PROPID_MAVLINK_OK) {
             send_bytes(link, buf, len, (const struct sockaddr *)&link->dest, link->dest_len);

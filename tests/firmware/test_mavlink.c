@@ -274,6 +274,99 @@ static void test_report_three_frames_in_sequence(void)
     TEST_ASSERT_EQUAL_UINT8(3u, sender.sequence);
 }
 
+static void fill_model(void)
+{
+    for (uint8_t axis = 0u; axis < 3u; ++axis) {
+        estimate.disturbance_torque[axis] = 1.0e-4f * (float)(axis + 1u);
+        estimate.disturbance_torque_std[axis] = 2.0e-5f * (float)(axis + 1u);
+    }
+    estimate.accel_bias = 0.25f;
+    estimate.accel_bias_std = 0.05f;
+    estimate.accel_innovation = -0.4f;
+    estimate.torque_scale = 1.07f;
+    estimate.torque_scale_std = 0.02f;
+    estimate.rotor_delay_us = -12000;
+    estimate.model_terms = PROPID_TERM_DISTURBANCE | PROPID_TERM_ACCEL | PROPID_TERM_TORQUE_SCALE |
+                           PROPID_TERM_ESC_DELAY;
+    counters.accel_accepted = 123456u;
+    counters.accel_gated = 12u;
+    counters.delay_overflows = 3u;
+}
+
+/* PROPID_MODEL: every field through the generated decoder, vectors and the z bias in FRD. */
+static void test_model_round_trip_is_frd(void)
+{
+    fill_model();
+    uint8_t buf[PROPID_MAVLINK_MODEL_MAX_LEN + GUARD_LEN];
+    uint16_t len = 0u;
+    memset(buf, GUARD_BYTE, sizeof buf);
+    TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
+                          propid_mavlink_pack_model(&sender, &estimate, &counters, buf,
+                                                    PROPID_MAVLINK_MODEL_MAX_LEN, &len));
+    assert_guard_intact(&buf[PROPID_MAVLINK_MODEL_MAX_LEN]);
+    mavlink_message_t msg;
+    TEST_ASSERT_EQUAL_UINT16(1u, parse_frames(buf, len, &msg, 1u));
+    TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_MODEL, msg.msgid);
+    mavlink_propid_model_t decoded;
+    mavlink_msg_propid_model_decode(&msg, &decoded);
+    TEST_ASSERT_TRUE(decoded.time_usec == estimate.time_us);
+    const float sign[3] = {1.0f, -1.0f, -1.0f};
+    for (uint8_t axis = 0u; axis < 3u; ++axis) {
+        ASSERT_SAME_FLOAT(sign[axis] * estimate.disturbance_torque[axis], decoded.disturbance_torque[axis]);
+        ASSERT_SAME_FLOAT(estimate.disturbance_torque_std[axis], decoded.disturbance_torque_std[axis]);
+    }
+    ASSERT_SAME_FLOAT(-0.25f, decoded.accel_bias);
+    ASSERT_SAME_FLOAT(0.05f, decoded.accel_bias_std);
+    ASSERT_SAME_FLOAT(0.4f, decoded.accel_innovation);
+    ASSERT_SAME_FLOAT(1.07f, decoded.torque_scale);
+    ASSERT_SAME_FLOAT(0.02f, decoded.torque_scale_std);
+    TEST_ASSERT_EQUAL_UINT32(123456u, decoded.accel_accepted);
+    TEST_ASSERT_EQUAL_UINT32(12u, decoded.accel_gated);
+    TEST_ASSERT_EQUAL_UINT32(3u, decoded.delay_overflows);
+    TEST_ASSERT_EQUAL_INT32(-12000, decoded.esc_delay_us);
+    TEST_ASSERT_EQUAL_HEX8(PROPID_MODEL_TERMS_DISTURBANCE | PROPID_MODEL_TERMS_ACCEL |
+                               PROPID_MODEL_TERMS_TORQUE_SCALE | PROPID_MODEL_TERMS_ESC_DELAY,
+                           decoded.terms);
+    /* Without counters its counts are 0. */
+    TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
+                          propid_mavlink_pack_model(&sender, &estimate, NULL, buf,
+                                                    PROPID_MAVLINK_MODEL_MAX_LEN, &len));
+    TEST_ASSERT_EQUAL_UINT16(1u, parse_frames(buf, len, &msg, 1u));
+    TEST_ASSERT_EQUAL_UINT32(0u, mavlink_msg_propid_model_get_accel_accepted(&msg));
+}
+
+/* With optional terms configured the report carries PROPID_MODEL after the status. */
+static void test_report_with_model_terms_has_four_frames(void)
+{
+    fill_model();
+    uint8_t buf[PROPID_MAVLINK_REPORT_MAX_LEN + GUARD_LEN];
+    uint16_t len = 0u;
+    memset(buf, GUARD_BYTE, sizeof buf);
+    TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
+                          propid_mavlink_pack_report(&sender, &estimate, &counters, buf,
+                                                     PROPID_MAVLINK_REPORT_MAX_LEN, &len));
+    assert_guard_intact(&buf[PROPID_MAVLINK_REPORT_MAX_LEN]);
+    mavlink_message_t msgs[4];
+    TEST_ASSERT_EQUAL_UINT16(4u, parse_frames(buf, len, msgs, 4u));
+    TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_STATUS, msgs[0].msgid);
+    TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_MODEL, msgs[1].msgid);
+    TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_GYRO, msgs[2].msgid);
+    TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_COEFFICIENTS, msgs[3].msgid);
+    TEST_ASSERT_EQUAL_UINT8(204u, sender.sequence);
+    /* A filter's own estimate says which terms it runs with. */
+    static propid_filter_t filter;
+    propid_config_t config;
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.05f, 0.0f, 1.0f, 2.3e-8f, 7.8e-10f));
+    propid_config_set_inertia_diag(&config, 1.4e-5f, 1.4e-5f, 2.9e-5f);
+    config.disturbance_torque = 1u;
+    config.rotor_inertia[0] = 1.0e-8f;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    TEST_ASSERT_EQUAL_HEX8(PROPID_TERM_DISTURBANCE | PROPID_TERM_ROTOR_INERTIA, estimate.model_terms);
+    TEST_ASSERT_EQUAL_INT32(0, estimate.rotor_delay_us);
+}
+
 /* Every size below the frame's is rejected without touching the buffer or sequence. */
 static void test_buffer_too_small_writes_nothing(void)
 {
@@ -427,6 +520,8 @@ int main(void)
     RUN_TEST(test_status_round_trip);
     RUN_TEST(test_rejected_total_saturates);
     RUN_TEST(test_report_three_frames_in_sequence);
+    RUN_TEST(test_model_round_trip_is_frd);
+    RUN_TEST(test_report_with_model_terms_has_four_frames);
     RUN_TEST(test_buffer_too_small_writes_nothing);
     RUN_TEST(test_corrupted_frame_fails_crc);
     RUN_TEST(test_bad_arguments_rejected);

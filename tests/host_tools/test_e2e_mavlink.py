@@ -274,7 +274,9 @@ def test_bad_mavlink_url_is_refused(url, message):
 
 
 def test_octocopter_estimates_cross_the_link(tmp_path):
-    """Eight rotors: every rotor's kf/km and std arrive, equal to the filter's (float32)."""
+    """Eight rotors: every rotor's kf/km and std arrive, equal to the filter's (float32); with
+    optional terms configured (disturbance states, the rotor samples held 1 ms: a gyro lagging)
+    PROPID_MODEL arrives too and `propid log` writes its columns."""
     _require_sitl()
     port = _free_udp_port()
     est_csv, sitl_csv = tmp_path / "estimates.csv", tmp_path / "sitl.csv"
@@ -287,6 +289,7 @@ def test_octocopter_estimates_cross_the_link(tmp_path):
         sitl = subprocess.run(
             [str(SITL), "--vehicle", "octo-x", "--trajectory", "lissajous", "--mode", "filter",
              "--paper", "--duration", "3", "--seed", "2", "--realtime", "20",
+             "--filter-disturbance", "--filter-esc-delay", "-0.001",
              "--mavlink", f"udp:127.0.0.1:{port}", "--log", str(sitl_csv), "--quiet"],
             capture_output=True, text=True, timeout=300)
         assert sitl.returncode == 0, sitl.stderr
@@ -308,3 +311,7 @@ def test_octocopter_estimates_cross_the_link(tmp_path):
             for name in (f"est_kf_{i}", f"std_kf_{i}", f"est_km_{i}", f"std_km_{i}"):
                 assert rec[name][k] == pytest.approx(sim[name][j], rel=1e-6), (name, t)
     assert matched >= 0.9 * rec["t"].size > 0
+    assert np.all(rec["esc_delay_s"] == pytest.approx(-0.001))
+    assert np.all(rec["model_terms"] == 1 + 16)  # PROPID_MODEL_TERMS_DISTURBANCE | _ESC_DELAY
+    assert np.all(np.isfinite(rec["est_dist_z"])) and np.all(rec["std_dist_z"] > 0)
+    assert np.all(np.isnan(rec["est_accel_bias_z"]) | (rec["est_accel_bias_z"] == 0))

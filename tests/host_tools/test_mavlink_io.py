@@ -3,6 +3,7 @@ message conversion, and the `propid log` / `propid listen` commands over UDP."""
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import signal
@@ -187,6 +188,34 @@ def test_estimate_rows_convert_frd_back_to_flu(tmp_path):
     assert row["health"] == 0x44
     assert row["rejected_total"] == 7 and row["gated_total"] == 6
     assert row["kf_converged"] == 0x05
+
+
+def test_model_message_columns_are_flu(tmp_path):
+    """PROPID_MODEL (optional terms) into the estimate rows: FRD back to FLU, the delay in s."""
+    model = mavlink_io.encode_message(
+        "PROPID_MODEL", time_usec=100_000, disturbance_torque=[1e-4, 2e-4, 3e-4],
+        disturbance_torque_std=[1e-5, 2e-5, 3e-5], accel_bias=-0.3, accel_bias_std=0.05,
+        accel_innovation=0.1, torque_scale=1.05, torque_scale_std=0.01, accel_accepted=10,
+        accel_gated=1, delay_overflows=0, esc_delay_us=-12000, terms=1 | 2 | 4 | 16)
+    frames = telemetry_frames(3)
+    frames.insert(len(frames) - 2, model)  # before the last PROPID_COEFFICIENTS
+    rows = []
+    assembler = mavlink_io.EstimateRows()
+    for msg in mavlink_io.read_tlog(write_tlog(tmp_path / "m.tlog", frames)):
+        row = assembler.feed(msg)
+        if row is not None:
+            rows.append(row)
+    assert all(math.isnan(row["est_dist_x"]) for row in rows[:-1])
+    row = rows[-1]
+    assert (row["est_dist_x"], row["est_dist_y"], row["est_dist_z"]) == pytest.approx((1e-4, -2e-4, -3e-4))
+    assert row["std_dist_z"] == pytest.approx(3e-5)
+    assert row["est_accel_bias_z"] == pytest.approx(0.3) and row["est_torque_scale"] == pytest.approx(1.05)
+    assert row["esc_delay_s"] == pytest.approx(-0.012) and row["model_terms"] == 23
+    from propid.commands.listen import format_model
+
+    lines = format_model(mavlink_io.dialect().MAVLink(None).decode(bytearray(model)))
+    assert "DISTURBANCE ACCEL TORQUE_SCALE ESC_DELAY" in lines[0] and "-12.0 ms" in lines[0]
+    assert "accel z bias FLU +0.300" in "\n".join(lines)
 
 
 def test_mavlogdump_decodes_our_tlog(tmp_path):

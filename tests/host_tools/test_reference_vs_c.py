@@ -198,6 +198,9 @@ def test_c_agrees_with_reference_with_a_telemetry_delay(flight, options, delay_u
     for name in ("gyro_accepted", "rotor_accepted", "accel_accepted", "delay_overflows", "rejected"):
         assert counters_c[name] == counters_ref[name], name
     assert counters_c["delay_overflows"] == 0 and not counters_c["rejected"]
+    est_c, est_ref = c_filter.estimate(), ref.estimate()
+    assert est_c.rotor_delay_us == est_ref.rotor_delay_us == delay_us
+    assert est_c.model_terms == est_ref.model_terms == (0b11111 if options == "all" else 0b10000)
     assert counters_c["gyro_accepted"] >= 2490  # all but the last few held samples of 2500
     state_err, cov_err = disagreement(trace_c, trace_ref)
     print(f"C vs reference, delay {delay_us} us, {options}: max |dx|/std = {state_err:.3g}, "

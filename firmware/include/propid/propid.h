@@ -366,7 +366,16 @@ typedef struct {
     float accel_innovation_test_ratio;
     float torque_scale;                               /* thrust-torque scale (1 when off) */
     float torque_scale_std;
+    int32_t rotor_delay_us;                           /* the configured telemetry delay (docs/math.md §12) */
+    uint8_t model_terms;                              /* PROPID_TERM_*: the optional terms configured */
 } propid_estimate_t;
+
+/* propid_estimate_t.model_terms: which optional terms the filter runs with. */
+#define PROPID_TERM_DISTURBANCE   (1u << 0) /* disturbance-torque states */
+#define PROPID_TERM_ACCEL         (1u << 1) /* accelerometer aiding (accel z bias state) */
+#define PROPID_TERM_TORQUE_SCALE  (1u << 2) /* thrust-torque scale state */
+#define PROPID_TERM_ROTOR_INERTIA (1u << 3) /* rotor inertia: yaw reaction, gyroscopic torque */
+#define PROPID_TERM_ESC_DELAY     (1u << 4) /* a nonzero telemetry delay held in the buffer */
 
 propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estimate_t *estimate);
 propid_status_t propid_get_counters(const propid_filter_t *filter, propid_counters_t *counters);

@@ -45,6 +45,7 @@ typedef enum {
 #define PROPID_MAVLINK_MSG_ID_COEFFICIENTS 53000u
 #define PROPID_MAVLINK_MSG_ID_GYRO 53001u
 #define PROPID_MAVLINK_MSG_ID_STATUS 53002u
+#define PROPID_MAVLINK_MSG_ID_MODEL 53004u
 #define PROPID_MAVLINK_CMD_RESET 53000u
 
 /* Largest frame of each message: 10 header + payload + 2 checksum bytes, unsigned.
@@ -52,9 +53,10 @@ typedef enum {
 #define PROPID_MAVLINK_COEFFICIENTS_MAX_LEN (12u + 145u)
 #define PROPID_MAVLINK_GYRO_MAX_LEN (12u + 84u)
 #define PROPID_MAVLINK_STATUS_MAX_LEN (12u + 116u)
+#define PROPID_MAVLINK_MODEL_MAX_LEN (12u + 69u)
 #define PROPID_MAVLINK_REPORT_MAX_LEN                                              \
     (PROPID_MAVLINK_COEFFICIENTS_MAX_LEN + PROPID_MAVLINK_GYRO_MAX_LEN +           \
-     PROPID_MAVLINK_STATUS_MAX_LEN)
+     PROPID_MAVLINK_STATUS_MAX_LEN + PROPID_MAVLINK_MODEL_MAX_LEN)
 
 /* MAV_RESULT values returned by propid_mavlink_execute_reset (common.xml). */
 #define PROPID_MAVLINK_RESULT_ACCEPTED 0u
@@ -91,9 +93,18 @@ propid_mavlink_status_t propid_mavlink_pack_status(propid_mavlink_sender_t *send
                                                    uint8_t *buf, uint16_t buf_size,
                                                    uint16_t *frame_len);
 
-/* All three frames back to back, in the order PROPID_STATUS (only when counters is
- * not NULL), PROPID_GYRO, PROPID_COEFFICIENTS. All or nothing: if the whole report
- * does not fit, nothing is written. */
+/* PROPID_MODEL: the optional terms (estimate->model_terms), their estimates and
+ * the telemetry delay; counters may be NULL (its counts are then 0). */
+propid_mavlink_status_t propid_mavlink_pack_model(propid_mavlink_sender_t *sender,
+                                                  const propid_estimate_t *estimate,
+                                                  const propid_counters_t *counters,
+                                                  uint8_t *buf, uint16_t buf_size,
+                                                  uint16_t *frame_len);
+
+/* The frames back to back, in the order PROPID_STATUS (only when counters is not
+ * NULL), PROPID_MODEL (only when estimate->model_terms is not 0), PROPID_GYRO,
+ * PROPID_COEFFICIENTS. All or nothing: if the whole report does not fit, nothing
+ * is written. */
 propid_mavlink_status_t propid_mavlink_pack_report(propid_mavlink_sender_t *sender,
                                                    const propid_estimate_t *estimate,
                                                    const propid_counters_t *counters,

@@ -40,6 +40,13 @@ def health_names(health: int) -> list[str]:
     return names
 
 
+def model_term_names(terms: int) -> list[str]:
+    """Names of the set PROPID_MODEL_TERMS bits (without the prefix)."""
+    enum = mavlink_io.dialect().enums.get("PROPID_MODEL_TERMS", {})
+    return [entry.name.replace("PROPID_MODEL_TERMS_", "") for value, entry in sorted(enum.items())
+            if value & terms and not entry.name.endswith("_ENUM_END")]
+
+
 def _mask_state(i: int, converging: int, converged: int) -> str:
     if converged >> i & 1:
         return "converged"
@@ -48,7 +55,25 @@ def _mask_state(i: int, converging: int, converged: int) -> str:
     return "-"
 
 
-def format_view(coeffs, gyro, status, frames: int, source: str) -> str:
+def format_model(model) -> list[str]:
+    """The PROPID_MODEL lines of the screen (body FLU)."""
+    terms = int(model.terms)
+    names = model_term_names(terms)
+    lines = [f"model terms {' '.join(names) or 'none'}   ESC delay held {model.esc_delay_us * 1e-3:+.1f} ms"
+             f"   delay overflows {model.delay_overflows}"]
+    if "DISTURBANCE" in names:
+        torque = mavlink_io.frd_to_flu(model.disturbance_torque)
+        lines.append("disturbance torque FLU [N m]  " + "  ".join(
+            f"{a} {t:+.3e} +-{s:.1e}" for a, t, s in zip("xyz", torque, model.disturbance_torque_std)))
+    if "ACCEL" in names:
+        lines.append(f"accel z bias FLU {-model.accel_bias:+.3f} +-{model.accel_bias_std:.3f} m/s^2"
+                     f"   accepted {model.accel_accepted}  gated {model.accel_gated}")
+    if "TORQUE_SCALE" in names:
+        lines.append(f"thrust-torque scale {model.torque_scale:.4f} +-{model.torque_scale_std:.4f}")
+    return lines
+
+
+def format_view(coeffs, gyro, status, frames: int, source: str, model=None) -> str:
     """The text screen for the latest messages (any of them may be None)."""
     lines = [f"propid listen  {source}  frames {frames}"]
     if coeffs is None:
@@ -80,6 +105,8 @@ def format_view(coeffs, gyro, status, frames: int, source: str) -> str:
         lines.append(f"gyro accepted {status.gyro_accepted}  rotor accepted {status.rotor_accepted}"
                      f"  gated {list(status.axis_gated)}  rejected {status.rejected_total}"
                      f"  cov repairs {status.cov_repairs}")
+    if model is not None:
+        lines += format_model(model)
     return "\n".join(lines)
 
 
@@ -140,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
     interactive = sys.stdout.isatty()
     start = time.monotonic()
     last_draw = 0.0
-    coeffs = gyro = status = None
+    coeffs = gyro = status = model = None
     frames = 0
     got_propid = False
     reset_pending = args.reset is not None
@@ -166,6 +193,8 @@ def run(args: argparse.Namespace) -> int:
                     gyro, got_propid = msg, True
                 elif kind == mavlink_io.MSG_STATUS:
                     status, got_propid = msg, True
+                elif kind == mavlink_io.MSG_MODEL:
+                    model, got_propid = msg, True
                 elif kind == "HEARTBEAT" and reset_pending:
                     reset_pending = False
                     result = mavlink_io.send_reset(conn, args.reset,
@@ -175,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
                     print(f"MAV_CMD_PROPID_RESET rotor {args.reset}: {reset_result}", flush=True)
             if now - last_draw >= REFRESH_S:
                 last_draw = now
-                view = format_view(coeffs, gyro, status, frames, args.connect)
+                view = format_view(coeffs, gyro, status, frames, args.connect, model)
                 if interactive:
                     print("\033[H\033[J" + view, flush=True)
                 else:
@@ -186,7 +215,7 @@ def run(args: argparse.Namespace) -> int:
         interrupted = True
     finally:
         conn.close()
-    print(format_view(coeffs, gyro, status, frames, args.connect))
+    print(format_view(coeffs, gyro, status, frames, args.connect, model))
     if not got_propid and not interrupted:
         what = "MAVLink data" if frames == 0 else "propid messages (other MAVLink did arrive)"
         raise UserError(f"no {what} on {args.connect} within --duration {args.duration:g} s")

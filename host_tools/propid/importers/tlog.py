@@ -60,7 +60,7 @@ def read_tlog_streams(path: str | Path, estimates: bool = False, progress: bool 
     assembler = None
     if estimates:
         assembler = mavlink_io.EstimateRows()
-        types |= {mavlink_io.MSG_COEFFICIENTS, mavlink_io.MSG_GYRO, mavlink_io.MSG_STATUS}
+        types |= {mavlink_io.MSG_COEFFICIENTS, mavlink_io.MSG_GYRO, mavlink_io.MSG_STATUS, mavlink_io.MSG_MODEL}
     for msg in mavlink_io.read_tlog(path, types=types, progress=progress):
         kind = msg.get_type()
         if kind == "HIGHRES_IMU":
