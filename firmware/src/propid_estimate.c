@@ -97,7 +97,9 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     terms |= disturbance != PROPID_NO_STATE ? PROPID_TERM_DISTURBANCE : 0u;
     terms |= accel_bias != PROPID_NO_STATE ? PROPID_TERM_ACCEL : 0u;
     terms |= derived->layout.torque_scale != PROPID_NO_STATE ? PROPID_TERM_TORQUE_SCALE : 0u;
+#if PROPID_WITH_ROTOR_INERTIA
     terms |= derived->rotor_inertia_on ? PROPID_TERM_ROTOR_INERTIA : 0u;
+#endif
     terms |= config->rotor_delay_us != 0 ? PROPID_TERM_ESC_DELAY : 0u;
     estimate->model_terms = terms;
     estimate->rotor_delay_us = config->rotor_delay_us;
