@@ -54,6 +54,7 @@ help:
 	@echo "                prints a table, writes build/results/bench.json (docs/performance.md)"
 	@echo "  make table1-extended  Table 1 per preset: quads, hexa, octo (docs/results.md)"
 	@echo "  make damage-bench     randomized propeller-damage flights, detector in the loop (docs/damage.md)"
+	@echo "  make effects-demo     SITL effects with the filter's matching term off and on (docs/math.md §13)"
 	@echo "  make debug    Debug host build in build/debug + host tests"
 	@echo "  make asan     AddressSanitizer + UBSan host build in build/asan + host tests"
 	@echo "  make fuzz     libFuzzer (ASan + UBSan) on the firmware API, FUZZ_RUNS=10000000"
@@ -185,3 +186,4 @@ include $(REPO)/sitl/table1.mk
 include $(REPO)/host_tools/gap_bench.mk
 include $(REPO)/sitl/damage_bench.mk
 include $(REPO)/sitl/table1_extended.mk
+include $(REPO)/sitl/effects_demo.mk

@@ -18,4 +18,5 @@ COMMAND_MODULES = [
     "observability",
     "damage_bench",
     "table1_extended",
+    "effects_demo",
 ]
