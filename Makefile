@@ -55,6 +55,8 @@ help:
 	@echo "  make table1-extended  Table 1 per preset: quads, hexa, octo (docs/results.md)"
 	@echo "  make damage-bench     randomized propeller-damage flights, detector in the loop (docs/damage.md)"
 	@echo "  make effects-demo     SITL effects with the filter's matching term off and on (docs/math.md §13)"
+	@echo "  make real-data        the optional terms on the 17 real Crazyflie logs in ../shared (skipped without"
+	@echo "                        them): build/results/real_data.json + tables (docs/real-data.md)"
 	@echo "  make debug    Debug host build in build/debug + host tests"
 	@echo "  make asan     AddressSanitizer + UBSan host build in build/asan + host tests"
 	@echo "  make fuzz     libFuzzer (ASan + UBSan) on the firmware API, FUZZ_RUNS=10000000"

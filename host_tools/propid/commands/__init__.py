@@ -19,4 +19,5 @@ COMMAND_MODULES = [
     "damage_bench",
     "table1_extended",
     "effects_demo",
+    "real_data",
 ]

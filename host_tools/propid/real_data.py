@@ -1,0 +1,151 @@
+"""`propid real-data`: the docs/real-data.md table of the filter's optional terms on a
+directory of real logs of one vehicle (the 17 Crazyflie 2.1 Brushless runs), with one command.
+
+Rules, fixed before this command was first run and not chosen by agreement with any
+reference value (the reference kf only divides the results for display):
+- every log replayed through the C filter with `propid replay`'s defaults: flying segment,
+  noise measured on the log (--noise auto), the telemetry delay the filter holds from the
+  vehicle file's esc_delay_s, else the per-log rule (--esc-delay default);
+- modes (the optional terms, docs/math.md §7-9): gyro only; + rotor inertia; + disturbance
+  torque; + accelerometer (torque scale off); + accelerometer with the thrust-torque scale;
+  all combined. Every other setting is the library default;
+- "square" runs are the logs whose name starts with "square", the others are the rest;
+- per run: kf = mean over rotors of the converged-part mean; rotor spread = the worst
+  rotor's |kf_i / run mean - 1|; km converged = all rotors' relative std below 5 % at the end.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+from dataclasses import dataclass
+from pathlib import Path
+
+from propid.errors import UserError
+
+# (name, what it is, ReplayOptions fields)
+MODES = [
+    ("gyro", "gyro only", dict(aiding="gyro", rotor_inertia="off", disturbance="off", torque_scale="off")),
+    ("rotor_inertia", "+ rotor inertia", dict(aiding="gyro", rotor_inertia="on", disturbance="off", torque_scale="off")),
+    ("disturbance", "+ disturbance torque", dict(aiding="gyro", rotor_inertia="off", disturbance="on", torque_scale="off")),
+    ("accel", "+ accelerometer, torque scale off", dict(aiding="gyro+accel", rotor_inertia="off", disturbance="off",
+                                                        torque_scale="off")),
+    ("accel_scale", "+ accelerometer with the torque scale", dict(aiding="gyro+accel", rotor_inertia="off",
+                                                                  disturbance="off", torque_scale="on")),
+    ("combined", "all: accelerometer + torque scale + disturbance + rotor inertia",
+     dict(aiding="gyro+accel", rotor_inertia="on", disturbance="on", torque_scale="on")),
+]
+ROTOR_WITHIN = 0.05
+
+
+@dataclass
+class RealDataConfig:
+    data_dir: Path
+    vehicle: Path
+    out_dir: Path
+    reference_kf: float
+    modes: tuple[str, ...] = tuple(mode[0] for mode in MODES)
+
+
+def _cv(values: list[float]) -> float:
+    return statistics.stdev(values) / statistics.fmean(values) if len(values) > 1 else float("nan")
+
+
+def run_summary(summary: dict, reference_kf: float) -> dict:
+    kf = summary["kf_mean"]
+    mean = statistics.fmean(kf)
+    return {
+        "kf_over_reference": mean / reference_kf,
+        "rotor_spread": max(abs(k / mean - 1.0) for k in kf),
+        "km": statistics.fmean(summary["km_mean"]),
+        "km_converged": all(summary["converged"]["km"]),
+        "km_converged_rotors": sum(summary["converged"]["km"]),
+        "accel_bias": summary["accel_bias"],
+        "torque_scale": summary["torque_scale"],
+        "esc_delay_s": summary["esc_delay_s"],
+        "finite": summary["finite"],
+    }
+
+
+def mode_summary(runs: dict[str, dict]) -> dict:
+    names = sorted(runs)
+    square = [runs[n]["kf_over_reference"] for n in names if n.startswith("square")]
+    other = [runs[n]["kf_over_reference"] for n in names if not n.startswith("square")]
+    kf = [runs[n]["kf_over_reference"] for n in names]
+    km = [runs[n]["km"] for n in names]
+    return {
+        "runs": len(names),
+        "kf_fleet_over_reference": statistics.fmean(kf), "kf_run_cv": _cv(kf),
+        "square_runs": len(square), "square_kf": statistics.fmean(square) if square else float("nan"),
+        "square_cv": _cv(square) if square else float("nan"),
+        "other_runs": len(other), "other_kf": statistics.fmean(other) if other else float("nan"),
+        "other_cv": _cv(other) if other else float("nan"),
+        "worst_rotor_spread": max(runs[n]["rotor_spread"] for n in names),
+        "runs_every_rotor_within_5pct": sum(runs[n]["rotor_spread"] <= ROTOR_WITHIN for n in names),
+        "km_fleet": statistics.fmean(km), "km_cv": _cv(km),
+        "runs_km_converged": sum(runs[n]["km_converged"] for n in names),
+        "accel_bias_median": statistics.median(runs[n]["accel_bias"] for n in names),
+        "all_finite": all(runs[n]["finite"] for n in names),
+    }
+
+
+def run_real_data(config: RealDataConfig, progress: bool = True) -> dict:
+    from propid.flightlog import read_flightlog, read_vehicle
+    from propid.replay import ReplayOptions, replay
+
+    logs = sorted(config.data_dir.glob("*.csv"))
+    if not logs:
+        raise UserError(f"no *.csv logs in {config.data_dir}")
+    vehicle = read_vehicle(config.vehicle)
+    modes = [mode for mode in MODES if mode[0] in config.modes]
+    jobs = [(mode, path) for mode in modes for path in logs]
+    iterator = jobs
+    if progress:
+        from tqdm import tqdm
+
+        iterator = tqdm(jobs, desc="real-data", unit="replay")
+    loaded: dict[Path, object] = {}
+    per_mode: dict[str, dict] = {mode[0]: {} for mode in modes}
+    for (name, _, fields), path in iterator:
+        if path not in loaded:
+            loaded[path] = read_flightlog(path, vehicle)
+        options = ReplayOptions(segment="flying", esc_delay="default", progress=False, **fields)
+        summary = replay(loaded[path], vehicle, options).summary
+        per_mode[name][path.stem.replace("_20251017", "")] = run_summary(summary, config.reference_kf)
+    result = {
+        "rules": __doc__.strip(),
+        "data_dir": str(config.data_dir), "vehicle": str(config.vehicle), "reference_kf": config.reference_kf,
+        "modes": [{"name": name, "what": what, "options": fields, "summary": mode_summary(per_mode[name]),
+                   "runs": per_mode[name]} for name, what, fields in modes],
+    }
+    config.out_dir.mkdir(parents=True, exist_ok=True)
+    (config.out_dir / "real_data.json").write_text(json.dumps(result, indent=2) + "\n")
+    return result
+
+
+def render(result: dict) -> str:
+    ref = result["reference_kf"]
+    lines = [f"kf over the reference {ref:.3g} N/(rad/s)^2 (display only); {result['modes'][0]['summary']['runs']} runs",
+             "",
+             "| mode | fleet kf / ref | run CV | square runs (CV) | other runs (CV) | worst rotor vs its run mean "
+             "| runs with every rotor within 5 % | km fleet (CV) | runs with all km converged | accel bias median [m/s^2] |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for mode in result["modes"]:
+        s = mode["summary"]
+        lines.append(
+            f"| {mode['what']} | {s['kf_fleet_over_reference']:.3f} | {100 * s['kf_run_cv']:.0f}% "
+            f"| {s['square_kf']:.2f} ({100 * s['square_cv']:.0f}%) | {s['other_kf']:.2f} ({100 * s['other_cv']:.0f}%) "
+            f"| {100 * s['worst_rotor_spread']:.0f}% | {s['runs_every_rotor_within_5pct']}/{s['runs']} "
+            f"| {s['km_fleet']:.3g} ({100 * s['km_cv']:.0f}%) | {s['runs_km_converged']}/{s['runs']} "
+            f"| {s['accel_bias_median']:.2f} |")
+    names = sorted(result["modes"][0]["runs"])
+    lines += ["", "| run | ESC delay [ms] | " + " | ".join(f"{m['name']}: kf (rotor spread, km conv.)" for m in result["modes"]) + " |",
+              "|---|---|" + "---|" * len(result["modes"])]
+    for name in names:
+        delay = result["modes"][0]["runs"][name]["esc_delay_s"]
+        cells = []
+        for mode in result["modes"]:
+            r = mode["runs"][name]
+            cells.append(f"{r['kf_over_reference']:.2f} ({100 * r['rotor_spread']:.0f}%, {r['km_converged_rotors']}/4)")
+        lines.append(f"| {name} | {1e3 * delay + 0.0:.0f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
