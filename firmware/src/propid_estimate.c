@@ -104,6 +104,12 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     estimate->model_terms = terms;
     estimate->rotor_delay_us = config->rotor_delay_us;
     uint32_t health = core->health;
+    if (health & PROPID_HEALTH_MODEL_MISMATCH) {
+        /* The innovations say the model misses something: a small std is then
+         * no evidence that a coefficient is right (propid_consistency.c). */
+        estimate->thrust_coeff_converged = 0u;
+        estimate->drag_coeff_converged = 0u;
+    }
     if (!core->has_rotor_data) {
         health |= PROPID_HEALTH_NO_ROTOR_DATA;
     }

@@ -7,6 +7,7 @@
 
 #include "propid_delay.h"
 #include "propid_internal.h"
+#include "propid_consistency.h"
 
 static int initialised(const propid_filter_t *filter)
 {
@@ -27,6 +28,9 @@ static void core_to_prior(propid_filter_t *filter)
     core->stale_mark = filter->counters.rejected[-(int)PROPID_ERR_ROTOR_STALE];
 #if PROPID_DELAY_SLOTS > 0
     propid_delay_clear(filter);
+#endif
+#if PROPID_CONSISTENCY
+    propid_consistency_reset(filter);
 #endif
 }
 
@@ -85,6 +89,9 @@ propid_status_t propid_reset_rotor(propid_filter_t *filter, uint8_t rotor)
     core->state[drag] = 1.0f;
     propid_cov_reset_state(&filter->derived, core, thrust);
     propid_cov_reset_state(&filter->derived, core, drag);
+#if PROPID_CONSISTENCY
+    propid_consistency_restart(filter);
+#endif
     return PROPID_OK;
 }
 
@@ -369,7 +376,11 @@ propid_status_t propid_fuse_gyro(propid_filter_t *filter, uint64_t time_us, cons
         }
     }
     /* Accepted: the filter has changed (prediction); now the measurement. */
-    const int gated = propid_update_gyro(filter, gyro_rad_s) != 0u;
+    const uint32_t gated_mask = propid_update_gyro(filter, gyro_rad_s);
+    const int gated = gated_mask != 0u;
+#if PROPID_CONSISTENCY
+    propid_consistency_observe(filter, gated_mask);
+#endif
     const uint32_t clamped = propid_clamp_coefficients(config, core);
     if (clamped != 0u) {
         core->health |= PROPID_HEALTH_STATE_CLAMPED;

@@ -85,6 +85,8 @@ HEALTH = {
     "GATE_REOPENED": 1 << 5,
     "ALL_CONVERGED": 1 << 6,
     "TIME_RESYNCED": 1 << 7,
+    "ROTOR_DAMAGE": 1 << 8,
+    "MODEL_MISMATCH": 1 << 9,
 }
 
 
@@ -224,6 +226,7 @@ class CountersStruct(ctypes.Structure):
         ("accel_gated", ctypes.c_uint32),
         ("accel_reanchored", ctypes.c_uint32),
         ("delay_overflows", ctypes.c_uint32),
+        ("model_mismatch", ctypes.c_uint32),
     ]
 
 

@@ -74,6 +74,11 @@ typedef enum {
 #define PROPID_HEALTH_ALL_CONVERGED   (1u << 6) /* every kf and km has converged */
 #define PROPID_HEALTH_TIME_RESYNCED   (1u << 7) /* propid_resync() was used since last reset (sticky) */
 #define PROPID_HEALTH_ROTOR_DAMAGE    (1u << 8) /* propid_damage_step() detected a damaged rotor (sticky) */
+#define PROPID_HEALTH_MODEL_MISMATCH  (1u << 9) /* the gyro innovations were inconsistent with their
+                                                   variances (windowed NIS above its chi-square bound)
+                                                   in one of the last few windows: the model misses
+                                                   something; no coefficient is reported converged
+                                                   (PROPID_CONSISTENCY builds; docs/reliability.md) */
 
 /* ------------------------------------------------------------------------ */
 /* Configuration                                                            */
@@ -204,6 +209,8 @@ typedef struct {
     uint32_t accel_gated;             /* accelerometer updates skipped by the gate */
     uint32_t accel_reanchored;        /* z bias re-anchored after too many gated samples */
     uint32_t delay_overflows;         /* samples released early because the delay buffer was full */
+    uint32_t model_mismatch;          /* NIS windows above their chi-square bound (0 when
+                                         PROPID_CONSISTENCY is 0) */
 } propid_counters_t;
 
 /* State layout: the first index of each block of the scaled state. Fixed blocks
@@ -286,6 +293,23 @@ typedef struct {
 } propid_delay_t;
 #endif
 
+/* Private: the model-consistency monitor's window (propid_consistency.c). */
+typedef struct {
+    float start_coeff[2 * PROPID_MAX_ROTORS];       /* kf, km (scaled) at the window's start */
+    float start_var[2 * PROPID_MAX_ROTORS];         /* their variances then */
+    uint64_t start_time_us;
+    float nis_sum;                                  /* sum of nu^2 / (gate^2 S) over fused axes */
+    uint32_t nis_count;                             /* fused axis samples in the window */
+    uint32_t samples;                               /* gyro samples in the window */
+    uint32_t window;                                /* gyro samples per window */
+    uint32_t check_every;                           /* gyro samples between checks of the running NIS */
+    uint8_t started;                                /* the window has its start snapshot */
+    uint8_t flagged;                                /* PROPID_HEALTH_MODEL_MISMATCH is up */
+    uint16_t clean_windows;                         /* consistent windows since the last inconsistent one */
+    float last_mean_nis;                            /* mean nu^2 / S of the last window */
+    float last_drift;                               /* largest Delta^2 / D of the last window */
+} propid_consistency_t;
+
 typedef struct {
     propid_config_t config;
     propid_derived_t derived;
@@ -293,6 +317,9 @@ typedef struct {
     propid_counters_t counters;
 #if PROPID_DELAY_SLOTS > 0
     propid_delay_t delay;
+#endif
+#if PROPID_CONSISTENCY
+    propid_consistency_t consistency;
 #endif
     uint32_t magic;                                 /* set by a successful propid_init() */
 } propid_filter_t;

@@ -54,6 +54,13 @@
 #define PROPID_MAX_STATES (PROPID_RATE_STATES + 2 * PROPID_MAX_ROTORS + PROPID_BIAS_STATES + \
                            PROPID_DISTURBANCE_STATES + PROPID_ACCEL_BIAS_STATES + PROPID_TORQUE_SCALE_STATES)
 
+/* 1: the model-consistency monitor (propid_consistency.c) watches the gyro
+ * innovations, raises PROPID_HEALTH_MODEL_MISMATCH and widens the coefficient
+ * covariance when they are inconsistent; 0 leaves it out (smaller filter). */
+#ifndef PROPID_CONSISTENCY
+#define PROPID_CONSISTENCY 1
+#endif
+
 #if PROPID_MAX_ROTORS < 1 || PROPID_MAX_ROTORS > 16
 #error "PROPID_MAX_ROTORS must be in 1..16"
 #endif
