@@ -118,6 +118,7 @@ typedef struct {
     sitl_esc_telemetry_t esc;
     sitl_faults_t faults;
     sitl_metrics_t metrics;
+    sitl_honesty_t honesty;
     sitl_flight_log_t log;
     int log_open;
     double true_kf[SITL_MAX_ROTORS], true_km[SITL_MAX_ROTORS];
@@ -230,6 +231,7 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
         km_std[i] = (double)f->filter_config.drag_coeff_rel_std0 * f->vehicle.rotor[i].drag_coeff;
     }
     sitl_metrics_init(&f->metrics, n, kf_std, km_std, (double)f->filter_config.gyro_bias_std0);
+    sitl_honesty_init(&f->honesty, n, f->true_kf, f->true_km);
     for (int k = 0; k < o->damage_count; k++) {
         if (o->damage[k].rotor >= n) {
             snprintf(err, sizeof(err), "--damage: rotor %d but the vehicle has %d", o->damage[k].rotor + 1, n);
@@ -545,6 +547,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
             sitl_metrics_add(&f->metrics, t, f->state.position, ref.position,
                              sitl_quat_yaw(f->state.quat), ref.yaw, &est, f->true_kf, f->true_km,
                              f->imu.gyro_bias);
+            sitl_honesty_add(&f->honesty, t, &est, &f->filter, f->true_kf, f->true_km, f->imu.gyro_bias);
             r->control_steps++;
             const char *why = divergence(f, o, &ref, tilt_limit_cos);
             if (why == NULL && now_ns < end_ns) {
@@ -667,6 +670,8 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     }
     propid_get_estimate(&f->filter, &r->estimate);
     propid_get_counters(&f->filter, &r->counters);
+    sitl_honesty_finish(&f->honesty);
+    r->honesty = f->honesty;
     memcpy(r->faults_injected, f->faults.injected, sizeof(r->faults_injected));
     teardown(f, r);
     r->wall_time_s = wall_seconds() - wall_start;

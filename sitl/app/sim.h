@@ -16,6 +16,7 @@
 #include "controller.h"
 #include "esc_telemetry.h"
 #include "imu.h"
+#include "honesty.h"
 #include "metrics.h"
 #include "options.h"
 #include "plant.h"
@@ -45,6 +46,7 @@ typedef struct {
     double true_bias[3];
     propid_estimate_t estimate;           /* final */
     propid_counters_t counters;
+    sitl_honesty_t honesty;               /* NEES, false "converged", recovery (honesty.h) */
     long faults_injected[SITL_FAULT_COUNT]; /* per class (faults.h) */
     long control_steps;
     long log_rows;

@@ -1,0 +1,165 @@
+/* Honesty metrics of the filter against the truth (see honesty.h). */
+#include "honesty.h"
+
+#include <math.h>
+#include <string.h>
+
+#define HONESTY_CONVERGED_TOL 0.05  /* a "converged" coefficient more than this off is a false claim */
+#define HONESTY_RECOVERED_TOL 0.10  /* recovered: every coefficient within this of the truth */
+#define HONESTY_MAX_DOF (2 * SITL_MAX_ROTORS + 3)
+
+/* z-quantile of chi-square(k), Wilson-Hilferty. */
+static double chi_square_quantile(double k, double z)
+{
+    const double c = 2.0 / (9.0 * k);
+    const double root = 1.0 - c + z * sqrt(c);
+    return k * root * root * root;
+}
+
+void sitl_honesty_init(sitl_honesty_t *h, int rotor_count, const double *true_kf, const double *true_km)
+{
+    memset(h, 0, sizeof(*h));
+    h->nees_dof = 2 * rotor_count + 3;
+    memcpy(h->last_true_kf, true_kf, (size_t)rotor_count * sizeof(double));
+    memcpy(h->last_true_km, true_km, (size_t)rotor_count * sizeof(double));
+    h->change_time_s = -1.0;
+    h->inside_since_s = -1.0;
+    h->max_recovery_s = -1.0;
+}
+
+/* e^T P^-1 e by Cholesky (double); returns -1 when P is not positive definite. */
+static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const double *e, int n)
+{
+    double l[HONESTY_MAX_DOF][HONESTY_MAX_DOF];
+    double y[HONESTY_MAX_DOF];
+    for (int i = 0; i < n; i++) {
+        for (int j = 0; j <= i; j++) {
+            double s = p[i][j];
+            for (int k = 0; k < j; k++) {
+                s -= l[i][k] * l[j][k];
+            }
+            if (i == j) {
+                if (!(s > 0.0)) {
+                    return -1.0;
+                }
+                l[i][i] = sqrt(s);
+            } else {
+                l[i][j] = s / l[j][j];
+            }
+        }
+    }
+    double nees = 0.0;
+    for (int i = 0; i < n; i++) {
+        double s = e[i];
+        for (int k = 0; k < i; k++) {
+            s -= l[i][k] * y[k];
+        }
+        y[i] = s / l[i][i];
+        nees += y[i] * y[i];
+    }
+    return nees;
+}
+
+static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const double *true_kf,
+                     const double *true_km, const double true_bias[3])
+{
+    const propid_config_t *config = &filter->config;
+    const propid_layout_t *layout = &filter->derived.layout;
+    const int n_rotor = config->rotor_count;
+    const int n = h->nees_dof;
+    int index[HONESTY_MAX_DOF];
+    double truth[HONESTY_MAX_DOF];
+    for (int i = 0; i < n_rotor; i++) {
+        index[i] = layout->thrust + i;
+        truth[i] = true_kf[i] / (double)config->rotor[i].thrust_coeff_nominal;
+        index[n_rotor + i] = layout->drag + i;
+        truth[n_rotor + i] = true_km[i] / (double)config->rotor[i].drag_coeff_nominal;
+    }
+    for (int a = 0; a < 3; a++) {
+        index[2 * n_rotor + a] = layout->gyro_bias + a;
+        truth[2 * n_rotor + a] = true_bias[a];
+    }
+    double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF];
+    double e[HONESTY_MAX_DOF];
+    for (int i = 0; i < n; i++) {
+        e[i] = (double)filter->core.state[index[i]] - truth[i];
+        for (int j = 0; j < n; j++) {
+            const int a = index[i] < index[j] ? index[i] : index[j];
+            const int b = index[i] < index[j] ? index[j] : index[i];
+            p[i][j] = (double)filter->core.cov[a][b]; /* the filter keeps the upper triangle */
+        }
+    }
+    const double nees = nees_of(p, e, n);
+    if (nees < 0.0 || !isfinite(nees)) {
+        return;
+    }
+    h->nees_samples++;
+    h->nees_sum += nees;
+    if (nees >= chi_square_quantile(n, -1.959964) && nees <= chi_square_quantile(n, 1.959964)) {
+        h->nees_in_bounds++;
+    }
+}
+
+void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *estimate,
+                      const propid_filter_t *filter, const double *true_kf, const double *true_km,
+                      const double true_bias[3])
+{
+    const int n = estimate->rotor_count;
+    int finite = 1;
+    int inside = 1;
+    int changed = 0;
+    for (int i = 0; i < n; i++) {
+        finite &= isfinite(estimate->thrust_coeff[i]) && isfinite(estimate->thrust_coeff_std[i]) &&
+                  isfinite(estimate->drag_coeff[i]) && isfinite(estimate->drag_coeff_std[i]);
+        const double kf_err = fabs((double)estimate->thrust_coeff[i] / true_kf[i] - 1.0);
+        const double km_err = fabs((double)estimate->drag_coeff[i] / true_km[i] - 1.0);
+        if ((estimate->thrust_coeff_converged >> i) & 1u) {
+            h->converged_claims++;
+            h->false_converged += kf_err > HONESTY_CONVERGED_TOL;
+        }
+        if ((estimate->drag_coeff_converged >> i) & 1u) {
+            h->converged_claims++;
+            h->false_converged += km_err > HONESTY_CONVERGED_TOL;
+        }
+        inside &= kf_err <= HONESTY_RECOVERED_TOL && km_err <= HONESTY_RECOVERED_TOL;
+        changed |= true_kf[i] != h->last_true_kf[i] || true_km[i] != h->last_true_km[i];
+        h->last_true_kf[i] = true_kf[i];
+        h->last_true_km[i] = true_km[i];
+    }
+    for (int a = 0; a < 3; a++) {
+        finite &= isfinite(estimate->gyro_bias[a]) && isfinite(estimate->gyro_bias_std[a]) &&
+                  isfinite(estimate->body_rate[a]) && isfinite(estimate->body_rate_std[a]);
+    }
+    if (!finite) {
+        h->nonfinite_estimates++;
+    }
+    if (changed) {
+        sitl_honesty_finish(h); /* the previous change, if any: recovered or not */
+        h->changes++;
+        h->change_time_s = t;
+        h->inside_since_s = -1.0;
+    }
+    if (h->change_time_s >= 0.0) {
+        if (!inside) {
+            h->inside_since_s = -1.0;
+        } else if (h->inside_since_s < 0.0) {
+            h->inside_since_s = t;
+        }
+    }
+    add_nees(h, filter, true_kf, true_km, true_bias);
+}
+
+void sitl_honesty_finish(sitl_honesty_t *h)
+{
+    if (h->change_time_s < 0.0) {
+        return;
+    }
+    if (h->inside_since_s >= 0.0) {
+        const double recovery = h->inside_since_s - h->change_time_s;
+        h->max_recovery_s = recovery > h->max_recovery_s ? recovery : h->max_recovery_s;
+    } else {
+        h->unrecovered++;
+    }
+    h->change_time_s = -1.0;
+    h->inside_since_s = -1.0;
+}

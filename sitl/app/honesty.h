@@ -1,0 +1,43 @@
+/*
+ * Is the filter honest? Per control step, against the truth: NEES of the
+ * coefficients and gyro biases with the filter's full covariance block (and
+ * whether it lies in its 95 % chi-square interval), non-finite estimates,
+ * "converged" claims and the false ones (a coefficient flagged converged while
+ * more than 5 % off), and the recovery after a change of the true coefficients
+ * (rotor loss, damage): the time until every kf and km is back within 10 % of
+ * the truth and stays there. Read by `make soak` from the summary JSON.
+ */
+#ifndef SITL_HONESTY_H
+#define SITL_HONESTY_H
+
+#include "propid/propid.h"
+#include "vehicle.h"
+
+typedef struct {
+    long nees_samples;          /* steps with a usable covariance block */
+    long nees_in_bounds;        /* ... whose NEES lay in the 95 % chi-square interval */
+    double nees_sum;
+    int nees_dof;               /* 2 N + 3 */
+    long nonfinite_estimates;   /* steps with a non-finite estimate or std */
+    long converged_claims;      /* coefficient-steps flagged converged */
+    long false_converged;       /* ... of them more than 5 % off */
+    double last_true_kf[SITL_MAX_ROTORS], last_true_km[SITL_MAX_ROTORS];
+    double change_time_s;       /* latest change of the true coefficients, -1: none */
+    double inside_since_s;      /* every coefficient within 10 % since then, -1: outside */
+    double max_recovery_s;      /* longest completed recovery, -1: none */
+    int changes;                /* changes of the true coefficients */
+    int unrecovered;            /* changes not recovered by the end (or the next change) */
+} sitl_honesty_t;
+
+void sitl_honesty_init(sitl_honesty_t *h, int rotor_count, const double *true_kf, const double *true_km);
+
+/* One control step: estimate, the filter (for its covariance), the truth. */
+void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *estimate,
+                      const propid_filter_t *filter, const double *true_kf, const double *true_km,
+                      const double true_bias[3]);
+
+/* Close the recovery of the latest change (at the end of the flight, or at the
+ * next change): recovered (inside at that moment) or not. */
+void sitl_honesty_finish(sitl_honesty_t *h);
+
+#endif /* SITL_HONESTY_H */
