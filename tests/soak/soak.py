@@ -1,0 +1,271 @@
+#!/usr/bin/env python3
+"""`make soak`: long randomized SITL flights with the filter in the loop.
+
+Not a test with a pass/fail verdict on its own: a measurement of how the filter
+behaves over many filter steps of varied flight (docs/reliability.md, "Soak").
+A seeded plan of flights (vehicle, trajectory, duration, sensors, filter tuning,
+0-2 unmodelled effects, 0-4 fault classes with random rates, a rotor losing
+part of its kf and km mid-flight) is flown twice per case: with the filter's
+estimates in the controller (mode filter) and with the true coefficients
+(mode oracle; the filter runs there too). Flights run in parallel over --jobs
+processes until the filter steps (accepted gyro samples, both modes) reach
+--steps. Writes the figures to --out (JSON) and prints them.
+
+Figures:
+- steps: accepted gyro samples over all flights (both modes);
+- faults_injected: per fault class, summed;
+- nan_count: control steps with a non-finite estimate or std (must be 0);
+- max_recovery_s: longest time, after a rotor lost part of its kf/km, until
+  every kf and km was back within 10 % of the truth and stayed; `unrecovered`
+  counts losses not recovered by the end of the flight;
+- nees_in_bounds_pct: over fault-free, effect-free flights without a rotor loss
+  (mode filter), the share of control steps whose NEES of coefficients and gyro
+  biases (full covariance block) lies inside its 95 % chi-square interval; also
+  per tuning and sensor set;
+- false_converged: coefficient "converged" claims (per coefficient and control
+  step) while more than 5 % off, over all mode-filter flights; with the claims;
+- cov_repairs: covariance repairs, summed;
+- diverged_filter / diverged_oracle: flights the simulator stopped for
+  divergence (exit 3) in each mode; `filter_only_diverged`: cases where the
+  filter's flight diverged and the oracle's did not.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import random
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from pathlib import Path
+
+VEHICLES = (("crazyflie-plus", 3), ("crazyflie-x", 3), ("hummingbird-plus", 2), ("hummingbird-x", 2),
+            ("hexa-x", 1), ("octo-x", 1))
+TRAJECTORIES = ("hover", "step", "circle", "lissajous")
+# Effect ids with their default strength (propid_sitl --help).
+EFFECTS = {
+    "rotor_inertia": 1.0, "rotor_gyroscopic": 1.0, "rotor_drag": 1.0, "translational_lift": 1.0,
+    "ground_effect": 1.0, "com_offset": 0.05, "inertia_error": 0.1, "esc_delay": 0.02,
+    "thrust_nonlinearity": 0.1, "gyro_scale": 0.02, "aero_damping": 1.0,
+}
+# Fault classes with the log10 range of their rate per sample (time_jitter: std [us]).
+FAULTS = {
+    "esc_dropout": (-3.0, -0.7), "esc_spike": (-4.0, -2.0), "esc_stuck": (-4.0, -2.5),
+    "esc_stale": (-4.0, -2.5), "gyro_spike": (-4.0, -2.0), "gyro_saturation": (-4.0, -2.5),
+    "gyro_stuck": (-4.0, -2.5), "time_jitter": (0.5, 2.0), "time_repeat": (-4.0, -2.5),
+    "time_backward": (-4.0, -2.5), "time_jump": (-4.5, -3.0),
+}
+# The Table 1 campaign's filter (priors = the truth distribution's, tight rate
+# noise, no random walks) and the library default (propid_config_default).
+CAMPAIGN_FLIGHT = ["--start-at-rest", "--coeff-spread", "0.2", "--gyro-bias-max", "0.0174533"]
+CAMPAIGN_FILTER = ["--prior-kf-std", "0.11547", "--prior-km-std", "0.11547", "--prior-bias-std", "0.0100767",
+                   "--prior-rate-std", "0.01", "--filter-rate-noise", "0.0004", "--filter-coeff-walk", "0.0",
+                   "--filter-bias-walk", "0.0"]
+
+
+def plan_case(rng: random.Random, index: int) -> dict:
+    """One random flight configuration (flown in both modes)."""
+    vehicle = rng.choices([v for v, _ in VEHICLES], weights=[w for _, w in VEHICLES])[0]
+    trajectory = rng.choice(TRAJECTORIES)
+    duration = round(rng.uniform(10.0, 60.0), 1)
+    sensors = "paper" if rng.random() < 0.4 else "default"
+    clean = rng.random() < 0.3          # fault-free, effect-free, no rotor loss: the NEES flights
+    effects: list[str] = []
+    faults: list[str] = []
+    damage = None
+    if not clean:
+        for name in rng.sample(sorted(EFFECTS), rng.choice((0, 0, 1, 1, 2))):
+            effects.append(f"{name}={EFFECTS[name] * rng.uniform(0.5, 1.5):.4g}")
+        for name in rng.sample(sorted(FAULTS), rng.choice((0, 1, 2, 3, 4))):
+            low, high = FAULTS[name]
+            faults.append(f"{name}={10.0 ** rng.uniform(low, high):.3g}")
+        if rng.random() < 0.3:
+            rotor = rng.randint(1, 4)
+            damage = f"{rotor}@{rng.uniform(0.3, 0.7) * duration:.2f}={rng.uniform(0.1, 0.4):.3f}"
+    # Tight (campaign) tuning only where it can hold: paper sensors, constant coefficients.
+    tuning = "campaign" if sensors == "paper" and damage is None and rng.random() < 0.5 else "library"
+    return {"case": index, "seed": 1000 + index, "vehicle": vehicle, "trajectory": trajectory,
+            "duration_s": duration, "sensors": sensors, "tuning": tuning, "clean": clean,
+            "effects": effects, "faults": faults, "damage": damage}
+
+
+def command(sitl: str, case: dict, mode: str, summary: str) -> list[str]:
+    cmd = [sitl, "--vehicle", case["vehicle"], "--trajectory", case["trajectory"], "--mode", mode,
+           "--seed", str(case["seed"]), "--duration", str(case["duration_s"]), "--quiet",
+           "--summary-json", summary]
+    if case["sensors"] == "paper":
+        cmd.append("--paper")
+    if case["tuning"] == "campaign":
+        cmd += CAMPAIGN_FLIGHT + CAMPAIGN_FILTER
+    for effect in case["effects"]:
+        cmd += ["--effect", effect]
+    for fault in case["faults"]:
+        cmd += ["--fault", fault]
+    if case["damage"]:
+        cmd += ["--damage", case["damage"]]
+    return cmd
+
+
+def fly(sitl: str, case: dict, mode: str, workdir: str) -> dict:
+    summary = os.path.join(workdir, f"case{case['case']}-{mode}.json")
+    cmd = command(sitl, case, mode, summary)
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
+    if proc.returncode not in (0, 3) or not os.path.exists(summary):
+        return {"error": f"exit {proc.returncode}: {proc.stderr.strip()[-300:]}", "command": " ".join(cmd)}
+    with open(summary, encoding="utf-8") as handle:
+        data = json.load(handle)
+    os.remove(summary)
+    data["exit"] = proc.returncode
+    return data
+
+
+def expected_steps(case: dict) -> float:
+    """Planned accepted gyro samples of one flight (for the plan and the progress bar)."""
+    rate = 500.0 if case["sensors"] == "paper" else 1000.0
+    return rate * case["duration_s"]
+
+
+def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
+    out = {"steps": 0, "flights": 0, "cases": len(cases), "flown_s": 0.0,
+           "faults_injected": {}, "nan_count": 0, "max_recovery_s": None, "rotor_losses": 0,
+           "unrecovered": 0, "nees_in_bounds_pct": None, "nees_samples": 0, "nees_by_group": {},
+           "false_converged": 0, "converged_claims": 0, "false_converged_pct": None,
+           "false_converged_by_group": {},
+           "cov_repairs": 0, "model_mismatch_windows": 0, "diverged_filter": 0, "diverged_oracle": 0,
+           "filter_only_diverged": 0, "errors": []}
+    nees_in = nees_all = 0
+    groups: dict[str, list[int]] = {}
+    false_groups: dict[str, list[int]] = {}
+    for case in cases:
+        pair = {}
+        for mode in ("filter", "oracle"):
+            data = results.get((case["case"], mode))
+            if data is None:
+                continue
+            if "error" in data:
+                out["errors"].append({"case": case, "mode": mode, **data})
+                continue
+            pair[mode] = data
+            out["flights"] += 1
+            out["steps"] += int(data.get("gyro_accepted", 0))
+            out["flown_s"] += float(data.get("flown_s", 0.0))
+            for name, count in data.get("faults_injected", {}).items():
+                out["faults_injected"][name] = out["faults_injected"].get(name, 0) + int(count)
+            honesty = data.get("honesty", {})
+            out["nan_count"] += int(honesty.get("nonfinite_estimates", 0))
+            out["cov_repairs"] += int(data.get("cov_repairs", 0))
+            out["model_mismatch_windows"] += int(data.get("model_mismatch_windows", 0))
+            if data["exit"] == 3:
+                out["diverged_" + mode] += 1
+            if mode != "filter":
+                continue
+            out["false_converged"] += int(honesty.get("false_converged", 0))
+            out["converged_claims"] += int(honesty.get("converged_claims", 0))
+            kind = "clean" if case["clean"] else ("effects" if case["effects"] else "no effect")
+            key = f"{case['tuning']} tuning, {case['sensors']} sensors, {kind}"
+            claims = false_groups.setdefault(key, [0, 0, 0])
+            claims[0] += int(honesty.get("false_converged", 0))
+            claims[1] += int(honesty.get("converged_claims", 0))
+            claims[2] += 1
+            out["rotor_losses"] += int(honesty.get("coefficient_changes", 0))
+            out["unrecovered"] += int(honesty.get("unrecovered", 0))
+            recovery = honesty.get("max_recovery_s")
+            if recovery is not None:
+                out["max_recovery_s"] = max(out["max_recovery_s"] or 0.0, float(recovery))
+            if case["clean"] and data["exit"] == 0:
+                inside, samples = int(honesty.get("nees_in_bounds", 0)), int(honesty.get("nees_samples", 0))
+                nees_in += inside
+                nees_all += samples
+                key = f"{case['tuning']} tuning, {case['sensors']} sensors"
+                group = groups.setdefault(key, [0, 0, 0])
+                group[0] += inside
+                group[1] += samples
+                group[2] += 1
+        if pair.get("filter", {}).get("exit") == 3 and pair.get("oracle", {}).get("exit") == 0:
+            out["filter_only_diverged"] += 1
+    out["nees_samples"] = nees_all
+    if nees_all:
+        out["nees_in_bounds_pct"] = round(100.0 * nees_in / nees_all, 2)
+    out["nees_by_group"] = {key: {"in_bounds_pct": round(100.0 * g[0] / g[1], 2) if g[1] else None,
+                                  "samples": g[1], "flights": g[2]} for key, g in sorted(groups.items())}
+    out["false_converged_by_group"] = {
+        key: {"false": g[0], "claims": g[1], "flights": g[2]} for key, g in sorted(false_groups.items())}
+    if out["converged_claims"]:
+        out["false_converged_pct"] = round(100.0 * out["false_converged"] / out["converged_claims"], 3)
+    out["flown_s"] = round(out["flown_s"], 1)
+    out["wall_time_s"] = round(elapsed_s, 1)
+    out["jobs"] = args.jobs
+    out["plan_seed"] = args.seed
+    out["command"] = f"make soak SOAK_STEPS={args.steps} SOAK_SEED={args.seed} JOBS={args.jobs}"
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--sitl", required=True, help="propid_sitl executable")
+    parser.add_argument("--steps", type=float, default=1e7, help="filter steps to fly (default 1e7)")
+    parser.add_argument("--jobs", type=int, default=2, help="parallel flights (default 2)")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the flight plan (default 1)")
+    parser.add_argument("--out", default="build/results/soak.json", help="JSON figures")
+    args = parser.parse_args(argv)
+    if not os.access(args.sitl, os.X_OK):
+        print(f"soak: {args.sitl}: not an executable (run make host)", file=sys.stderr)
+        return 2
+    if args.steps <= 0 or args.jobs < 1:
+        print("soak: --steps must be > 0 and --jobs >= 1", file=sys.stderr)
+        return 2
+
+    rng = random.Random(args.seed)
+    cases: list[dict] = []
+    planned = 0.0
+    while planned < args.steps:
+        case = plan_case(rng, len(cases))
+        cases.append(case)
+        planned += 2.0 * expected_steps(case)
+
+    try:
+        from tqdm import tqdm
+    except ImportError:  # the venv has it; plain runs without a bar
+        tqdm = None
+    bar = tqdm(total=int(planned), unit="step", unit_scale=True, desc="soak", file=sys.stderr) if tqdm else None
+    results: dict = {}
+    start = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="propid-soak-") as workdir, \
+            ThreadPoolExecutor(max_workers=args.jobs) as pool:
+        futures = {pool.submit(fly, args.sitl, case, mode, workdir): (case, mode)
+                   for case in cases for mode in ("filter", "oracle")}
+        try:
+            for future in as_completed(futures):
+                case, mode = futures[future]
+                try:
+                    results[(case["case"], mode)] = future.result()
+                except subprocess.TimeoutExpired:
+                    results[(case["case"], mode)] = {"error": "timeout", "command": ""}
+                if bar:
+                    bar.update(int(expected_steps(case)))
+        except KeyboardInterrupt:
+            for future in futures:
+                future.cancel()
+            print("\nsoak: interrupted; figures of the flights flown so far", file=sys.stderr)
+    if bar:
+        bar.close()
+    figures = summarise(cases, results, time.monotonic() - start, args)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(figures, indent=2) + "\n", encoding="utf-8")
+    width = max(len(k) for k in figures)
+    for key, value in figures.items():
+        if key in ("errors",):
+            value = len(value)
+        print(f"{key:<{width}}  {json.dumps(value) if isinstance(value, (dict, list)) else value}")
+    print(f"soak: {args.out}")
+    return 1 if figures["errors"] or figures["nan_count"] else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
