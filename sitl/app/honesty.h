@@ -14,7 +14,8 @@
 #include "vehicle.h"
 
 typedef struct {
-    long nees_samples;          /* steps with a usable covariance block */
+    long steps;                 /* control steps seen */
+    long nees_samples;          /* NEES samples (every 10th step) with a usable covariance block */
     long nees_in_bounds;        /* ... whose NEES lay in the 95 % chi-square interval */
     double nees_sum;
     int nees_dof;               /* 2 N + 3 */
