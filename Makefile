@@ -40,7 +40,8 @@ help:
 	@echo "                the loop; writes a log and a plot under build/sitl"
 	@echo "  make test     set up, build host + target, run every test: Unity and SITL tests on"
 	@echo "                the host, Unity tests on Cortex-M4F under QEMU, forbidden-symbol check,"
-	@echo "                pytest of host_tools"
+	@echo "                pytest of host_tools, every host C test again under ASan + UBSan,"
+	@echo "                a short fuzz run, cppcheck"
 	@echo "  make setup    Debian packages (when missing, as root), .venv with pinned requirements"
 	@echo "                + host_tools, Unity sources (hash checked)"
 	@echo "  make host     configure and build build/host (Release)"
@@ -58,7 +59,8 @@ help:
 	@echo "  make real-data        the optional terms on the 17 real Crazyflie logs in ../shared (skipped without"
 	@echo "                        them): build/results/real_data.json + tables (docs/real-data.md)"
 	@echo "  make debug    Debug host build in build/debug + host tests"
-	@echo "  make asan     AddressSanitizer + UBSan host build in build/asan + host tests"
+	@echo "  make asan     AddressSanitizer + UBSan host build in build/asan + every host C test"
+	@echo "                (a stage of make test)"
 	@echo "  make fuzz     libFuzzer (ASan + UBSan) on the firmware API, FUZZ_RUNS=10000000"
 	@echo "                executions over JOBS processes; writes build/results/fuzz.json"
 	@echo "  make cppcheck static analysis of firmware/ (fails on any finding)"
@@ -148,6 +150,7 @@ test: setup
 	stage target-build  $(MAKE) --no-print-directory target; \
 	stage target-tests  $(MAKE) --no-print-directory test-target; \
 	stage python-tests  $(MAKE) --no-print-directory test-python; \
+	stage sanitizers    $(MAKE) --no-print-directory asan; \
 	stage fuzz-short    $(MAKE) --no-print-directory test-fuzz; \
 	stage cppcheck      $(MAKE) --no-print-directory cppcheck; \
 	echo; echo "=== make test: $$(( $$(date +%s) - start )) s"; \
