@@ -693,6 +693,7 @@ class CFilter:
             "accel_gated": int(c.accel_gated),
             "accel_reanchored": int(c.accel_reanchored),
             "delay_overflows": int(c.delay_overflows),
+            "model_mismatch": int(c.model_mismatch),
         }
 
     def scaled_state(self) -> tuple[np.ndarray, np.ndarray]:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from propid import cfilter
+from propid.cfilter import DEFAULT_TUNING
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.replay.alignment import detect_streams, estimate_esc_delay, filter_input_rule
@@ -55,6 +57,9 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     if highpass_info is not None:
         notes["diagnostic_highpass"] = highpass_info
     filt = FilterSession(vehicle, config_fields)
+    kf_nominal = [float(v) for v in config_fields["thrust_coeff_nominal"]]
+    km_nominal = [float(v) for v in config_fields["drag_coeff_nominal"]]
+    converged_rel_std = float(config_fields.get("converged_rel_std", DEFAULT_TUNING["converged_rel_std"]))
     t_us = np.round((log.t - log.t[0]) * US).astype(np.int64) + US  # start at 1 s: time 0 is 'no time yet'
     speeds = np.ascontiguousarray(log.rotor_speed, dtype=np.float32)
     aiding = notes.get("aiding", "gyro")
@@ -77,8 +82,6 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     status_counts: dict[str, int] = {}
     n = vehicle.rotor_count
     rec_t, rec_kf, rec_kfs, rec_km, rec_kms, rec_bg, rec_bgs, rec_conv_kf, rec_conv_km, rec_nis = ([] for _ in range(10))
-    from propid.cfilter import DEFAULT_TUNING
-
     gate = float(config_fields.get("gate_sigma", DEFAULT_TUNING["gate_sigma"]))
     resyncs = 0
     gyro_pushes = 0
@@ -126,8 +129,11 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
                 rec_kms.append(est["drag_coeff_std"][:n])
                 rec_bg.append(est["gyro_bias"])
                 rec_bgs.append(est["gyro_bias_std"])
-                rec_conv_kf.append([(est["thrust_coeff_converged"] >> k) & 1 for k in range(n)])
-                rec_conv_km.append([(est["drag_coeff_converged"] >> k) & 1 for k in range(n)])
+                # The averaging window starts where the std says converged, whatever
+                # the model-mismatch flag says (the flag withdraws the claim, the
+                # estimate is the same).
+                rec_conv_kf.append([est["thrust_coeff_std"][k] < converged_rel_std * kf_nominal[k] for k in range(n)])
+                rec_conv_km.append([est["drag_coeff_std"][k] < converged_rel_std * km_nominal[k] for k in range(n)])
                 rec_nis.append(est["innovation_test_ratio"] if status >= 0 else [np.nan] * 3)
     if not rec_t:
         raise UserError("no gyro sample was replayed")
@@ -154,19 +160,21 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         status_counts = {name: int(count) for name, count in counters["rejected"].items()}
         gyro_accepted = int(counters["gyro_accepted"])
 
-    def converged_mean(values: np.ndarray, flags: np.ndarray) -> tuple[list[float], list[bool], list[float]]:
-        means, conv, starts = [], [], []
+    def converged_mean(values: np.ndarray, flags: np.ndarray) -> tuple[list[float], list[float]]:
+        means, starts = [], []
         half = values.shape[0] // 2
         for k in range(values.shape[1]):
             on = np.flatnonzero(flags[:, k])
             start = int(on[0]) if on.size else half
             means.append(float(np.mean(values[start:, k])))
-            conv.append(bool(on.size) and bool(flags[-1, k]))
             starts.append(float(series["t"][start]) if on.size else float("nan"))
-        return means, conv, starts
+        return means, starts
 
-    kf_mean, kf_conv, kf_start = converged_mean(series["kf"], series["kf_converged"])
-    km_mean, km_conv, km_start = converged_mean(series["km"], series["km_converged"])
+    kf_mean, kf_start = converged_mean(series["kf"], series["kf_converged"])
+    km_mean, km_start = converged_mean(series["km"], series["km_converged"])
+    # The filter's own claim at the end (withdrawn while MODEL_MISMATCH is up).
+    kf_conv = [bool((final["thrust_coeff_converged"] >> k) & 1) for k in range(n)]
+    km_conv = [bool((final["drag_coeff_converged"] >> k) & 1) for k in range(n)]
     finite = all(np.all(np.isfinite(series[k])) for k in ("kf", "kf_std", "km", "km_std", "gyro_bias"))
     summary = {
         "log": str(log.path) if log.path else None,
@@ -200,6 +208,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "kf_converged_from_s": kf_start,
         "km_converged_from_s": km_start,
         "converged": {"kf": kf_conv, "km": km_conv},
+        "model_mismatch": bool(int(final["health"]) & cfilter.HEALTH["MODEL_MISMATCH"]),
+        "model_mismatch_windows": int(counters.get("model_mismatch", 0)),
         "gyro_bias": [float(v) for v in final["gyro_bias"]],
         "gyro_bias_std": [float(v) for v in final["gyro_bias_std"]],
         "aiding": aiding,
@@ -221,9 +231,11 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "config_notes": notes,
         "warnings": replay_warnings(rates, gyro_accepted, gyro_pushes),
         "definitions": {
-            "kf_mean": "mean of the estimate from the first sample flagged converged (rel std < converged_rel_std) "
-                       "to the end; second half of the replay if never converged",
-            "converged": "converged flag set at the end of the replay",
+            "kf_mean": "mean of the estimate from the first sample with rel std < converged_rel_std to the end; "
+                       "second half of the replay if never below",
+            "converged": "the filter's converged flag at the end of the replay (none while model_mismatch)",
+            "model_mismatch": "MODEL_MISMATCH health flag at the end: the innovations or the coefficients' drift "
+                              "were inconsistent with the filter's covariance (docs/reliability.md)",
             "gyro_rate_hz/rotor_rate_hz": "new samples per second of each stream over the replayed rows (a row "
                                           "repeating the previous value of a stream is no new sample)",
         },
