@@ -49,7 +49,7 @@ if [ -n "$example" ]; then
     echo
     echo "== port example ELF (vector table, start-up, newlib pieces, filter, mixer, demo board)"
     printf "  %-34s %8s %6s %6s %8s %7s\n" ELF text data bss flash RAM
-    "$size" -B "$example" | table "$(basename "$example")" | head -1
+    "$size" -B "$example" | table "$(basename "$example")" | awk 'NR == 1'
 fi
 
 echo

@@ -154,6 +154,15 @@ def decode_blackbox(
         parser = Parser.load(str(path), 1)
     except Exception as exc:  # orangebox raises assorted errors on foreign files
         raise UserError(f"{path}: not a readable Betaflight blackbox log ({exc})") from None
+    try:
+        return _decode_log(parser, path, log_index, progress)
+    except UserError:
+        raise
+    except Exception as exc:  # orangebox trusts the headers: a corrupt one fails anywhere
+        raise UserError(f"{path}: corrupt Betaflight blackbox log ({type(exc).__name__}: {exc})") from None
+
+
+def _decode_log(parser, path: Path, log_index: int | None, progress: bool) -> tuple[dict, dict[str, np.ndarray], dict]:
     count = parser.reader.log_count
     pointers = list(parser.reader.log_pointers) + [path.stat().st_size]
     logs = [{"index": k + 1, "bytes": int(pointers[k + 1] - pointers[k])} for k in range(count)]
@@ -174,10 +183,10 @@ def decode_blackbox(
         for frame in frames:
             data = frame.data
             rows.append([data[i] for i in wanted])
-    except RuntimeError as exc:
+    except Exception as exc:  # orangebox: RuntimeError on a truncated file, others on corrupt bytes
         if not rows:
-            raise UserError(f"{path} log {log_index}: {exc}") from None
-        # a truncated file (power cut): keep the frames decoded so far
+            raise UserError(f"{path} log {log_index}: {type(exc).__name__}: {exc}") from None
+        # a truncated or partly corrupt file (power cut): keep the frames decoded so far
     finally:
         if progress:
             frames.close()

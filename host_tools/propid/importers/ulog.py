@@ -18,6 +18,9 @@ its own times.
 
 from __future__ import annotations
 
+import contextlib
+import io
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -72,11 +75,23 @@ def import_ulog(
         raise UserError(f"gyro topic {gyro_topic!r}: choose one of {', '.join(GYRO_TOPICS)}")
     if not path.is_file():
         raise UserError(f"cannot read {path}: no such file")
+    chatter = io.StringIO()  # pyulog prints its corruption notes to stdout
     try:
-        ulog = ULog(str(path), [gyro_topic, "sensor_combined", "esc_status"])
+        with contextlib.redirect_stdout(chatter):
+            ulog = ULog(str(path), [gyro_topic, "sensor_combined", "esc_status"])
     except Exception as exc:  # pyulog raises assorted errors on foreign files
         raise UserError(f"{path}: not a readable PX4 ULog file ({exc})") from None
+    if "corrupt" in chatter.getvalue():
+        print(f"propid: warning: {path}: pyulog found corrupt records and skipped them", file=sys.stderr)
+    try:
+        return _from_ulog(ulog, path, vehicle, gyro_topic, motor_map)
+    except (KeyError, IndexError, ValueError, TypeError) as exc:
+        # A corrupt format definition leaves topics without the fields they should have.
+        raise UserError(f"{path}: incomplete or corrupt PX4 ULog ({type(exc).__name__}: {exc})") from None
 
+
+def _from_ulog(ulog, path: Path, vehicle: Vehicle | None, gyro_topic: str,
+               motor_map: list[int] | None) -> tuple[FlightLog, dict]:
     def topic(name):
         found = [d for d in ulog.data_list if d.name == name]
         return min(found, key=lambda d: d.multi_id) if found else None
