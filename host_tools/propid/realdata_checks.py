@@ -74,13 +74,24 @@ def _hold_rotor_rows(speeds: np.ndarray) -> np.ndarray:
     return held
 
 
+# Speeds further than this many robust standard deviations (1.4826 MAD) from the
+# median are outliers for the limit below: a spike of a corrupt frame, not a peak.
+SPEED_FENCE_SIGMAS = 10.0
+
+
 def absurd_speed_limit(speeds: np.ndarray) -> float:
     """A rotor speed above this is a telemetry glitch: 2x the 99.9th percentile of the
-    finite speeds (robust to a handful of eRPM spikes, generous to real peaks)."""
+    finite speeds inside a robust fence (median + SPEED_FENCE_SIGMAS x 1.4826 MAD), so
+    eRPM spikes do not raise the limit however many there are (up to half the samples),
+    and real peaks keep a factor 2 of headroom."""
     finite = speeds[np.isfinite(speeds)]
     if finite.size == 0:
         raise UserError("the log has no finite rotor speed")
-    return 2.0 * float(np.percentile(finite, 99.9))
+    median = float(np.median(finite))
+    spread = 1.4826 * float(np.median(np.abs(finite - median)))
+    spread = max(spread, 0.01 * abs(median), 1.0)  # a constant-speed log: 1 % of it, at least 1 rad/s
+    inside = finite[np.abs(finite - median) <= SPEED_FENCE_SIGMAS * spread]
+    return 2.0 * float(np.percentile(inside, 99.9))
 
 
 def clean_rotor_speeds(speeds: np.ndarray, limit: float) -> tuple[np.ndarray, int]:

@@ -64,7 +64,8 @@ def build_config(vehicle: Vehicle, log: FlightLog, options: ReplayOptions) -> tu
         "max_rotor_speed": float(limit),
     }
     notes = {"nominals": nominal_source, "max_rotor_speed": "given" if options.max_rotor_speed else
-             "2x the 99.9th percentile of the log's finite rotor speeds"}
+             "2x the 99.9th percentile of the log's finite rotor speeds inside a robust fence "
+             "(median + 10 x 1.4826 MAD)"}
     if options.noise == "auto":
         mask = flying_mask(log)
         auto = estimate_noise(log, inertia, vehicle.positions, vehicle.yaw_signs, mask)

@@ -15,7 +15,7 @@ class ReplayOptions:
     kf_nominal: float | None = None  # override (unit-inertia mode: kf/J)
     km_nominal: float | None = None
     noise: str = "auto"  # "auto": from the log; "default": the library defaults
-    max_rotor_speed: float | None = None  # None: 2x the 99.9th percentile of finite speeds
+    max_rotor_speed: float | None = None  # None: realdata_checks.absurd_speed_limit (robust to spikes)
     overrides: dict = field(default_factory=dict)  # any other propid_config_t field
     skip_repeats: bool = False  # a row whose gyro (or rotor speeds) exactly repeat the previous row is no new sample
     # Telemetry delay, held by the filter itself (config.rotor_delay_us, docs/math.md §12):

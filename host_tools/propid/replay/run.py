@@ -81,7 +81,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
             streams = "events"  # rows now carry one stream or the other
     status_counts: dict[str, int] = {}
     n = vehicle.rotor_count
-    rec_t, rec_kf, rec_kfs, rec_km, rec_kms, rec_bg, rec_bgs, rec_conv_kf, rec_conv_km, rec_nis = ([] for _ in range(10))
+    rec_t, rec_kf, rec_kfs, rec_km, rec_kms, rec_bg, rec_bgs, rec_conv_kf, rec_conv_km, rec_nis, rec_rate = (
+        [] for _ in range(11))
     gate = float(config_fields.get("gate_sigma", DEFAULT_TUNING["gate_sigma"]))
     resyncs = 0
     gyro_pushes = 0
@@ -129,6 +130,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
                 rec_kms.append(est["drag_coeff_std"][:n])
                 rec_bg.append(est["gyro_bias"])
                 rec_bgs.append(est["gyro_bias_std"])
+                rec_rate.append(est["body_rate"])
                 # The averaging window starts where the std says converged, whatever
                 # the model-mismatch flag says (the flag withdraws the claim, the
                 # estimate is the same).
@@ -148,6 +150,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "km_std": np.array(rec_kms, dtype=float),
         "gyro_bias": np.array(rec_bg, dtype=float),
         "gyro_bias_std": np.array(rec_bgs, dtype=float),
+        "body_rate": np.array(rec_rate, dtype=float),
         "kf_converged": np.array(rec_conv_kf, dtype=bool),
         "km_converged": np.array(rec_conv_km, dtype=bool),
         "nis": np.array(rec_nis, dtype=float) * (gate * gate if gate > 0 else np.nan),
@@ -175,7 +178,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     # The filter's own claim at the end (withdrawn while MODEL_MISMATCH is up).
     kf_conv = [bool((final["thrust_coeff_converged"] >> k) & 1) for k in range(n)]
     km_conv = [bool((final["drag_coeff_converged"] >> k) & 1) for k in range(n)]
-    finite = all(np.all(np.isfinite(series[k])) for k in ("kf", "kf_std", "km", "km_std", "gyro_bias"))
+    finite = estimates_finite(series)
     summary = {
         "log": str(log.path) if log.path else None,
         "vehicle": str(vehicle.path) if vehicle.path else vehicle.name,
@@ -227,12 +230,14 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "resyncs_by_replay": resyncs,
         "health": int(final["health"]),
         "finite": bool(finite),
+        "body_rate_max_abs": float(np.max(np.abs(series["body_rate"]))) if finite else float("nan"),
         "config": config_fields,
         "config_notes": notes,
         "warnings": replay_warnings(rates, gyro_accepted, gyro_pushes),
         "definitions": {
             "kf_mean": "mean of the estimate from the first sample with rel std < converged_rel_std to the end; "
                        "second half of the replay if never below",
+            "finite": "every recorded kf, km, their stds, gyro bias and body rate is finite",
             "converged": "the filter's converged flag at the end of the replay (none while model_mismatch)",
             "model_mismatch": "MODEL_MISMATCH health flag at the end: the innovations or the coefficients' drift "
                               "were inconsistent with the filter's covariance (docs/reliability.md)",
@@ -265,6 +270,12 @@ def resolve_esc_delay(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, option
                 "auto: whole-sample lag (-50..50 ms) maximising the 2-10 Hz R^2 of measured vs modelled "
                 "roll/pitch torque in the filter's Euler step")
     return float(choice), "given"
+
+
+def estimates_finite(series: dict) -> bool:
+    """Every recorded estimate and std the replay reports, the body rate included."""
+    keys = ("kf", "kf_std", "km", "km_std", "gyro_bias", "gyro_bias_std", "body_rate")
+    return all(np.all(np.isfinite(series[k])) for k in keys if k in series)
 
 
 # Below these rates the filter's discretisation (one Euler step per gyro sample, rotor speed

@@ -60,7 +60,8 @@ class FilterSession:
 
     def estimate(self) -> dict:
         est = self._filter.estimate()
-        names = ("thrust_coeff", "thrust_coeff_std", "drag_coeff", "drag_coeff_std", "gyro_bias", "gyro_bias_std",
+        names = ("body_rate", "thrust_coeff", "thrust_coeff_std", "drag_coeff", "drag_coeff_std", "gyro_bias",
+                 "gyro_bias_std",
                  "thrust_coeff_converged", "drag_coeff_converged", "health", "innovation_test_ratio",
                  "disturbance_torque", "disturbance_torque_std", "accel_bias", "accel_bias_std",
                  "torque_scale", "torque_scale_std")
