@@ -14,7 +14,7 @@ trap 'rm -rf "$work"' EXIT
 # Top-level needs of host_tools (pyproject.toml) plus the test and build tools.
 # orangebox 0.5.0's wheel declares invalid console-script entry points that
 # pip refuses to install, so we stay on 0.4.0.
-top_level=(numpy matplotlib pymavlink tqdm "orangebox==0.4.0" pyulog sympy pytest setuptools wheel pip)
+top_level=(numpy matplotlib pymavlink tqdm "orangebox==0.4.0" pyulog sympy pytest hypothesis setuptools wheel pip)
 
 "$python" -m venv "$work/venv"
 "$work/venv/bin/python" -m pip install -q --upgrade pip

@@ -20,18 +20,16 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-import pytest
 
-hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
+from hypothesis import HealthCheck, given, settings  # pinned in host_tools/setup/requirements.txt
+from hypothesis import strategies as st
 
-from propid.errors import UserError  # noqa: E402
-from propid.flightlog import read_flightlog, read_vehicle  # noqa: E402
-from propid.importers import import_log  # noqa: E402
+from propid.errors import UserError
+from propid.flightlog import read_flightlog, read_vehicle
+from propid.importers import import_log
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_importers import quad_vehicle, write_ulog  # noqa: E402
+from test_importers import quad_vehicle, write_ulog  # noqa: E402 (after the path insert)
 
 EXAMPLES = int(os.environ.get("PROPID_FUZZ_EXAMPLES", "40"))
 FUZZ = settings(max_examples=EXAMPLES, derandomize=True, deadline=None, database=None,
