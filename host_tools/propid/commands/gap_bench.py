@@ -33,9 +33,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=12.0, help="flight length [s] (default 12)")
     parser.add_argument("--workers", type=int, default=2, help="parallel flights (default 2)")
     parser.add_argument("--tool-command", default=None, metavar="'CMD'",
-                        help="the diagnosis to benchmark, called with --log/--vehicle/--json/--report "
+                        help="the diagnosis to benchmark, called with --log/--vehicle/--json (and --report "
+                             "with --reports) "
                              "(default: this package's `propid gap --no-filter --quiet`: the "
                              "filter replay is not scored)")
+    parser.add_argument("--reports", action="store_true",
+                        help="also write each flight's HTML report (tool/ID_report; not scored, slower)")
     parser.add_argument("--no-tool", action="store_true", help="score the baseline only")
     parser.add_argument("--time-budget", type=float, default=None, metavar="S",
                         help="start no new flight after S seconds; score the flights done "
@@ -66,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
         sitl=locate_sitl(args.sitl), seed=args.seed, singles_per_effect=args.singles_per_effect,
         pairs=args.pairs, nones=args.nones, effects=effects, duration_s=args.duration,
         workers=args.workers, tool_command=tool, time_budget_s=args.time_budget,
+        reports=args.reports,
     )
     result = run_bench(config, progress=not args.no_progress)
     print(render(result))

@@ -46,11 +46,27 @@ def _normal_upper_quantile(p: float) -> float:
 
 
 def _fit(design: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, float]:
-    scale = np.linalg.norm(design, axis=0)
-    scale[scale == 0] = 1.0
-    coef, *_ = np.linalg.lstsq(design / scale, target, rcond=None)
-    residual = target - (design / scale) @ coef
-    return coef / scale, float(residual @ residual)
+    return _GramFit(design, target).fit(np.arange(design.shape[1]))
+
+
+class _GramFit:
+    """Least squares of `target` on any subset of the columns of `design`, from one Gram
+    matrix (columns scaled to unit norm; tall logs cost one product, not one SVD each)."""
+
+    def __init__(self, design: np.ndarray, target: np.ndarray):
+        self.scale = np.linalg.norm(design, axis=0)
+        self.scale[self.scale == 0] = 1.0
+        scaled = design / self.scale
+        self.gram = scaled.T @ scaled
+        self.cross = scaled.T @ target
+        self.total = float(target @ target)
+
+    def fit(self, cols: np.ndarray) -> tuple[np.ndarray, float]:
+        g = self.gram[np.ix_(cols, cols)]
+        h = self.cross[cols]
+        coef, *_ = np.linalg.lstsq(g, h, rcond=1e-12)
+        ssr = self.total - 2.0 * coef @ h + coef @ g @ coef
+        return coef / self.scale[cols], float(max(ssr, 0.0))
 
 
 def diagnose(csv_path: Path, vehicle_path: Path) -> dict:
@@ -86,9 +102,11 @@ def diagnose(csv_path: Path, vehicle_path: Path) -> dict:
     base = flat(nominal) * w[:, None]
     names = list(groups)
     blocks = [flat(groups[e]) * w[:, None] for e in names]
-    _, ssr_nominal = _fit(base, y)
     full = np.concatenate([base] + blocks, axis=1)
-    coef_full, ssr_full = _fit(full, y)
+    gram = _GramFit(full, y)
+    starts = np.cumsum([base.shape[1]] + [b.shape[1] for b in blocks])
+    _, ssr_nominal = gram.fit(np.arange(base.shape[1]))
+    coef_full, ssr_full = gram.fit(np.arange(full.shape[1]))
     dof = max(y.size - full.shape[1], 1)
     sigma2 = ssr_full / dof
     threshold_p = FAMILY_ALPHA / max(len(names), 1)
@@ -96,8 +114,9 @@ def diagnose(csv_path: Path, vehicle_path: Path) -> dict:
     offset = base.shape[1]
     for k, effect in enumerate(names):
         width = blocks[k].shape[1]
-        reduced = np.concatenate([base] + [b for j, b in enumerate(blocks) if j != k], axis=1)
-        _, ssr_reduced = _fit(reduced, y)
+        keep = np.ones(full.shape[1], dtype=bool)
+        keep[starts[k]: starts[k] + width] = False
+        _, ssr_reduced = gram.fit(np.flatnonzero(keep))
         gain = max(ssr_reduced - ssr_full, 0.0)
         f_stat = gain / width / sigma2
         explained = gain / ssr_nominal if ssr_nominal > 0 else 0.0

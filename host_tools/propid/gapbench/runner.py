@@ -49,6 +49,7 @@ class BenchConfig:
     tool_command: list[str] | None = field(default_factory=default_tool_command)
     tool_timeout_s: float = 600.0
     time_budget_s: float | None = None  # stop starting flights after this [s]
+    reports: bool = False  # ask the tool for its HTML report too (not scored; ~2 s per flight)
 
 
 def tool_available(command: list[str]) -> tuple[bool, str]:
@@ -68,9 +69,10 @@ def _run_tool(config: BenchConfig, flight_id: str, csv: Path, vehicle: Path) -> 
     out_dir = config.out_dir / "tool"
     out_dir.mkdir(parents=True, exist_ok=True)
     out_json = out_dir / f"{flight_id}.json"
-    report = out_dir / f"{flight_id}_report"
     command = config.tool_command + ["--log", str(csv), "--vehicle", str(vehicle),
-                                     "--json", str(out_json), "--report", str(report)]
+                                     "--json", str(out_json)]
+    if config.reports:
+        command += ["--report", str(out_dir / f"{flight_id}_report")]
     start = time.monotonic()
     env = dict(os.environ, TQDM_DISABLE="1")
     try:
