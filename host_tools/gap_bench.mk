@@ -14,5 +14,6 @@ GAP_BENCH_RESULT ?= $(BUILD)/results/gap_bench.json
 GAP_BENCH_ARGS   ?=
 
 gap-bench: setup host
-	@cd $(REPO) && PROPID_BUILD_DIR=$(BUILD_HOST) nice -n 10 $(VENV)/bin/propid gap-bench \
+	@cd $(REPO) && PROPID_BUILD_DIR=$(BUILD_HOST) OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 \
+	    nice -n 10 $(VENV)/bin/propid gap-bench \
 	    --out $(GAP_BENCH_OUT) --result $(GAP_BENCH_RESULT) --workers $(JOBS) $(GAP_BENCH_ARGS)

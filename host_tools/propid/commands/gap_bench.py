@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
+import sys
 from pathlib import Path
 
 from propid.campaign import locate_sitl
 from propid.errors import UserError
 from propid.gapbench.magnitudes import EFFECTS
-from propid.gapbench.runner import BenchConfig, default_tool_command, run_bench
+from propid.gapbench.runner import SINGLE_THREADED_BLAS, BenchConfig, default_tool_command, run_bench
 from propid.gapbench.table import render
 
 NAME = "gap-bench"
@@ -49,6 +51,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    started_as_command = sys.argv[1:2] == [NAME]
+    if started_as_command and any(os.environ.get(k) != v for k, v in SINGLE_THREADED_BLAS.items()):
+        # numpy's BLAS reads its thread count when loaded: start again single-threaded
+        sys.stdout.flush()
+        os.execve(sys.executable, [sys.executable, "-m", "propid.cli"] + sys.argv[1:],
+                  dict(os.environ, **SINGLE_THREADED_BLAS))
     effects = tuple(e.strip() for e in args.effects.split(",") if e.strip())
     unknown = [e for e in effects if e not in EFFECTS]
     if unknown or not effects:

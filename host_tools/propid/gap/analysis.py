@@ -22,7 +22,9 @@ NEEDS_TEXT = {"inertia": "vehicle inertia", "acc": "acc_x/y/z", "mass": "vehicle
 
 ALIGNMENT_NUISANCE = ("rotor_gyroscopic", "rotor_drag", "com_offset", "aero_damping")
 SCALE_LIKE = ("inertia_error", "gyro_scale", "thrust_nonlinearity")  # effects a regressor attenuation mimics
-MIN_REPORTED_DELAY_S = 0.005  # shorter lags are sampling conventions (latest-sample logging), not a delay
+# A lag up to one log sample is the logging convention (each stream's latest sample in a
+# row), not a telemetry delay; below 5 ms the sensor chain's own lags (gyro filtering) rule.
+MIN_REPORTED_DELAY_S = 0.005
 
 
 @dataclass
@@ -38,29 +40,51 @@ BAND_STABILITY = 0.10
 
 def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band) -> tuple[Band, dict]:
     """Closed-loop bias shows as a torque coefficient that depends on the band's lower
-    edge (the controller cancels slow unmodelled torques). Rule: the lowest candidate
-    high-pass whose roll/pitch fleet kf (least squares, mean of the two axes) is within
-    BAND_STABILITY of the kf at every higher candidate; the highest candidate otherwise."""
-    values = {}
+    edge: the controller cancels slow unmodelled torques, which drags the coefficient of
+    a band reaching down to them towards 0. Rule: the lowest candidate high-pass whose
+    roll/pitch fleet kf (least squares, mean of the two axes) is not shown to be more than
+    BAND_STABILITY below the kf at a higher candidate: a lower band is given up only when
+    the 95 % paired block-bootstrap interval of the ratio kf(low)/kf(high) lies entirely
+    below 1 - BAND_STABILITY (a noisy short log must not lose its slow content to scatter,
+    and a low band reading MORE than a high one is not the closed-loop signature: a narrow
+    high band is the attenuated one then); the highest candidate otherwise."""
+    values, boots = {}, {}
     for hp in HIGHPASS_CANDIDATES_HZ:
         trial = [replace(f, band=Band(hp, band.lowpass_hz).for_rate(f.rate_hz)) for f in flights]
-        kf = []
+        kf, boot = [], []
         for axis in ("roll", "pitch"):
             fit = basefit.fleet_fit(trial, axis, vehicle.positions, vehicle.yaw_signs, vehicle.mass,
-                                    use_instrument=False)
+                                    use_instrument=False, keep_bootstrap=True)
             kf.append(fit["least_squares_value"])
+            boot.append(fit["bootstrap"])
         values[hp] = float(np.mean(kf))
+        boots[hp] = np.mean(boot, axis=0)
+    intervals = {}
+    for k, hp in enumerate(HIGHPASS_CANDIDATES_HZ):
+        for h in HIGHPASS_CANDIDATES_HZ[k + 1:]:
+            ratio = boots[hp] / np.where(boots[h] != 0, boots[h], np.nan)
+            ratio = ratio[np.isfinite(ratio)]
+            intervals[(hp, h)] = ([float(np.percentile(ratio, 2.5)), float(np.percentile(ratio, 97.5))]
+                                  if ratio.size else [float("nan")] * 2)
+
+    def differs(lo_hp, hi_hp):
+        lo, hi = intervals[(lo_hp, hi_hp)]
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            return True
+        return hi < 1.0 - BAND_STABILITY
+
     chosen = HIGHPASS_CANDIDATES_HZ[-1]
     for k, hp in enumerate(HIGHPASS_CANDIDATES_HZ):
-        higher = HIGHPASS_CANDIDATES_HZ[k + 1:]
-        if all(values[h] != 0 and abs(values[hp] / values[h] - 1.0) <= BAND_STABILITY for h in higher):
+        if not any(differs(hp, h) for h in HIGHPASS_CANDIDATES_HZ[k + 1:]):
             chosen = hp
             break
-    return Band(chosen, band.lowpass_hz), {"candidates_hz": list(HIGHPASS_CANDIDATES_HZ),
-                                           "roll_pitch_kf": [values[h] for h in HIGHPASS_CANDIDATES_HZ],
-                                           "chosen_hz": chosen,
-                                           "rule": "lowest high-pass whose roll/pitch kf is within 10 % of the kf "
-                                                   "at every higher candidate"}
+    return Band(chosen, band.lowpass_hz), {
+        "candidates_hz": list(HIGHPASS_CANDIDATES_HZ),
+        "roll_pitch_kf": [values[h] for h in HIGHPASS_CANDIDATES_HZ],
+        "ratio_ci_to_higher": {f"{a:g}/{b:g}": v for (a, b), v in intervals.items()},
+        "chosen_hz": chosen,
+        "rule": "lowest high-pass whose roll/pitch kf is not shown (95 % paired block bootstrap of the "
+                "ratio) to be more than 10 % below the kf at a higher candidate"}
 
 
 class Progress:
@@ -152,7 +176,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     # reported as esc_delay when it is significant and longer than the log's sample period
     sample_period = 1.0 / min(f.rate_hz for f in flights)
     delay_significant = bool(align["ci"][0] > 0 and align["explained_fraction"] >= scoring.MIN_EXPLAINED
-                             and abs(align["delay_s"]) >= max(2.0 * sample_period, MIN_REPORTED_DELAY_S))
+                             and abs(align["delay_s"]) > max(sample_period, MIN_REPORTED_DELAY_S))
     delay = align["delay_s"] if align["ci"][0] > 0 else 0.0
     work = [shifted_flight(f, delay) for f in flights]
     work_held = [shifted_flight(f, delay) for f in held_flights]

@@ -75,7 +75,8 @@ def predicted_u(f: Flight, lowpass_only: bool) -> np.ndarray | None:
 
 def fleet_fit(flights: list[Flight], axis: str, positions: np.ndarray, signs: np.ndarray, mass: float | None,
               extra: list[np.ndarray] | None = None, response_scale: float = 1.0,
-              use_instrument: bool = True, rng_seed: int = 7, shape: dict | None = None) -> dict | None:
+              use_instrument: bool = True, rng_seed: int = 7, shape: dict | None = None,
+              keep_bootstrap: bool = False) -> dict | None:
     """One fleet coefficient on `axis` (+ extra nuisance/effect columns): value, CI, method."""
     lowpass_only = axis == "thrust"
     ys, xs, zs, blocks = [], [], [], []
@@ -137,9 +138,12 @@ def fleet_fit(flights: list[Flight], axis: str, positions: np.ndarray, signs: np
     boot = [solve(rng.integers(0, nb, nb), zx, zy) for _ in range(scoring.BOOTSTRAP)]
     resid = y - x @ np.linalg.lstsq(x, y, rcond=None)[0]
     r2 = 1.0 - float(resid @ resid) / float(y @ y) if y @ y > 0 else float("nan")
-    return {"value": float(value), "ci": [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))],
-            "method": "instrumental variables (motor commands)" if instrumented else "least squares",
-            "least_squares_value": float(ls_value), "r2": r2, "rows": int(y.size)}
+    out = {"value": float(value), "ci": [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))],
+           "method": "instrumental variables (motor commands)" if instrumented else "least squares",
+           "least_squares_value": float(ls_value), "r2": r2, "rows": int(y.size)}
+    if keep_bootstrap:  # the resamples depend only on rng_seed and the block count: paired across calls
+        out["bootstrap"] = np.asarray(boot)
+    return out
 
 
 def base_fit(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, mass: float | None,

@@ -28,6 +28,11 @@ from propid.gapbench.plan import FlightSpec, make_plan
 from propid.gapbench.scoring import score_flight, summarize
 
 
+# The bench already runs one flight per core; a multi-threaded BLAS on top of that spins
+# its threads against the other workers (measured: 5x the wall time on a loaded machine).
+SINGLE_THREADED_BLAS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+
+
 def default_tool_command() -> list[str]:
     # The bench scores the diagnosis (verdict, effects, shrink), not the firmware
     # filter's before/after replay, which costs ~10 s per flight: --no-filter.
@@ -74,7 +79,7 @@ def _run_tool(config: BenchConfig, flight_id: str, csv: Path, vehicle: Path) -> 
     if config.reports:
         command += ["--report", str(out_dir / f"{flight_id}_report")]
     start = time.monotonic()
-    env = dict(os.environ, TQDM_DISABLE="1")
+    env = dict(os.environ, TQDM_DISABLE="1", **SINGLE_THREADED_BLAS)
     try:
         proc = subprocess.run(command, capture_output=True, text=True, timeout=config.tool_timeout_s,
                               check=False, env=env)
