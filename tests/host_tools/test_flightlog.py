@@ -84,6 +84,21 @@ def test_round_trip_keeps_values_and_missing(tmp_path):
     np.testing.assert_allclose(back.acc, log.acc, rtol=1e-8)
 
 
+@pytest.mark.parametrize("newline", ["\n", "\r\n"])
+def test_empty_fields_anywhere_are_missing_values(tmp_path, newline):
+    # first column, runs of empties, last column, with LF and CRLF line ends
+    rows = ["a,b,c,d", ",1,,", "2,,,3", "4,5,6,7"]
+    path = tmp_path / "t.csv"
+    path.write_bytes(newline.join(rows).encode() + newline.encode())
+    from propid.flightlog import read_table
+
+    cols = read_table(path)
+    np.testing.assert_array_equal(np.isnan(np.column_stack([cols[k] for k in "abcd"])),
+                                  [[True, False, True, True], [False, True, True, False],
+                                   [False, False, False, False]])
+    assert cols["d"][1] == 3.0 and cols["a"][2] == 4.0
+
+
 @pytest.mark.parametrize(
     "text, expected",
     [
