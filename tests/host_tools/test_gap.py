@@ -224,3 +224,16 @@ def test_untestable_lists_effects_whose_columns_are_missing():
     missing_ids = {m["id"] for m in missing}
     assert {"inertia_error", "gyro_scale", "rotor_drag", "translational_lift", "ground_effect"} <= missing_ids
     assert {"rotor_inertia", "rotor_gyroscopic", "com_offset", "aero_damping"} <= set(ok)
+
+
+def test_held_out_interval_widens_with_the_number_of_candidates():
+    # the significance interval is read at 0.05 / candidates (Bonferroni over the family)
+    from propid.gap.scoring import explained
+
+    rng = np.random.default_rng(3)
+    without = rng.uniform(1.0, 2.0, (6, 2))
+    with_ = without * rng.uniform(0.7, 1.05, (6, 2))
+    value, single = explained(without, with_, [0, 1])
+    _, family = explained(without, with_, [0, 1], level=0.05 / 11)
+    assert single[0] < value < single[1]
+    assert family[0] < single[0] and family[1] > single[1]

@@ -226,6 +226,10 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                         "effect_size": s["effect_size"], "per_axis": s["per_axis"],
                         "explained_fraction_all_axes": s["explained_fraction_all_axes"],
                         "significant": s["significant"], **({"step": s["step"]} if "step" in s else {})})
+    if delay_significant:  # the alignment is applied before any effect is scored: it ranks by its own share
+        first = next((e for e in entries if e.get("step") == 1), None)
+        esc_entry["step"] = 0 if first is None or esc_entry["explained_fraction"] >= first.get(
+            "explained_fraction_all_axes", first["explained_fraction"]) else 1.5
     entries.sort(key=lambda e: (not e["significant"], e.get("step", 99),
                                 -e.get("explained_fraction_all_axes", e["explained_fraction"])))
     significant = [e["id"] for e in entries if e["significant"]]

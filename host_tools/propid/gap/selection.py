@@ -22,6 +22,7 @@ from propid.gap.design import Design
 from propid.gap.effects import LOOK_ALIKES, by_id
 
 MAX_EFFECTS = 4
+FAMILY_LEVEL = 0.05  # per selection step, over all the candidates scored at that step (Bonferroni)
 SCALE_EFFECTS = ("inertia_error", "gyro_scale", "thrust_nonlinearity")
 NESTED = {("inertia_error", "gyro_scale")}  # (smaller, larger): the larger's columns span the smaller's
 
@@ -35,14 +36,14 @@ def _look_alike(a: str, b: str) -> bool:
 
 
 def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
-          held_current: np.ndarray) -> dict:
+          held_current: np.ndarray, candidates: int = 1) -> dict:
     cols = current + design.groups[effect_id]
     held = scoring.cv_sse(gr, cols)
     axes = by_id(effect_id).axes
     idx = _axis_idx(design, axes)
     all_idx = list(range(len(design.axes)))
     frac_all, _ = scoring.explained(held_current, held, all_idx, bootstrap=False)
-    frac, ci = scoring.explained(held_current, held, idx)
+    frac, ci = scoring.explained(held_current, held, idx, level=FAMILY_LEVEL / max(candidates, 1))
     per_axis = {a: scoring.explained(held_current, held, [k], bootstrap=False)[0] for k, a in enumerate(design.axes)}
     size = scoring.effect_size(gr, current, design.groups[effect_id], idx)
     return {"id": effect_id, "explained_fraction": frac, "ci": ci, "held": held, "effect_size": size,
@@ -62,7 +63,7 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
     ambiguous: list[dict] = []
     remaining = list(candidates)
     while remaining and len(selected) < MAX_EFFECTS:
-        scores = [score(design, gr, current, e, held_current) for e in remaining]
+        scores = [score(design, gr, current, e, held_current, len(remaining)) for e in remaining]
         if progress:
             progress(len(scores))
         good = sorted([s for s in scores if s["significant"]], key=lambda s: -s["explained_fraction_all_axes"])
