@@ -2,8 +2,8 @@
 held-out logs with the given vehicle file and with the corrected one.
 
 Both runs use the replay's recommended settings (`--segment flying`, or `all` when the
-replay finds no flying rows; stream alignment `auto`); the corrected run pushes the rotor stream by the corrected `esc_delay_s` when
-it has one. A `gyro_scale` in the corrected file is undone on the gyro before the
+replay finds no flying rows; telemetry delay: each file's `esc_delay_s` when it has
+one, else the replay's per-log rule), so the corrected run's filter holds the corrected delay. A `gyro_scale` in the corrected file is undone on the gyro before the
 replay (the filter takes rates as measured). Fleet kf = mean over rotors of each run's
 converged kf; run-to-run CV = std/mean over runs.
 """
@@ -31,7 +31,7 @@ def _replay_kf(log: FlightLog, vehicle: Vehicle, delay) -> float:
     log = copy.copy(log)
     if vehicle.gyro_scale is not None:
         log.gyro = log.gyro / np.asarray(vehicle.gyro_scale)[None, :]
-    gyro_only = dict(rotor_delay_s=delay, aiding="gyro", rotor_inertia="off", torque_scale="off", progress=False)
+    gyro_only = dict(esc_delay=delay, aiding="gyro", rotor_inertia="off", torque_scale="off", progress=False)
     try:
         result = replay(log, vehicle, ReplayOptions(segment="flying", **gyro_only))
     except UserError:  # the replay's flying detector found nothing (e.g. a log that starts airborne)
@@ -42,9 +42,9 @@ def _replay_kf(log: FlightLog, vehicle: Vehicle, delay) -> float:
 def filter_before_after(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progress=None) -> dict:
     before, after = [], []
     for log in logs:
-        before.append(_replay_kf(log, vehicle, "auto"))
-        delay = corrected.esc_delay_s if corrected.esc_delay_s is not None else "auto"
-        after.append(_replay_kf(log, corrected, delay))
+        # each file's esc_delay_s when it has one, else the replay's per-log rule
+        before.append(_replay_kf(log, vehicle, "default"))
+        after.append(_replay_kf(log, corrected, "default"))
         if progress:
             progress()
     return {"logs": [str(l.path) for l in logs], "kf_before": _fleet(before), "kf_after": _fleet(after),

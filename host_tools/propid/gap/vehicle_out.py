@@ -3,7 +3,7 @@ the vehicle JSON where the model can carry them (flight-log v1 extension keys, d
 
 | effect | written as |
 |---|---|
-| esc_delay | `esc_delay_s` = file's + fitted delay (only when the total is >= 0) |
+| esc_delay | `esc_delay_s` = file's + fitted delay (negative: the gyro lags) |
 | inertia_error | `inertia` Jxx, Jyy times the fitted scale (Jzz kept: no independent yaw reference) |
 | gyro_scale | `gyro_scale` = file's times the fitted diagonal (the off-diagonal part is reported, not carried) |
 | com_offset | rotor positions minus the fitted offset (x, y); `com_offset` = file's + offset |
@@ -32,12 +32,8 @@ def corrected_vehicle(vehicle: Vehicle, effects: list[dict]) -> tuple[Vehicle, d
         eid = e["id"]
         if eid == "esc_delay":
             total = (vehicle.esc_delay_s or 0.0) + p["delay_s"]
-            if total >= 0:
-                out.esc_delay_s = float(total)
-                applied[eid] = {"esc_delay_s": out.esc_delay_s}
-            else:
-                not_carried.append({"id": eid, "why": "the rotor stream leads the gyro (negative delay): "
-                                                      "use propid replay --rotor-delay"})
+            out.esc_delay_s = float(total)  # negative: the gyro lags (flight-log v1 allows -1..1 s)
+            applied[eid] = {"esc_delay_s": out.esc_delay_s}
         elif eid == "inertia_error":
             j = np.array(out.inertia, dtype=float)
             j[0, 0] *= p["inertia_scale_xx"]
