@@ -224,7 +224,8 @@ def main(argv: list[str] | None = None) -> int:
     rng = random.Random(args.seed)
     cases: list[dict] = []
     planned = 0.0
-    while planned < args.steps:
+    # 5 % over: rejected samples (faults) are not steps, and the plan must reach --steps.
+    while planned < 1.05 * args.steps:
         case = plan_case(rng, len(cases))
         cases.append(case)
         planned += 2.0 * expected_steps(case)
