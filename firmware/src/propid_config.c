@@ -669,8 +669,6 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         }
         out.prior_var[k] = prior;
         out.process_psd[k] = psd;
-        out.var_floor[k] = floor_var;
-        out.var_ceiling[k] = ceiling;
         /* Both positive and finite, floor <= ceiling: their bit patterns are ordered. */
         uint32_t floor_bits;
         uint32_t ceiling_bits;

@@ -127,7 +127,7 @@ static void close_window(propid_filter_t *filter)
     for (uint8_t c = 0; c < count; ++c) {
         const uint8_t k = (uint8_t)(first + c);
         const float removed = monitor->start_var[c] + derived->process_psd[k] * elapsed_s - core->cov[k][k];
-        if (!(removed > derived->var_floor[k])) {
+        if (!(removed > propid_var_floor(derived, k))) {
             continue; /* nothing learnt about it (or its variance was reset): no test */
         }
         const float change = core->state[k] - monitor->start_coeff[c];

@@ -42,8 +42,8 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
     /* Bad variances: the state forgets its correlations and returns to its prior. */
     for (uint8_t i = 0; i < n; ++i) {
         const float p = core->cov[i][i];
-        if (p >= derived->var_floor[i] && p <= derived->var_ceiling[i]) {
-            continue; /* the usual case: one test pair per diagonal (NaN fails it) */
+        if (!propid_outside_positive_range(p, derived->var_floor_bits[i], derived->var_range_bits[i])) {
+            continue; /* the usual case: one test per diagonal (NaN fails it) */
         }
         if (!(p > 0.0f && p <= FLT_MAX)) {
             propid_cov_reset_state(derived, core, i);
@@ -108,25 +108,25 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
     int repaired = 0;
     for (uint8_t i = 0; i < n; ++i) {
         const float p = core->cov[i][i];
-        if (p >= derived->var_floor[i] && p <= derived->var_ceiling[i]) {
-            continue; /* the usual case: one test pair per diagonal (NaN fails it) */
+        if (!propid_outside_positive_range(p, derived->var_floor_bits[i], derived->var_range_bits[i])) {
+            continue; /* the usual case: one test per diagonal (NaN fails it) */
         }
         if (!(p > 0.0f && p <= FLT_MAX)) {
             repaired |= propid_cov_repair(derived, core);
-        } else if (p < derived->var_floor[i]) {
+        } else if (p < propid_var_floor(derived, i)) {
             /* Adding to a diagonal keeps P positive semi-definite. */
-            core->cov[i][i] = derived->var_floor[i];
-        } else if (p > derived->var_ceiling[i]) {
+            core->cov[i][i] = propid_var_floor(derived, i);
+        } else if (p > propid_var_ceiling(derived, i)) {
             /* Scale row and column by c = ceiling / p and set the diagonal to the
              * ceiling: D P D plus a non-negative diagonal term, still PSD. Rare. */
-            const float c = derived->var_ceiling[i] / p;
+            const float c = propid_var_ceiling(derived, i) / p;
             for (uint8_t j = 0; j < i; ++j) {
                 core->cov[j][i] *= c; /* column i above the diagonal */
             }
             for (uint8_t j = (uint8_t)(i + 1u); j < n; ++j) {
                 core->cov[i][j] *= c; /* row i right of the diagonal */
             }
-            core->cov[i][i] = derived->var_ceiling[i];
+            core->cov[i][i] = propid_var_ceiling(derived, i);
         }
     }
     return repaired;

@@ -199,4 +199,20 @@ static inline uint32_t propid_outside_positive_range(float value, uint32_t floor
     return (uint32_t)(bits - floor_bits) > range_bits ? 1u : 0u;
 }
 
+/* The per-state variance floor and ceiling, kept only as bit patterns (positive
+ * floats: the patterns are ordered like the values). */
+static inline float propid_var_floor(const propid_derived_t *derived, uint8_t i)
+{
+    float value;
+    memcpy(&value, &derived->var_floor_bits[i], sizeof(value));
+    return value;
+}
+static inline float propid_var_ceiling(const propid_derived_t *derived, uint8_t i)
+{
+    const uint32_t bits = derived->var_floor_bits[i] + derived->var_range_bits[i];
+    float value;
+    memcpy(&value, &bits, sizeof(value));
+    return value;
+}
+
 #endif /* PROPID_INTERNAL_H */

@@ -249,10 +249,9 @@ typedef struct {
     uint32_t innovation_range_bits;                 /* bits(S at which R is loaded) - bits(gyro_var) */
     float process_psd[PROPID_MAX_STATES];           /* per-state Q rate: Q_ii = process_psd[i] * dt */
     float prior_var[PROPID_MAX_STATES];             /* per-state prior variance */
-    float var_floor[PROPID_MAX_STATES];             /* per-state variance floor */
-    float var_ceiling[PROPID_MAX_STATES];           /* per-state variance ceiling */
-    uint32_t var_floor_bits[PROPID_MAX_STATES];     /* bit pattern of var_floor (bounds test) */
-    uint32_t var_range_bits[PROPID_MAX_STATES];     /* bits(var_ceiling) - bits(var_floor) */
+    uint32_t var_floor_bits[PROPID_MAX_STATES];     /* bit pattern of the per-state variance floor */
+    uint32_t var_range_bits[PROPID_MAX_STATES];     /* bits(ceiling) - bits(floor): the ceiling's
+                                                       value follows (propid_var_ceiling) */
     /* Sparsity of the 3 rate rows of A = df/dx (structurally non-zero entries only,
      * fixed by geometry and inertia): row a has jac_count[a] entries, the first
      * jac_rate_count[a] of them in rate columns, the rest in coefficient columns. */

@@ -58,7 +58,7 @@
  * innovations, raises PROPID_HEALTH_MODEL_MISMATCH and widens the coefficient
  * covariance when they are inconsistent; 0 leaves it out (smaller filter). */
 #ifndef PROPID_CONSISTENCY
-#define PROPID_CONSISTENCY 1
+#define PROPID_CONSISTENCY PROPID_DEFAULT_FEATURES /* the quad build: left out */
 #endif
 
 #if PROPID_MAX_ROTORS < 1 || PROPID_MAX_ROTORS > 16
