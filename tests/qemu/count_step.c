@@ -127,6 +127,12 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
         return 1;
     }
     propid_config_set_inertia_diag(&config, jxx, jyy, jzz);
+#ifdef COUNT_STEP_DELAY_US
+    /* -DCOUNT_STEP_DELAY_US=D: the telemetry delay D held by the filter; each counted
+     * step is then the rotor push and the gyro push together (a held sample is fused
+     * in either): compare with D = 0, counted the same way. */
+    config.rotor_delay_us = COUNT_STEP_DELAY_US;
+#endif
     if (propid_init(&filter, &config) != PROPID_OK ||
         (with_dense && propid_init(&dense_model, &config) != PROPID_OK)) {
         return 1;
@@ -173,7 +179,12 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
                                      rate[2] * momentum[0] - rate[0] * momentum[2],
                                      rate[0] * momentum[1] - rate[1] * momentum[0]};
         const float inertia[3] = {jxx, jyy, jzz};
-        if (propid_push_rotor_speeds(&filter, t_us, speed, rotors) != PROPID_OK ||
+#ifdef COUNT_STEP_DELAY_US
+        if (!with_dense && step >= warmup) {
+            propid_count_begin(variant);
+        }
+#endif
+        if (propid_push_rotor_speeds(&filter, t_us, speed, rotors) < 0 ||
             (with_dense && propid_push_rotor_speeds(&dense_model, t_us, speed, rotors) != PROPID_OK)) {
             errors++;
         }
@@ -209,9 +220,11 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
             }
             continue;
         }
+#ifndef COUNT_STEP_DELAY_US
         if (counted) {
             propid_count_begin(variant);
         }
+#endif
         const propid_status_t status = propid_push_gyro(&filter, t_us, gyro);
         if (counted) {
             propid_count_end(variant);
