@@ -43,8 +43,8 @@ uint32_t propid_abi_offsetof_counters_rejected(void)
 }
 
 /* Scaled state (PROPID_MAX_STATES floats) and covariance (row-major
- * PROPID_MAX_STATES^2 floats, both triangles: the filter stores only the upper
- * one) for cross-checks against the reference filter. */
+ * PROPID_MAX_STATES^2 floats, both triangles: the filter stores only the packed
+ * upper one) for cross-checks against the reference filter. */
 void propid_abi_copy_state(const propid_filter_t *filter, float *state, float *covariance)
 {
     if (filter == NULL) {
@@ -55,7 +55,7 @@ void propid_abi_copy_state(const propid_filter_t *filter, float *state, float *c
             state[i] = filter->core.state[i];
         }
         for (uint32_t j = 0; j < PROPID_MAX_STATES && covariance != NULL; ++j) {
-            covariance[i * PROPID_MAX_STATES + j] = i <= j ? filter->core.cov[i][j] : filter->core.cov[j][i];
+            covariance[i * PROPID_MAX_STATES + j] = filter->core.cov[propid_cov_index(i, j)];
         }
     }
 }

@@ -1,6 +1,7 @@
 /* Covariance housekeeping: prior, per-state variance bounds, integrity checks and
- * repair. Only the upper triangle of the symmetric P is kept (propid_internal.h,
- * propid_cov_at): symmetry is exact by construction, there is no mirror to check. */
+ * repair. Only the upper triangle of the symmetric P is kept, packed
+ * (propid_internal.h, propid_cov_at): symmetry is exact by construction, there
+ * is no mirror to check. */
 #include <float.h>
 #include <math.h>
 #include <string.h>
@@ -20,19 +21,17 @@ void propid_cov_set_prior(const propid_derived_t *derived, uint8_t rotor_count, 
         core->state[derived->layout.torque_scale] = 1.0f; /* the configured J and arms */
     }
     for (uint8_t k = 0; k < n; ++k) {
-        core->cov[k][k] = derived->prior_var[k];
+        core->cov[propid_cov_index(k, k)] = derived->prior_var[k];
     }
 }
 
 void propid_cov_reset_state(const propid_derived_t *derived, propid_core_t *core, uint8_t index)
 {
     const uint8_t n = derived->state_count;
-    /* Both triangles: the unused lower one then holds zeros, not old values. */
     for (uint8_t j = 0; j < n; ++j) {
-        core->cov[index][j] = 0.0f;
-        core->cov[j][index] = 0.0f;
+        core->cov[propid_cov_index(index, j)] = 0.0f;
     }
-    core->cov[index][index] = derived->prior_var[index];
+    core->cov[propid_cov_index(index, index)] = derived->prior_var[index];
 }
 
 int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
@@ -41,7 +40,7 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
     int changed = 0;
     /* Bad variances: the state forgets its correlations and returns to its prior. */
     for (uint8_t i = 0; i < n; ++i) {
-        const float p = core->cov[i][i];
+        const float p = core->cov[propid_cov_index(i, i)];
         if (!propid_outside_positive_range(p, derived->var_floor_bits[i], derived->var_range_bits[i])) {
             continue; /* the usual case: one test per diagonal (NaN fails it) */
         }
@@ -53,9 +52,10 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
     /* Off-diagonals: finite, and correlation inside [-1, 1] up to the rounding of
      * the test itself (PROPID_ROUNDING_TOL: two rounded products). */
     for (uint8_t i = 0; i < n; ++i) {
+        float *row = propid_cov_row(core->cov, i);
         for (uint8_t j = (uint8_t)(i + 1u); j < n; ++j) {
-            const float pij = core->cov[i][j];
-            const float limit_sq = core->cov[i][i] * core->cov[j][j];
+            const float pij = row[j];
+            const float limit_sq = row[i] * core->cov[propid_cov_index(j, j)];
             float fixed = pij;
             if (!isfinite(pij)) {
                 fixed = 0.0f;
@@ -65,7 +65,7 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
                 fixed = pij > 0.0f ? limit : -limit;
             }
             if (fixed != pij) {
-                core->cov[i][j] = fixed;
+                row[j] = fixed;
                 changed = 1;
             }
         }
@@ -81,18 +81,19 @@ int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, u
     }
     /* The diagonal and the part of the row right of it (the stored triangle):
      * over n samples every element (i, j), i <= j, is visited once. */
-    const float pii = core->cov[row][row];
+    const float pii = core->cov[propid_cov_index(row, row)];
     int bad = !(pii > 0.0f && pii <= FLT_MAX);
     /* |P_ij| <= sqrt(P_ii P_jj) up to the rounding of the two products (a
      * correlation of 1 within float32 is not a fault; propid_internal.h). */
     const float pii_tol = pii * (1.0f + PROPID_ROUNDING_TOL);
     /* Walk P_ij along the row and P_jj down the diagonal with pointers (no index
-     * arithmetic per element). */
-    const float *pij = &core->cov[row][row];
+     * arithmetic per element: the diagonal's step shrinks by one per row). */
+    const float *pij = &core->cov[propid_cov_index(row, row)];
     const float *pjj = pij;
+    uint32_t diagonal_step = propid_cov_diagonal_step(row);
     for (uint32_t count = (uint32_t)(n - 1u - row); count > 0u; --count) {
         pij += 1;
-        pjj += PROPID_MAX_STATES + 1;
+        pjj += diagonal_step--;
         /* A NaN fails the comparison, so it is caught too. */
         bad |= !(*pij * *pij <= pii_tol * *pjj);
     }
@@ -107,7 +108,8 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
     const uint8_t n = derived->state_count;
     int repaired = 0;
     for (uint8_t i = 0; i < n; ++i) {
-        const float p = core->cov[i][i];
+        float *diagonal = &core->cov[propid_cov_index(i, i)];
+        const float p = *diagonal;
         if (!propid_outside_positive_range(p, derived->var_floor_bits[i], derived->var_range_bits[i])) {
             continue; /* the usual case: one test per diagonal (NaN fails it) */
         }
@@ -115,18 +117,18 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
             repaired |= propid_cov_repair(derived, core);
         } else if (p < propid_var_floor(derived, i)) {
             /* Adding to a diagonal keeps P positive semi-definite. */
-            core->cov[i][i] = propid_var_floor(derived, i);
+            *diagonal = propid_var_floor(derived, i);
         } else if (p > propid_var_ceiling(derived, i)) {
             /* Scale row and column by c = ceiling / p and set the diagonal to the
              * ceiling: D P D plus a non-negative diagonal term, still PSD. Rare. */
             const float c = propid_var_ceiling(derived, i) / p;
             for (uint8_t j = 0; j < i; ++j) {
-                core->cov[j][i] *= c; /* column i above the diagonal */
+                core->cov[propid_cov_index(j, i)] *= c; /* column i above the diagonal */
             }
             for (uint8_t j = (uint8_t)(i + 1u); j < n; ++j) {
-                core->cov[i][j] *= c; /* row i right of the diagonal */
+                diagonal[j - i] *= c; /* row i right of the diagonal */
             }
-            core->cov[i][i] = propid_var_ceiling(derived, i);
+            *diagonal = propid_var_ceiling(derived, i);
         }
     }
     return repaired;

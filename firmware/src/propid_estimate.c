@@ -31,9 +31,9 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     estimate->rotor_count = rotor_count;
     for (uint8_t a = 0; a < 3u; ++a) {
         estimate->body_rate[a] = core->state[a];
-        estimate->body_rate_std[a] = std_of(core->cov[a][a]);
+        estimate->body_rate_std[a] = std_of(core->cov[propid_cov_index(a, a)]);
         estimate->gyro_bias[a] = core->state[first_bias + a];
-        estimate->gyro_bias_std[a] = std_of(core->cov[first_bias + a][first_bias + a]);
+        estimate->gyro_bias_std[a] = std_of(core->cov[propid_cov_index(first_bias + a, first_bias + a)]);
         estimate->innovation[a] = core->innovation[a];
         estimate->innovation_test_ratio[a] = core->innovation_test_ratio[a];
     }
@@ -43,8 +43,8 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         const uint8_t km = (uint8_t)(first_drag + i);
         const float kf_nominal = config->rotor[i].thrust_coeff_nominal;
         const float km_nominal = config->rotor[i].drag_coeff_nominal;
-        const float kf_var = core->cov[kf][kf];
-        const float km_var = core->cov[km][km];
+        const float kf_var = core->cov[propid_cov_index(kf, kf)];
+        const float km_var = core->cov[propid_cov_index(km, km)];
         const uint16_t bit = (uint16_t)(1u << i);
         all_rotors |= bit;
         estimate->thrust_coeff[i] = core->state[kf] * kf_nominal;
@@ -73,7 +73,7 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
             for (uint8_t b = 0; b < 3u; ++b) {
                 const uint8_t k = (uint8_t)(disturbance + b);
                 torque += config->inertia[a][b] * core->state[k];
-                torque_var += config->inertia[a][b] * config->inertia[a][b] * core->cov[k][k];
+                torque_var += config->inertia[a][b] * config->inertia[a][b] * core->cov[propid_cov_index(k, k)];
             }
             estimate->disturbance_torque[a] = torque;
             estimate->disturbance_torque_std[a] = std_of(torque_var);
@@ -82,7 +82,7 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     const uint8_t accel_bias = derived->layout.accel_bias;
     if (PROPID_WITH_ACCEL && accel_bias != PROPID_NO_STATE) {
         estimate->accel_bias = core->state[accel_bias];
-        estimate->accel_bias_std = std_of(core->cov[accel_bias][accel_bias]);
+        estimate->accel_bias_std = std_of(core->cov[propid_cov_index(accel_bias, accel_bias)]);
 #if PROPID_WITH_ACCEL
         estimate->accel_innovation = core->accel_innovation;
         estimate->accel_innovation_test_ratio = core->accel_innovation_test_ratio;
@@ -91,7 +91,7 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     estimate->torque_scale = 1.0f;
     if (PROPID_WITH_ACCEL && derived->layout.torque_scale != PROPID_NO_STATE) {
         estimate->torque_scale = core->state[derived->layout.torque_scale];
-        estimate->torque_scale_std = std_of(core->cov[derived->layout.torque_scale][derived->layout.torque_scale]);
+        estimate->torque_scale_std = std_of(core->cov[propid_cov_index(derived->layout.torque_scale, derived->layout.torque_scale)]);
     }
     uint8_t terms = 0u;
     terms |= disturbance != PROPID_NO_STATE ? PROPID_TERM_DISTURBANCE : 0u;

@@ -38,7 +38,7 @@ typedef struct {
  * gains in registers). Returns non-zero when a new variance of the group is
  * outside its [floor, ceiling]. */
 static inline __attribute__((always_inline)) uint32_t
-apply_row_group(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
+apply_row_group(float *restrict cov, float *restrict state,
                 const pending_t *restrict pending, const propid_derived_t *restrict derived,
                 const uint8_t first, const uint8_t rows)
 {
@@ -67,7 +67,8 @@ apply_row_group(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
 #pragma GCC unroll 4
         for (uint8_t c = r; c < rows; ++c) {
             const uint8_t j = (uint8_t)(first + c);
-            cov[i][j] = cov[i][j] - gain[r][0] * h0[j] - gain[r][1] * h1[j] - gain[r][2] * h2[j];
+            float *p = &cov[propid_cov_index(i, j)];
+            *p = *p - gain[r][0] * h0[j] - gain[r][1] * h1[j] - gain[r][2] * h2[j];
         }
         /* Floors and ceilings are per kind of state (rate, thrust, drag, bias:
          * propid_config.c): the first state of its kind stands for each, so
@@ -75,7 +76,8 @@ apply_row_group(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
         const uint8_t kind = i < PROPID_QUAD_FIRST_THRUST ? 0u
                              : (i < PROPID_QUAD_FIRST_DRAG ? PROPID_QUAD_FIRST_THRUST
                                 : (i < PROPID_QUAD_FIRST_BIAS ? PROPID_QUAD_FIRST_DRAG : PROPID_QUAD_FIRST_BIAS));
-        outside |= propid_outside_positive_range(cov[i][i], derived->var_floor_bits[kind], derived->var_range_bits[kind]);
+        outside |= propid_outside_positive_range(cov[propid_cov_index(i, i)], derived->var_floor_bits[kind],
+                                                 derived->var_range_bits[kind]);
     }
 #pragma GCC unroll 10
     for (uint8_t j = (uint8_t)(first + rows); j < PROPID_QUAD_STATES; ++j) {
@@ -84,7 +86,7 @@ apply_row_group(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
         const float hj2 = h2[j];
 #pragma GCC unroll 4
         for (uint8_t r = 0; r < rows; ++r) {
-            float *p = &cov[first + r][j];
+            float *p = &cov[propid_cov_index((uint32_t)first + r, j)];
             *p = *p - gain[r][0] * hj0 - gain[r][1] * hj1 - gain[r][2] * hj2;
         }
     }
@@ -94,8 +96,10 @@ apply_row_group(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
 /* P_ij -= sum_k g_k,i h_k,j on the stored upper triangle, x += sum_k g_k nu_k,
  * for three pending terms of a quad: n constant, fully unrolled, four rows at a
  * time. Also tests every new variance against its floor and ceiling; returns 1
- * when all are inside. */
-static int apply_three_quad(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
+ * when all are inside. Not inlined: with the covariance as its own pointer every
+ * element is within the 1 KiB reach of a VFP load (from the filter's base the
+ * compiler folds the offsets and needs an address computation per element). */
+static __attribute__((noinline)) int apply_three_quad(float *restrict cov, float *restrict state,
                             const pending_t *restrict pending, const propid_derived_t *restrict derived)
 {
     uint32_t outside = apply_row_group(cov, state, pending, derived, 0u, 4u);
@@ -161,7 +165,7 @@ static uint32_t fuse_axis(propid_filter_t *filter, uint8_t axis, float measured)
  * given the covariance as its own pointer: offsets from the filter's base exceed
  * the 1 KiB reach of a VFP load. */
 static __attribute__((noinline)) int
-fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *restrict core,
+fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
                 const propid_derived_t *restrict derived, pending_t *restrict pending,
                 const float *restrict gyro)
 {
@@ -271,7 +275,7 @@ fuse_quad_usual(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *r
  * queued in `pending` and their innovations recorded, or 0 without writing
  * anything (the per-axis path then handles the sample). */
 static __attribute__((noinline)) int
-fuse_usual_any(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *restrict core,
+fuse_usual_any(const float *restrict cov, propid_core_t *restrict core,
                const propid_derived_t *restrict derived, pending_t *restrict pending,
                const float *restrict gyro)
 {
@@ -335,7 +339,7 @@ fuse_usual_any(const float (*restrict cov)[PROPID_MAX_STATES], propid_core_t *re
 /* P_ij -= sum_k g_k,i h_k,j on the stored upper triangle, x += sum_k g_k nu_k, for
  * any n; returns 1 when every new variance is inside its floor and ceiling. */
 static __attribute__((noinline)) int
-apply_three_any(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
+apply_three_any(float *restrict cov, float *restrict state,
                 const pending_t *restrict pending, const propid_derived_t *restrict derived)
 {
     const uint8_t n = derived->state_count;
@@ -348,7 +352,7 @@ apply_three_any(float (*restrict cov)[PROPID_MAX_STATES], float *restrict state,
         const float g1 = h1[i] * pending->inv_var[1];
         const float g2 = h2[i] * pending->inv_var[2];
         state[i] += g0 * pending->innovation[0] + g1 * pending->innovation[1] + g2 * pending->innovation[2];
-        float *row = cov[i];
+        float *row = propid_cov_row(cov, i);
         for (uint8_t j = i; j < n; ++j) {
             row[j] = row[j] - g0 * h0[j] - g1 * h1[j] - g2 * h2[j];
         }
@@ -384,7 +388,7 @@ static __attribute__((noinline)) int fuse_one_pass(propid_filter_t *filter, cons
 {
     propid_core_t *core = &filter->core;
     const propid_derived_t *derived = &filter->derived;
-    const float (*cov)[PROPID_MAX_STATES] = (const float (*)[PROPID_MAX_STATES])core->cov;
+    const float *cov = core->cov;
     pending_t pending;
     int inside;
     if (derived->quad_core) {

@@ -19,14 +19,30 @@
 #define PROPID_QUAD_STATES 0u
 #endif
 
-/* Covariance storage: P is symmetric and only its upper triangle is kept, P_ij
- * (i <= j) in cov[i][j]. The strictly lower part of the array is never read and
- * not kept up to date (it holds zeros or old values); writing only one triangle
- * saves a store per element in every pass over P. Read an element at any (i, j)
+/* Covariance storage: P is symmetric and only its upper triangle is kept,
+ * packed row by row (propid.h, propid_cov_index): symmetry is exact by
+ * construction and P takes n (n + 1) / 2 floats. Read an element at any (i, j)
  * with propid_cov_at; with constant indices it compiles to one load. */
-static inline float propid_cov_at(const float (*cov)[PROPID_MAX_STATES], uint8_t i, uint8_t j)
+static inline float propid_cov_at(const float *cov, uint8_t i, uint8_t j)
 {
-    return i <= j ? cov[i][j] : cov[j][i];
+    return cov[propid_cov_index(i, j)];
+}
+
+/* Row i of the stored triangle as a pointer `row` with row[j] = P_ij for
+ * j >= i (the elements left of the diagonal are other rows' and not P_ij). */
+static inline float *propid_cov_row(float *cov, uint8_t i)
+{
+    return cov + (propid_cov_index(i, i) - i);
+}
+static inline const float *propid_cov_row_const(const float *cov, uint8_t i)
+{
+    return cov + (propid_cov_index(i, i) - i);
+}
+
+/* Distance from P_jj to P_(j+1)(j+1) in the packed triangle. */
+static inline uint32_t propid_cov_diagonal_step(uint8_t j)
+{
+    return (uint32_t)PROPID_MAX_STATES - j;
 }
 
 /* Fixed Jacobian layout of a quad whose rate rows have the structure of a

@@ -13,7 +13,7 @@
  * Cost: nnz(G) n + O(nnz(G)) multiply-adds; nnz(G) = 14 for a plus quad, 18 for
  * an X quad (diagonal inertia), 18 for both in the fixed quad layout
  * (propid_internal.h), which has straight-line kernels here. Only the upper
- * triangle of P is stored (propid_cov_at). */
+ * triangle of P is stored, packed (propid_cov_at). */
 #include <math.h>
 
 #include "propid_internal.h"
@@ -246,7 +246,7 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
  * folded into immediates) and for any n (plain loops, small code). */
 #define PROPID_DEFINE_PREDICT(name, UNROLL)                                                     \
 static __attribute__((noinline)) void name(                                                      \
-                 const propid_derived_t *derived, float (*cov)[PROPID_MAX_STATES], float dt,   \
+                 const propid_derived_t *derived, float *cov, float dt,                        \
                  const float jacobian_dt[3][PROPID_MAX_STATES], const uint8_t n)               \
 {                                                                                               \
     /* T = rate rows of F P = P_a + sum_p G_ap P_(column p). */                                 \
@@ -256,11 +256,12 @@ static __attribute__((noinline)) void name(                                     
         /* Row `a` of the stored triangle: column a above the diagonal, then the row. */        \
 UNROLL                                                                                          \
         for (uint8_t j = 0; j < a; ++j) {                                                       \
-            acc[j] = cov[j][a];                                                                 \
+            acc[j] = cov[propid_cov_index(j, a)];                                               \
         }                                                                                       \
+        const float *row_a = propid_cov_row_const(cov, a);                                      \
 UNROLL                                                                                          \
         for (uint8_t j = a; j < n; ++j) {                                                       \
-            acc[j] = cov[a][j];                                                                 \
+            acc[j] = row_a[j];                                                                  \
         }                                                                                       \
         const uint8_t count = derived->jac_count[a];                                            \
         for (uint8_t p = 0; p < count; ++p) {                                                   \
@@ -269,14 +270,19 @@ UNROLL                                                                          
             if (source >= n) { /* never (propid_config.c); bounds the index for the compiler */ \
                 continue;                                                                       \
             }                                                                                   \
-            /* P_(source, j) from the stored triangle, without a branch per element. */         \
+            /* P_(source, j) from the stored triangle, without a branch per element: down    \
+             * column `source` above the diagonal (the packed step shrinks by one per row),    \
+             * then along row `source`. */                                                      \
+            uint32_t above = source;                                                            \
 UNROLL                                                                                          \
             for (uint8_t j = 0; j < source; ++j) {                                              \
-                acc[j] += g * cov[j][source];                                                   \
+                acc[j] += g * cov[above];                                                       \
+                above += PROPID_MAX_STATES - 1u - j;                                            \
             }                                                                                   \
+            const float *row_source = propid_cov_row_const(cov, source);                        \
 UNROLL                                                                                          \
             for (uint8_t j = source; j < n; ++j) {                                              \
-                acc[j] += g * cov[source][j];                                                   \
+                acc[j] += g * row_source[j];                                                    \
             }                                                                                   \
         }                                                                                       \
         float *row = rows[a];                                                                   \
@@ -300,7 +306,7 @@ UNROLL                                                                          
             if (a == b) { /* Q dt and the rounding loading (propid_internal.h) */               \
                 value += PROPID_VAR_LOADING * value + derived->process_psd[b] * dt;             \
             }                                                                                   \
-            cov[a][b] = value;                                                                  \
+            cov[propid_cov_index(a, b)] = value;                                                \
         }                                                                                       \
     }                                                                                           \
     /* Cross terms with every non-rate state; Q dt on the other diagonals. */                   \
@@ -309,10 +315,11 @@ UNROLL                                                                          
         const float t0 = rows[0][j];                                                            \
         const float t1 = rows[1][j];                                                            \
         const float t2 = rows[2][j];                                                            \
-        cov[0][j] = t0;                                                                         \
-        cov[1][j] = t1;                                                                         \
-        cov[2][j] = t2;                                                                         \
-        cov[j][j] += PROPID_VAR_LOADING * cov[j][j] + derived->process_psd[j] * dt;             \
+        cov[propid_cov_index(0u, j)] = t0;                                                      \
+        cov[propid_cov_index(1u, j)] = t1;                                                      \
+        cov[propid_cov_index(2u, j)] = t2;                                                      \
+        float *diagonal = &cov[propid_cov_index(j, j)];                                         \
+        *diagonal += PROPID_VAR_LOADING * *diagonal + derived->process_psd[j] * dt;             \
     }                                                                                           \
 }
 
@@ -333,7 +340,7 @@ PROPID_DEFINE_PREDICT(predict_covariance_any, PROPID_NO_UNROLL)
 #define D0 PROPID_QUAD_FIRST_DRAG
 #define B0 PROPID_QUAD_FIRST_BIAS
 static __attribute__((noinline)) void
-predict_covariance_quad_layout(const propid_derived_t *derived, float (*restrict cov)[PROPID_MAX_STATES],
+predict_covariance_quad_layout(const propid_derived_t *derived, float *restrict cov,
                                float dt, const float jacobian_dt[3][PROPID_MAX_STATES])
 {
     /* Row 0: columns 1, 2 and the thrust columns; row 1: 0, 2 and the thrust
@@ -352,7 +359,7 @@ predict_covariance_quad_layout(const propid_derived_t *derived, float (*restrict
     float block02 = 0.0f, block12 = 0.0f, block22 = 0.0f; /* drag-column terms */
 #pragma GCC unroll 14
     for (uint8_t j = 0; j < PROPID_QUAD_STATES; ++j) {
-#define PROPID_P(c) propid_cov_at((const float (*)[PROPID_MAX_STATES])cov, (c), j)
+#define PROPID_P(c) propid_cov_at(cov, (c), j)
         const float p0 = PROPID_P(0u), p1 = PROPID_P(1u), p2 = PROPID_P(2u);
         const float k0 = PROPID_P(T0), k1 = PROPID_P(T0 + 1u), k2 = PROPID_P(T0 + 2u), k3 = PROPID_P(T0 + 3u);
         const float d0 = PROPID_P(D0), d1 = PROPID_P(D0 + 1u), d2 = PROPID_P(D0 + 2u), d3 = PROPID_P(D0 + 3u);
@@ -382,15 +389,16 @@ predict_covariance_quad_layout(const propid_derived_t *derived, float (*restrict
             block12 += t1 * g2j;
             block22 += t2 * g2j;
         }
-        cov[0][j] = t0;
-        cov[1][j] = t1;
-        cov[2][j] = t2;
+        cov[propid_cov_index(0u, j)] = t0;
+        cov[propid_cov_index(1u, j)] = t1;
+        cov[propid_cov_index(2u, j)] = t2;
         /* Q per kind of state (thrust, drag, bias: propid_config.c), and the
          * rounding loading (propid_internal.h); the diagonal of a coefficient
          * column is already in a register (j is a constant here). */
         const float own = j == T0 ? k0 : j == T0 + 1u ? k1 : j == T0 + 2u ? k2 : j == T0 + 3u ? k3 :
-                          j == D0 ? d0 : j == D0 + 1u ? d1 : j == D0 + 2u ? d2 : j == D0 + 3u ? d3 : cov[j][j];
-        cov[j][j] = own + (PROPID_VAR_LOADING * own + (j < D0 ? q_thrust : (j < B0 ? q_drag : q_bias)));
+                          j == D0 ? d0 : j == D0 + 1u ? d1 : j == D0 + 2u ? d2 : j == D0 + 3u ? d3 :
+                          cov[propid_cov_index(j, j)];
+        cov[propid_cov_index(j, j)] = own + (PROPID_VAR_LOADING * own + (j < D0 ? q_thrust : (j < B0 ? q_drag : q_bias)));
         PROPID_SCHEDULE_BARRIER();
     }
     const float (*t)[3] = (const float (*)[3])rate_cols;
@@ -404,12 +412,12 @@ predict_covariance_quad_layout(const propid_derived_t *derived, float (*restrict
     const float p00 = f00 + (PROPID_VAR_LOADING * f00 + derived->process_psd[0] * dt);
     const float p11 = f11 + (PROPID_VAR_LOADING * f11 + derived->process_psd[1] * dt);
     const float p22 = f22 + (PROPID_VAR_LOADING * f22 + derived->process_psd[2] * dt);
-    cov[0][0] = p00;
-    cov[0][1] = p01;
-    cov[0][2] = p02;
-    cov[1][1] = p11;
-    cov[1][2] = p12;
-    cov[2][2] = p22;
+    cov[propid_cov_index(0u, 0u)] = p00;
+    cov[propid_cov_index(0u, 1u)] = p01;
+    cov[propid_cov_index(0u, 2u)] = p02;
+    cov[propid_cov_index(1u, 1u)] = p11;
+    cov[propid_cov_index(1u, 2u)] = p12;
+    cov[propid_cov_index(2u, 2u)] = p22;
 }
 #undef T0
 #undef D0

@@ -16,7 +16,7 @@
 #include "propid_internal.h"
 
 /* h = P H^T into ph[0..n); returns the running sum (non-finite when any is). */
-static float form_gain_vector(const float (*cov)[PROPID_MAX_STATES], const propid_sparse_row_t *row,
+static float form_gain_vector(const float *cov, const propid_sparse_row_t *row,
                               uint8_t n, float *ph)
 {
     float check = 0.0f;
@@ -38,17 +38,17 @@ propid_scalar_result_t propid_scalar_update(propid_filter_t *filter, const propi
     propid_core_t *core = &filter->core;
     const propid_derived_t *derived = &filter->derived;
     const uint8_t n = derived->state_count;
-    float (*cov)[PROPID_MAX_STATES] = core->cov;
+    float *cov = core->cov;
     float ph[PROPID_MAX_STATES];
     float innovation_var = noise_var;
     for (uint8_t attempt = 0; attempt < 2u; ++attempt) {
-        const float check = form_gain_vector((const float (*)[PROPID_MAX_STATES])cov, row, n, ph);
+        const float check = form_gain_vector(cov, row, n, ph);
         float hph = 0.0f;
         float scale = 0.0f; /* count * sum_k v_k^2 P_kk >= (sum_k |v_k| sigma_k)^2 */
         for (uint8_t k = 0; k < row->count; ++k) {
             const uint8_t column = row->index[k];
             hph += row->value[k] * ph[column];
-            scale += row->value[k] * row->value[k] * cov[column][column];
+            scale += row->value[k] * row->value[k] * cov[propid_cov_index(column, column)];
         }
         innovation_var = hph + noise_var;
         /* var(H x) < 0 beyond the rounding of its sum (propid_internal.h), or a
@@ -87,7 +87,7 @@ propid_scalar_result_t propid_scalar_update(propid_filter_t *filter, const propi
     for (uint8_t i = 0; i < n; ++i) {
         const float gain = ph[i] * inv_innovation_var;
         core->state[i] += ph[i] * step;
-        float *cov_row = cov[i];
+        float *cov_row = propid_cov_row(cov, i);
         for (uint8_t j = i; j < n; ++j) {
             cov_row[j] -= gain * ph[j];
         }

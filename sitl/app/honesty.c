@@ -87,7 +87,7 @@ static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const dou
         for (int j = 0; j < n; j++) {
             const int a = index[i] < index[j] ? index[i] : index[j];
             const int b = index[i] < index[j] ? index[j] : index[i];
-            p[i][j] = (double)filter->core.cov[a][b]; /* the filter keeps the upper triangle */
+            p[i][j] = (double)filter->core.cov[propid_cov_index(a, b)]; /* the filter keeps the upper triangle */
         }
     }
     const double nees = nees_of(p, e, n);

@@ -168,14 +168,14 @@ static void test_reset_rotor_touches_only_that_rotor(void)
     const uint8_t km = propid_index_drag_coeff(&filter, rotor);
     const uint8_t states = (uint8_t)(6u + 2u * ROTORS);
     /* The flight must have moved the coefficient and correlated it with others. */
-    TEST_ASSERT_TRUE(snapshot.core.cov[kf][kf] < fresh.core.cov[kf][kf]);
+    TEST_ASSERT_TRUE(snapshot.core.cov[propid_cov_index(kf, kf)] < fresh.core.cov[propid_cov_index(kf, kf)]);
 
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_reset_rotor(&filter, rotor));
 
     TEST_ASSERT_EQUAL_FLOAT(1.0f, filter.core.state[kf]);
     TEST_ASSERT_EQUAL_FLOAT(1.0f, filter.core.state[km]);
-    TEST_ASSERT_EQUAL_FLOAT(fresh.core.cov[kf][kf], filter.core.cov[kf][kf]);
-    TEST_ASSERT_EQUAL_FLOAT(fresh.core.cov[km][km], filter.core.cov[km][km]);
+    TEST_ASSERT_EQUAL_FLOAT(fresh.core.cov[propid_cov_index(kf, kf)], filter.core.cov[propid_cov_index(kf, kf)]);
+    TEST_ASSERT_EQUAL_FLOAT(fresh.core.cov[propid_cov_index(km, km)], filter.core.cov[propid_cov_index(km, km)]);
     for (uint8_t i = 0; i < states; ++i) {
         if (i != kf && i != km) {
             TEST_ASSERT_EQUAL_FLOAT(snapshot.core.state[i], filter.core.state[i]);
@@ -183,9 +183,9 @@ static void test_reset_rotor_touches_only_that_rotor(void)
         for (uint8_t j = 0; j < states; ++j) {
             const int touches = (i == kf || i == km || j == kf || j == km);
             if (!touches) {
-                TEST_ASSERT_EQUAL_FLOAT(snapshot.core.cov[i][j], filter.core.cov[i][j]);
+                TEST_ASSERT_EQUAL_FLOAT(snapshot.core.cov[propid_cov_index(i, j)], filter.core.cov[propid_cov_index(i, j)]);
             } else if (i != j) {
-                TEST_ASSERT_EQUAL_FLOAT(0.0f, filter.core.cov[i][j]);
+                TEST_ASSERT_EQUAL_FLOAT(0.0f, filter.core.cov[propid_cov_index(i, j)]);
             }
         }
     }
@@ -212,11 +212,11 @@ static void test_resync_after_time_jump(void)
     for (uint8_t i = 3u; i < states; ++i) {
         TEST_ASSERT_EQUAL_FLOAT(snapshot.core.state[i], filter.core.state[i]);
         for (uint8_t j = 3u; j < states; ++j) {
-            TEST_ASSERT_EQUAL_FLOAT(snapshot.core.cov[i][j], filter.core.cov[i][j]);
+            TEST_ASSERT_EQUAL_FLOAT(snapshot.core.cov[propid_cov_index(i, j)], filter.core.cov[propid_cov_index(i, j)]);
         }
     }
     for (uint8_t a = 0; a < 3u; ++a) {
-        TEST_ASSERT_EQUAL_FLOAT(fresh.core.cov[a][a], filter.core.cov[a][a]);
+        TEST_ASSERT_EQUAL_FLOAT(fresh.core.cov[propid_cov_index(a, a)], filter.core.cov[propid_cov_index(a, a)]);
     }
     propid_counters_t counters;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));

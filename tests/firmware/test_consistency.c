@@ -214,7 +214,7 @@ static void fly(const flight_t *flight, result_t *out)
         out->final_rel_err_max = fmaxf(out->final_rel_err_max, fabsf(est.drag_coeff[i] / km[i] - 1.0f));
     }
     for (uint8_t k = 3u; k < 11u; ++k) {
-        if (!(filter.core.cov[k][k] < filter.derived.converged_var)) {
+        if (!(filter.core.cov[propid_cov_index(k, k)] < filter.derived.converged_var)) {
             out->would_have_converged = 0;
         }
     }

@@ -210,7 +210,7 @@ static void fly(const scenario_t *sc, float reset_rotor_at_s, outcome_t *out)
                                      fresh.thrust_coeff_std[1]);
             for (uint8_t k = 0; k < filter.derived.state_count; ++k) {
                 if (k != 4u) {
-                    TEST_ASSERT_EQUAL_FLOAT(0.0f, filter.core.cov[4][k]);
+                    TEST_ASSERT_EQUAL_FLOAT(0.0f, filter.core.cov[propid_cov_index(4, k)]);
                 }
             }
             rotor_was_reset = 1;

@@ -162,7 +162,7 @@ static void expect_delayed_equals_aligned(int32_t delay_us, float mass)
         TEST_ASSERT_TRUE(propid_push_gyro(&aligned, stamp, values) >= 0);
         memcpy(state_after[gyro_count], aligned.core.state, sizeof(aligned.core.state));
         for (uint8_t k = 0; k < PROPID_MAX_STATES; ++k) {
-            diag_after[gyro_count][k] = aligned.core.cov[k][k];
+            diag_after[gyro_count][k] = aligned.core.cov[propid_cov_index(k, k)];
         }
         gyro_count++;
     }
@@ -203,7 +203,7 @@ static void expect_delayed_equals_aligned(int32_t delay_us, float mass)
             TEST_ASSERT_EQUAL_MEMORY(state_after[fused - 1u], delayed.core.state, sizeof(delayed.core.state));
             float diag[PROPID_MAX_STATES];
             for (uint8_t k = 0; k < PROPID_MAX_STATES; ++k) {
-                diag[k] = delayed.core.cov[k][k];
+                diag[k] = delayed.core.cov[propid_cov_index(k, k)];
             }
             TEST_ASSERT_EQUAL_MEMORY(diag_after[fused - 1u], diag, sizeof(diag));
         }

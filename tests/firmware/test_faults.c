@@ -69,7 +69,7 @@ static void assert_sane(void)
     const uint8_t n = filter.derived.state_count;
     for (uint8_t i = 0; i < n; ++i) {
         TEST_ASSERT_TRUE(isfinite(filter.core.state[i]));
-        TEST_ASSERT_TRUE(filter.core.cov[i][i] > 0.0f && isfinite(filter.core.cov[i][i]));
+        TEST_ASSERT_TRUE(filter.core.cov[propid_cov_index(i, i)] > 0.0f && isfinite(filter.core.cov[propid_cov_index(i, i)]));
     }
     /* Bounded, not running away: the prediction stops at 2 gyro_range, an
      * update of a correlated axis may move a gated axis' rate a little further. */
@@ -342,7 +342,7 @@ static int covariance_is_positive_definite(void)
     static double l[PROPID_MAX_STATES][PROPID_MAX_STATES];
     for (uint8_t i = 0; i < n; ++i) {
         for (uint8_t j = 0; j <= i; ++j) {
-            double sum = (double)(j <= i ? filter.core.cov[j][i] : filter.core.cov[i][j]);
+            double sum = (double)(j <= i ? filter.core.cov[propid_cov_index(j, i)] : filter.core.cov[propid_cov_index(i, j)]);
             for (uint8_t k = 0; k < j; ++k) {
                 sum -= l[i][k] * l[j][k];
             }

@@ -487,14 +487,14 @@ static void test_reset_command_decisions(void)
     /* Move rotors 1 and 2 away from their prior, then reset rotor 2 only. */
     const uint8_t kf1 = propid_index_thrust_coeff(1u);
     const uint8_t kf2 = propid_index_thrust_coeff(2u);
-    const float prior_var = filter.core.cov[kf2][kf2];
+    const float prior_var = filter.core.cov[propid_cov_index(kf2, kf2)];
     filter.core.state[kf1] = 1.2f;
     filter.core.state[kf2] = 1.3f;
-    filter.core.cov[kf2][kf2] = 0.25f * prior_var;
+    filter.core.cov[propid_cov_index(kf2, kf2)] = 0.25f * prior_var;
     TEST_ASSERT_EQUAL_UINT8(PROPID_MAVLINK_RESULT_ACCEPTED,
                             propid_mavlink_execute_reset(&filter, 2.0f));
     ASSERT_SAME_FLOAT(1.0f, filter.core.state[kf2]);
-    ASSERT_SAME_FLOAT(prior_var, filter.core.cov[kf2][kf2]);
+    ASSERT_SAME_FLOAT(prior_var, filter.core.cov[propid_cov_index(kf2, kf2)]);
     ASSERT_SAME_FLOAT(1.2f, filter.core.state[kf1]);
 
     filter.core.state[kf2] = 0.7f;

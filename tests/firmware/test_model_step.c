@@ -4,8 +4,8 @@
  *   F's rate rows match finite differences of the discrete (Heun) step;
  * - three sequential scalar updates equal the batch 3-axis Kalman update
  *   P - P H^T (H P H^T + R)^-1 H P (they must: R is diagonal);
- * - P (only its upper triangle is stored) stays positive definite over a long
- *   run, and the unstored lower triangle is never read (it is filled with NaN);
+ * - P (only its upper triangle is stored, packed) stays positive definite over a
+ *   long run;
  * - gating, re-opening, clamping and covariance repair do what docs/design.md says.
  * Dense references are computed in float here (test code only).
  */
@@ -26,7 +26,7 @@ void tearDown(void) {}
 static propid_filter_t filter;
 static float dense_a[N_MAX][N_MAX];
 static float dense_b[N_MAX][N_MAX];
-static float saved_cov[N_MAX][N_MAX];
+static float saved_cov[PROPID_COV_SIZE];
 
 static float rng_uniform(rng_t *rng, float lo, float hi)
 {
@@ -57,17 +57,6 @@ static void init_quad_diag(float first_angle)
     TEST_ASSERT_EQUAL_UINT8(1u, filter.derived.quad_layout);
 }
 
-/* The filter stores the upper triangle only: fill the lower one with NaN, so a
- * step that read it would produce NaN (caught by the finiteness checks below). */
-static void poison_lower_triangle(void)
-{
-    for (uint8_t i = 0; i < N_MAX; ++i) {
-        for (uint8_t j = 0; j < i; ++j) {
-            filter.core.cov[i][j] = NAN;
-        }
-    }
-}
-
 /* The full symmetric P from the stored upper triangle; fails on a non-finite element. */
 static void symmetric_view(float out[N_MAX][N_MAX])
 {
@@ -75,9 +64,9 @@ static void symmetric_view(float out[N_MAX][N_MAX])
     memset(out, 0, sizeof(float) * N_MAX * N_MAX);
     for (uint8_t i = 0; i < n; ++i) {
         for (uint8_t j = i; j < n; ++j) {
-            TEST_ASSERT_TRUE(isfinite(filter.core.cov[i][j]));
-            out[i][j] = filter.core.cov[i][j];
-            out[j][i] = filter.core.cov[i][j];
+            TEST_ASSERT_TRUE(isfinite(filter.core.cov[propid_cov_index(i, j)]));
+            out[i][j] = filter.core.cov[propid_cov_index(i, j)];
+            out[j][i] = filter.core.cov[propid_cov_index(i, j)];
         }
     }
 }
@@ -103,8 +92,7 @@ static void randomise(rng_t *rng)
             if (i == j) {
                 sum += 1.0e-3f;
             }
-            filter.core.cov[i][j] = sum;
-            filter.core.cov[j][i] = sum;
+            filter.core.cov[propid_cov_index(i, j)] = sum;
         }
         filter.core.state[i] = i < 3u ? rng_uniform(rng, -2.0f, 2.0f)
                                       : (i < n - 3u ? rng_uniform(rng, 0.7f, 1.3f) : rng_uniform(rng, -0.05f, 0.05f));
@@ -206,7 +194,7 @@ static void check_prediction_against_dense(void)
             for (uint8_t j = 0; j < n; ++j) {
                 float sum = 0.0f;
                 for (uint8_t k = 0; k < n; ++k) {
-                    sum += f[i][k] * filter.core.cov[k][j];
+                    sum += f[i][k] * filter.core.cov[propid_cov_index(k, j)];
                 }
                 dense_a[i][j] = sum;
             }
@@ -220,7 +208,6 @@ static void check_prediction_against_dense(void)
                 dense_b[i][j] = sum + (i == j ? filter.derived.process_psd[i] * dt : 0.0f);
             }
         }
-        poison_lower_triangle();
         propid_predict_covariance(&filter.derived, &filter.core, dt, jac_dt);
         symmetric_view(view);
         float scale;
@@ -361,7 +348,7 @@ static void check_updates_against_batch(void)
         float pht[N_MAX][3];
         for (uint8_t i = 0; i < n; ++i) {
             for (uint8_t a = 0; a < 3u; ++a) {
-                pht[i][a] = filter.core.cov[i][a] + filter.core.cov[i][bias + a];
+                pht[i][a] = filter.core.cov[propid_cov_index(i, a)] + filter.core.cov[propid_cov_index(i, bias + a)];
             }
         }
         float s[3][3];
@@ -385,11 +372,10 @@ static void check_updates_against_batch(void)
             state_expected[i] = filter.core.state[i] + k_row[0] * innovation[0] + k_row[1] * innovation[1] +
                                 k_row[2] * innovation[2];
             for (uint8_t j = 0; j < n; ++j) {
-                dense_b[i][j] = filter.core.cov[i][j] - (k_row[0] * pht[j][0] + k_row[1] * pht[j][1] +
+                dense_b[i][j] = filter.core.cov[propid_cov_index(i, j)] - (k_row[0] * pht[j][0] + k_row[1] * pht[j][1] +
                                                          k_row[2] * pht[j][2]);
             }
         }
-        poison_lower_triangle();
         TEST_ASSERT_EQUAL_UINT32(0u, propid_update_gyro(&filter, gyro));
         symmetric_view(view);
         float scale;
@@ -455,7 +441,6 @@ static void check_long_run_positive_definite(void)
 {
     uint64_t t_us = 1000u;
     const uint8_t n = filter.derived.state_count;
-    poison_lower_triangle(); /* never read: a read would spread NaN into the stored triangle */
     for (int block = 0; block < 10; ++block) {
         run_steps((uint32_t)(block + 1), 500u, &t_us);
         symmetric_view(view);
@@ -484,8 +469,8 @@ static void test_first_gyro_sample_only_anchors(void)
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, 5000u, gyro));
     /* No prediction: the coefficient block is untouched by the (rate+bias) update
      * because the prior has no cross-covariances. */
-    TEST_ASSERT_EQUAL_FLOAT(saved_cov[3][3], filter.core.cov[3][3]);
-    TEST_ASSERT_TRUE(filter.core.cov[0][0] < saved_cov[0][0]);
+    TEST_ASSERT_EQUAL_FLOAT(saved_cov[propid_cov_index(3, 3)], filter.core.cov[propid_cov_index(3, 3)]);
+    TEST_ASSERT_TRUE(filter.core.cov[propid_cov_index(0, 0)] < saved_cov[propid_cov_index(0, 0)]);
     TEST_ASSERT_EQUAL_UINT64(5000u, filter.core.time_us);
 }
 
@@ -526,7 +511,7 @@ static void test_gate_rejects_outlier_then_reopens(void)
     /* Re-anchored: rate + bias now explain the sample, the rate variance is at most
      * its prior (no inflation by the innovation), and P is still positive definite. */
     TEST_ASSERT_FLOAT_WITHIN(0.05f, target, filter.core.state[0] + filter.core.state[9 + 2]);
-    TEST_ASSERT_TRUE(filter.core.cov[0][0] <= filter.derived.prior_var[0]);
+    TEST_ASSERT_TRUE(filter.core.cov[propid_cov_index(0, 0)] <= filter.derived.prior_var[0]);
     symmetric_view(view);
     TEST_ASSERT_TRUE(positive_definite(view, filter.derived.state_count));
     TEST_ASSERT_EQUAL_UINT32(before.cov_repairs, after.cov_repairs);
@@ -539,10 +524,8 @@ static void test_corrupted_covariance_is_repaired(void)
     run_steps(7u, 50u, &t_us);
     const uint8_t n = filter.derived.state_count;
     /* A NaN off-diagonal and a correlation above one, in coefficient rows. */
-    filter.core.cov[4][9] = NAN;
-    filter.core.cov[9][4] = NAN;
-    filter.core.cov[5][6] = 2.0f * sqrtf(filter.core.cov[5][5] * filter.core.cov[6][6]);
-    filter.core.cov[6][5] = filter.core.cov[5][6];
+    filter.core.cov[propid_cov_index(4, 9)] = NAN;
+    filter.core.cov[propid_cov_index(5, 6)] = 2.0f * sqrtf(filter.core.cov[propid_cov_index(5, 5)] * filter.core.cov[propid_cov_index(6, 6)]);
     run_steps(8u, n, &t_us); /* the round-robin check visits every row within n samples */
     propid_estimate_t est;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
@@ -557,9 +540,9 @@ static void test_corrupted_covariance_is_repaired(void)
         }
     }
     /* A negative variance is caught on the very next sample. */
-    filter.core.cov[7][7] = -1.0f;
+    filter.core.cov[propid_cov_index(7, 7)] = -1.0f;
     run_steps(9u, 1u, &t_us);
-    TEST_ASSERT_TRUE(filter.core.cov[7][7] > 0.0f);
+    TEST_ASSERT_TRUE(filter.core.cov[propid_cov_index(7, 7)] > 0.0f);
     symmetric_view(view);
     TEST_ASSERT_TRUE(positive_definite(view, n));
 }
@@ -644,22 +627,22 @@ static void test_integrity_tolerance_is_rounding_only(void)
     init_quad_diag(0.0f);
     uint64_t t_us = 1000u;
     run_steps(41u, 200u, &t_us);
-    const float p44 = filter.core.cov[4][4];
-    const float p66 = filter.core.cov[6][6];
+    const float p44 = filter.core.cov[propid_cov_index(4, 4)];
+    const float p66 = filter.core.cov[propid_cov_index(6, 6)];
     /* A correlation of 1 plus one rounding of the products: not a fault. */
-    filter.core.cov[4][6] = sqrtf(p44 * p66) * (1.0f + 0.25f * PROPID_ROUNDING_TOL);
+    filter.core.cov[propid_cov_index(4, 6)] = sqrtf(p44 * p66) * (1.0f + 0.25f * PROPID_ROUNDING_TOL);
     TEST_ASSERT_EQUAL_INT(0, propid_cov_check_row(&filter.derived, &filter.core, 4u));
     /* 1e-4 beyond 1 is far outside rounding: a fault, repaired. */
-    filter.core.cov[4][6] = sqrtf(p44 * p66) * (1.0f + 1.0e-4f);
+    filter.core.cov[propid_cov_index(4, 6)] = sqrtf(p44 * p66) * (1.0f + 1.0e-4f);
     TEST_ASSERT_EQUAL_INT(1, propid_cov_check_row(&filter.derived, &filter.core, 4u));
-    TEST_ASSERT_TRUE(filter.core.cov[4][6] * filter.core.cov[4][6] <= p44 * p66);
+    TEST_ASSERT_TRUE(filter.core.cov[propid_cov_index(4, 6)] * filter.core.cov[propid_cov_index(4, 6)] <= p44 * p66);
     /* var(omega_x + b_x) clearly negative: S < R beyond rounding is repaired and
      * flagged on the next sample. */
     propid_counters_t before;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &before));
-    const float p00 = filter.core.cov[0][0];
-    const float pbb = filter.core.cov[11][11];
-    filter.core.cov[0][11] = -(p00 + pbb) - 1.0e-3f; /* beyond the prediction's Q dt */
+    const float p00 = filter.core.cov[propid_cov_index(0, 0)];
+    const float pbb = filter.core.cov[propid_cov_index(11, 11)];
+    filter.core.cov[propid_cov_index(0, 11)] = -(p00 + pbb) - 1.0e-3f; /* beyond the prediction's Q dt */
     filter.core.check_row = 12u;
     run_steps(42u, 1u, &t_us);
     propid_counters_t after;
@@ -679,7 +662,7 @@ static void check_non_finite_update_vector_never_reaches_state(uint8_t row, uint
     run_steps(21u, 50u, &t_us);
     propid_counters_t before;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &before));
-    filter.core.cov[row][column] = bad_value;
+    filter.core.cov[propid_cov_index(row, column)] = bad_value;
     filter.core.check_row = 12u; /* the round-robin check is elsewhere */
     run_steps(22u, 1u, &t_us);
     const uint8_t n = filter.derived.state_count;
@@ -741,8 +724,8 @@ static void test_time_jump_resync_workflow(void)
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_TIME_JUMP, propid_push_gyro(&filter, late, gyro));
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_resync(&filter, late));
     /* Rate variance back to the prior, uncorrelated. */
-    TEST_ASSERT_EQUAL_FLOAT(filter.derived.prior_var[0], filter.core.cov[0][0]);
-    TEST_ASSERT_EQUAL_FLOAT(0.0f, filter.core.cov[0][11]);
+    TEST_ASSERT_EQUAL_FLOAT(filter.derived.prior_var[0], filter.core.cov[propid_cov_index(0, 0)]);
+    TEST_ASSERT_EQUAL_FLOAT(0.0f, filter.core.cov[propid_cov_index(0, 11)]);
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_TIME_BACKWARDS, propid_push_gyro(&filter, late - 1u, gyro));
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, late, gyro)); /* same sample anchors */
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, late + 2000u, gyro));

@@ -169,7 +169,7 @@ static int positive_definite(const propid_filter_t *filter)
     double l[PROPID_MAX_STATES][PROPID_MAX_STATES];
     for (uint8_t i = 0; i < n; ++i) {
         for (uint8_t j = 0; j <= i; ++j) {
-            double sum = (double)filter->core.cov[j][i]; /* upper triangle: (j, i), j <= i */
+            double sum = (double)filter->core.cov[propid_cov_index(j, i)]; /* upper triangle: (j, i), j <= i */
             for (uint8_t k = 0; k < j; ++k) {
                 sum -= l[i][k] * l[j][k];
             }
@@ -207,12 +207,12 @@ static void check_invariants(const propid_filter_t *filter)
         if (!isfinite(filter->core.state[i])) {
             fail("non-finite state");
         }
-        const float p = filter->core.cov[i][i];
+        const float p = filter->core.cov[propid_cov_index(i, i)];
         if (!(p > 0.0f) || !isfinite(p)) {
             fail("variance not positive and finite");
         }
         for (uint8_t j = (uint8_t)(i + 1u); j < n; ++j) {
-            if (!isfinite(filter->core.cov[i][j])) {
+            if (!isfinite(filter->core.cov[propid_cov_index(i, j)])) {
                 fail("non-finite covariance");
             }
         }

@@ -100,7 +100,7 @@ static float dense_difference(void)
     float worst = 0.0f;
     const uint8_t n = filter.derived.state_count;
     for (uint8_t i = 0; i < n; ++i) {
-        const float var = filter.core.cov[i][i];
+        const float var = filter.core.cov[propid_cov_index(i, i)];
         const float diff = fabsf(dense.x[i] - filter.core.state[i]) / sqrtf(var);
         worst = diff > worst ? diff : worst;
     }

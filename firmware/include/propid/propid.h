@@ -167,10 +167,23 @@ propid_status_t propid_config_check(const propid_config_t *config, const char **
 /* ------------------------------------------------------------------------ */
 /* Filter object: allocate it yourself; touch it only through the API.      */
 /* ------------------------------------------------------------------------ */
+/* Covariance storage (private): only the upper triangle of the symmetric P is
+ * kept, row by row, P_ij (i <= j) at cov[propid_cov_index(i, j)]: row i holds
+ * P_ii .. P_i,(PROPID_MAX_STATES-1) contiguously. */
+#define PROPID_COV_SIZE (PROPID_MAX_STATES * (PROPID_MAX_STATES + 1) / 2)
+/* Index of P_ij in the packed triangle, for either order of i and j. */
+static inline uint32_t propid_cov_index(uint32_t i, uint32_t j)
+{
+    const uint32_t row = i <= j ? i : j;
+    const uint32_t column = i <= j ? j : i;
+    return row * (2u * PROPID_MAX_STATES - 1u - row) / 2u + column;
+}
+
 typedef struct {
     /* Scaled state: body rate [rad/s], kf/kf_nominal, km/km_nominal, gyro bias [rad/s]. */
     float state[PROPID_MAX_STATES];
-    float cov[PROPID_MAX_STATES][PROPID_MAX_STATES];  /* symmetric, kept in the scaled units */
+    float cov[PROPID_COV_SIZE];                       /* symmetric, kept in the scaled units: the
+                                                         packed upper triangle (propid_cov_index) */
     float rotor_speed_sq[PROPID_MAX_ROTORS];          /* latest accepted rotor speeds squared */
     float input_speed_sq[PROPID_MAX_ROTORS];          /* rotor speeds squared in force at time_us
                                                          (start of the next prediction interval) */
