@@ -186,9 +186,11 @@ test-fuzz: setup
 # 2 idle cores); fails only on a NaN estimate or a flight that could not run.
 SOAK_STEPS ?= 10000000
 SOAK_SEED ?= 1
+SOAK_NEES_TUNING ?= matched
 soak: setup host
 	@cd $(REPO) && nice -n 10 $(VENV_PYTHON) tests/soak/soak.py --sitl $(BUILD_HOST)/sitl/propid_sitl \
-	    --steps $(SOAK_STEPS) --seed $(SOAK_SEED) --jobs $(JOBS) --out $(BUILD)/results/soak.json
+	    --steps $(SOAK_STEPS) --seed $(SOAK_SEED) --jobs $(JOBS) --nees-tuning $(SOAK_NEES_TUNING) \
+	    --out $(BUILD)/results/soak.json
 
 cppcheck: setup
 	@cppcheck --error-exitcode=1 --enable=warning,style,performance,portability --std=c11 \

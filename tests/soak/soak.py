@@ -21,7 +21,10 @@ Figures:
 - nees_in_bounds_pct: over fault-free, effect-free flights without a rotor loss
   (mode filter), the share of control steps whose NEES of coefficients and gyro
   biases (full covariance block) lies inside its 95 % chi-square interval; also
-  per tuning and sensor set;
+  per tuning and sensor set, and per flight (nees_flights). These flights use
+  the "matched" tuning (--nees-tuning): the filter's priors and random walks
+  are the distribution the simulator draws the truth from, without which a
+  NEES is not chi-square distributed;
 - false_converged: coefficient "converged" claims (per coefficient and control
   step) while more than 5 % off, over all mode-filter flights; with the claims;
 - cov_repairs: covariance repairs, summed;
@@ -66,9 +69,31 @@ CAMPAIGN_FLIGHT = ["--start-at-rest", "--coeff-spread", "0.2", "--gyro-bias-max"
 CAMPAIGN_FILTER = ["--prior-kf-std", "0.11547", "--prior-km-std", "0.11547", "--prior-bias-std", "0.0100767",
                    "--prior-rate-std", "0.01", "--filter-rate-noise", "0.0004", "--filter-coeff-walk", "0.0",
                    "--filter-bias-walk", "0.0"]
+# The truth distribution of every flight: kf, km = nominal x U(1-S, 1+S) per
+# rotor, gyro bias U(-B, B) per axis, bias random walk W [rad/s/sqrt(s)] of the
+# sensor set (propid_sitl --help).
+COEFF_SPREAD = 0.2
+GYRO_BIAS_MAX = math.radians(1.0)
+GYRO_BIAS_WALK = {"paper": 0.0, "default": 1.0e-4}
 
 
-def plan_case(rng: random.Random, index: int) -> dict:
+def matched_filter(sensors: str) -> list[str]:
+    """The "matched" tuning of the NEES flights: the library default, with the
+    priors and random walks the truth is drawn from. A NEES is chi-square only
+    when the filter's prior is the distribution of the truth: a uniform
+    U(-a, a) has std a / sqrt(3); the coefficients are constant (walk 0); the
+    bias walks as the sensor's. Rate process noise and gyro noise stay the
+    library's and the datasheet's (design.md "Defaults")."""
+    walk = GYRO_BIAS_WALK[sensors]
+    return ["--coeff-spread", f"{COEFF_SPREAD}", "--gyro-bias-max", f"{GYRO_BIAS_MAX:.7g}",
+            "--gyro-bias-walk", f"{walk}",
+            "--prior-kf-std", f"{COEFF_SPREAD / math.sqrt(3.0):.6g}",
+            "--prior-km-std", f"{COEFF_SPREAD / math.sqrt(3.0):.6g}",
+            "--prior-bias-std", f"{GYRO_BIAS_MAX / math.sqrt(3.0):.6g}",
+            "--filter-coeff-walk", "0", "--filter-bias-walk", f"{walk}"]
+
+
+def plan_case(rng: random.Random, index: int, nees_tuning: str = "matched") -> dict:
     """One random flight configuration (flown in both modes)."""
     vehicle = rng.choices([v for v, _ in VEHICLES], weights=[w for _, w in VEHICLES])[0]
     trajectory = rng.choice(TRAJECTORIES)
@@ -89,6 +114,8 @@ def plan_case(rng: random.Random, index: int) -> dict:
             damage = f"{rotor}@{rng.uniform(0.3, 0.7) * duration:.2f}={rng.uniform(0.1, 0.4):.3f}"
     # Tight (campaign) tuning only where it can hold: paper sensors, constant coefficients.
     tuning = "campaign" if sensors == "paper" and damage is None and rng.random() < 0.5 else "library"
+    if clean:
+        tuning = nees_tuning  # the NEES flights
     return {"case": index, "seed": 1000 + index, "vehicle": vehicle, "trajectory": trajectory,
             "duration_s": duration, "sensors": sensors, "tuning": tuning, "clean": clean,
             "effects": effects, "faults": faults, "damage": damage}
@@ -102,6 +129,8 @@ def command(sitl: str, case: dict, mode: str, summary: str) -> list[str]:
         cmd.append("--paper")
     if case["tuning"] == "campaign":
         cmd += CAMPAIGN_FLIGHT + CAMPAIGN_FILTER
+    elif case["tuning"] == "matched":
+        cmd += matched_filter(case["sensors"])
     for effect in case["effects"]:
         cmd += ["--effect", effect]
     for fault in case["faults"]:
@@ -135,7 +164,7 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
            "faults_injected": {}, "nan_count": 0, "max_recovery_s": None, "rotor_losses": 0,
            "unrecovered": 0, "nees_in_bounds_pct": None, "nees_samples": 0, "nees_by_group": {},
            "false_converged": 0, "converged_claims": 0, "false_converged_pct": None,
-           "false_converged_by_group": {},
+           "false_converged_by_group": {}, "nees_flights": [],
            "cov_repairs": 0, "model_mismatch_windows": 0, "diverged_filter": 0, "diverged_oracle": 0,
            "filter_only_diverged": 0, "errors": []}
     nees_in = nees_all = 0
@@ -186,6 +215,11 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
                 group[0] += inside
                 group[1] += samples
                 group[2] += 1
+                out["nees_flights"].append({
+                    "case": case["case"], "vehicle": case["vehicle"], "trajectory": case["trajectory"],
+                    "duration_s": case["duration_s"], "sensors": case["sensors"], "tuning": case["tuning"],
+                    "dof": int(honesty.get("nees_dof", 0)), "nees_mean": honesty.get("nees_mean"),
+                    "in_bounds_pct": round(100.0 * inside / samples, 2) if samples else None})
         if pair.get("filter", {}).get("exit") == 3 and pair.get("oracle", {}).get("exit") == 0:
             out["filter_only_diverged"] += 1
     out["nees_samples"] = nees_all
@@ -201,7 +235,8 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
     out["wall_time_s"] = round(elapsed_s, 1)
     out["jobs"] = args.jobs
     out["plan_seed"] = args.seed
-    out["command"] = f"make soak SOAK_STEPS={args.steps} SOAK_SEED={args.seed} JOBS={args.jobs}"
+    out["command"] = (f"make soak SOAK_STEPS={args.steps:g} SOAK_SEED={args.seed} JOBS={args.jobs}"
+                      + (f" SOAK_NEES_TUNING={args.nees_tuning}" if args.nees_tuning != "matched" else ""))
     return out
 
 
@@ -213,6 +248,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="parallel flights (default 2)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the flight plan (default 1)")
     parser.add_argument("--out", default="build/results/soak.json", help="JSON figures")
+    parser.add_argument("--nees-tuning", choices=("matched", "library"), default="matched",
+                        help="filter tuning of the fault-free, effect-free NEES flights: matched (priors and "
+                             "walks = the truth's distribution, default) or library (propid_config_default)")
     args = parser.parse_args(argv)
     if not os.access(args.sitl, os.X_OK):
         print(f"soak: {args.sitl}: not an executable (run make host)", file=sys.stderr)
@@ -226,7 +264,7 @@ def main(argv: list[str] | None = None) -> int:
     planned = 0.0
     # 5 % over: rejected samples (faults) are not steps, and the plan must reach --steps.
     while planned < 1.05 * args.steps:
-        case = plan_case(rng, len(cases))
+        case = plan_case(rng, len(cases), args.nees_tuning)
         cases.append(case)
         planned += 2.0 * expected_steps(case)
 
@@ -261,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
     Path(args.out).write_text(json.dumps(figures, indent=2) + "\n", encoding="utf-8")
     width = max(len(k) for k in figures)
     for key, value in figures.items():
-        if key in ("errors",):
+        if key in ("errors", "nees_flights"):
             value = len(value)
         print(f"{key:<{width}}  {json.dumps(value) if isinstance(value, (dict, list)) else value}")
     print(f"soak: {args.out}")
