@@ -39,7 +39,6 @@ static __attribute__((noinline)) propid_status_t accel_sample_check(propid_filte
     if (specific_force == NULL) {
         return reject(filter, PROPID_ERR_NULL);
     }
-    const propid_config_t *config = &filter->config;
     if (!PROPID_WITH_ACCEL || filter->derived.layout.accel_bias == PROPID_NO_STATE) {
         /* No mass configured, or compiled out (propid_config.h). */
         return reject(filter, PROPID_ERR_CONFIG);
@@ -49,15 +48,17 @@ static __attribute__((noinline)) propid_status_t accel_sample_check(propid_filte
             return reject(filter, PROPID_ERR_NOT_FINITE);
         }
     }
+#if PROPID_WITH_ACCEL /* (the configuration this build keeps has no accelerometer fields) */
     for (uint8_t a = 0; a < 3u; ++a) {
-        if (fabsf(specific_force[a]) > config->accel_range) {
+        if (fabsf(specific_force[a]) > filter->config.accel_range) {
             return reject(filter, PROPID_ERR_ACCEL_RANGE);
         }
     }
+#endif
 #if PROPID_DELAY_SLOTS == 0 || !PROPID_WITH_ACCEL
     (void)time_us; /* only a held sample's time is checked here */
 #else
-    if (config->rotor_delay_us > 0) {
+    if (filter->config.rotor_delay_us > 0) {
         uint64_t previous = filter->core.accel_time_us;
         int has_previous = filter->core.has_accel;
         has_previous |= propid_delay_newest(filter, PROPID_DELAY_ACCEL, &previous);
@@ -92,7 +93,7 @@ propid_status_t propid_fuse_accel(propid_filter_t *filter, uint64_t time_us, con
     (void)specific_force;
     return reject(filter, PROPID_ERR_CONFIG); /* compiled out (propid_config.h) */
 #else
-    const propid_config_t *config = &filter->config;
+    const propid_kept_config_t *config = &filter->config;
     const propid_derived_t *derived = &filter->derived;
     propid_core_t *core = &filter->core;
     if (core->has_accel && time_us <= core->accel_time_us) {

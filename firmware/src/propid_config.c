@@ -198,12 +198,21 @@ static void cross3(const float a[3], const float b[3], float out[3])
  * - coefficient columns: A = thrust_torque[i][a] u_i or drag_torque[i][a] u_i,
  *   present only when that torque component is not exactly zero (a diagonal
  *   inertia has no yaw thrust and no roll/pitch drag entries). */
+/* The geometry and inertia terms the derivation works from (the general build
+ * keeps them in propid_derived_t too: its step and model read them). */
+typedef struct {
+    float inertia_inv[3][3];
+    float thrust_torque[PROPID_MAX_ROTORS][3];      /* J^-1 (r_i x z) kf_nominal_i */
+    float drag_torque[PROPID_MAX_ROTORS][3];        /* J^-1 z yaw_sign_i km_nominal_i */
+    float gyro_jacobian[3][3][3];                   /* A_ab = sum_c gyro_jacobian[a][b][c] omega_c */
+} geometry_t;
+
 /* A quad whose structure fits the fixed layout of propid_internal.h (gyroscopic
  * entries A_ab that depend on the third rate only, no drag in the roll/pitch rows,
  * no thrust in the yaw row: any diagonal inertia) gets its lists rewritten to exactly that layout and
  * quad_layout = 1, so the step can use its straight-line quad kernels. The lists
  * then may hold entries that are zero for this frame; they add exact zeros. */
-static void derive_quad_layout(const propid_config_t *config, propid_derived_t *out)
+static void derive_quad_layout(const propid_config_t *config, const geometry_t *geo, propid_derived_t *out)
 {
     out->quad_layout = 0u;
     if (config->rotor_count != 4u || out->state_count != PROPID_QUAD_STATES || propid_rotor_inertia_on(out)) {
@@ -214,43 +223,40 @@ static void derive_quad_layout(const propid_config_t *config, propid_derived_t *
         for (uint8_t b = 0; b < 3u; ++b) {
             for (uint8_t c = 0; c < 3u; ++c) {
                 const int third = a != b && c != a && c != b;
-                if (!third && out->gyro_jacobian[a][b][c] != 0.0f) {
+                if (!third && geo->gyro_jacobian[a][b][c] != 0.0f) {
                     return;
                 }
             }
         }
         for (uint8_t i = 0; i < 4u; ++i) {
-            if ((a < 2u && out->drag_torque[i][a] != 0.0f) || (a == 2u && out->thrust_torque[i][a] != 0.0f)) {
+            if ((a < 2u && geo->drag_torque[i][a] != 0.0f) || (a == 2u && geo->thrust_torque[i][a] != 0.0f)) {
                 return;
             }
         }
     }
+    out->quad_layout = 1u;
     for (uint8_t a = 0; a < 3u; ++a) {
-        out->jac_column[a][0] = a == 0u ? 1u : 0u;
-        out->jac_column[a][1] = a == 2u ? 1u : 2u;
-        for (uint8_t p = 0; p < 2u; ++p) {
-            out->jac_rotor[a][p] = 0u;
-            out->jac_torque[a][p] = 0.0f;
+        for (uint8_t p = 0; p < (uint8_t)PROPID_QUAD_JAC_ENTRIES; ++p) {
+            const uint8_t i = (uint8_t)(p - 2u);
+            out->jac_torque[a][p] = p < 2u ? 0.0f : (a < 2u ? geo->thrust_torque[i][a] : geo->drag_torque[i][a]);
+#if PROPID_GENERAL_VEHICLES
+            out->jac_column[a][p] = propid_quad_layout_column(a, p);
+            out->jac_rotor[a][p] = p < 2u ? 0u : i;
+#endif
         }
-        for (uint8_t i = 0; i < 4u; ++i) {
-            const uint8_t p = (uint8_t)(2u + i);
-            out->jac_column[a][p] = (uint8_t)(PROPID_RATE_STATES + (a < 2u ? 0u : 4u) + i);
-            out->jac_rotor[a][p] = i;
-            out->jac_torque[a][p] = a < 2u ? out->thrust_torque[i][a] : out->drag_torque[i][a];
-        }
-        for (uint8_t p = 0; p < 2u; ++p) {
-            const uint8_t b = out->jac_column[a][p];
-            out->quad_gyro[a][p] = out->gyro_jacobian[a][b][3u - a - b];
-        }
+#if PROPID_GENERAL_VEHICLES
         out->jac_rate_count[a] = 2u;
         out->jac_count[a] = (uint8_t)PROPID_QUAD_JAC_ENTRIES;
+#endif
+        for (uint8_t p = 0; p < 2u; ++p) {
+            const uint8_t b = propid_quad_layout_column(a, p);
+            out->quad_gyro[a][p] = geo->gyro_jacobian[a][b][3u - a - b];
+        }
     }
-    out->quad_layout = 1u;
 }
 
-static void derive_sparsity(const propid_config_t *config, propid_derived_t *out)
+static void derive_gyro_jacobian(const propid_config_t *config, geometry_t *geo)
 {
-    const uint8_t rotor_count = config->rotor_count;
     for (uint8_t b = 0; b < 3u; ++b) {
         for (uint8_t c = 0; c < 3u; ++c) {
             const float unit_b[3] = {b == 0u ? 1.0f : 0.0f, b == 1u ? 1.0f : 0.0f, b == 2u ? 1.0f : 0.0f};
@@ -264,16 +270,22 @@ static void derive_sparsity(const propid_config_t *config, propid_derived_t *out
             for (uint8_t a = 0; a < 3u; ++a) {
                 float sum = 0.0f;
                 for (uint8_t d = 0; d < 3u; ++d) {
-                    sum += out->inertia_inv[a][d] * (first[d] + second[d]);
+                    sum += geo->inertia_inv[a][d] * (first[d] + second[d]);
                 }
-                out->gyro_jacobian[a][b][c] = -sum;
+                geo->gyro_jacobian[a][b][c] = -sum;
             }
         }
     }
+}
+
+#if PROPID_GENERAL_VEHICLES
+static void derive_sparsity(const propid_config_t *config, const geometry_t *geo, propid_derived_t *out)
+{
+    const uint8_t rotor_count = config->rotor_count;
     for (uint8_t a = 0; a < 3u; ++a) {
         uint8_t count = 0u;
         for (uint8_t b = 0; b < 3u; ++b) {
-            const float *coeff = out->gyro_jacobian[a][b];
+            const float *coeff = geo->gyro_jacobian[a][b];
             const int rotor_term = b < 2u && propid_rotor_gyro(out, a, b) != 0.0f;
             if (coeff[0] != 0.0f || coeff[1] != 0.0f || coeff[2] != 0.0f || rotor_term) {
                 out->jac_column[a][count] = b;
@@ -285,19 +297,19 @@ static void derive_sparsity(const propid_config_t *config, propid_derived_t *out
         out->jac_rate_count[a] = count;
         uint8_t thrust_entries = 0u;
         for (uint8_t i = 0; i < rotor_count; ++i) {
-            if (out->thrust_torque[i][a] != 0.0f) {
+            if (geo->thrust_torque[i][a] != 0.0f) {
                 thrust_entries++;
                 out->jac_column[a][count] = (uint8_t)(PROPID_RATE_STATES + i);
                 out->jac_rotor[a][count] = i;
-                out->jac_torque[a][count] = out->thrust_torque[i][a];
+                out->jac_torque[a][count] = geo->thrust_torque[i][a];
                 count++;
             }
         }
         for (uint8_t i = 0; i < rotor_count; ++i) {
-            if (out->drag_torque[i][a] != 0.0f) {
+            if (geo->drag_torque[i][a] != 0.0f) {
                 out->jac_column[a][count] = (uint8_t)(PROPID_RATE_STATES + rotor_count + i);
                 out->jac_rotor[a][count] = i;
-                out->jac_torque[a][count] = out->drag_torque[i][a];
+                out->jac_torque[a][count] = geo->drag_torque[i][a];
                 count++;
             }
         }
@@ -319,8 +331,8 @@ static void derive_sparsity(const propid_config_t *config, propid_derived_t *out
         }
         out->jac_count[a] = count;
     }
-    derive_quad_layout(config, out);
 }
+#endif
 
 #define PROPID_BAD(name)                                                                           \
     do {                                                                                           \
@@ -361,9 +373,16 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!all_finite(&config->inertia[0][0], 9u)) {
         PROPID_BAD("inertia");
     }
+#if !PROPID_GENERAL_VEHICLES
+    if (rotor_count != 4u) {
+        PROPID_BAD("rotor_count"); /* this build has the quad kernels only (propid_config.h) */
+    }
+#endif
     propid_derived_t out;
     memset(&out, 0, sizeof(out));
-    if (!inertia_inverse(config->inertia, out.inertia_inv)) {
+    geometry_t geo;
+    memset(&geo, 0, sizeof(geo));
+    if (!inertia_inverse(config->inertia, geo.inertia_inv)) {
         PROPID_BAD("inertia");
     }
     if (!positive_finite(config->rate_std0)) {
@@ -515,15 +534,15 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         }
         out.rotor_momentum[i] = config->rotor[i].yaw_sign * rotor_inertia;
         for (uint8_t a = 0; a < 3u; ++a) {
-            out.rotor_reaction[i][a] = out.inertia_inv[a][2] * out.rotor_momentum[i];
+            out.rotor_reaction[i][a] = geo.inertia_inv[a][2] * out.rotor_momentum[i];
         }
     }
     /* Rotor angular momentum h z_B with h = -sum_i yaw_sign_i J_r,i Omega_i (a rotor
      * spins opposite to the yaw torque its drag puts on the body): the body torque
      * -omega x (h z) = sum_i yaw_sign_i J_r,i Omega_i (omega_y, -omega_x, 0). */
     for (uint8_t a = 0; a < 3u; ++a) {
-        out.rotor_gyro[a][0] = out.rotor_inertia_on ? -out.inertia_inv[a][1] : 0.0f;
-        out.rotor_gyro[a][1] = out.rotor_inertia_on ? out.inertia_inv[a][0] : 0.0f;
+        out.rotor_gyro[a][0] = out.rotor_inertia_on ? -geo.inertia_inv[a][1] : 0.0f;
+        out.rotor_gyro[a][1] = out.rotor_inertia_on ? geo.inertia_inv[a][0] : 0.0f;
     }
 #endif
     for (uint8_t i = 0; i < rotor_count; ++i) {
@@ -531,21 +550,34 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         /* r x z = (r_y, -r_x, 0) */
         const float arm_torque[3] = {rotor->position_m[1], -rotor->position_m[0], 0.0f};
         for (uint8_t a = 0; a < 3u; ++a) {
-            out.thrust_torque[i][a] =
-                (out.inertia_inv[a][0] * arm_torque[0] + out.inertia_inv[a][1] * arm_torque[1]) *
+            geo.thrust_torque[i][a] =
+                (geo.inertia_inv[a][0] * arm_torque[0] + geo.inertia_inv[a][1] * arm_torque[1]) *
                 rotor->thrust_coeff_nominal;
-            out.drag_torque[i][a] =
-                out.inertia_inv[a][2] * rotor->yaw_sign * rotor->drag_coeff_nominal;
+            geo.drag_torque[i][a] =
+                geo.inertia_inv[a][2] * rotor->yaw_sign * rotor->drag_coeff_nominal;
         }
     }
-    if (!all_finite(&out.thrust_torque[0][0], 3u * PROPID_MAX_ROTORS) ||
-        !all_finite(&out.drag_torque[0][0], 3u * PROPID_MAX_ROTORS)) {
+    if (!all_finite(&geo.thrust_torque[0][0], 3u * PROPID_MAX_ROTORS) ||
+        !all_finite(&geo.drag_torque[0][0], 3u * PROPID_MAX_ROTORS)) {
         PROPID_BAD("inertia");
     }
 
-    flush_residues(&out.thrust_torque[0][0], 3u * PROPID_MAX_ROTORS);
-    flush_residues(&out.drag_torque[0][0], 3u * PROPID_MAX_ROTORS);
-    derive_sparsity(config, &out);
+    flush_residues(&geo.thrust_torque[0][0], 3u * PROPID_MAX_ROTORS);
+    flush_residues(&geo.drag_torque[0][0], 3u * PROPID_MAX_ROTORS);
+    derive_gyro_jacobian(config, &geo);
+#if PROPID_GENERAL_VEHICLES
+    derive_sparsity(config, &geo, &out);
+    memcpy(out.inertia_inv, geo.inertia_inv, sizeof(out.inertia_inv));
+    memcpy(out.thrust_torque, geo.thrust_torque, sizeof(out.thrust_torque));
+    memcpy(out.drag_torque, geo.drag_torque, sizeof(out.drag_torque));
+    memcpy(out.gyro_jacobian, geo.gyro_jacobian, sizeof(out.gyro_jacobian));
+#endif
+    derive_quad_layout(config, &geo, &out);
+#if !PROPID_GENERAL_VEHICLES
+    if (!out.quad_layout) {
+        PROPID_BAD("inertia"); /* not the quad layout's structure: this build's kernels cannot run it */
+    }
+#endif
     out.quad_core = (uint8_t)(rotor_count == 4u && out.state_count == PROPID_QUAD_STATES);
 
     out.gyro_var = config->gyro_noise_density * config->gyro_noise_density *
@@ -599,37 +631,45 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         float psd;
         float floor_var;
         float ceiling;
+        uint8_t kind;
         if (k < PROPID_RATE_STATES) {
+            kind = PROPID_KIND_RATE;
             prior = config->rate_std0 * config->rate_std0;
             psd = config->rate_process_noise * config->rate_process_noise;
             floor_var = 1.0e-12f;
             ceiling = 4.0f * config->gyro_range * config->gyro_range;
         } else if (k < first_drag) {
+            kind = PROPID_KIND_THRUST;
             prior = config->thrust_coeff_rel_std0 * config->thrust_coeff_rel_std0;
             psd = config->thrust_coeff_rel_walk * config->thrust_coeff_rel_walk;
             floor_var = 1.0e-10f;
             ceiling = coeff_ceiling;
         } else if (k < first_bias) {
+            kind = PROPID_KIND_DRAG;
             prior = config->drag_coeff_rel_std0 * config->drag_coeff_rel_std0;
             psd = config->drag_coeff_rel_walk * config->drag_coeff_rel_walk;
             floor_var = 1.0e-10f;
             ceiling = coeff_ceiling;
         } else if (k < first_bias + PROPID_BIAS_STATES) {
+            kind = PROPID_KIND_BIAS;
             prior = config->gyro_bias_std0 * config->gyro_bias_std0;
             psd = config->gyro_bias_walk * config->gyro_bias_walk;
             floor_var = 1.0e-14f;
             ceiling = config->gyro_range * config->gyro_range;
         } else if (k == out.layout.accel_bias) {
+            kind = PROPID_KIND_ACCEL_BIAS;
             prior = config->accel_bias_std0 * config->accel_bias_std0;
             psd = config->accel_bias_walk * config->accel_bias_walk;
             floor_var = 1.0e-12f;
             ceiling = config->accel_range * config->accel_range;
         } else if (k == out.layout.torque_scale) {
+            kind = PROPID_KIND_TORQUE_SCALE;
             prior = config->torque_scale_std0 * config->torque_scale_std0;
             psd = 0.0f; /* geometry and inertia: constant */
             floor_var = 1.0e-10f;
             ceiling = coeff_ceiling;
         } else { /* disturbance */
+            kind = PROPID_KIND_DISTURBANCE;
             prior = config->disturbance_std0 * config->disturbance_std0;
             psd = config->disturbance_walk * config->disturbance_walk;
             floor_var = 1.0e-12f;
@@ -667,21 +707,45 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
                        : k == out.layout.accel_bias ? "accel_bias_std0"
                        : k == out.layout.torque_scale ? "torque_scale_std0" : "disturbance_std0");
         }
-        out.prior_var[k] = prior;
-        out.process_psd[k] = psd;
+        /* (A kind's values do not depend on k: the last write is the first's.) */
+        out.state_kind[k] = kind;
+        out.kind_prior_var[kind] = prior;
+        out.kind_process_psd[kind] = psd;
         /* Both positive and finite, floor <= ceiling: their bit patterns are ordered. */
         uint32_t floor_bits;
         uint32_t ceiling_bits;
         memcpy(&floor_bits, &floor_var, sizeof(floor_bits));
         memcpy(&ceiling_bits, &ceiling, sizeof(ceiling_bits));
-        out.var_floor_bits[k] = floor_bits;
-        out.var_range_bits[k] = ceiling_bits - floor_bits;
+        out.kind_floor_bits[kind] = floor_bits;
+        out.kind_range_bits[kind] = ceiling_bits - floor_bits;
     }
 
     if (derived != NULL) {
         *derived = out;
     }
     return PROPID_OK;
+}
+
+void propid_config_keep(const propid_config_t *config, propid_kept_config_t *kept)
+{
+#if PROPID_GENERAL_VEHICLES
+    *kept = *config;
+#else
+    memset(kept, 0, sizeof(*kept));
+    kept->rotor_count = config->rotor_count;
+    kept->gate_max_consecutive = config->gate_max_consecutive;
+    kept->rotor_delay_us = config->rotor_delay_us;
+    kept->rotor_stale_us = config->rotor_stale_us;
+    kept->max_gyro_gap_us = config->max_gyro_gap_us;
+    kept->max_rotor_speed = config->max_rotor_speed;
+    kept->gyro_range = config->gyro_range;
+    kept->coeff_rel_min = config->coeff_rel_min;
+    kept->coeff_rel_max = config->coeff_rel_max;
+    for (uint8_t i = 0; i < PROPID_MAX_ROTORS; ++i) {
+        kept->rotor[i].thrust_coeff_nominal = config->rotor[i].thrust_coeff_nominal;
+        kept->rotor[i].drag_coeff_nominal = config->rotor[i].drag_coeff_nominal;
+    }
+#endif
 }
 
 propid_status_t propid_config_check(const propid_config_t *config, const char **bad_field)

@@ -126,7 +126,7 @@ static void close_window(propid_filter_t *filter)
     float worst = 0.0f;
     for (uint8_t c = 0; c < count; ++c) {
         const uint8_t k = (uint8_t)(first + c);
-        const float removed = monitor->start_var[c] + derived->process_psd[k] * elapsed_s - core->cov[propid_cov_index(k, k)];
+        const float removed = monitor->start_var[c] + propid_process_psd(derived, k) * elapsed_s - core->cov[propid_cov_index(k, k)];
         if (!(removed > propid_var_floor(derived, k))) {
             continue; /* nothing learnt about it (or its variance was reset): no test */
         }

@@ -21,7 +21,7 @@ void propid_cov_set_prior(const propid_derived_t *derived, uint8_t rotor_count, 
         core->state[derived->layout.torque_scale] = 1.0f; /* the configured J and arms */
     }
     for (uint8_t k = 0; k < n; ++k) {
-        core->cov[propid_cov_index(k, k)] = derived->prior_var[k];
+        core->cov[propid_cov_index(k, k)] = propid_prior_var(derived, k);
     }
 }
 
@@ -31,7 +31,7 @@ void propid_cov_reset_state(const propid_derived_t *derived, propid_core_t *core
     for (uint8_t j = 0; j < n; ++j) {
         core->cov[propid_cov_index(index, j)] = 0.0f;
     }
-    core->cov[propid_cov_index(index, index)] = derived->prior_var[index];
+    core->cov[propid_cov_index(index, index)] = propid_prior_var(derived, index);
 }
 
 int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
@@ -41,7 +41,7 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
     /* Bad variances: the state forgets its correlations and returns to its prior. */
     for (uint8_t i = 0; i < n; ++i) {
         const float p = core->cov[propid_cov_index(i, i)];
-        if (!propid_outside_positive_range(p, derived->var_floor_bits[i], derived->var_range_bits[i])) {
+        if (!propid_outside_positive_range(p, propid_floor_bits(derived, i), propid_range_bits(derived, i))) {
             continue; /* the usual case: one test per diagonal (NaN fails it) */
         }
         if (!(p > 0.0f && p <= FLT_MAX)) {
@@ -110,7 +110,7 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
     for (uint8_t i = 0; i < n; ++i) {
         float *diagonal = &core->cov[propid_cov_index(i, i)];
         const float p = *diagonal;
-        if (!propid_outside_positive_range(p, derived->var_floor_bits[i], derived->var_range_bits[i])) {
+        if (!propid_outside_positive_range(p, propid_floor_bits(derived, i), propid_range_bits(derived, i))) {
             continue; /* the usual case: one test per diagonal (NaN fails it) */
         }
         if (!(p > 0.0f && p <= FLT_MAX)) {
@@ -134,7 +134,7 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
     return repaired;
 }
 
-uint32_t propid_clamp_coefficients(const propid_config_t *config, propid_core_t *core)
+uint32_t propid_clamp_coefficients(const propid_kept_config_t *config, propid_core_t *core)
 {
     const uint8_t first = propid_first_thrust();
     const uint8_t end = propid_first_bias(config->rotor_count);

@@ -21,7 +21,7 @@
 
 /* Added to an IMU stamp before it is compared with rotor stamps: d when the
  * rotor speeds lag, else 0. */
-static inline uint64_t propid_delay_imu_shift(const propid_config_t *config)
+static inline uint64_t propid_delay_imu_shift(const propid_kept_config_t *config)
 {
 #if PROPID_DELAY_SLOTS > 0
     return config->rotor_delay_us > 0 ? (uint64_t)config->rotor_delay_us : 0u;
@@ -32,7 +32,7 @@ static inline uint64_t propid_delay_imu_shift(const propid_config_t *config)
 }
 
 /* Added to a rotor stamp: |d| when the gyro lags, else 0. */
-static inline uint64_t propid_delay_rotor_shift(const propid_config_t *config)
+static inline uint64_t propid_delay_rotor_shift(const propid_kept_config_t *config)
 {
 #if PROPID_DELAY_SLOTS > 0
     return config->rotor_delay_us < 0 ? (uint64_t)(-(int64_t)config->rotor_delay_us) : 0u;

@@ -19,7 +19,7 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     if (filter->magic != PROPID_MAGIC) {
         return PROPID_ERR_NOT_INITIALISED;
     }
-    const propid_config_t *config = &filter->config;
+    const propid_kept_config_t *config = &filter->config;
     const propid_derived_t *derived = &filter->derived;
     const propid_core_t *core = &filter->core;
     const uint8_t rotor_count = config->rotor_count;
@@ -52,10 +52,10 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         estimate->drag_coeff[i] = core->state[km] * km_nominal;
         estimate->drag_coeff_std[i] = std_of(km_var) * km_nominal;
         /* "Converging": std below half its prior, i.e. variance below a quarter. */
-        if (kf_var < 0.25f * derived->prior_var[kf]) {
+        if (kf_var < 0.25f * propid_prior_var(derived, kf)) {
             estimate->thrust_coeff_converging |= bit;
         }
-        if (km_var < 0.25f * derived->prior_var[km]) {
+        if (km_var < 0.25f * propid_prior_var(derived, km)) {
             estimate->drag_coeff_converging |= bit;
         }
         if (kf_var < derived->converged_var) {
@@ -66,7 +66,8 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         }
     }
     const uint8_t disturbance = derived->layout.disturbance;
-    if (PROPID_WITH_DISTURBANCE && disturbance != PROPID_NO_STATE) {
+#if PROPID_WITH_DISTURBANCE /* (a build without it keeps no inertia) */
+    if (disturbance != PROPID_NO_STATE) {
         for (uint8_t a = 0; a < 3u; ++a) {
             float torque = 0.0f;
             float torque_var = 0.0f;
@@ -79,6 +80,7 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
             estimate->disturbance_torque_std[a] = std_of(torque_var);
         }
     }
+#endif
     const uint8_t accel_bias = derived->layout.accel_bias;
     if (PROPID_WITH_ACCEL && accel_bias != PROPID_NO_STATE) {
         estimate->accel_bias = core->state[accel_bias];

@@ -51,8 +51,8 @@ propid_status_t propid_init(propid_filter_t *filter, const propid_config_t *conf
         return PROPID_ERR_CONFIG;
     }
     memset(filter, 0, sizeof(*filter));
-    filter->config = *config;
-    (void)propid_config_derive(&filter->config, &filter->derived, NULL);
+    (void)propid_config_derive(config, &filter->derived, NULL);
+    propid_config_keep(config, &filter->config);
     core_to_prior(filter);
     filter->magic = PROPID_MAGIC;
     return PROPID_OK;
@@ -137,7 +137,7 @@ static __attribute__((noinline)) propid_status_t rotor_sample_check(propid_filte
     if (rotor_speed_rad_s == NULL) {
         return reject(filter, PROPID_ERR_NULL);
     }
-    const propid_config_t *config = &filter->config;
+    const propid_kept_config_t *config = &filter->config;
     if (rotor_count != config->rotor_count) {
         return reject(filter, PROPID_ERR_ROTOR_COUNT);
     }
@@ -229,7 +229,7 @@ static __attribute__((noinline)) propid_status_t predict_step(propid_filter_t *f
 {
     propid_core_t *core = &filter->core;
     float rate_next[3];
-    float rate_jacobian_dt[3][PROPID_MAX_STATES];
+    float rate_jacobian_dt[3][PROPID_JAC_ROW];
     const propid_status_t staged = propid_predict_stage(filter, dt, rate_next, rate_jacobian_dt);
     if (staged < 0) {
         return PROPID_ERR_NUMERIC;
@@ -250,7 +250,7 @@ static __attribute__((noinline)) propid_status_t predict_step(propid_filter_t *f
 
 /* Time checks of a gyro sample against the previous one (previous: its stamp,
  * or the resync time when anchor): backwards, jump. */
-static propid_status_t gyro_time_check(const propid_config_t *config, uint64_t previous, int anchor,
+static propid_status_t gyro_time_check(const propid_kept_config_t *config, uint64_t previous, int anchor,
                                        uint64_t time_us)
 {
     if (anchor) {
@@ -280,7 +280,7 @@ static __attribute__((noinline)) propid_status_t gyro_sample_check(propid_filter
     if (gyro_rad_s == NULL) {
         return reject(filter, PROPID_ERR_NULL);
     }
-    const propid_config_t *config = &filter->config;
+    const propid_kept_config_t *config = &filter->config;
     for (uint8_t a = 0; a < 3u; ++a) {
         if (!isfinite(gyro_rad_s[a])) {
             return reject(filter, PROPID_ERR_NOT_FINITE);
@@ -326,7 +326,7 @@ propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
 
 propid_status_t propid_fuse_gyro(propid_filter_t *filter, uint64_t time_us, const float gyro_rad_s[3])
 {
-    const propid_config_t *config = &filter->config;
+    const propid_kept_config_t *config = &filter->config;
     propid_core_t *core = &filter->core;
     const int anchor = !core->has_time; /* first sample after init/reset/resync */
     const propid_status_t timing = gyro_time_check(config, core->time_us, anchor, time_us);

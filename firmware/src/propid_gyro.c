@@ -19,14 +19,11 @@
 #include "propid_internal.h"
 
 
-/* Row length of the pending vectors: at least 20 floats. With the quad build's
- * 14 the compiler keeps fewer of the unrolled downdate's vector entries in
- * registers (measured: 53 more instructions per step); 72 B of stack buys them. */
-#define PROPID_PENDING_STRIDE (PROPID_MAX_STATES < 20 ? 20 : PROPID_MAX_STATES)
-
+/* The three pending vectors h[a] = P H_a^T (the quad step's largest stack
+ * object: 3 x 14 floats in the quad build). */
 typedef struct {
     uint8_t count;                      /* pending fused axes */
-    float h[3][PROPID_PENDING_STRIDE];  /* P H^T of each pending axis (its gain is h / S) */
+    float h[3][PROPID_MAX_STATES];      /* P H^T of each pending axis (its gain is h / S) */
     float inv_var[3];                   /* 1 / S: the gain is g = h / S */
     float innovation[3];
 } pending_t;
@@ -71,13 +68,13 @@ apply_row_group(float *restrict cov, float *restrict state,
             *p = *p - gain[r][0] * h0[j] - gain[r][1] * h1[j] - gain[r][2] * h2[j];
         }
         /* Floors and ceilings are per kind of state (rate, thrust, drag, bias:
-         * propid_config.c): the first state of its kind stands for each, so
-         * the constants stay in registers across the groups. */
-        const uint8_t kind = i < PROPID_QUAD_FIRST_THRUST ? 0u
-                             : (i < PROPID_QUAD_FIRST_DRAG ? PROPID_QUAD_FIRST_THRUST
-                                : (i < PROPID_QUAD_FIRST_BIAS ? PROPID_QUAD_FIRST_DRAG : PROPID_QUAD_FIRST_BIAS));
-        outside |= propid_outside_positive_range(cov[propid_cov_index(i, i)], derived->var_floor_bits[kind],
-                                                 derived->var_range_bits[kind]);
+         * derived->state_kind); the quad's kinds are known here, so the
+         * constants stay in registers across the groups. */
+        const uint8_t kind = i < PROPID_QUAD_FIRST_THRUST ? PROPID_KIND_RATE
+                             : (i < PROPID_QUAD_FIRST_DRAG ? PROPID_KIND_THRUST
+                                : (i < PROPID_QUAD_FIRST_BIAS ? PROPID_KIND_DRAG : PROPID_KIND_BIAS));
+        outside |= propid_outside_positive_range(cov[propid_cov_index(i, i)], derived->kind_floor_bits[kind],
+                                                 derived->kind_range_bits[kind]);
     }
 #pragma GCC unroll 10
     for (uint8_t j = (uint8_t)(first + rows); j < PROPID_QUAD_STATES; ++j) {
@@ -269,6 +266,7 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
     return 1;
 }
 
+#if PROPID_GENERAL_VEHICLES
 /* The usual sample of any other vehicle (hexa, octo, optional states): the same
  * one pass as the quad's (fuse_quad_usual, apply_three_quad) over loops, for any
  * state count n and the layout's bias block. Returns 1 with the three axes
@@ -356,10 +354,11 @@ apply_three_any(float *restrict cov, float *restrict state,
         for (uint8_t j = i; j < n; ++j) {
             row[j] = row[j] - g0 * h0[j] - g1 * h1[j] - g2 * h2[j];
         }
-        outside |= propid_outside_positive_range(row[i], derived->var_floor_bits[i], derived->var_range_bits[i]);
+        outside |= propid_outside_positive_range(row[i], propid_floor_bits(derived, i), propid_range_bits(derived, i));
     }
     return outside == 0u;
 }
+#endif
 
 /* Every sample the one pass does not take (a gated axis, S < R, a non-finite
  * vector): the generic scalar update per axis. Not inlined: its callees' frames
@@ -391,16 +390,19 @@ static __attribute__((noinline)) int fuse_one_pass(propid_filter_t *filter, cons
     const float *cov = core->cov;
     pending_t pending;
     int inside;
-    if (derived->quad_core) {
-        if (!fuse_quad_usual(cov, core, derived, &pending, gyro)) {
-            return 0;
-        }
-        inside = apply_three_quad(core->cov, core->state, &pending, derived);
-    } else {
+#if PROPID_GENERAL_VEHICLES
+    if (!derived->quad_core) {
         if (!fuse_usual_any(cov, core, derived, &pending, gyro)) {
             return 0;
         }
         inside = apply_three_any(core->cov, core->state, &pending, derived);
+    } else
+#endif
+    {
+        if (!fuse_quad_usual(cov, core, derived, &pending, gyro)) {
+            return 0;
+        }
+        inside = apply_three_quad(core->cov, core->state, &pending, derived);
     }
     /* Variance floors and ceilings: tested inside the pass; the full pass (which
      * also repairs) only when one is outside. */

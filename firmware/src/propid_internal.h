@@ -55,6 +55,48 @@ static inline uint32_t propid_cov_diagonal_step(uint8_t j)
  * lists. */
 #define PROPID_QUAD_JAC_ENTRIES 6u
 
+/* Length of a row of the Jacobian work rows jacobian_dt[3][PROPID_JAC_ROW]
+ * (propid_predict_stage): the general path's longest list, or the quad layout's 6. */
+#if PROPID_GENERAL_VEHICLES
+#define PROPID_JAC_ROW PROPID_MAX_STATES
+#define PROPID_JAC_TORQUE_ROW (PROPID_MAX_STATES - 3) /* derived->jac_torque[3][...] */
+#else
+#define PROPID_JAC_ROW PROPID_QUAD_JAC_ENTRIES
+#define PROPID_JAC_TORQUE_ROW 6
+#endif
+
+/* State column of entry p of rate row a in the fixed quad layout. */
+static inline uint8_t propid_quad_layout_column(uint8_t a, uint8_t p)
+{
+    if (p < 2u) { /* the two other rate columns, ascending */
+        return (uint8_t)(p == 0u ? (a == 0u ? 1u : 0u) : (a == 2u ? 1u : 2u));
+    }
+    /* thrust columns in the roll and pitch rows, drag columns in the yaw row */
+    return (uint8_t)(PROPID_RATE_STATES + (a < 2u ? 0u : 4u) + (p - 2u));
+}
+
+/* Entries of rate row a of G, and the state column of entry p (the general
+ * lists, or the fixed quad layout above). */
+static inline uint8_t propid_jacobian_entries(const propid_derived_t *derived, uint8_t a)
+{
+#if PROPID_GENERAL_VEHICLES
+    return derived->jac_count[a];
+#else
+    (void)derived;
+    (void)a;
+    return (uint8_t)PROPID_QUAD_JAC_ENTRIES;
+#endif
+}
+static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, uint8_t a, uint8_t p)
+{
+#if PROPID_GENERAL_VEHICLES
+    return derived->jac_column[a][p];
+#else
+    (void)derived;
+    return propid_quad_layout_column(a, p);
+#endif
+}
+
 /* Keeps the compiler's instruction scheduler from hoisting the loads of later
  * iterations of a fully unrolled kernel above this point: hoisted loads outlive
  * the 32 FPU registers and are spilled to the stack (measured: ~100 extra
@@ -160,6 +202,9 @@ propid_scalar_result_t propid_scalar_update(propid_filter_t *filter, const propi
                                             float innovation, float noise_var, float gate_sq,
                                             float *test_ratio);
 
+/* propid_config.c: the configuration the filter keeps (propid.h, propid_kept_config_t). */
+void propid_config_keep(const propid_config_t *config, propid_kept_config_t *kept);
+
 /* propid_config.c: validate a configuration and compute its derived quantities.
  * Writes *derived only when the configuration is valid. */
 propid_status_t propid_config_derive(const propid_config_t *config, propid_derived_t *derived,
@@ -185,24 +230,24 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core);
  * into rate_next and the rate rows of F - I (dt * the structurally non-zero
  * Jacobian entries, the gyroscopic ones at the midpoint of omega and the Euler
  * predictor) into jacobian_dt[a][p], entry p of row a
- * being column derived->jac_column[a][p], without touching the filter. Returns
+ * being column propid_jacobian_column(derived, a, p), without touching the filter. Returns
  * PROPID_ERR_NUMERIC when either (or a state) would be non-finite, and
  * PROPID_PREDICT_CLAMPED when a finite rate_next beyond +-derived->rate_limit was
  * bounded to it (an unobserved rate integrating the gyroscopic term can run away:
  * the gyro cannot measure beyond gyro_range anyway). */
 propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, float rate_next[3],
-                                     float jacobian_dt[3][PROPID_MAX_STATES]);
+                                     float jacobian_dt[3][PROPID_JAC_ROW]);
 /* P := F P F^T + Q dt + PROPID_VAR_LOADING diag, F = I + G, G the sparse rows from propid_predict_stage
  * (only the 3 rate rows differ from I). */
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
-                               const float jacobian_dt[3][PROPID_MAX_STATES]);
+                               const float jacobian_dt[3][PROPID_JAC_ROW]);
 
 /* propid_gyro.c: fuse one gyro sample, three scalar updates (x, y, z; H = e_rate +
  * e_bias each). Returns the mask of axes gated out (bit a). */
 uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3]);
 /* propid_covariance.c: clamp the coefficients to [coeff_rel_min, coeff_rel_max];
  * returns how many were clamped. */
-uint32_t propid_clamp_coefficients(const propid_config_t *config, propid_core_t *core);
+uint32_t propid_clamp_coefficients(const propid_kept_config_t *config, propid_core_t *core);
 
 /* 1 when a value is outside [floor, ceiling] (or negative, or not finite): for
  * non-negative floats the bit patterns are ordered like the values, so one
@@ -215,17 +260,46 @@ static inline uint32_t propid_outside_positive_range(float value, uint32_t floor
     return (uint32_t)(bits - floor_bits) > range_bits ? 1u : 0u;
 }
 
+/* Kinds of state (derived->state_kind; propid_config.h PROPID_STATE_KINDS). */
+#define PROPID_KIND_RATE 0u
+#define PROPID_KIND_THRUST 1u
+#define PROPID_KIND_DRAG 2u
+#define PROPID_KIND_BIAS 3u
+#define PROPID_KIND_DISTURBANCE 4u
+#define PROPID_KIND_ACCEL_BIAS (4u + PROPID_WITH_DISTURBANCE)
+#define PROPID_KIND_TORQUE_SCALE (5u + PROPID_WITH_DISTURBANCE)
+
+/* Per-state process noise rate, prior variance and variance bounds (stored once
+ * per kind of state). */
+static inline float propid_process_psd(const propid_derived_t *derived, uint8_t i)
+{
+    return derived->kind_process_psd[derived->state_kind[i]];
+}
+static inline float propid_prior_var(const propid_derived_t *derived, uint8_t i)
+{
+    return derived->kind_prior_var[derived->state_kind[i]];
+}
+static inline uint32_t propid_floor_bits(const propid_derived_t *derived, uint8_t i)
+{
+    return derived->kind_floor_bits[derived->state_kind[i]];
+}
+static inline uint32_t propid_range_bits(const propid_derived_t *derived, uint8_t i)
+{
+    return derived->kind_range_bits[derived->state_kind[i]];
+}
+
 /* The per-state variance floor and ceiling, kept only as bit patterns (positive
  * floats: the patterns are ordered like the values). */
 static inline float propid_var_floor(const propid_derived_t *derived, uint8_t i)
 {
+    const uint32_t bits = propid_floor_bits(derived, i);
     float value;
-    memcpy(&value, &derived->var_floor_bits[i], sizeof(value));
+    memcpy(&value, &bits, sizeof(value));
     return value;
 }
 static inline float propid_var_ceiling(const propid_derived_t *derived, uint8_t i)
 {
-    const uint32_t bits = derived->var_floor_bits[i] + derived->var_range_bits[i];
+    const uint32_t bits = propid_floor_bits(derived, i) + propid_range_bits(derived, i);
     float value;
     memcpy(&value, &bits, sizeof(value));
     return value;

@@ -44,9 +44,9 @@ static propid_status_t bound_rates(float rate_next[3], float limit, float check)
 static __attribute__((noinline)) propid_status_t
 predict_stage_quad(const float *restrict state, const float *restrict input_speed_sq,
                    const float *restrict latest_speed_sq, const float (*restrict quad_gyro)[2],
-                   const float (*restrict jac_torque)[PROPID_MAX_STATES - 3], float dt,
+                   const float (*restrict jac_torque)[PROPID_JAC_TORQUE_ROW], float dt,
                    float rate_limit, float *restrict rate_next,
-                   float (*restrict jacobian_dt)[PROPID_MAX_STATES])
+                   float (*restrict jacobian_dt)[PROPID_JAC_ROW])
 {
     const float rate[3] = {state[0], state[1], state[2]};
     const float half_dt = 0.5f * dt;
@@ -111,11 +111,12 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
     return PROPID_OK;
 }
 
+#if PROPID_GENERAL_VEHICLES
 /* Any vehicle and any optional term, over the sparsity lists. Not inlined: its
  * frame stays off the quad path's stack. */
 static __attribute__((noinline)) propid_status_t
 predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
-                  float jacobian_dt[3][PROPID_MAX_STATES])
+                  float jacobian_dt[3][PROPID_JAC_ROW])
 {
     const propid_derived_t *derived = &filter->derived;
     const float *state = filter->core.state;
@@ -228,17 +229,20 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
     }
     return bound_rates(rate_next, derived->rate_limit, check);
 }
+#endif
 
 propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, float rate_next[3],
-                                     float jacobian_dt[3][PROPID_MAX_STATES])
+                                     float jacobian_dt[3][PROPID_JAC_ROW])
 {
-    if (filter->derived.quad_layout) {
-        return predict_stage_quad(filter->core.state, filter->core.input_speed_sq,
-                                  filter->core.rotor_speed_sq, filter->derived.quad_gyro,
-                                  filter->derived.jac_torque, dt, filter->derived.rate_limit,
-                                  rate_next, jacobian_dt);
+#if PROPID_GENERAL_VEHICLES
+    if (!filter->derived.quad_layout) {
+        return predict_stage_any(filter, dt, rate_next, jacobian_dt);
     }
-    return predict_stage_any(filter, dt, rate_next, jacobian_dt);
+#endif
+    return predict_stage_quad(filter->core.state, filter->core.input_speed_sq,
+                              filter->core.rotor_speed_sq, filter->derived.quad_gyro,
+                              filter->derived.jac_torque, dt, filter->derived.rate_limit,
+                              rate_next, jacobian_dt);
 }
 
 /* The propagation for a given state count, defined twice by this macro: for the
@@ -247,7 +251,7 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
 #define PROPID_DEFINE_PREDICT(name, UNROLL)                                                     \
 static __attribute__((noinline)) void name(                                                      \
                  const propid_derived_t *derived, float *cov, float dt,                        \
-                 const float jacobian_dt[3][PROPID_MAX_STATES], const uint8_t n)               \
+                 const float jacobian_dt[3][PROPID_JAC_ROW], const uint8_t n)                  \
 {                                                                                               \
     /* T = rate rows of F P = P_a + sum_p G_ap P_(column p). */                                 \
     float rows[3][PROPID_MAX_STATES];                                                           \
@@ -304,7 +308,7 @@ UNROLL                                                                          
                 value += row[column[p]] * g[p];                                                 \
             }                                                                                   \
             if (a == b) { /* Q dt and the rounding loading (propid_internal.h) */               \
-                value += PROPID_VAR_LOADING * value + derived->process_psd[b] * dt;             \
+                value += PROPID_VAR_LOADING * value + propid_process_psd(derived, b) * dt;     \
             }                                                                                   \
             cov[propid_cov_index(a, b)] = value;                                                \
         }                                                                                       \
@@ -319,14 +323,16 @@ UNROLL                                                                          
         cov[propid_cov_index(1u, j)] = t1;                                                      \
         cov[propid_cov_index(2u, j)] = t2;                                                      \
         float *diagonal = &cov[propid_cov_index(j, j)];                                         \
-        *diagonal += PROPID_VAR_LOADING * *diagonal + derived->process_psd[j] * dt;             \
+        *diagonal += PROPID_VAR_LOADING * *diagonal + propid_process_psd(derived, j) * dt;     \
     }                                                                                           \
 }
 
+#if PROPID_GENERAL_VEHICLES
 #if !PROPID_QUAD_BUILD /* the quad build keeps flash small: a quad off the fixed layout takes the loops */
 PROPID_DEFINE_PREDICT(predict_covariance_quad, PROPID_UNROLL_QUAD)
 #endif
 PROPID_DEFINE_PREDICT(predict_covariance_any, PROPID_NO_UNROLL)
+#endif
 
 /* The propagation for the quad layout, column by column: column j of T needs
  * P_cj for the 11 non-bias rows c; each is loaded once (one load with a constant
@@ -341,7 +347,7 @@ PROPID_DEFINE_PREDICT(predict_covariance_any, PROPID_NO_UNROLL)
 #define B0 PROPID_QUAD_FIRST_BIAS
 static __attribute__((noinline)) void
 predict_covariance_quad_layout(const propid_derived_t *derived, float *restrict cov,
-                               float dt, const float jacobian_dt[3][PROPID_MAX_STATES])
+                               float dt, const float jacobian_dt[3][PROPID_JAC_ROW])
 {
     /* Row 0: columns 1, 2 and the thrust columns; row 1: 0, 2 and the thrust
      * columns; row 2: 0, 1 and the drag columns. */
@@ -351,9 +357,9 @@ predict_covariance_quad_layout(const propid_derived_t *derived, float *restrict 
     const float g0r0 = g0[0], g0r1 = g0[1], g0c0 = g0[2], g0c1 = g0[3], g0c2 = g0[4], g0c3 = g0[5];
     const float g1r0 = g1[0], g1r1 = g1[1], g1c0 = g1[2], g1c1 = g1[3], g1c2 = g1[4], g1c3 = g1[5];
     const float g2r0 = g2[0], g2r1 = g2[1], g2c0 = g2[2], g2c1 = g2[3], g2c2 = g2[4], g2c3 = g2[5];
-    const float q_thrust = derived->process_psd[T0] * dt;
-    const float q_drag = derived->process_psd[D0] * dt;
-    const float q_bias = derived->process_psd[B0] * dt;
+    const float q_thrust = derived->kind_process_psd[PROPID_KIND_THRUST] * dt;
+    const float q_drag = derived->kind_process_psd[PROPID_KIND_DRAG] * dt;
+    const float q_bias = derived->kind_process_psd[PROPID_KIND_BIAS] * dt;
     float rate_cols[3][3]; /* T_ab for the rate columns b */
     float block00 = 0.0f, block01 = 0.0f, block11 = 0.0f; /* thrust-column terms */
     float block02 = 0.0f, block12 = 0.0f, block22 = 0.0f; /* drag-column terms */
@@ -409,9 +415,9 @@ predict_covariance_quad_layout(const propid_derived_t *derived, float *restrict 
     const float p12 = t[1][2] + t[1][0] * g2r0 + t[1][1] * g2r1 + block12;
     const float f22 = t[2][2] + t[2][0] * g2r0 + t[2][1] * g2r1 + block22;
     /* Q dt and the rounding loading (propid_internal.h) on the diagonal. */
-    const float p00 = f00 + (PROPID_VAR_LOADING * f00 + derived->process_psd[0] * dt);
-    const float p11 = f11 + (PROPID_VAR_LOADING * f11 + derived->process_psd[1] * dt);
-    const float p22 = f22 + (PROPID_VAR_LOADING * f22 + derived->process_psd[2] * dt);
+    const float p00 = f00 + (PROPID_VAR_LOADING * f00 + derived->kind_process_psd[PROPID_KIND_RATE] * dt);
+    const float p11 = f11 + (PROPID_VAR_LOADING * f11 + derived->kind_process_psd[PROPID_KIND_RATE] * dt);
+    const float p22 = f22 + (PROPID_VAR_LOADING * f22 + derived->kind_process_psd[PROPID_KIND_RATE] * dt);
     cov[propid_cov_index(0u, 0u)] = p00;
     cov[propid_cov_index(0u, 1u)] = p01;
     cov[propid_cov_index(0u, 2u)] = p02;
@@ -424,16 +430,20 @@ predict_covariance_quad_layout(const propid_derived_t *derived, float *restrict 
 #undef B0
 
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
-                               const float jacobian_dt[3][PROPID_MAX_STATES])
+                               const float jacobian_dt[3][PROPID_JAC_ROW])
 {
+#if PROPID_GENERAL_VEHICLES
     const uint8_t n = derived->state_count;
-    if (derived->quad_layout) {
-        predict_covariance_quad_layout(derived, core->cov, dt, jacobian_dt);
+    if (!derived->quad_layout) {
 #if !PROPID_QUAD_BUILD
-    } else if (n == PROPID_QUAD_STATES) {
-        predict_covariance_quad(derived, core->cov, dt, jacobian_dt, PROPID_QUAD_STATES);
+        if (n == PROPID_QUAD_STATES) {
+            predict_covariance_quad(derived, core->cov, dt, jacobian_dt, PROPID_QUAD_STATES);
+            return;
+        }
 #endif
-    } else {
         predict_covariance_any(derived, core->cov, dt, jacobian_dt, n);
+        return;
     }
+#endif
+    predict_covariance_quad_layout(derived, core->cov, dt, jacobian_dt);
 }

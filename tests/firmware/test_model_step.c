@@ -142,7 +142,7 @@ static void check_prediction_against_dense(void)
         randomise(&rng);
         const float dt = rng_uniform(&rng, 0.0005f, 0.01f);
         float rate_next[3];
-        float jac_dt[3][N_MAX];
+        float jac_dt[3][PROPID_JAC_ROW];
         TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&filter, dt, rate_next, jac_dt));
         /* Heun step of the rates against the model's derivative, with the
          * interval's input = mean of the start and latest rotor speeds squared:
@@ -205,7 +205,7 @@ static void check_prediction_against_dense(void)
                 for (uint8_t k = 0; k < n; ++k) {
                     sum += dense_a[i][k] * f[j][k];
                 }
-                dense_b[i][j] = sum + (i == j ? filter.derived.process_psd[i] * dt : 0.0f);
+                dense_b[i][j] = sum + (i == j ? propid_process_psd(&filter.derived, i) * dt : 0.0f);
             }
         }
         propid_predict_covariance(&filter.derived, &filter.core, dt, jac_dt);
@@ -244,15 +244,15 @@ static void check_jacobian_against_finite_differences(void)
         randomise(&rng);
         const float dt = 0.01f; /* the largest step the filter allows by default */
         float rate_next[3];
-        float jac_dt[3][N_MAX];
+        float jac_dt[3][PROPID_JAC_ROW];
         TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&filter, dt, rate_next, jac_dt));
         /* F's rate rows, dense (the stage's entries are in list order). */
         float f_rows[3][N_MAX];
         memset(f_rows, 0, sizeof(f_rows));
         for (uint8_t a = 0; a < 3u; ++a) {
             f_rows[a][a] = 1.0f;
-            for (uint8_t p = 0; p < filter.derived.jac_count[a]; ++p) {
-                f_rows[a][filter.derived.jac_column[a][p]] += jac_dt[a][p];
+            for (uint8_t p = 0; p < propid_jacobian_entries(&filter.derived, a); ++p) {
+                f_rows[a][propid_jacobian_column(&filter.derived, a, p)] += jac_dt[a][p];
             }
         }
         /* The second-order term dt^2/2 A_gyr(x_p) A(x), from the model. */
@@ -511,7 +511,7 @@ static void test_gate_rejects_outlier_then_reopens(void)
     /* Re-anchored: rate + bias now explain the sample, the rate variance is at most
      * its prior (no inflation by the innovation), and P is still positive definite. */
     TEST_ASSERT_FLOAT_WITHIN(0.05f, target, filter.core.state[0] + filter.core.state[9 + 2]);
-    TEST_ASSERT_TRUE(filter.core.cov[propid_cov_index(0, 0)] <= filter.derived.prior_var[0]);
+    TEST_ASSERT_TRUE(filter.core.cov[propid_cov_index(0, 0)] <= propid_prior_var(&filter.derived, 0));
     symmetric_view(view);
     TEST_ASSERT_TRUE(positive_definite(view, filter.derived.state_count));
     TEST_ASSERT_EQUAL_UINT32(before.cov_repairs, after.cov_repairs);
@@ -724,7 +724,7 @@ static void test_time_jump_resync_workflow(void)
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_TIME_JUMP, propid_push_gyro(&filter, late, gyro));
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_resync(&filter, late));
     /* Rate variance back to the prior, uncorrelated. */
-    TEST_ASSERT_EQUAL_FLOAT(filter.derived.prior_var[0], filter.core.cov[propid_cov_index(0, 0)]);
+    TEST_ASSERT_EQUAL_FLOAT(propid_prior_var(&filter.derived, 0), filter.core.cov[propid_cov_index(0, 0)]);
     TEST_ASSERT_EQUAL_FLOAT(0.0f, filter.core.cov[propid_cov_index(0, 11)]);
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_TIME_BACKWARDS, propid_push_gyro(&filter, late - 1u, gyro));
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, late, gyro)); /* same sample anchors */

@@ -587,6 +587,23 @@ static void test_compiled_out_features_rejected(void)
     TEST_ASSERT_EQUAL_STRING("rotor_inertia", bad);
     checked++;
 #endif
+#if !PROPID_GENERAL_VEHICLES
+    /* Without the general path only the quad layout runs: another rotor count,
+     * or an inertia whose products couple the axes, is a configuration error
+     * (and a good quad still passes). */
+    make_config(&asked);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&asked, &bad));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK,
+                          propid_config_set_symmetric(&asked, 3u, 0.17f, 0.0f, 1.0f, 5.57e-6f, 1.36e-7f));
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&asked, &bad));
+    TEST_ASSERT_EQUAL_STRING("rotor_count", bad);
+    make_config(&asked);
+    asked.inertia[0][1] = 1.0e-4f;
+    asked.inertia[1][0] = 1.0e-4f;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&asked, &bad));
+    TEST_ASSERT_EQUAL_STRING("inertia", bad);
+    checked++;
+#endif
     (void)bad;
     (void)asked;
     if (checked == 0) {

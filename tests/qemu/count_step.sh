@@ -39,10 +39,15 @@ extra=(${COUNT_STEP_CFLAGS:-})
 cflags=("${cpu[@]}" -std=c11 -O2 -DNDEBUG -fno-math-errno -ffp-contract=fast
         -ffunction-sections -fdata-sections "${extra[@]}")
 
+# The quad build's library leaves out the damage detector and the model helpers
+# (firmware/CMakeLists.txt): they need the general build's derived data.
+quad_build=0
+case " ${extra[*]:-} " in *" -DPROPID_QUAD_BUILD=1 "*) quad_build=1 ;; esac
 sources=()
 for f in "$src"/firmware/src/propid_*.c; do
     case "$(basename "$f")" in
         propid_abi.c|propid_mavlink.c) ;;   # host-only / separate library
+        propid_damage.c|propid_model.c) [ "$quad_build" = 1 ] || sources+=("$f") ;;
         *) sources+=("$f") ;;
     esac
 done

@@ -115,14 +115,14 @@ int dense_ekf_step(dense_ekf_t *dense, propid_filter_t *model, uint64_t time_us,
     /* Model: predicted rates and the rate rows of F - I. */
     memcpy(model->core.state, dense->x, sizeof(float) * (size_t)n);
     float rate_next[3];
-    float jacobian_dt[3][PROPID_MAX_STATES];
+    float jacobian_dt[3][PROPID_JAC_ROW];
     if (propid_predict_stage(model, dt, rate_next, jacobian_dt) != PROPID_OK) {
         return -1;
     }
     identity(f_mat, n);
     for (int a = 0; a < 3; ++a) {
-        for (int p = 0; p < derived->jac_count[a]; ++p) {
-            f_mat[a][derived->jac_column[a][p]] += jacobian_dt[a][p];
+        for (uint8_t p = 0; p < propid_jacobian_entries(derived, (uint8_t)a); ++p) {
+            f_mat[a][propid_jacobian_column(derived, (uint8_t)a, p)] += jacobian_dt[a][p];
         }
     }
 
@@ -134,7 +134,7 @@ int dense_ekf_step(dense_ekf_t *dense, propid_filter_t *model, uint64_t time_us,
     transpose(f_mat, f_t, n, n);
     mat_mul(tmp, f_t, dense->p, n, n, n);
     for (int i = 0; i < n; ++i) {
-        dense->p[i][i] += PROPID_VAR_LOADING * dense->p[i][i] + derived->process_psd[i] * dt;
+        dense->p[i][i] += PROPID_VAR_LOADING * dense->p[i][i] + propid_process_psd(derived, (uint8_t)i) * dt;
     }
 
     /* Update with z = gyro, H = [I_3 0 I_3], R = gyro_var I_3. */

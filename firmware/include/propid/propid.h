@@ -249,9 +249,11 @@ typedef struct {
     uint8_t quad_core;                              /* private: 1 for the plain quad (14 states in
                                                        the fixed order): the gyro's one-pass update */
     propid_layout_t layout;
+#if PROPID_GENERAL_VEHICLES /* (the quad build needs them at initialisation only) */
     float inertia_inv[3][3];
     float thrust_torque[PROPID_MAX_ROTORS][3];      /* J^-1 (r_i x z) kf_nominal_i */
     float drag_torque[PROPID_MAX_ROTORS][3];        /* J^-1 z yaw_sign_i km_nominal_i */
+#endif
     float gyro_var;                                 /* per-sample measurement variance */
     /* Private (not part of the API contract): */
     float gate_sq;                                  /* gate_sigma^2, PROPID_GATE_OFF_SQ when gating is off */
@@ -260,20 +262,29 @@ typedef struct {
     float rate_limit;                               /* |predicted body rate| bound: 2 gyro_range */
     uint32_t innovation_var_bits;                   /* bit pattern of gyro_var (S range test) */
     uint32_t innovation_range_bits;                 /* bits(S at which R is loaded) - bits(gyro_var) */
-    float process_psd[PROPID_MAX_STATES];           /* per-state Q rate: Q_ii = process_psd[i] * dt */
-    float prior_var[PROPID_MAX_STATES];             /* per-state prior variance */
-    uint32_t var_floor_bits[PROPID_MAX_STATES];     /* bit pattern of the per-state variance floor */
-    uint32_t var_range_bits[PROPID_MAX_STATES];     /* bits(ceiling) - bits(floor): the ceiling's
+    /* Process noise, prior and variance bounds are the same for every state of a
+     * kind (rate, thrust, drag, gyro bias and each optional block): one value per
+     * kind, state_kind[i] the kind of state i (propid_internal.h: propid_prior_var ...). */
+    uint8_t state_kind[PROPID_MAX_STATES];
+    float kind_process_psd[PROPID_STATE_KINDS];     /* Q rate: Q_ii = psd * dt */
+    float kind_prior_var[PROPID_STATE_KINDS];       /* prior variance */
+    uint32_t kind_floor_bits[PROPID_STATE_KINDS];   /* bit pattern of the variance floor */
+    uint32_t kind_range_bits[PROPID_STATE_KINDS];   /* bits(ceiling) - bits(floor): the ceiling's
                                                        value follows (propid_var_ceiling) */
     /* Sparsity of the 3 rate rows of A = df/dx (structurally non-zero entries only,
      * fixed by geometry and inertia): row a has jac_count[a] entries, the first
-     * jac_rate_count[a] of them in rate columns, the rest in coefficient columns. */
+     * jac_rate_count[a] of them in rate columns, the rest in coefficient columns
+     * (the quad layout: 6 entries in fixed columns, propid_internal.h). */
+#if PROPID_GENERAL_VEHICLES
     uint8_t jac_count[3];
     uint8_t jac_rate_count[3];
     uint8_t jac_column[3][PROPID_MAX_STATES - 3];   /* state index of each entry */
     uint8_t jac_rotor[3][PROPID_MAX_STATES - 3];    /* coefficient entry: its rotor */
     float jac_torque[3][PROPID_MAX_STATES - 3];     /* coefficient entry: A = jac_torque * u_rotor */
     float gyro_jacobian[3][3][3];                   /* A_ab = sum_c gyro_jacobian[a][b][c] omega_c */
+#else
+    float jac_torque[3][6];                         /* the quad layout's entries (2..5 used) */
+#endif
     /* Optional terms' data: compiled out with their terms (propid_config.h). */
 #if PROPID_WITH_ROTOR_INERTIA
     uint8_t rotor_inertia_on;                       /* any config.rotor_inertia > 0 */
@@ -322,8 +333,32 @@ typedef struct {
     float last_drift;                               /* largest Delta^2 / D of the last window */
 } propid_consistency_t;
 
+/* The configuration the filter keeps (private): all of it, or in a build without
+ * the general path (PROPID_GENERAL_VEHICLES 0, the quad build) only the fields
+ * its calls read after propid_init, under the same names. */
+#if PROPID_GENERAL_VEHICLES
+typedef propid_config_t propid_kept_config_t;
+#else
 typedef struct {
-    propid_config_t config;
+    float thrust_coeff_nominal;
+    float drag_coeff_nominal;
+} propid_kept_rotor_t;
+typedef struct {
+    uint8_t rotor_count;
+    uint16_t gate_max_consecutive;
+    int32_t rotor_delay_us;
+    uint32_t rotor_stale_us;
+    uint32_t max_gyro_gap_us;
+    float max_rotor_speed;
+    float gyro_range;
+    float coeff_rel_min;
+    float coeff_rel_max;
+    propid_kept_rotor_t rotor[PROPID_MAX_ROTORS];
+} propid_kept_config_t;
+#endif
+
+typedef struct {
+    propid_kept_config_t config;
     propid_derived_t derived;
     propid_core_t core;
     propid_counters_t counters;

@@ -40,6 +40,22 @@
 #define PROPID_WITH_ROTOR_INERTIA PROPID_DEFAULT_FEATURES
 #endif
 
+/* 1: the step also has its general path, for any rotor count up to
+ * PROPID_MAX_ROTORS, any inertia and the optional terms (the Jacobian's sparsity
+ * lists and loops over them). 0 (the quad build with every optional term off):
+ * only a 4-rotor vehicle whose inertia gives the step's fixed quad layout
+ * (propid_internal.h: any diagonal inertia); propid_config_check rejects any
+ * other ("rotor_count", "inertia"), and the lists, their loops and their work
+ * rows take no RAM, flash or stack. */
+#ifndef PROPID_GENERAL_VEHICLES
+#define PROPID_GENERAL_VEHICLES (PROPID_DEFAULT_FEATURES || PROPID_WITH_ACCEL || PROPID_WITH_DISTURBANCE || \
+                                 PROPID_WITH_ROTOR_INERTIA)
+#endif
+#if !PROPID_GENERAL_VEHICLES && (PROPID_MAX_ROTORS != 4 || PROPID_WITH_ACCEL || PROPID_WITH_DISTURBANCE || \
+                                 PROPID_WITH_ROTOR_INERTIA)
+#error "PROPID_GENERAL_VEHICLES 0 needs PROPID_MAX_ROTORS 4 and every optional model term off"
+#endif
+
 /* State layout: body rate (3), thrust coefficient (N), drag coefficient (N),
  * gyro bias (3), then the optional blocks. With PROPID_MAX_ROTORS = 8 the largest
  * filter has 27 states. */
@@ -51,6 +67,9 @@
 #define PROPID_DISTURBANCE_STATES (3 * PROPID_WITH_DISTURBANCE)
 #define PROPID_ACCEL_BIAS_STATES (1 * PROPID_WITH_ACCEL)
 #define PROPID_TORQUE_SCALE_STATES (1 * PROPID_WITH_ACCEL)
+/* Kinds of state (each shares its noise, prior and bounds): rate, thrust, drag,
+ * gyro bias, then the optional disturbance, accelerometer bias, torque scale. */
+#define PROPID_STATE_KINDS (4 + PROPID_WITH_DISTURBANCE + 2 * PROPID_WITH_ACCEL)
 #define PROPID_MAX_STATES (PROPID_RATE_STATES + 2 * PROPID_MAX_ROTORS + PROPID_BIAS_STATES + \
                            PROPID_DISTURBANCE_STATES + PROPID_ACCEL_BIAS_STATES + PROPID_TORQUE_SCALE_STATES)
 
