@@ -113,6 +113,8 @@ static void test_init_gives_prior(void)
 #if PROPID_GENERAL_VEHICLES
     TEST_ASSERT_EQUAL_MEMORY(&config, &filter.config, sizeof(config));
 #else
+    /* The quad build's RAM budget (docs/performance.md). */
+    TEST_ASSERT_LESS_OR_EQUAL_UINT32(1024u, (uint32_t)sizeof(propid_filter_t));
     TEST_ASSERT_EQUAL_UINT8(config.rotor_count, filter.config.rotor_count);
     TEST_ASSERT_EQUAL_UINT16(config.gate_max_consecutive, filter.config.gate_max_consecutive);
     TEST_ASSERT_EQUAL_INT32(config.rotor_delay_us, filter.config.rotor_delay_us);
