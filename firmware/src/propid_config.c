@@ -57,6 +57,7 @@ void propid_config_default(propid_config_t *config)
     config->accel_range = 160.0f;
     config->torque_scale = 0u;
     config->torque_scale_std0 = 0.5f;
+    config->torque_scale_walk = 0.0f;
 }
 
 propid_status_t propid_config_set_symmetric(propid_config_t *config, uint8_t rotor_count,
@@ -495,6 +496,10 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (config->torque_scale && (!positive_finite(config->torque_scale_std0) || config->torque_scale_std0 > 10.0f)) {
         PROPID_BAD("torque_scale_std0");
     }
+    if (config->torque_scale &&
+        (!isfinite(config->torque_scale_walk) || config->torque_scale_walk < 0.0f || config->torque_scale_walk > 10.0f)) {
+        PROPID_BAD("torque_scale_walk");
+    }
     if (!propid_delay_config_ok(config)) {
         PROPID_BAD("rotor_delay_us"); /* beyond 1 s or what PROPID_DELAY_SLOTS holds */
     }
@@ -665,7 +670,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         } else if (k == out.layout.torque_scale) {
             kind = PROPID_KIND_TORQUE_SCALE;
             prior = config->torque_scale_std0 * config->torque_scale_std0;
-            psd = 0.0f; /* geometry and inertia: constant */
+            psd = config->torque_scale_walk * config->torque_scale_walk; /* 0: geometry and inertia only */
             floor_var = 1.0e-10f;
             ceiling = coeff_ceiling;
         } else { /* disturbance */

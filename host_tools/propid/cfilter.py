@@ -151,6 +151,7 @@ _OPTIONAL_FIELDS = [
     ("accel_range", ctypes.c_float),
     ("torque_scale", ctypes.c_uint8),
     ("torque_scale_std0", ctypes.c_float),
+    ("torque_scale_walk", ctypes.c_float),
     ("rotor_delay_us", ctypes.c_int32),
 ]
 _INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int32)
@@ -266,6 +267,7 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "accel_range": 160.0,
     "torque_scale": 0,
     "torque_scale_std0": 0.5,
+    "torque_scale_walk": 0.0,
     # Telemetry delay (docs/math.md §12): > 0 rotor speeds lag the gyro, < 0 the gyro lags.
     "rotor_delay_us": 0,
 }
@@ -317,6 +319,7 @@ class FilterConfig:
     accel_range: float = DEFAULT_TUNING["accel_range"]
     torque_scale: int = DEFAULT_TUNING["torque_scale"]
     torque_scale_std0: float = DEFAULT_TUNING["torque_scale_std0"]
+    torque_scale_walk: float = DEFAULT_TUNING["torque_scale_walk"]
     rotor_delay_us: int = DEFAULT_TUNING["rotor_delay_us"]
 
     @property

@@ -8,7 +8,8 @@ reference value (the reference kf only divides the results for display):
   vehicle file's esc_delay_s, else the per-log rule (--esc-delay default);
 - modes (the optional terms, docs/math.md §7-9): gyro only; + rotor inertia; + disturbance
   torque; + accelerometer (torque scale off); + accelerometer with the thrust-torque scale;
-  all combined. Every other setting is the library default;
+  all combined. Every other setting is the library default. Added later, and NOT a rule fixed in
+  advance: + accelerometer with the scale as a random walk (SCALE_WALK below);
 - "square" runs are the logs whose name starts with "square", the others are the rest;
 - per run: kf = mean over rotors of the converged-part mean; rotor spread = the worst
   rotor's |kf_i / run mean - 1|; km converged = all rotors' relative std below 5 % at the end.
@@ -23,6 +24,10 @@ from pathlib import Path
 
 from propid.errors import UserError
 
+# The thrust-torque scale's random walk of the last mode [1/sqrt(s)]: NOT fixed in advance. It was
+# picked from a four-point sweep on these same logs (0.01, 0.05, 0.1, 0.2; docs/real-data.md), where the
+# fleet value stops changing from 0.1 on: a candidate to check on held-out flights, not a validated rule.
+SCALE_WALK = 0.1
 # (name, what it is, ReplayOptions fields)
 MODES = [
     ("gyro", "gyro only", dict(aiding="gyro", rotor_inertia="off", disturbance="off", torque_scale="off")),
@@ -34,6 +39,9 @@ MODES = [
                                                                   disturbance="off", torque_scale="on")),
     ("combined", "all: accelerometer + torque scale + disturbance + rotor inertia",
      dict(aiding="gyro+accel", rotor_inertia="on", disturbance="on", torque_scale="on")),
+    ("accel_scale_walk", "+ accelerometer with the torque scale as a random walk (0.1/sqrt(s))",
+     dict(aiding="gyro+accel", rotor_inertia="off", disturbance="off", torque_scale="on",
+          overrides={"torque_scale_walk": SCALE_WALK})),
 ]
 ROTOR_WITHIN = 0.05
 

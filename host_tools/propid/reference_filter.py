@@ -63,7 +63,7 @@ class ReferenceFilter:
             "thrust_coeff_rel_walk", "drag_coeff_rel_walk", "gyro_bias_walk", "gate_sigma",
             "max_rotor_speed", "gyro_range", "coeff_rel_min", "coeff_rel_max", "converged_rel_std",
             "disturbance_std0", "disturbance_walk", "mass", "accel_noise_std", "accel_bias_std0",
-            "accel_bias_walk", "accel_range", "torque_scale_std0")}
+            "accel_bias_walk", "accel_range", "torque_scale_std0", "torque_scale_walk")}
         self.c = c
         self.gate_max_consecutive = int(config.gate_max_consecutive)
         self.rotor_stale_us = int(config.rotor_stale_us)
@@ -128,7 +128,8 @@ class ReferenceFilter:
                 prior, psd, floor, ceiling = (c["accel_bias_std0"] ** 2, c["accel_bias_walk"] ** 2,
                                               1e-12, c["accel_range"] ** 2)
             elif k == self.torque_scale:
-                prior, psd, floor, ceiling = c["torque_scale_std0"] ** 2, 0.0, 1e-10, coeff_ceiling
+                prior, psd, floor, ceiling = (c["torque_scale_std0"] ** 2, c["torque_scale_walk"] ** 2, 1e-10,
+                                              coeff_ceiling)
             else:  # disturbance
                 prior, psd, floor = c["disturbance_std0"] ** 2, c["disturbance_walk"] ** 2, 1e-12
                 ceiling = 100.0 * prior

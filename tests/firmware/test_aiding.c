@@ -140,6 +140,8 @@ typedef struct {
     float inertia_error;     /* the filter's J = inertia_error * true J (0: exact) */
     int torque_scale;        /* filter option */
     float accel_noise;       /* accelerometer noise std [m/s^2] (0: 0.2) */
+    float torque_gain_late;  /* from half the flight on the thrust torques act this much (0: 1) */
+    float scale_walk;        /* filter option torque_scale_walk */
 } flight_t;
 
 /* Mean over rotors of kf_est / kf_true at the end. */
@@ -154,6 +156,7 @@ static float fly(const flight_t *flight, float *worst_rotor)
     }
     config.disturbance_torque = (uint8_t)flight->disturbance_states;
     config.torque_scale = (uint8_t)flight->torque_scale;
+    config.torque_scale_walk = flight->scale_walk;
     if (flight->inertia_error > 0.0f) {
         propid_config_set_inertia_diag(&config, flight->inertia_error * 3.65e-3f, flight->inertia_error * 3.68e-3f,
                                        flight->inertia_error * 7.03e-3f);
@@ -203,10 +206,12 @@ static float fly(const flight_t *flight, float *worst_rotor)
         /* Plant over dt (explicit Euler at 2 ms; the filter's model is the same). */
         float torque[3] = {flight->disturbance[0], flight->disturbance[1], flight->disturbance[2]};
         float thrust = 0.0f;
+        const float gain = flight->torque_gain_late > 0.0f && t > 0.5f * flight->duration_s ? flight->torque_gain_late
+                                                                                           : 1.0f;
         for (uint8_t i = 0; i < 4u; ++i) {
             const propid_rotor_config_t *rotor = &config.rotor[i];
-            torque[0] += kf[i] * u[i] * rotor->position_m[1];
-            torque[1] -= kf[i] * u[i] * rotor->position_m[0];
+            torque[0] += gain * kf[i] * u[i] * rotor->position_m[1];
+            torque[1] -= gain * kf[i] * u[i] * rotor->position_m[0];
             torque[2] += rotor->yaw_sign * km[i] * u[i];
             thrust += kf[i] * u[i];
         }
@@ -251,7 +256,7 @@ static float fly(const flight_t *flight, float *worst_rotor)
 
 static void test_accelerometer_pins_the_thrust_scale(void)
 {
-    flight_t flight = {1.25f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f, 0.0f, 0, 0.0f};
+    flight_t flight = {1.25f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f, 0.0f, 0, 0.0f, 0.0f, 0.0f};
     float worst = 0.0f;
     const float with_accel = fly(&flight, &worst);
     TEST_ASSERT_FLOAT_WITHIN(0.02f, 1.0f, with_accel);
@@ -264,7 +269,7 @@ static void test_accelerometer_pins_the_thrust_scale(void)
 static void test_disturbance_states_remove_the_closed_loop_bias(void)
 {
     /* A 1 cm centre-of-mass offset along x at 1 kg: 0.098 N m about y. */
-    flight_t flight = {1.0f, {0.0f, 0.098f, 0.0f}, 0, 0, 20.0f, 0.0f, 0, 0.0f};
+    flight_t flight = {1.0f, {0.0f, 0.098f, 0.0f}, 0, 0, 20.0f, 0.0f, 0, 0.0f, 0.0f, 0.0f};
     float worst_off = 0.0f;
     float worst_on = 0.0f;
     const float off = fly(&flight, &worst_off);
@@ -289,7 +294,7 @@ static void test_torque_scale_frees_kf_from_an_inertia_error(void)
      * it are asserted.) */
     /* A vibrating accelerometer (1 m/s^2 per sample, as on a small quad): the
      * gyro's information on the scale then dominates without the state. */
-    flight_t flight = {1.0f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f, 1.3f, 0, 1.0f};
+    flight_t flight = {1.0f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f, 1.3f, 0, 1.0f, 0.0f, 0.0f};
     float worst_with = 0.0f;
     flight.torque_scale = 1;
     const float with = fly(&flight, &worst_with);
@@ -305,6 +310,43 @@ static void test_torque_scale_frees_kf_from_an_inertia_error(void)
     const char *bad = NULL;
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
     TEST_ASSERT_EQUAL_STRING("torque_scale", bad);
+}
+
+static void test_torque_scale_walk_follows_a_changing_torque_gain(void)
+{
+    /* From half the flight on the thrust torques act at 0.6 of their earlier
+     * strength (thrust unchanged), as when the torque gain the gyro sees varies
+     * within a flight. A constant scale cannot follow: it settles between the
+     * two gains. With the scale's random walk it follows the change, and kf
+     * stays with the accelerometer either way in this flight (its thrust swing
+     * gives the accelerometer enough information). */
+    flight_t flight = {1.0f, {0.0f, 0.0f, 0.0f}, 1, 0, 40.0f, 0.0f, 1, 1.0f, 0.6f, 0.0f};
+    float worst = 0.0f;
+    const float constant = fly(&flight, &worst);
+    propid_estimate_t estimate;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    const float constant_scale = estimate.torque_scale;
+    flight.scale_walk = 0.1f;
+    const float walking = fly(&flight, &worst);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    TEST_ASSERT_FLOAT_WITHIN(0.02f, 1.0f, constant);
+    TEST_ASSERT_TRUE(fabsf(constant_scale - 0.6f) > 0.1f); /* a constant averages both halves */
+    TEST_ASSERT_FLOAT_WITHIN(0.02f, 1.0f, walking);
+    TEST_ASSERT_TRUE(worst < 0.05f);
+    TEST_ASSERT_FLOAT_WITHIN(0.05f, 0.6f, estimate.torque_scale);
+    /* Validated: a negative or non-finite walk is refused, by name. */
+    propid_config_t config;
+    quad_config(&config);
+    config.mass = MASS;
+    config.torque_scale = 1u;
+    config.torque_scale_walk = -0.1f;
+    const char *bad = NULL;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("torque_scale_walk", bad);
+    config.torque_scale_walk = NAN;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    config.torque_scale_walk = 0.1f;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
 }
 
 /* ---- rotor inertia: the yaw reaction in one step ------------------------ */
@@ -346,5 +388,6 @@ int main(void)
     RUN_TEST(test_accelerometer_pins_the_thrust_scale);
     RUN_TEST(test_disturbance_states_remove_the_closed_loop_bias);
     RUN_TEST(test_torque_scale_frees_kf_from_an_inertia_error);
+    RUN_TEST(test_torque_scale_walk_follows_a_changing_torque_gain);
     return UNITY_END();
 }

@@ -47,7 +47,8 @@ def make_config(options: str = "plain") -> FilterConfig:
     config = FilterConfig.symmetric(4, 0.17, math.pi / 4, 1.0, 5.57e-6, 1.36e-7, inertia)
     if options == "all":
         config = config.with_overrides(disturbance_torque=1, rotor_inertia=[2e-6] * 4, mass=MASS,
-                                       accel_noise_std=0.3, torque_scale=1)
+                                       accel_noise_std=0.3, torque_scale=1,
+                                       torque_scale_walk=0.05)
     return config
 
 

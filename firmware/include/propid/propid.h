@@ -138,6 +138,9 @@ typedef struct {
                                          J^-1 (r x z) kf relative to the configured J and arms (1 more
                                          state): kf's scale then comes from the accelerometer alone */
     float torque_scale_std0;          /* prior std of that scale (nominal 1) */
+    float torque_scale_walk;          /* its random walk [1/sqrt(s)]; 0: a constant (a pure J or arm
+                                         error). > 0 when the torque gain the gyro sees varies during a
+                                         flight (errors in the rotor-speed regressor, docs/math.md §9) */
     int32_t rotor_delay_us;           /* telemetry delay [us] (docs/math.md §12): > 0, the rotor speeds
                                          lag the gyro (the speed the body had at t arrives stamped
                                          t + delay): gyro and accelerometer samples are held until

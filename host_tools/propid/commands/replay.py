@@ -33,6 +33,7 @@ OVERRIDES = [
     ("rotor_stale_us", int, "rotor data older than this at a gyro sample is stale [us]"),
     ("max_gyro_gap_us", int, "a longer gap between gyro samples is a time jump (resync) [us]"),
     ("converged_rel_std", float, "a coefficient is converged below this relative std"),
+    ("torque_scale_walk", float, "random walk of the thrust-torque scale [1/sqrt(s)] (library default 0: constant)"),
 ]
 
 
