@@ -129,8 +129,12 @@ def linked_filter_size(repo: pathlib.Path, work: pathlib.Path, build_flag: str,
                        per_sample: set[str]) -> dict:
     """Flash of the filter linked into a minimal application (--gc-sections),
     split into what the per-sample calls reach and the rest (init-only)."""
-    sources = [p for p in sorted((repo / "firmware/src").glob("propid_*.c"))
-               if p.name not in ("propid_abi.c", "propid_mavlink.c")]
+    # The quad build's library has neither the damage detector nor the model
+    # helpers (firmware/CMakeLists.txt): they need the general build's data.
+    left_out = {"propid_abi.c", "propid_mavlink.c"}
+    if build_flag == "-DPROPID_QUAD_BUILD=1":
+        left_out |= {"propid_damage.c", "propid_model.c"}
+    sources = [p for p in sorted((repo / "firmware/src").glob("propid_*.c")) if p.name not in left_out]
     tag = build_flag.lstrip("-D").replace("=", "_").lower()
     elf = work / f"footprint_app_{tag}.elf"
     map_file = work / f"footprint_app_{tag}.map"
