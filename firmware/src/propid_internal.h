@@ -129,10 +129,6 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
  * derived->rate_limit (not a public status: the step was accepted). */
 #define PROPID_PREDICT_CLAMPED ((propid_status_t)2)
 
-/* Loop annotations for the two copies of the step's kernels: fully unrolled for
- * the quad (GCC and Clang honour the pragma), plain otherwise. */
-#define PROPID_UNROLL_QUAD _Pragma("GCC unroll 14")
-#define PROPID_NO_UNROLL
 
 /* The rotor-inertia terms' data (0 when compiled out, propid_config.h). */
 static inline int propid_rotor_inertia_on(const propid_derived_t *derived)

@@ -17,6 +17,7 @@
 #include <math.h>
 
 #include "propid_internal.h"
+#include "propid_quad_predict.h"
 
 /* Rare path of the prediction's finiteness and bound test: PROPID_ERR_NUMERIC
  * when a rate or `check` is not finite, else every rate bounded to +-limit and
@@ -245,203 +246,97 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
                               rate_next, jacobian_dt);
 }
 
-/* The propagation for a given state count, defined twice by this macro: for the
- * quad (n constant, loops over the state fully unrolled by PROPID_UNROLL, addresses
- * folded into immediates) and for any n (plain loops, small code). */
-#define PROPID_DEFINE_PREDICT(name, UNROLL)                                                     \
-static __attribute__((noinline)) void name(                                                      \
-                 const propid_derived_t *derived, float *cov, float dt,                        \
-                 const float jacobian_dt[3][PROPID_JAC_ROW], const uint8_t n)                  \
-{                                                                                               \
-    /* T = rate rows of F P = P_a + sum_p G_ap P_(column p). */                                 \
-    float rows[3][PROPID_MAX_STATES];                                                           \
-    for (uint8_t a = 0; a < 3u; ++a) {                                                          \
-        float acc[PROPID_MAX_STATES]; /* registers in the unrolled quad copy */                 \
-        /* Row `a` of the stored triangle: column a above the diagonal, then the row. */        \
-UNROLL                                                                                          \
-        for (uint8_t j = 0; j < a; ++j) {                                                       \
-            acc[j] = cov[propid_cov_index(j, a)];                                               \
-        }                                                                                       \
-        const float *row_a = propid_cov_row_const(cov, a);                                      \
-UNROLL                                                                                          \
-        for (uint8_t j = a; j < n; ++j) {                                                       \
-            acc[j] = row_a[j];                                                                  \
-        }                                                                                       \
-        const uint8_t count = derived->jac_count[a];                                            \
-        for (uint8_t p = 0; p < count; ++p) {                                                   \
-            const float g = jacobian_dt[a][p];                                                  \
-            const uint8_t source = derived->jac_column[a][p];                                   \
-            if (source >= n) { /* never (propid_config.c); bounds the index for the compiler */ \
-                continue;                                                                       \
-            }                                                                                   \
-            /* P_(source, j) from the stored triangle, without a branch per element: down    \
-             * column `source` above the diagonal (the packed step shrinks by one per row),    \
-             * then along row `source`. */                                                      \
-            uint32_t above = source;                                                            \
-UNROLL                                                                                          \
-            for (uint8_t j = 0; j < source; ++j) {                                              \
-                acc[j] += g * cov[above];                                                       \
-                above += PROPID_MAX_STATES - 1u - j;                                            \
-            }                                                                                   \
-            const float *row_source = propid_cov_row_const(cov, source);                        \
-UNROLL                                                                                          \
-            for (uint8_t j = source; j < n; ++j) {                                              \
-                acc[j] += g * row_source[j];                                                    \
-            }                                                                                   \
-        }                                                                                       \
-        float *row = rows[a];                                                                   \
-UNROLL                                                                                          \
-        for (uint8_t j = 0; j < n; ++j) {                                                       \
-            row[j] = acc[j];                                                                    \
-        }                                                                                       \
-    }                                                                                           \
-    /* Rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp, upper               \
-     * triangle; Q dt on its diagonal. */                                                       \
-    for (uint8_t b = 0; b < 3u; ++b) {                                                          \
-        const uint8_t count = derived->jac_count[b];                                            \
-        const uint8_t *column = derived->jac_column[b];                                         \
-        const float *g = jacobian_dt[b];                                                        \
-        for (uint8_t a = 0; a <= b; ++a) {                                                      \
-            const float *row = rows[a];                                                         \
-            float value = row[b];                                                               \
-            for (uint8_t p = 0; p < count; ++p) {                                               \
-                value += row[column[p]] * g[p];                                                 \
-            }                                                                                   \
-            if (a == b) { /* Q dt and the rounding loading (propid_internal.h) */               \
-                value += PROPID_VAR_LOADING * value + propid_process_psd(derived, b) * dt;     \
-            }                                                                                   \
-            cov[propid_cov_index(a, b)] = value;                                                \
-        }                                                                                       \
-    }                                                                                           \
-    /* Cross terms with every non-rate state; Q dt on the other diagonals. */                   \
-UNROLL                                                                                          \
-    for (uint8_t j = 3u; j < n; ++j) {                                                          \
-        const float t0 = rows[0][j];                                                            \
-        const float t1 = rows[1][j];                                                            \
-        const float t2 = rows[2][j];                                                            \
-        cov[propid_cov_index(0u, j)] = t0;                                                      \
-        cov[propid_cov_index(1u, j)] = t1;                                                      \
-        cov[propid_cov_index(2u, j)] = t2;                                                      \
-        float *diagonal = &cov[propid_cov_index(j, j)];                                         \
-        *diagonal += PROPID_VAR_LOADING * *diagonal + propid_process_psd(derived, j) * dt;     \
-    }                                                                                           \
-}
-
 #if PROPID_GENERAL_VEHICLES
-#if !PROPID_QUAD_BUILD /* the quad build keeps flash small: a quad off the fixed layout takes the loops */
-PROPID_DEFINE_PREDICT(predict_covariance_quad, PROPID_UNROLL_QUAD)
-#endif
-PROPID_DEFINE_PREDICT(predict_covariance_any, PROPID_NO_UNROLL)
+/* The propagation for any vehicle and state count over the sparsity lists
+ * (plain loops, small code; the quad layout has its straight-line kernel below). */
+static __attribute__((noinline)) void predict_covariance_any(
+                 const propid_derived_t *derived, float *cov, float dt,
+                 const float jacobian_dt[3][PROPID_JAC_ROW], const uint8_t n)
+{
+    /* T = rate rows of F P = P_a + sum_p G_ap P_(column p). */
+    float rows[3][PROPID_MAX_STATES];
+    for (uint8_t a = 0; a < 3u; ++a) {
+        float *acc = rows[a];
+        /* Row `a` of the stored triangle: column a above the diagonal, then the row. */
+        for (uint8_t j = 0; j < a; ++j) {
+            acc[j] = cov[propid_cov_index(j, a)];
+        }
+        const float *row_a = propid_cov_row_const(cov, a);
+        for (uint8_t j = a; j < n; ++j) {
+            acc[j] = row_a[j];
+        }
+        const uint8_t count = derived->jac_count[a];
+        for (uint8_t p = 0; p < count; ++p) {
+            const float g = jacobian_dt[a][p];
+            const uint8_t source = derived->jac_column[a][p];
+            if (source >= n) { /* never (propid_config.c); bounds the index for the compiler */
+                continue;
+            }
+            /* P_(source, j) from the stored triangle, without a branch per element: down
+             * column `source` above the diagonal (the packed step shrinks by one per row),
+             * then along row `source`. */
+            uint32_t above = source;
+            for (uint8_t j = 0; j < source; ++j) {
+                acc[j] += g * cov[above];
+                above += PROPID_MAX_STATES - 1u - j;
+            }
+            const float *row_source = propid_cov_row_const(cov, source);
+            for (uint8_t j = source; j < n; ++j) {
+                acc[j] += g * row_source[j];
+            }
+        }
+    }
+    /* Rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp, upper
+     * triangle; Q dt on its diagonal. */
+    for (uint8_t b = 0; b < 3u; ++b) {
+        const uint8_t count = derived->jac_count[b];
+        const uint8_t *column = derived->jac_column[b];
+        const float *g = jacobian_dt[b];
+        for (uint8_t a = 0; a <= b; ++a) {
+            const float *row = rows[a];
+            float value = row[b];
+            for (uint8_t p = 0; p < count; ++p) {
+                value += row[column[p]] * g[p];
+            }
+            if (a == b) { /* Q dt and the rounding loading (propid_internal.h) */
+                value += PROPID_VAR_LOADING * value + propid_process_psd(derived, b) * dt;
+            }
+            cov[propid_cov_index(a, b)] = value;
+        }
+    }
+    /* Cross terms with every non-rate state; Q dt on the other diagonals. */
+    for (uint8_t j = 3u; j < n; ++j) {
+        const float t0 = rows[0][j];
+        const float t1 = rows[1][j];
+        const float t2 = rows[2][j];
+        cov[propid_cov_index(0u, j)] = t0;
+        cov[propid_cov_index(1u, j)] = t1;
+        cov[propid_cov_index(2u, j)] = t2;
+        float *diagonal = &cov[propid_cov_index(j, j)];
+        *diagonal += PROPID_VAR_LOADING * *diagonal + propid_process_psd(derived, j) * dt;
+    }
+}
 #endif
 
-/* The propagation for the quad layout, column by column: column j of T needs
- * P_cj for the 11 non-bias rows c; each is loaded once (one load with a constant
- * offset each, from the stored triangle) and feeds all three rows of T, with the
- * 18 G entries held in registers. The rate columns (j < 3) are computed first, into
- * locals, because the later columns overwrite rows/columns 0..2. The rate block
- * (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp collects its
- * coefficient-column terms during the sweep (upper triangle). */
-/* (Not inlined, for the same reason as predict_stage_quad: its own base registers.) */
-#define T0 PROPID_QUAD_FIRST_THRUST
-#define D0 PROPID_QUAD_FIRST_DRAG
-#define B0 PROPID_QUAD_FIRST_BIAS
+/* The propagation for the quad layout: the straight-line kernel generated from
+ * the symbolic model (firmware/codegen/quad_predict.py). Not inlined, for the
+ * same reason as predict_stage_quad: its own base registers. */
 static __attribute__((noinline)) void
 predict_covariance_quad_layout(const propid_derived_t *derived, float *restrict cov,
                                float dt, const float jacobian_dt[3][PROPID_JAC_ROW])
 {
-    /* Row 0: columns 1, 2 and the thrust columns; row 1: 0, 2 and the thrust
-     * columns; row 2: 0, 1 and the drag columns. */
-    const float *g0 = jacobian_dt[0];
-    const float *g1 = jacobian_dt[1];
-    const float *g2 = jacobian_dt[2];
-    const float g0r0 = g0[0], g0r1 = g0[1], g0c0 = g0[2], g0c1 = g0[3], g0c2 = g0[4], g0c3 = g0[5];
-    const float g1r0 = g1[0], g1r1 = g1[1], g1c0 = g1[2], g1c1 = g1[3], g1c2 = g1[4], g1c3 = g1[5];
-    const float g2r0 = g2[0], g2r1 = g2[1], g2c0 = g2[2], g2c1 = g2[3], g2c2 = g2[4], g2c3 = g2[5];
-    const float q_thrust = derived->kind_process_psd[PROPID_KIND_THRUST] * dt;
-    const float q_drag = derived->kind_process_psd[PROPID_KIND_DRAG] * dt;
-    const float q_bias = derived->kind_process_psd[PROPID_KIND_BIAS] * dt;
-    float rate_cols[3][3]; /* T_ab for the rate columns b */
-    float block00 = 0.0f, block01 = 0.0f, block11 = 0.0f; /* thrust-column terms */
-    float block02 = 0.0f, block12 = 0.0f, block22 = 0.0f; /* drag-column terms */
-#pragma GCC unroll 14
-    for (uint8_t j = 0; j < PROPID_QUAD_STATES; ++j) {
-#define PROPID_P(c) propid_cov_at(cov, (c), j)
-        const float p0 = PROPID_P(0u), p1 = PROPID_P(1u), p2 = PROPID_P(2u);
-        const float k0 = PROPID_P(T0), k1 = PROPID_P(T0 + 1u), k2 = PROPID_P(T0 + 2u), k3 = PROPID_P(T0 + 3u);
-        const float d0 = PROPID_P(D0), d1 = PROPID_P(D0 + 1u), d2 = PROPID_P(D0 + 2u), d3 = PROPID_P(D0 + 3u);
-#undef PROPID_P
-        /* The own element last: the sums then start with a product (a fresh
-         * register) instead of a copy of an operand the other rows still need. */
-        const float t0 = (g0r0 * p1 + g0r1 * p2 + g0c0 * k0 + g0c1 * k1 + g0c2 * k2 + g0c3 * k3) + p0;
-        const float t1 = (g1r0 * p0 + g1r1 * p2 + g1c0 * k0 + g1c1 * k1 + g1c2 * k2 + g1c3 * k3) + p1;
-        const float t2 = (g2r0 * p0 + g2r1 * p1 + g2c0 * d0 + g2c1 * d1 + g2c2 * d2 + g2c3 * d3) + p2;
-        if (j < T0) {
-            rate_cols[0][j] = t0;
-            rate_cols[1][j] = t1;
-            rate_cols[2][j] = t2;
-            PROPID_SCHEDULE_BARRIER();
-            continue;
-        }
-        if (j < D0) {
-            /* The entries of column j from the registers (j is a constant here). */
-            const float g0j = j == T0 ? g0c0 : j == T0 + 1u ? g0c1 : j == T0 + 2u ? g0c2 : g0c3;
-            const float g1j = j == T0 ? g1c0 : j == T0 + 1u ? g1c1 : j == T0 + 2u ? g1c2 : g1c3;
-            block00 += t0 * g0j;
-            block01 += t0 * g1j;
-            block11 += t1 * g1j;
-        } else if (j < B0) {
-            const float g2j = j == D0 ? g2c0 : j == D0 + 1u ? g2c1 : j == D0 + 2u ? g2c2 : g2c3;
-            block02 += t0 * g2j;
-            block12 += t1 * g2j;
-            block22 += t2 * g2j;
-        }
-        cov[propid_cov_index(0u, j)] = t0;
-        cov[propid_cov_index(1u, j)] = t1;
-        cov[propid_cov_index(2u, j)] = t2;
-        /* Q per kind of state (thrust, drag, bias: propid_config.c), and the
-         * rounding loading (propid_internal.h); the diagonal of a coefficient
-         * column is already in a register (j is a constant here). */
-        const float own = j == T0 ? k0 : j == T0 + 1u ? k1 : j == T0 + 2u ? k2 : j == T0 + 3u ? k3 :
-                          j == D0 ? d0 : j == D0 + 1u ? d1 : j == D0 + 2u ? d2 : j == D0 + 3u ? d3 :
-                          cov[propid_cov_index(j, j)];
-        cov[propid_cov_index(j, j)] = own + (PROPID_VAR_LOADING * own + (j < D0 ? q_thrust : (j < B0 ? q_drag : q_bias)));
-        PROPID_SCHEDULE_BARRIER();
-    }
-    const float (*t)[3] = (const float (*)[3])rate_cols;
-    const float f00 = t[0][0] + t[0][1] * g0r0 + t[0][2] * g0r1 + block00;
-    const float p01 = t[0][1] + t[0][0] * g1r0 + t[0][2] * g1r1 + block01;
-    const float p02 = t[0][2] + t[0][0] * g2r0 + t[0][1] * g2r1 + block02;
-    const float f11 = t[1][1] + t[1][0] * g1r0 + t[1][2] * g1r1 + block11;
-    const float p12 = t[1][2] + t[1][0] * g2r0 + t[1][1] * g2r1 + block12;
-    const float f22 = t[2][2] + t[2][0] * g2r0 + t[2][1] * g2r1 + block22;
-    /* Q dt and the rounding loading (propid_internal.h) on the diagonal. */
-    const float p00 = f00 + (PROPID_VAR_LOADING * f00 + derived->kind_process_psd[PROPID_KIND_RATE] * dt);
-    const float p11 = f11 + (PROPID_VAR_LOADING * f11 + derived->kind_process_psd[PROPID_KIND_RATE] * dt);
-    const float p22 = f22 + (PROPID_VAR_LOADING * f22 + derived->kind_process_psd[PROPID_KIND_RATE] * dt);
-    cov[propid_cov_index(0u, 0u)] = p00;
-    cov[propid_cov_index(0u, 1u)] = p01;
-    cov[propid_cov_index(0u, 2u)] = p02;
-    cov[propid_cov_index(1u, 1u)] = p11;
-    cov[propid_cov_index(1u, 2u)] = p12;
-    cov[propid_cov_index(2u, 2u)] = p22;
+    propid_quad_predict_covariance(cov, jacobian_dt, derived->kind_process_psd[PROPID_KIND_RATE] * dt,
+                                   derived->kind_process_psd[PROPID_KIND_THRUST] * dt,
+                                   derived->kind_process_psd[PROPID_KIND_DRAG] * dt,
+                                   derived->kind_process_psd[PROPID_KIND_BIAS] * dt);
 }
-#undef T0
-#undef D0
-#undef B0
 
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
                                const float jacobian_dt[3][PROPID_JAC_ROW])
 {
 #if PROPID_GENERAL_VEHICLES
-    const uint8_t n = derived->state_count;
     if (!derived->quad_layout) {
-#if !PROPID_QUAD_BUILD
-        if (n == PROPID_QUAD_STATES) {
-            predict_covariance_quad(derived, core->cov, dt, jacobian_dt, PROPID_QUAD_STATES);
-            return;
-        }
-#endif
-        predict_covariance_any(derived, core->cov, dt, jacobian_dt, n);
+        predict_covariance_any(derived, core->cov, dt, jacobian_dt, derived->state_count);
         return;
     }
 #endif

@@ -1,0 +1,254 @@
+#!/usr/bin/env python3
+"""Generate the quad's covariance prediction kernel from its symbolic model.
+
+    python3 firmware/codegen/quad_predict.py [--out FILE] [--check]
+
+The model is written once, here, with sympy: the body-rate dynamics of a quad
+with a diagonal inertia (docs/math.md §1),
+
+    J omega_dot = sum_i kf_i u_i (r_i x z) + sum_i km_i u_i s_i z - omega x (J omega),
+
+with the thrust and drag coefficients and the gyro biases random walks. Its
+Jacobian with respect to the 14-state vector (rates, kf, km, biases) gives the
+structurally non-zero entries of the rate rows of G = F - I: the step's fixed
+quad layout (propid_internal.h: row a has the two other rates, then the four
+thrust columns in the roll and pitch rows or the four drag columns in the yaw
+row). From that structure the script writes the straight-line kernel
+
+    P := F P F^T + Q dt + PROPID_VAR_LOADING diag(F P F^T)
+
+on the packed upper triangle (firmware/src/propid_quad_predict.h): column by
+column, each P_cj of the 11 non-bias rows loaded once and shared by the three
+rows of T = F_rate P, the rate block collecting its coefficient-column terms
+during the sweep. Every element the kernel writes is checked, symbolically,
+against F P F^T + Q of the model before the file is written: the C is the
+model's arithmetic, only ordered for the Cortex-M4 (one multiply-add per term,
+the own element last so each sum starts in a fresh register).
+
+--check regenerates in memory and exits 1 when the committed file differs (the
+test suite runs it: tests/host_tools/test_codegen.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import sys
+
+import sympy
+
+N_RATE, N_ROTOR, N_BIAS = 3, 4, 3
+N = N_RATE + 2 * N_ROTOR + N_BIAS          # 14 states
+FIRST_THRUST, FIRST_DRAG, FIRST_BIAS = 3, 7, 11
+OUT = pathlib.Path(__file__).resolve().parents[1] / "src" / "propid_quad_predict.h"
+
+
+def rate_jacobian_structure() -> list[list[int]]:
+    """Columns of the structurally non-zero entries of each rate row of
+    d(omega_dot)/dx for a quad with a diagonal inertia and arbitrary arms, yaw
+    signs and rotor speeds (zero for every value of the symbols = absent)."""
+    omega = sympy.symbols("w0:3")
+    kf = sympy.symbols("kf0:4")
+    km = sympy.symbols("km0:4")
+    bias = sympy.symbols("b0:3")
+    jx, jy, jz = sympy.symbols("Jx Jy Jz", positive=True)
+    inertia = sympy.diag(jx, jy, jz)
+    w = sympy.Matrix(omega)
+    torque = sympy.zeros(3, 1)
+    for i in range(N_ROTOR):
+        rx, ry, u, s = sympy.symbols(f"rx{i} ry{i} u{i} s{i}")
+        arm_cross_z = sympy.Matrix([ry, -rx, 0])          # r x z, r in the xy-plane
+        torque += kf[i] * u * arm_cross_z + km[i] * u * s * sympy.Matrix([0, 0, 1])
+    torque -= w.cross(inertia * w)
+    rate_dot = inertia.inv() * torque
+    state = list(omega) + list(kf) + list(km) + list(bias)
+    rows = []
+    for a in range(3):
+        columns = [c for c, x in enumerate(state)
+                   if sympy.simplify(sympy.diff(rate_dot[a], x)) != 0]
+        rows.append(columns)
+    return rows
+
+
+def p_symbol(i: int, j: int) -> sympy.Symbol:
+    i, j = min(i, j), max(i, j)
+    return sympy.Symbol(f"P_{i}_{j}")
+
+
+def generate() -> str:
+    structure = rate_jacobian_structure()
+    # The fixed layout the C kernels and propid_jacobian_column() assume.
+    expected = [[1, 2, 3, 4, 5, 6], [0, 2, 3, 4, 5, 6], [0, 1, 7, 8, 9, 10]]
+    if structure != expected:
+        raise SystemExit(f"quad_predict: the model's Jacobian structure {structure} is not the "
+                         f"fixed quad layout {expected}")
+    entries = len(expected[0])
+    g = [[sympy.Symbol(f"g{a}_{p}") for p in range(entries)] for a in range(3)]
+    loading = sympy.Symbol("L")
+    q = {kind: sympy.Symbol(f"q_{kind}") for kind in ("rate", "thrust", "drag", "bias")}
+
+    # The model's F P F^T + Q dt + loading, densely and symbolically.
+    p_full = sympy.Matrix(N, N, lambda i, j: p_symbol(i, j))
+    f = sympy.eye(N)
+    for a in range(3):
+        for p, column in enumerate(structure[a]):
+            f[a, column] += g[a][p]
+    predicted = f * p_full * f.T
+
+    def kind(k: int) -> str:
+        return "rate" if k < FIRST_THRUST else "thrust" if k < FIRST_DRAG else "drag" \
+            if k < FIRST_BIAS else "bias"
+
+    def wanted(i: int, j: int) -> sympy.Expr:
+        value = predicted[i, j]
+        if i == j:
+            value += loading * value + q[kind(i)]
+        return sympy.expand(value)
+
+    lines: list[str] = []
+    emit = lines.append
+    checked: dict[tuple[int, int], sympy.Expr] = {}
+
+    def store(i: int, j: int, c_value: str, value: sympy.Expr) -> None:
+        emit(f"        cov[propid_cov_index({i}u, {j}u)] = {c_value};")
+        checked[(i, j)] = value
+
+    names = {0: "p0", 1: "p1", 2: "p2"}
+    names.update({FIRST_THRUST + i: f"k{i}" for i in range(N_ROTOR)})
+    names.update({FIRST_DRAG + i: f"d{i}" for i in range(N_ROTOR)})
+    loaded_rows = list(range(FIRST_BIAS))                # the 11 non-bias rows
+    rate_cols: dict[tuple[int, int], sympy.Expr] = {}
+    block: dict[tuple[int, int], sympy.Expr] = {(a, b): sympy.Integer(0)
+                                               for a in range(3) for b in range(a, 3)}
+    block_terms: dict[tuple[int, int], list[str]] = {key: [] for key in block}
+    for j in range(N):
+        emit(f"    {{ /* column {j} */")
+        sym = {}
+        loads = []
+        for c in loaded_rows:
+            loads.append(f"{names[c]} = cov[propid_cov_index({min(c, j)}u, {max(c, j)}u)]")
+            sym[c] = p_symbol(c, j)
+        emit("        const float " + ", ".join(loads[:3]) + ";")
+        emit("        const float " + ", ".join(loads[3:7]) + ";")
+        emit("        const float " + ", ".join(loads[7:]) + ";")
+        t = []
+        for a in range(3):
+            terms = [f"g{a}_{p} * {names[col]}" for p, col in enumerate(structure[a])]
+            emit(f"        const float t{a} = ({' + '.join(terms)}) + {names[a]};")
+            t.append(sum(g[a][p] * sym[col] for p, col in enumerate(structure[a])) + sym[a])
+        if j < FIRST_THRUST:
+            for a in range(3):
+                emit(f"        rate_col{a}[{j}] = t{a};")
+                rate_cols[(a, j)] = t[a]
+            emit("        PROPID_SCHEDULE_BARRIER();")
+            emit("    }")
+            continue
+        # The coefficient columns' share of the rate block (T F^T)_ab, b >= a.
+        for a in range(3):
+            for b in range(a, 3):
+                if j in structure[b]:
+                    p = structure[b].index(j)
+                    block_terms[(a, b)].append(f"block{a}{b} += t{a} * g{b}_{p};")
+                    emit(f"        block{a}{b} += t{a} * g{b}_{p};")
+                    block[(a, b)] += t[a] * g[b][p]
+        for a in range(3):
+            store(a, j, f"t{a}", t[a])
+        own = names.get(j, None)
+        if own is None:                                   # a bias column: not loaded yet
+            emit(f"        const float own = cov[propid_cov_index({j}u, {j}u)];")
+            own = "own"
+        emit(f"        cov[propid_cov_index({j}u, {j}u)] = {own} + (PROPID_VAR_LOADING * {own} + "
+             f"q_{kind(j)});")
+        checked[(j, j)] = p_symbol(j, j) + (loading * p_symbol(j, j) + q[kind(j)])
+        emit("        PROPID_SCHEDULE_BARRIER();")
+        emit("    }")
+    # The rate block from the rate columns and the collected coefficient terms.
+    emit("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp. */")
+    for a in range(3):
+        for b in range(a, 3):
+            terms = [f"rate_col{a}[{b}]"]
+            value = rate_cols[(a, b)]
+            for p, column in enumerate(structure[b]):
+                if column < FIRST_THRUST:
+                    terms.append(f"rate_col{a}[{column}] * g{b}_{p}")
+                    value += rate_cols[(a, column)] * g[b][p]
+            terms.append(f"block{a}{b}")
+            value += block[(a, b)]
+            if a == b:
+                emit(f"    const float f{a}{b} = {' + '.join(terms)};")
+                emit(f"    cov[propid_cov_index({a}u, {b}u)] = f{a}{b} + (PROPID_VAR_LOADING * f{a}{b} + "
+                     f"q_rate);")
+                checked[(a, b)] = value + (loading * value + q["rate"])
+            else:
+                emit(f"    cov[propid_cov_index({a}u, {b}u)] = {' + '.join(terms)};")
+                checked[(a, b)] = value
+
+    # Every element the model changes is written, and each equals the model's.
+    for i in range(N):
+        for j in range(i, N):
+            changed = sympy.expand(wanted(i, j) - p_symbol(i, j)) != 0
+            if (i, j) in checked:
+                if sympy.expand(checked[(i, j)] - wanted(i, j)) != 0:
+                    raise SystemExit(f"quad_predict: element ({i}, {j}) differs from the model")
+            elif changed:
+                raise SystemExit(f"quad_predict: element ({i}, {j}) changes but is not written")
+
+    g_loads = []
+    for a in range(3):
+        g_loads.append(f"    const float " + ", ".join(f"g{a}_{p} = jacobian_dt[{a}][{p}]"
+                                                          for p in range(entries)) + ";")
+    header = f"""/* Generated by firmware/codegen/quad_predict.py from its symbolic quad model:
+ * do not edit (regenerate; tests/host_tools/test_codegen.py checks it is current).
+ *
+ * P := F P F^T + Q dt + PROPID_VAR_LOADING diag(F P F^T) for the fixed quad layout
+ * (propid_internal.h), on the packed upper triangle, F = I + G with G in the 3
+ * rate rows only: column by column, the 11 non-bias P_cj loaded once for the
+ * three rows of T = F_rate P, the 18 G entries in registers, the rate block's
+ * coefficient-column terms collected during the sweep; the rate columns (j < 3)
+ * go to locals first because later columns overwrite rows 0..2. Every element
+ * written was checked against the model's F P F^T + Q by the generator. */
+#ifndef PROPID_QUAD_PREDICT_H
+#define PROPID_QUAD_PREDICT_H
+
+#include "propid_internal.h"
+
+/* jacobian_dt: entries of the rate rows of G in the quad layout; q_*: Q dt per
+ * kind of state. */
+static inline __attribute__((always_inline)) void
+propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][PROPID_JAC_ROW],
+                               float q_rate, float q_thrust, float q_drag, float q_bias)
+{{
+{chr(10).join(g_loads)}
+    float rate_col0[3], rate_col1[3], rate_col2[3]; /* T_ab for the rate columns b */
+    float block00 = 0.0f, block01 = 0.0f, block02 = 0.0f; /* coefficient-column terms */
+    float block11 = 0.0f, block12 = 0.0f, block22 = 0.0f;
+{chr(10).join(lines)}
+}}
+
+#endif /* PROPID_QUAD_PREDICT_H */
+"""
+    return header
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=pathlib.Path, default=OUT, help=f"output file (default {OUT})")
+    parser.add_argument("--check", action="store_true",
+                        help="exit 1 when the output file is not what this script generates")
+    args = parser.parse_args()
+    text = generate()
+    if args.check:
+        current = args.out.read_text() if args.out.exists() else ""
+        if current != text:
+            print(f"quad_predict: {args.out} is not current: run firmware/codegen/quad_predict.py",
+                  file=sys.stderr)
+            return 1
+        print(f"quad_predict: {args.out} is current")
+        return 0
+    args.out.write_text(text)
+    print(f"quad_predict: wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
