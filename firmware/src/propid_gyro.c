@@ -298,8 +298,15 @@ fuse_usual_any(const float *restrict cov, propid_core_t *restrict core,
         const float c0 = a > 0u ? (h0[a] + h0[bias]) * inv[0] : 0.0f;
         const float c1 = a > 1u ? (h1[a] + h1[bias]) * inv[1] : 0.0f;
         float check = 0.0f;
+        /* P_ia and P_i,bias walked through the packed triangle: down the column
+         * while i is above the diagonal (the step shrinks by one per row), then
+         * along the row. */
+        uint32_t at_rate = a;
+        uint32_t at_bias = bias;
         for (uint8_t i = 0; i < n; ++i) {
-            float value = propid_cov_at(cov, i, a) + propid_cov_at(cov, i, bias);
+            float value = cov[at_rate] + cov[at_bias];
+            at_rate += i < a ? (uint32_t)PROPID_MAX_STATES - 1u - i : 1u;
+            at_bias += i < bias ? (uint32_t)PROPID_MAX_STATES - 1u - i : 1u;
             if (a > 0u) {
                 value -= c0 * h0[i];
             }
@@ -345,16 +352,18 @@ apply_three_any(float *restrict cov, float *restrict state,
     const float *h1 = pending->h[1];
     const float *h2 = pending->h[2];
     uint32_t outside = 0u;
+    float *diagonal = cov; /* P_ii; the next diagonal is PROPID_MAX_STATES - i further */
     for (uint8_t i = 0; i < n; ++i) {
         const float g0 = h0[i] * pending->inv_var[0];
         const float g1 = h1[i] * pending->inv_var[1];
         const float g2 = h2[i] * pending->inv_var[2];
         state[i] += g0 * pending->innovation[0] + g1 * pending->innovation[1] + g2 * pending->innovation[2];
-        float *row = propid_cov_row(cov, i);
+        float *row = diagonal - i; /* row[j] = P_ij, j >= i */
         for (uint8_t j = i; j < n; ++j) {
             row[j] = row[j] - g0 * h0[j] - g1 * h1[j] - g2 * h2[j];
         }
         outside |= propid_outside_positive_range(row[i], propid_floor_bits(derived, i), propid_range_bits(derived, i));
+        diagonal += PROPID_MAX_STATES - i;
     }
     return outside == 0u;
 }
