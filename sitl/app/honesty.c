@@ -26,6 +26,9 @@ void sitl_honesty_init(sitl_honesty_t *h, int rotor_count, const double *true_kf
     h->change_time_s = -1.0;
     h->inside_since_s = -1.0;
     h->max_recovery_s = -1.0;
+    h->rotor_inside_since_s = -1.0;
+    h->max_rotor_recovery_s = -1.0;
+    h->last_inside = 1;
 }
 
 /* e^T P^-1 e by Cholesky (double); returns -1 when P is not positive definite. */
@@ -108,7 +111,8 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
     const int n = estimate->rotor_count;
     int finite = 1;
     int inside = 1;
-    int changed = 0;
+    int rotors_inside = 1;
+    unsigned changed = 0u;
     for (int i = 0; i < n; i++) {
         finite &= isfinite(estimate->thrust_coeff[i]) && isfinite(estimate->thrust_coeff_std[i]) &&
                   isfinite(estimate->drag_coeff[i]) && isfinite(estimate->drag_coeff_std[i]);
@@ -122,8 +126,15 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
             h->converged_claims++;
             h->false_converged += km_err > HONESTY_CONVERGED_TOL;
         }
-        inside &= kf_err <= HONESTY_RECOVERED_TOL && km_err <= HONESTY_RECOVERED_TOL;
-        changed |= true_kf[i] != h->last_true_kf[i] || true_km[i] != h->last_true_km[i];
+        const int rotor_inside = kf_err <= HONESTY_RECOVERED_TOL && km_err <= HONESTY_RECOVERED_TOL;
+        inside &= rotor_inside;
+        const unsigned bit = 1u << i;
+        if (true_kf[i] != h->last_true_kf[i] || true_km[i] != h->last_true_km[i]) {
+            changed |= bit;
+        }
+        if ((h->changed_rotors | changed) & bit) {
+            rotors_inside &= rotor_inside;
+        }
         h->last_true_kf[i] = true_kf[i];
         h->last_true_km[i] = true_km[i];
     }
@@ -139,12 +150,21 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
         h->changes++;
         h->change_time_s = t;
         h->inside_since_s = -1.0;
+        h->rotor_inside_since_s = -1.0;
+        h->change_from_inside = h->last_inside;
+        h->changed_rotors = changed;
     }
+    h->last_inside = inside;
     if (h->change_time_s >= 0.0) {
         if (!inside) {
             h->inside_since_s = -1.0;
         } else if (h->inside_since_s < 0.0) {
             h->inside_since_s = t;
+        }
+        if (!rotors_inside) {
+            h->rotor_inside_since_s = -1.0;
+        } else if (h->rotor_inside_since_s < 0.0) {
+            h->rotor_inside_since_s = t;
         }
     }
     /* NEES every HONESTY_NEES_EVERY control steps: a Cholesky per sample would
@@ -166,6 +186,16 @@ void sitl_honesty_finish(sitl_honesty_t *h)
     } else {
         h->unrecovered++;
     }
+    if (h->change_from_inside) {
+        h->changes_from_inside++;
+        h->recovered_from_inside += h->inside_since_s >= 0.0;
+    }
+    if (h->rotor_inside_since_s >= 0.0) {
+        const double recovery = h->rotor_inside_since_s - h->change_time_s;
+        h->max_rotor_recovery_s = recovery > h->max_rotor_recovery_s ? recovery : h->max_rotor_recovery_s;
+        h->rotor_recovered++;
+    }
     h->change_time_s = -1.0;
     h->inside_since_s = -1.0;
+    h->rotor_inside_since_s = -1.0;
 }

@@ -28,6 +28,15 @@ typedef struct {
     double max_recovery_s;      /* longest completed recovery, -1: none */
     int changes;                /* changes of the true coefficients */
     int unrecovered;            /* changes not recovered by the end (or the next change) */
+    /* The same, split by what a recovery can be asked for: */
+    int last_inside;            /* every coefficient within 10 % at the latest step */
+    int change_from_inside;     /* ... at the step before the latest change */
+    int changes_from_inside;    /* changes with every coefficient within 10 % just before */
+    int recovered_from_inside;  /* ... of them recovered (every coefficient back within 10 %) */
+    unsigned changed_rotors;    /* bit i: rotor i's truth changed at the latest change */
+    double rotor_inside_since_s; /* the changed rotors' kf, km within 10 % since then, -1: outside */
+    int rotor_recovered;        /* changes whose changed rotors came back within 10 % and stayed */
+    double max_rotor_recovery_s; /* longest such recovery, -1: none */
 } sitl_honesty_t;
 
 void sitl_honesty_init(sitl_honesty_t *h, int rotor_count, const double *true_kf, const double *true_km);

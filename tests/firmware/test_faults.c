@@ -2,8 +2,9 @@
  * Regression tests of the input and numeric guards under faulty data: each test
  * drives the public API into one failure found by random-call fuzzing and checks
  * the filter's answer (docs/reliability.md, "Findings"):
- *   runaway rate while gated, gating off, an ESC stamp far ahead, the first gyro
- *   sample at a high rate, noise settings out of range, covariance definiteness.
+ *   runaway rate while gated, gating off, an ESC stamp far ahead, an ESC spike
+ *   within range, the first gyro sample at a high rate, noise settings out of
+ *   range, covariance definiteness.
  */
 #include <math.h>
 #include <stdint.h>
@@ -178,14 +179,24 @@ static void test_gate_off_never_writes_non_finite(void)
     config.gate_sigma = 0.0f;
     run_gated_spin();
     rng_t rng = {77u};
+    uint32_t accepted = 0u;
     for (uint32_t k = 0; k < 2000u; ++k) {
         now_us += 1u + (rng_next(&rng) % config.max_gyro_gap_us);
         const float gyro[3] = {rng_range(&rng, -34.0f, 34.0f), rng_range(&rng, -34.0f, 34.0f),
                                rng_range(&rng, -34.0f, 34.0f)};
-        const propid_status_t status = push(now_us, rng_range(&rng, 0.0f, 5000.0f), gyro);
+        /* Wild speeds: refused when no motor could reach them since the
+         * previous sample (gaps under 10 ms), fused otherwise. */
+        const float speed = rng_range(&rng, 0.0f, 5000.0f);
+        const float speeds[ROTORS] = {speed, speed * 1.01f, speed * 0.99f, speed * 1.02f};
+        const propid_status_t pushed = propid_push_rotor_speeds(&filter, now_us, speeds, ROTORS);
+        TEST_ASSERT_TRUE_MESSAGE(pushed == PROPID_OK || pushed == PROPID_ERR_ROTOR_SPEED_RANGE,
+                                 propid_status_name(pushed));
+        accepted += pushed == PROPID_OK;
+        const propid_status_t status = propid_push_gyro(&filter, now_us, gyro);
         TEST_ASSERT_TRUE_MESSAGE(status >= 0, propid_status_name(status));
         assert_sane();
     }
+    TEST_ASSERT_TRUE(accepted > 1000u); /* most gaps exceed 10 ms: the wild speeds are fused */
 }
 
 /* One ESC sample stamped an hour ahead must not lock out the rotor stream:
@@ -217,6 +228,54 @@ static void test_esc_stamp_far_ahead_does_not_freeze_input(void)
     /* A small backward step is still refused. */
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_TIME_BACKWARDS,
                           propid_push_rotor_speeds(&filter, now_us - 1000u, speeds, ROTORS));
+}
+
+/* A corrupted ESC frame decoded as a speed within range (soak: a 0.7 % rate of
+ * such spikes on a Crazyflie circle threw every kf ~90 % off within 0.5 s, no
+ * innovation gated, and crashed the vehicle with the damage detector on): a
+ * change no motor can make in the time since the previous sample is refused
+ * like an out-of-range speed, with nothing written; a motor ramping at its
+ * fastest is accepted; after a refused burst any in-range speed is accepted
+ * again once the gap spans a whole sweep (no lock-out). */
+static void test_esc_spike_within_range_refused(void)
+{
+    init_filter();
+    const float gyro[3] = {0.01f, -0.02f, 0.03f};
+    for (uint32_t k = 0; k < 20u; ++k) {
+        now_us += GYRO_PERIOD_US;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, push(now_us, HOVER_SPEED, gyro));
+    }
+    /* One rotor jumps by 30 % of max_rotor_speed within 2 ms: still in range. */
+    float spike[ROTORS] = {HOVER_SPEED, HOVER_SPEED * 1.01f, HOVER_SPEED * 0.99f, HOVER_SPEED * 1.02f};
+    spike[2] += 0.3f * config.max_rotor_speed;
+    TEST_ASSERT_TRUE(spike[2] < config.max_rotor_speed);
+    static propid_filter_t before;
+    memcpy(&before, &filter, sizeof(filter));
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_ROTOR_SPEED_RANGE,
+                          propid_push_rotor_speeds(&filter, now_us + GYRO_PERIOD_US, spike, ROTORS));
+    TEST_ASSERT_EQUAL_MEMORY(&before.core, &filter.core, sizeof(filter.core));
+    TEST_ASSERT_EQUAL_MEMORY(&before.config, &filter.config, sizeof(filter.config));
+    /* A fast motor (time constant 15 ms) spinning up from hover to full speed:
+     * its largest step per 2 ms is (max - hover) 2 / 15 = 13 % of the range. */
+    float speed = HOVER_SPEED;
+    for (uint32_t k = 0; k < 30u; ++k) {
+        speed += (config.max_rotor_speed * 0.95f - speed) * (2.0f / 15.0f);
+        const float ramp[ROTORS] = {speed, speed, speed, speed};
+        now_us += GYRO_PERIOD_US;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, now_us, ramp, ROTORS));
+    }
+    /* Refused spikes every 2 ms, then 12 ms after the last accepted sample any
+     * in-range speed passes. */
+    const uint64_t last_accepted = now_us;
+    const float low[ROTORS] = {100.0f, 100.0f, 100.0f, 100.0f};
+    for (uint32_t k = 1; k <= 4u; ++k) {
+        TEST_ASSERT_EQUAL_INT(PROPID_ERR_ROTOR_SPEED_RANGE,
+                              propid_push_rotor_speeds(&filter, last_accepted + k * GYRO_PERIOD_US, low, ROTORS));
+    }
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, last_accepted + 12000u, low, ROTORS));
+    propid_counters_t counters;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
+    TEST_ASSERT_EQUAL_UINT32(5u, counters.rejected[-(int)PROPID_ERR_ROTOR_SPEED_RANGE]);
 }
 
 /* The same before the gyro clock is anchored (after init, and after resync). */
@@ -383,7 +442,9 @@ static void test_covariance_stays_positive_definite_under_random_calls(void)
                                    rng_range(&rng, -scale, scale)};
             const float speeds[ROTORS] = {rng_range(&rng, 0.0f, 1500.0f), rng_range(&rng, 0.0f, 1500.0f),
                                           rng_range(&rng, 0.0f, 1500.0f), rng_range(&rng, 0.0f, 1500.0f)};
-            TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, now_us, speeds, ROTORS));
+            const propid_status_t pushed = propid_push_rotor_speeds(&filter, now_us, speeds, ROTORS);
+            /* (a jump faster than any motor is refused: the previous speeds hold) */
+            TEST_ASSERT_TRUE(pushed == PROPID_OK || pushed == PROPID_ERR_ROTOR_SPEED_RANGE);
             if (rng_next(&rng) % 500u == 0u) {
                 TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_resync(&filter, now_us));
             }
@@ -406,6 +467,7 @@ int main(void)
     RUN_TEST(test_gate_off_never_writes_non_finite);
     RUN_TEST(test_esc_stamp_far_ahead_does_not_freeze_input);
     RUN_TEST(test_esc_stamp_far_ahead_before_anchor);
+    RUN_TEST(test_esc_spike_within_range_refused);
     RUN_TEST(test_first_sample_fused_at_high_rate);
     RUN_TEST(test_config_bounds_noise_fields);
     RUN_TEST(test_covariance_stays_positive_definite_under_random_calls);

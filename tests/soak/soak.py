@@ -17,7 +17,12 @@ Figures:
 - nan_count: control steps with a non-finite estimate or std (must be 0);
 - max_recovery_s: longest time, after a rotor lost part of its kf/km, until
   every kf and km was back within 10 % of the truth and stayed; `unrecovered`
-  counts losses not recovered by the end of the flight;
+  counts losses not recovered by the end of the flight. Split by what can be
+  asked: `losses_from_accurate` / `recovered_from_accurate`: losses where every
+  coefficient was within 10 % just before, and how many of them recovered;
+  `lost_rotor_recovered` / `max_lost_rotor_recovery_s`: losses whose own
+  rotor's kf and km came back within 10 % and stayed (other rotors may be off
+  through an effect);
 - nees_in_bounds_pct: over fault-free, effect-free flights without a rotor loss
   (mode filter), the share of control steps whose NEES of coefficients and gyro
   biases (full covariance block) lies inside its 95 % chi-square interval; also
@@ -121,7 +126,7 @@ def plan_case(rng: random.Random, index: int, nees_tuning: str = "matched") -> d
             "effects": effects, "faults": faults, "damage": damage}
 
 
-def command(sitl: str, case: dict, mode: str, summary: str) -> list[str]:
+def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool = True) -> list[str]:
     cmd = [sitl, "--vehicle", case["vehicle"], "--trajectory", case["trajectory"], "--mode", mode,
            "--seed", str(case["seed"]), "--duration", str(case["duration_s"]), "--quiet",
            "--summary-json", summary]
@@ -137,12 +142,14 @@ def command(sitl: str, case: dict, mode: str, summary: str) -> list[str]:
         cmd += ["--fault", fault]
     if case["damage"]:
         cmd += ["--damage", case["damage"]]
+    if detect_damage:
+        cmd.append("--detect-damage")
     return cmd
 
 
-def fly(sitl: str, case: dict, mode: str, workdir: str) -> dict:
+def fly(sitl: str, case: dict, mode: str, workdir: str, detect_damage: bool = True) -> dict:
     summary = os.path.join(workdir, f"case{case['case']}-{mode}.json")
-    cmd = command(sitl, case, mode, summary)
+    cmd = command(sitl, case, mode, summary, detect_damage)
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
     if proc.returncode not in (0, 3) or not os.path.exists(summary):
         return {"error": f"exit {proc.returncode}: {proc.stderr.strip()[-300:]}", "command": " ".join(cmd)}
@@ -162,7 +169,8 @@ def expected_steps(case: dict) -> float:
 def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
     out = {"steps": 0, "flights": 0, "cases": len(cases), "flown_s": 0.0,
            "faults_injected": {}, "nan_count": 0, "max_recovery_s": None, "rotor_losses": 0,
-           "unrecovered": 0, "nees_in_bounds_pct": None, "nees_samples": 0, "nees_by_group": {},
+           "unrecovered": 0, "losses_from_accurate": 0, "recovered_from_accurate": 0,
+           "lost_rotor_recovered": 0, "max_lost_rotor_recovery_s": None, "nees_in_bounds_pct": None, "nees_samples": 0, "nees_by_group": {},
            "false_converged": 0, "converged_claims": 0, "false_converged_pct": None,
            "false_converged_by_group": {}, "nees_flights": [],
            "cov_repairs": 0, "model_mismatch_windows": 0, "diverged_filter": 0, "diverged_oracle": 0,
@@ -206,6 +214,12 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
             recovery = honesty.get("max_recovery_s")
             if recovery is not None:
                 out["max_recovery_s"] = max(out["max_recovery_s"] or 0.0, float(recovery))
+            out["losses_from_accurate"] += int(honesty.get("changes_from_inside", 0))
+            out["recovered_from_accurate"] += int(honesty.get("recovered_from_inside", 0))
+            out["lost_rotor_recovered"] += int(honesty.get("changed_rotor_recovered", 0))
+            recovery = honesty.get("max_changed_rotor_recovery_s")
+            if recovery is not None:
+                out["max_lost_rotor_recovery_s"] = max(out["max_lost_rotor_recovery_s"] or 0.0, float(recovery))
             if case["clean"] and data["exit"] == 0:
                 inside, samples = int(honesty.get("nees_in_bounds", 0)), int(honesty.get("nees_samples", 0))
                 nees_in += inside
@@ -248,6 +262,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="parallel flights (default 2)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the flight plan (default 1)")
     parser.add_argument("--out", default="build/results/soak.json", help="JSON figures")
+    parser.add_argument("--no-detect-damage", action="store_true",
+                        help="fly without the firmware's damage detector (propid_damage; default: with it)")
     parser.add_argument("--nees-tuning", choices=("matched", "library"), default="matched",
                         help="filter tuning of the fault-free, effect-free NEES flights: matched (priors and "
                              "walks = the truth's distribution, default) or library (propid_config_default)")
@@ -277,7 +293,7 @@ def main(argv: list[str] | None = None) -> int:
     start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="propid-soak-") as workdir, \
             ThreadPoolExecutor(max_workers=args.jobs) as pool:
-        futures = {pool.submit(fly, args.sitl, case, mode, workdir): (case, mode)
+        futures = {pool.submit(fly, args.sitl, case, mode, workdir, not args.no_detect_damage): (case, mode)
                    for case in cases for mode in ("filter", "oracle")}
         try:
             for future in as_completed(futures):

@@ -46,7 +46,8 @@ typedef enum {
     PROPID_ERR_CONFIG = -3,           /* configuration rejected (see propid_config_check) */
     PROPID_ERR_NOT_FINITE = -4,       /* NaN or Inf in an input sample */
     PROPID_ERR_ROTOR_SPEED_NEGATIVE = -5,
-    PROPID_ERR_ROTOR_SPEED_RANGE = -6, /* above config.max_rotor_speed */
+    PROPID_ERR_ROTOR_SPEED_RANGE = -6, /* above config.max_rotor_speed, or changed faster than
+                                          max_rotor_speed per 10 ms since the previous sample */
     PROPID_ERR_ROTOR_COUNT = -7,      /* sample's rotor count differs from the configuration */
     PROPID_ERR_ROTOR_INDEX = -8,      /* rotor index out of range */
     PROPID_ERR_GYRO_RANGE = -9,       /* |gyro| beyond config.gyro_range (saturated sensor) */
