@@ -237,3 +237,58 @@ def test_held_out_interval_widens_with_the_number_of_candidates():
     _, family = explained(without, with_, [0, 1], level=0.05 / 11)
     assert single[0] < value < single[1]
     assert family[0] < single[0] and family[1] > single[1]
+
+
+def _one_axis_design(y, x, block_s=1.0, rate=100.0):
+    from propid.gap.design import Design
+
+    n = y.shape[0]
+    t = np.arange(n) / rate
+    block = (t // block_s).astype(int)
+    return Design(axes=["roll"], names=[f"c{k}" for k in range(x.shape[1])],
+                  groups={"base": [0], "effect": list(range(1, x.shape[1]))}, y={"roll": y}, x={"roll": x},
+                  scale=np.ones(x.shape[1]), block=block, flight=np.zeros(n, dtype=int),
+                  block_flight=np.zeros(block.max() + 1, dtype=int), time=t)
+
+
+def test_whitening_flattens_a_differentiated_noise_residual():
+    """A residual whose noise grows with frequency (a differentiated gyro) comes out of the
+    whitening with a flat spectrum in the band: power at 20-30 Hz over power at 1-3 Hz
+    goes from ~(25/2)^2 to ~1."""
+    from propid.gap import whitening
+    from propid.realdata_checks import bandpass
+
+    rng = np.random.default_rng(7)
+    rate, n = 200.0, 4000
+    noise = bandpass(np.diff(rng.normal(size=n + 1))[:, None], rate, 0.2, 40.0)[:, 0]
+    x = bandpass(np.sin(2 * np.pi * 0.7 * np.arange(n) / rate)[:, None], rate, 0.2, 40.0)
+    y = 0.3 * x[:, 0] + noise
+    design = _one_axis_design(y, x, rate=rate)
+    white, _ = whitening.whiten(design, {"roll": noise}, [rate], [(0.2, 40.0)])
+    res = white.y["roll"] - 0.3 * white.x["roll"][:, 0]
+
+    def high_over_low(r):
+        spec = np.abs(np.fft.rfft(r)) ** 2
+        f = np.fft.rfftfreq(r.size, 1.0 / rate)
+        return spec[(f > 20) & (f < 30)].mean() / spec[(f > 1) & (f < 3)].mean()
+
+    assert high_over_low(noise) > 30
+    assert 0.5 < high_over_low(res) < 2.0
+    # the blocks used for held-out scoring are cut to about 1 s
+    assert white.n_blocks == pytest.approx(n / rate / whitening.SCORE_BLOCK_S, abs=1)
+
+
+@pytest.mark.parametrize("sign,physical", [(+1.0, True), (-1.0, False)])
+def test_an_unphysical_sign_is_not_an_effect(sign, physical):
+    """A damping (or inertia, drag, lift) fitted clearly negative is some other error taking
+    its shape: physical_sign rejects it, a positive one passes."""
+    from propid.gap import scoring, selection
+
+    rng = np.random.default_rng(11)
+    n = 2000
+    x = rng.normal(size=(n, 2))
+    y = x[:, 0] + sign * 0.3 * x[:, 1] + 0.1 * rng.normal(size=n)
+    design = _one_axis_design(y, x)
+    gr = scoring.grams(design)
+    assert selection.physical_sign(gr, [0], [1], (0,)) is physical
+    assert selection.physical_sign(gr, [0], [1], ()) is True  # a signed effect: no constraint

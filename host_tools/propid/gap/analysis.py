@@ -10,7 +10,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
-from propid.gap import alignment, basefit, scoring, selection, shrink, where
+from propid.gap import alignment, basefit, scoring, selection, shrink, where, whitening
 from propid.gap.vehicle_out import corrected_vehicle
 from propid.gap.design import build_design
 from propid.gap.effects import ALL_IDS, EFFECTS, ESC_DELAY, Context, by_id
@@ -25,6 +25,7 @@ SCALE_LIKE = ("inertia_error", "gyro_scale", "thrust_nonlinearity")  # effects a
 # A lag up to one log sample is the logging convention (each stream's latest sample in a
 # row), not a telemetry delay; below 5 ms the sensor chain's own lags (gyro filtering) rule.
 MIN_REPORTED_DELAY_S = 0.005
+MIN_DELAY_EXPLAINED = 0.02  # the alignment is scored on the raw rows (not whitened): 2 % of the torque residual
 
 
 @dataclass
@@ -175,7 +176,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     # the alignment is always applied (stream misalignment is part of the base fit); it is
     # reported as esc_delay when it is significant and longer than the log's sample period
     sample_period = 1.0 / min(f.rate_hz for f in flights)
-    delay_significant = bool(align["ci"][0] > 0 and align["explained_fraction"] >= scoring.MIN_EXPLAINED
+    delay_significant = bool(align["ci"][0] > 0 and align["explained_fraction"] >= MIN_DELAY_EXPLAINED
                              and abs(align["delay_s"]) > max(sample_period, MIN_REPORTED_DELAY_S))
     delay = align["delay_s"] if align["ci"][0] > 0 else 0.0
     work = [shifted_flight(f, delay) for f in flights]
@@ -200,12 +201,22 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     design = build_design(work, ctx, effects, vehicle.mass, with_thrust)
     gr = scoring.grams(design)
     gr.weight = gr0.weight
+    # effects are scored on the whitened rows (generalised least squares, whitening.py)
+    # the noise spectrum comes from the residual of the full model (base + every candidate), so
+    # that an effect's own signature is not taken for noise and whitened away
+    all_cols = list(range(len(design.names)))
+    full_residual = scoring.residuals(design, all_cols, scoring.solve(gr, all_cols, np.arange(design.n_blocks)))
+    design_w, _ = whitening.whiten(design, full_residual, [f.rate_hz for f in work],
+                                   [(f.band.highpass_hz, f.band.lowpass_hz) for f in work])
+    gr_w = scoring.grams(design_w)
+    gr_w.weight = scoring.axis_weights(design_w, base_cols)
     progress(10)
-    sel = selection.forward_select(design, gr, candidates, base_cols, progress=lambda n: progress(n))
+    sel = selection.forward_select(design_w, gr_w, candidates, base_cols, progress=lambda n: progress(n),
+                                   size_gr=gr)
 
     # final model on all training data
     final_cols = sel["columns"]
-    theta_final = scoring.solve(gr, final_cols, np.arange(design.n_blocks))
+    theta_final = scoring.solve(gr_w, final_cols, np.arange(design.n_blocks))
     pos_of = {c: k for k, c in enumerate(final_cols)}
 
     entries = []
@@ -219,7 +230,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
             th = np.array([theta_final[pos_of[c]] for c in cols])
         else:
             cols_all = final_cols + cols
-            th_all = scoring.solve(gr, cols_all, np.arange(design.n_blocks))
+            th_all = scoring.solve(gr_w, cols_all, np.arange(design.n_blocks))
             th = th_all[len(final_cols):]
         entries.append({"id": s["id"], "explained_fraction": s["explained_fraction"], "ci": s["ci"],
                         "axes": s["axes"], "params": _physical(design, th, s["id"], ctx),

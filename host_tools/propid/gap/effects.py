@@ -48,6 +48,10 @@ class Effect:
     build: Callable[[Flight, Context], dict[str, np.ndarray]]  # axis -> (n, len(params)) raw columns
     physical: Callable[[np.ndarray, Context], dict] | None = None  # fitted coefficients -> physical params
     description: str = ""
+    # indices of the parameters whose sign physics fixes (>= 0: an inertia, a damping, a drag
+    # coefficient, a lift or ground gain, a time constant); selection.py rejects a fit that
+    # needs one of them clearly negative
+    nonnegative: tuple[int, ...] = ()
 
 
 def _thrusts(f: Flight, c: Context) -> np.ndarray:
@@ -193,10 +197,10 @@ def _com_physical(coef, c):
 EFFECTS: list[Effect] = [
     Effect("rotor_inertia", ("rotor_inertia",), ("kg m^2",), (), ("yaw",), _rotor_inertia,
            _identity_physical(("rotor_inertia",)),
-           "yaw reaction of spinning rotors up/down: J_r sum s_i dOmega_i/dt"),
+           "yaw reaction of spinning rotors up/down: J_r sum s_i dOmega_i/dt", nonnegative=(0,)),
     Effect("rotor_gyroscopic", ("rotor_inertia",), ("kg m^2",), (), ("roll", "pitch"), _rotor_gyroscopic,
            _identity_physical(("rotor_inertia",)),
-           "gyroscopic torque of the rotors' angular momentum: J_r sum s_i Omega_i (w x z)"),
+           "gyroscopic torque of the rotors' angular momentum: J_r sum s_i Omega_i (w x z)", nonnegative=(0,)),
     Effect("inertia_error", ("alpha_roll", "alpha_pitch"), ("1", "1"), ("acc", "mass", "inertia"), ("roll", "pitch"),
            _inertia_error, _inertia_physical,
            "body inertia differs from the file's: roll/pitch torque scale (needs the accelerometer kf)"),
@@ -205,22 +209,23 @@ EFFECTS: list[Effect] = [
            "gyro scale and axis misalignment: measured rate M w, cross-axis coupling is its signature"),
     Effect("gyro_lowpass", ("time_constant_s",), ("s",), (), ("roll", "pitch", "yaw"), _gyro_lowpass,
            _identity_physical(("time_constant_s",)),
-           "the logged rate is low-pass filtered (sensor filter, on-board estimator): first-order lag tau"),
+           "the logged rate is low-pass filtered (sensor filter, on-board estimator): first-order lag tau", nonnegative=(0,)),
     Effect("com_offset", ("com_offset_x", "com_offset_y"), ("m", "m"), (), ("roll", "pitch"), _com_offset,
            _com_physical, "centre of mass off the described centre: torque d x (total thrust)"),
     Effect("aero_damping", ("damping_x", "damping_y", "damping_z"), ("N m s/rad",) * 3, (),
            ("roll", "pitch", "yaw"), _aero_damping, _identity_physical(("damping_x", "damping_y", "damping_z")),
-           "aerodynamic rate damping: torque -D w, D proportional to rotor speed (D at the median speed)"),
+           "aerodynamic rate damping: torque -D w, D proportional to rotor speed (D at the median speed)", nonnegative=(0, 1, 2)),
     Effect("rotor_drag", ("k_drag", "k_drag_axial", "k_flap"), ("N/(rad/s m/s)", "N/(rad/s m/s)", "N m/(rad/s m/s)"),
            ("velocity", "attitude"), ("roll", "pitch", "yaw", "thrust"), _rotor_drag,
            _identity_physical(("k_drag", "k_drag_axial", "k_flap")),
-           "velocity-dependent rotor drag and blade flapping (body velocity from attitude + velocity)"),
+           "velocity-dependent rotor drag and blade flapping (body velocity from attitude + velocity)",
+           nonnegative=(0, 1, 2)),
     Effect("translational_lift", ("k_lift",), ("N/(m/s)^2 per rotor",), ("velocity", "attitude", "acc", "mass"),
            ("thrust",), _translational_lift, _identity_physical(("k_lift",)),
-           "extra thrust in horizontal flight: k_h (v_x^2 + v_y^2) per rotor"),
+           "extra thrust in horizontal flight: k_h (v_x^2 + v_y^2) per rotor", nonnegative=(0,)),
     Effect("ground_effect", ("ground_gain",), ("1",), ("height", "rotor_radius"), ("roll", "pitch", "thrust"),
            _ground_effect, _identity_physical(("ground_gain",)),
-           "thrust gain near the ground: T (1 + s (1/(1 - (R/4h)^2) - 1))"),
+           "thrust gain near the ground: T (1 + s (1/(1 - (R/4h)^2) - 1))", nonnegative=(0,)),
     Effect("thrust_nonlinearity", ("exponent",), ("1",), (), ("roll", "pitch", "yaw", "thrust"),
            _thrust_nonlinearity, _identity_physical(("exponent",)),
            "thrust/drag not exactly quadratic: T = kf Omega^2 (Omega/Omega_ref)^s"),

@@ -14,12 +14,14 @@ Rules (docs/gap.md, "Scoring"):
   selection step when deciding significance (selection.py: Bonferroni);
 - effect size: RMS of what the effect adds to the fit (all data, beyond the current
   model) over the response's variation, largest over its axes;
-- significant: interval lower bound > 0 AND explained fraction >= MIN_EXPLAINED AND
-  effect size >= MIN_EFFECT_SIZE (1.5 %; a clean log makes the base residual tiny, so a
-  fraction alone would flag sensor-chain details); for the effects whose evidence is a
-  torque scale against the accelerometer kf (inertia_error, gyro_scale,
-  thrust_nonlinearity) the floor is MIN_SCALE_EFFECT_SIZE (3 %): a MEMS accelerometer's
-  zero-g offset (~20 mg) moves that reference by ~2 %.
+- the rows are whitened first (whitening.py: generalised least squares for the residual's
+  noise spectrum) and cut into 1 s blocks, so the held-out fraction measures signal over
+  noise and the blocks are close to independent;
+- significant: physical sign (selection.physical_sign) AND family-wise interval lower
+  bound > 0 AND, for the effects whose evidence is a torque scale against the
+  accelerometer kf (inertia_error, gyro_scale, thrust_nonlinearity), effect size >=
+  MIN_SCALE_EFFECT_SIZE (3 %): a MEMS accelerometer's zero-g offset (~20 mg) moves that
+  reference by ~2 %, so a smaller scale is not evidence of the effect.
 Everything runs on per-block Gram matrices, so a model (any column subset) costs a
 few small solves, whatever the log length.
 """
@@ -33,8 +35,6 @@ import numpy as np
 
 from propid.gap.design import Design
 
-MIN_EXPLAINED = 0.02
-MIN_EFFECT_SIZE = 0.015  # effects with a signature of their own
 MIN_SCALE_EFFECT_SIZE = 0.03  # effects seen as a torque-vs-accelerometer scale (zero-g offset ~2 % of g)
 FOLDS = 5
 BOOTSTRAP = 300
@@ -181,6 +181,20 @@ def effect_size(gr: Grams, current: list[int], effect_cols: list[int], axis_idx:
     variation = gr.s.sum(axis=0) - gr.m.sum(axis=0) ** 2 / max(n, 1)
     ratios = [np.sqrt(max(before[a] - after[a], 0.0) / variation[a]) for a in axis_idx if variation[a] > 0]
     return float(max(ratios)) if ratios else 0.0
+
+
+def coefficients_with_se(gr: Grams, cols: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """All-data weighted LS coefficients (scaled columns) and their standard errors
+    (residual variance times the inverse normal matrix: valid on whitened rows)."""
+    blocks = np.arange(gr.s.shape[0])
+    theta = solve(gr, cols, blocks)
+    a = np.einsum("a,bapq->pq", gr.weight, gr.g[:, :, cols][:, :, :, cols])
+    sse = float((block_sse(gr, cols, theta, blocks) * gr.weight).sum())
+    n = float(gr.count.sum()) * len(gr.axes)
+    dof = max(n - len(cols), 1.0)
+    ridge = RIDGE * max(np.trace(a) / max(len(cols), 1), 1e-300)
+    cov = np.linalg.inv(a + ridge * np.eye(len(cols))) * sse / dof
+    return theta, np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 
 def cv_residuals(design: Design, gr: Grams, cols: list[int]) -> dict:

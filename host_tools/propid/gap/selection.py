@@ -22,6 +22,7 @@ from propid.gap.design import Design
 from propid.gap.effects import LOOK_ALIKES, by_id
 
 MAX_EFFECTS = 4
+SIGN_SIGMAS = 2.0
 FAMILY_LEVEL = 0.05  # per selection step, over all the candidates scored at that step (Bonferroni)
 SCALE_EFFECTS = ("inertia_error", "gyro_scale", "thrust_nonlinearity")
 NESTED = {("inertia_error", "gyro_scale")}  # (smaller, larger): the larger's columns span the smaller's
@@ -36,7 +37,7 @@ def _look_alike(a: str, b: str) -> bool:
 
 
 def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
-          held_current: np.ndarray, candidates: int = 1) -> dict:
+          held_current: np.ndarray, candidates: int = 1, size_gr: scoring.Grams | None = None) -> dict:
     cols = current + design.groups[effect_id]
     held = scoring.cv_sse(gr, cols)
     axes = by_id(effect_id).axes
@@ -45,17 +46,35 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
     frac_all, _ = scoring.explained(held_current, held, all_idx, bootstrap=False)
     frac, ci = scoring.explained(held_current, held, idx, level=FAMILY_LEVEL / max(candidates, 1))
     per_axis = {a: scoring.explained(held_current, held, [k], bootstrap=False)[0] for k, a in enumerate(design.axes)}
-    size = scoring.effect_size(gr, current, design.groups[effect_id], idx)
+    # size on the unwhitened rows: the effect's share of the measured signal (physical relevance)
+    size = scoring.effect_size(size_gr or gr, current, design.groups[effect_id], idx)
+    physical = physical_sign(gr, current, design.groups[effect_id], by_id(effect_id).nonnegative)
+    floor = scoring.MIN_SCALE_EFFECT_SIZE if effect_id in SCALE_EFFECTS else 0.0
     return {"id": effect_id, "explained_fraction": frac, "ci": ci, "held": held, "effect_size": size,
             "explained_fraction_all_axes": frac_all,
             "per_axis": per_axis,
             "axes": [a for a in axes if a in design.axes],
-            "significant": bool(ci[0] > 0 and frac >= scoring.MIN_EXPLAINED and size >= (
-                scoring.MIN_SCALE_EFFECT_SIZE if effect_id in SCALE_EFFECTS else scoring.MIN_EFFECT_SIZE))}
+            "physical_sign": physical,
+            "significant": bool(physical and ci[0] > 0 and size >= floor)}
+
+
+def physical_sign(gr: scoring.Grams, current: list[int], effect_cols: list[int], nonnegative: tuple[int, ...]) -> bool:
+    """False when a parameter that physics keeps >= 0 is fitted below 0 by more than
+    SIGN_SIGMAS standard errors, or when none of them is above 0 (a damping, an inertia or a
+    drag coefficient cannot be negative: such a fit is some other error taking its shape)."""
+    if not nonnegative:
+        return True
+    theta, se = scoring.coefficients_with_se(gr, current + effect_cols)
+    own = theta[len(current):]
+    own_se = se[len(current):]
+    values = [(own[k], own_se[k]) for k in nonnegative]
+    if any(v < -SIGN_SIGMAS * e for v, e in values):
+        return False
+    return any(v > 0 for v, _ in values)
 
 
 def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], base_cols: list[int],
-                   progress=None) -> dict:
+                   progress=None, size_gr: scoring.Grams | None = None) -> dict:
     current = list(base_cols)
     held_current = scoring.cv_sse(gr, current)
     held_base = held_current
@@ -63,7 +82,7 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
     ambiguous: list[dict] = []
     remaining = list(candidates)
     while remaining and len(selected) < MAX_EFFECTS:
-        scores = [score(design, gr, current, e, held_current, len(remaining)) for e in remaining]
+        scores = [score(design, gr, current, e, held_current, len(remaining), size_gr) for e in remaining]
         if progress:
             progress(len(scores))
         good = sorted([s for s in scores if s["significant"]], key=lambda s: -s["explained_fraction_all_axes"])
@@ -96,7 +115,7 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
             for cand in amb["candidates"]:
                 if cand in remaining and amb["kept"] == best["id"]:
                     remaining.remove(cand)
-    others = [score(design, gr, current, e, held_current) for e in candidates
+    others = [score(design, gr, current, e, held_current, 1, size_gr) for e in candidates
               if e not in {s["id"] for s in selected}]
     for o in others:
         o["significant"] = False
