@@ -120,6 +120,11 @@ static void reopen_rotor(propid_filter_t *filter, uint8_t rotor)
     const uint8_t rotor_count = filter->config.rotor_count;
     for (uint8_t a = 0; a < PROPID_RATE_STATES; ++a) {
         propid_cov_reset_state(&filter->derived, &filter->core, a);
+        /* The unexplained torque moved the rate by about the innovation: the
+         * re-opened rate variance covers it, so the next gyro samples correct
+         * the rate instead of being read as a larger loss. */
+        const float nu = filter->core.innovation[a];
+        filter->core.cov[a][a] += nu * nu;
         filter->core.gated_run[a] = 0u;
     }
     propid_cov_reset_state(&filter->derived, &filter->core, (uint8_t)(propid_first_thrust() + rotor));

@@ -243,6 +243,35 @@ static void test_damage_detected_isolated_and_reconverged(void)
     }
 }
 
+/* A large loss moves the body rates far between the loss and its detection;
+ * the re-opened rates absorb that, so the damaged rotor's estimate goes to the
+ * damaged value without overshooting it and stays there. */
+static void test_large_loss_relearnt_without_overshoot(void)
+{
+    for (uint8_t damaged = 0; damaged < 4; damaged++) {
+        flight_t f;
+        setup_flight(&f, 31u + damaged);
+        int8_t rotor;
+        TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 2.0f, &rotor));
+        f.kf[damaged] *= 0.6f; /* 40 % loss */
+        f.km[damaged] *= 0.6f;
+        const float at = fly(&f, 2.0f, 2.05f, &rotor);
+        TEST_ASSERT_TRUE_MESSAGE(at > 2.0f, "detected within 50 ms");
+        TEST_ASSERT_EQUAL_INT(damaged, rotor);
+        float lowest = 1e9f;
+        for (int k = 0; k < 15; k++) { /* 150 ms in 10 ms steps */
+            fly(&f, 2.05f + 0.01f * (float)k, 2.06f + 0.01f * (float)k, &rotor);
+            propid_estimate_t e;
+            propid_get_estimate(&f.filter, &e);
+            lowest = fminf(lowest, e.thrust_coeff[damaged] / f.kf[damaged]);
+        }
+        propid_estimate_t e;
+        propid_get_estimate(&f.filter, &e);
+        TEST_ASSERT_TRUE_MESSAGE(lowest > 0.8f, "no overshoot below 0.8x the damaged kf");
+        TEST_ASSERT_FLOAT_WITHIN(0.05f * f.kf[damaged], f.kf[damaged], e.thrust_coeff[damaged]);
+    }
+}
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -250,5 +279,6 @@ int main(void)
     RUN_TEST(test_init_rejects_bad_input);
     RUN_TEST(test_healthy_flight_has_no_alarm);
     RUN_TEST(test_damage_detected_isolated_and_reconverged);
+    RUN_TEST(test_large_loss_relearnt_without_overshoot);
     return UNITY_END();
 }
