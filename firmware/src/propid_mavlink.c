@@ -31,6 +31,16 @@ _Static_assert(MAVLINK_NUM_NON_PAYLOAD_BYTES + MAVLINK_MSG_ID_PROPID_STATUS_LEN 
                    PROPID_MAVLINK_STATUS_MAX_LEN,
                "status frame size");
 _Static_assert(MAVLINK_MSG_ID_PROPID_MODEL == PROPID_MAVLINK_MSG_ID_MODEL, "dialect id");
+_Static_assert(MAVLINK_MSG_ID_PROPID_DAMAGE == PROPID_MAVLINK_MSG_ID_DAMAGE, "dialect id");
+_Static_assert(MAVLINK_MSG_ID_STATUSTEXT == PROPID_MAVLINK_MSG_ID_STATUSTEXT, "common id");
+_Static_assert(MAVLINK_NUM_NON_PAYLOAD_BYTES + MAVLINK_MSG_ID_PROPID_DAMAGE_LEN ==
+                   PROPID_MAVLINK_DAMAGE_MAX_LEN,
+               "damage frame size");
+_Static_assert(MAVLINK_NUM_NON_PAYLOAD_BYTES + MAVLINK_MSG_ID_STATUSTEXT_LEN ==
+                   PROPID_MAVLINK_STATUSTEXT_MAX_LEN,
+               "statustext frame size");
+_Static_assert(MAV_SEVERITY_CRITICAL == PROPID_MAVLINK_SEVERITY_CRITICAL, "MAV_SEVERITY value");
+_Static_assert(PROPID_MAX_ROTORS <= 9, "the damage text writes the rotor number as one digit");
 _Static_assert(MAVLINK_NUM_NON_PAYLOAD_BYTES + MAVLINK_MSG_ID_PROPID_MODEL_LEN ==
                    PROPID_MAVLINK_MODEL_MAX_LEN,
                "model frame size");
@@ -307,6 +317,102 @@ propid_mavlink_status_t propid_mavlink_pack_report(propid_mavlink_sender_t *send
     return PROPID_MAVLINK_OK;
 }
 
+/* A detection the wire can carry: a rotor below the rotor count, at most 8 rotors. */
+static propid_mavlink_status_t check_detection(const propid_damage_t *detector)
+{
+    if (detector == NULL) {
+        return PROPID_MAVLINK_ERR_NULL;
+    }
+    if (detector->detections == 0u || detector->last_rotor < 0 || detector->rotor_count == 0u ||
+        detector->rotor_count > PROPID_MAVLINK_MAX_ROTORS ||
+        (uint8_t)detector->last_rotor >= detector->rotor_count) {
+        return PROPID_MAVLINK_ERR_NO_DETECTION;
+    }
+    return PROPID_MAVLINK_OK;
+}
+
+static void build_damage(const propid_mavlink_sender_t *sender, mavlink_status_t *link,
+                         const propid_damage_t *detector, mavlink_message_t *msg)
+{
+    (void)mavlink_msg_propid_damage_pack_status(
+        sender->system_id, sender->component_id, link, msg, detector->last_detection_us,
+        (uint8_t)((uint8_t)detector->last_rotor + 1u), detector->detections, detector->damaged_mask);
+}
+
+/* "propid: rotor N damaged, re-identifying" without printf (N is one digit). */
+static void build_damage_text(const propid_mavlink_sender_t *sender, mavlink_status_t *link,
+                              const propid_damage_t *detector, mavlink_message_t *msg)
+{
+    static const char head[] = "propid: rotor ";
+    static const char tail[] = " damaged, re-identifying";
+    char text[MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN] = {0};
+    _Static_assert(sizeof(head) + sizeof(tail) <= sizeof(text), "damage text fits STATUSTEXT");
+    size_t n = 0u;
+    for (size_t i = 0u; i + 1u < sizeof(head); ++i) {
+        text[n++] = head[i];
+    }
+    text[n++] = (char)('1' + detector->last_rotor);
+    for (size_t i = 0u; i + 1u < sizeof(tail); ++i) {
+        text[n++] = tail[i];
+    }
+    (void)mavlink_msg_statustext_pack_status(sender->system_id, sender->component_id, link, msg,
+                                             MAV_SEVERITY_CRITICAL, text, 0u, 0u);
+}
+
+/* Shared body of the two damage packers: one or two frames, all or nothing. */
+static propid_mavlink_status_t pack_damage(propid_mavlink_sender_t *sender,
+                                           const propid_damage_t *detector, int with_text,
+                                           uint8_t *buf, uint16_t buf_size, uint16_t *frame_len)
+{
+    propid_mavlink_status_t status = check_sender(sender, buf, frame_len);
+    if (status == PROPID_MAVLINK_OK) {
+        status = check_detection(detector);
+    }
+    if (status != PROPID_MAVLINK_OK) {
+        clear_len(frame_len);
+        return status;
+    }
+    mavlink_status_t link;
+    mavlink_message_t msgs[2];
+    uint8_t count = 0u;
+    link_from_sequence(sender->sequence, &link);
+    build_damage(sender, &link, detector, &msgs[count++]);
+    if (with_text) {
+        build_damage_text(sender, &link, detector, &msgs[count++]);
+    }
+    uint32_t total = 0u;
+    for (uint8_t i = 0u; i < count; ++i) {
+        total += frame_size(&msgs[i]);
+    }
+    if (total > buf_size) {
+        *frame_len = 0u;
+        return PROPID_MAVLINK_ERR_BUFFER;
+    }
+    uint16_t used = 0u;
+    for (uint8_t i = 0u; i < count; ++i) {
+        used = (uint16_t)(used + mavlink_msg_to_send_buffer(buf + used, &msgs[i]));
+    }
+    sender->sequence = link.current_tx_seq;
+    *frame_len = used;
+    return PROPID_MAVLINK_OK;
+}
+
+propid_mavlink_status_t propid_mavlink_pack_damage(propid_mavlink_sender_t *sender,
+                                                   const propid_damage_t *detector,
+                                                   uint8_t *buf, uint16_t buf_size,
+                                                   uint16_t *frame_len)
+{
+    return pack_damage(sender, detector, 0, buf, buf_size, frame_len);
+}
+
+propid_mavlink_status_t propid_mavlink_pack_damage_alert(propid_mavlink_sender_t *sender,
+                                                         const propid_damage_t *detector,
+                                                         uint8_t *buf, uint16_t buf_size,
+                                                         uint16_t *frame_len)
+{
+    return pack_damage(sender, detector, 1, buf, buf_size, frame_len);
+}
+
 uint8_t propid_mavlink_execute_reset(propid_filter_t *filter, float rotor_param)
 {
     if (filter == NULL) {
@@ -346,6 +452,8 @@ const char *propid_mavlink_status_name(propid_mavlink_status_t status)
         return "PROPID_MAVLINK_ERR_ROTOR_COUNT";
     case PROPID_MAVLINK_ERR_SYSTEM_ID:
         return "PROPID_MAVLINK_ERR_SYSTEM_ID";
+    case PROPID_MAVLINK_ERR_NO_DETECTION:
+        return "PROPID_MAVLINK_ERR_NO_DETECTION";
     default:
         return "PROPID_MAVLINK_UNKNOWN";
     }

@@ -60,6 +60,8 @@ MSG_COEFFICIENTS = "PROPID_COEFFICIENTS"
 MSG_GYRO = "PROPID_GYRO"
 MSG_STATUS = "PROPID_STATUS"
 MSG_MODEL = "PROPID_MODEL"
+MSG_DAMAGE = "PROPID_DAMAGE"
+MAV_SEVERITY_CRITICAL = 2
 
 _dialect_module: ModuleType | None = None
 
@@ -438,6 +440,30 @@ def message_to_dict(msg) -> dict[str, Any]:
     out["_sysid"] = msg.get_srcSystem()
     out["_compid"] = msg.get_srcComponent()
     return out
+
+
+def damage_event(msg) -> dict[str, Any]:
+    """A PROPID_DAMAGE message as a detection: filter time [s], the isolated rotor
+    (1-based, as on the wire), the detection count and the rotors flagged since boot
+    (1-based, from damaged_mask)."""
+    mask = int(msg.damaged_mask)
+    return {"time_s": msg.time_usec * 1e-6, "rotor": int(msg.rotor),
+            "detections": int(msg.detections),
+            "damaged_rotors": [i + 1 for i in range(16) if mask >> i & 1]}
+
+
+def format_damage_event(event: dict[str, Any]) -> str:
+    rotors = ", ".join(str(r) for r in event["damaged_rotors"]) or "-"
+    return (f"DAMAGE t={event['time_s']:.3f} s: rotor {event['rotor']} "
+            f"(detection {event['detections']}; damaged rotors {rotors})")
+
+
+def statustext(msg) -> tuple[int, str]:
+    """(severity, text) of a STATUSTEXT (text without its NUL padding)."""
+    text = msg.text
+    if isinstance(text, (bytes, bytearray)):
+        text = text.decode("utf-8", errors="replace")
+    return int(msg.severity), text.rstrip("\x00")
 
 
 def estimate_columns(rotor_count: int) -> list[str]:

@@ -364,8 +364,7 @@ static void step_detector(flight_t *f, const sitl_options_t *o, sitl_result_t *r
     }
 #ifdef PROPID_SITL_WITH_MAVLINK
     if (f->link != NULL) {
-        sitl_mavlink_damage(f->link, (uint8_t)rotor, f->detector.detections,
-                            f->detector.damaged_mask, f->filter.core.time_us);
+        sitl_mavlink_damage(f->link, &f->detector);
     }
 #endif
 }

@@ -305,26 +305,18 @@ static void attitude_ned_frd(const double q[4], double *roll, double *pitch, dou
     *yaw = atan2(r[1][0], r[0][0]);
 }
 
-void sitl_mavlink_damage(sitl_mavlink_t *link, uint8_t rotor, uint32_t detections,
-                         uint16_t damaged_mask, uint64_t time_us)
+void sitl_mavlink_damage(sitl_mavlink_t *link, const propid_damage_t *detector)
 {
     if (link == NULL) {
         return;
     }
-    mavlink_status_t status = tx_status(link);
-    mavlink_message_t msg;
-    mavlink_msg_propid_damage_pack_status(link->sender.system_id, link->sender.component_id,
-                                          &status, &msg, time_us, (uint8_t)(rotor + 1u),
-                                          detections, damaged_mask);
-    link->sender.sequence = status.current_tx_seq;
-    send_message(link, &msg);
-    char text[MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN + 1];
-    snprintf(text, sizeof(text), "propid: rotor %u damaged, re-identifying", (unsigned)(rotor + 1u));
-    status = tx_status(link);
-    mavlink_msg_statustext_pack_status(link->sender.system_id, link->sender.component_id, &status,
-                                       &msg, MAV_SEVERITY_CRITICAL, text, 0u, 0u);
-    link->sender.sequence = status.current_tx_seq;
-    send_message(link, &msg);
+    /* The firmware's own packer: PROPID_DAMAGE, then the CRITICAL STATUSTEXT. */
+    uint8_t buf[PROPID_MAVLINK_DAMAGE_ALERT_MAX_LEN];
+    uint16_t len = 0u;
+    if (propid_mavlink_pack_damage_alert(&link->sender, detector, buf, sizeof buf, &len) ==
+        PROPID_MAVLINK_OK) {
+        send_bytes(link, buf, len, (const struct sockaddr *)&link->dest, link->dest_len);
+    }
 }
 
 static void send_attitude_and_position(sitl_mavlink_t *link, const sitl_mavlink_snapshot_t *snap)

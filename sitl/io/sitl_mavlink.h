@@ -11,6 +11,7 @@
 #include <stdint.h>
 
 #include "propid/propid.h"
+#include "propid/propid_damage.h"
 
 typedef struct {
     double heartbeat_hz;     /* HEARTBEAT, default 1 */
@@ -46,9 +47,9 @@ void sitl_mavlink_close(sitl_mavlink_t *link);
 void sitl_mavlink_update(sitl_mavlink_t *link, const sitl_mavlink_snapshot_t *snapshot,
                          const propid_filter_t *filter);
 
-/* A damage detection: PROPID_DAMAGE and a STATUSTEXT (CRITICAL) a ground station shows. */
-void sitl_mavlink_damage(sitl_mavlink_t *link, uint8_t rotor, uint32_t detections,
-                         uint16_t damaged_mask, uint64_t time_us);
+/* The detector's latest detection: PROPID_DAMAGE and a STATUSTEXT (CRITICAL) a
+ * ground station shows, packed by the firmware's propid_mavlink_pack_damage_alert. */
+void sitl_mavlink_damage(sitl_mavlink_t *link, const propid_damage_t *detector);
 
 /* Read pending incoming frames without blocking; a COMMAND_LONG asking for a
  * filter reset (all rotors or one) is executed on filter and acknowledged with

@@ -25,6 +25,7 @@
 #include <stdint.h>
 
 #include "propid/propid.h"
+#include "propid/propid_damage.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -36,6 +37,7 @@ typedef enum {
     PROPID_MAVLINK_ERR_BUFFER = -2,        /* the frame does not fit in buf_size: nothing written */
     PROPID_MAVLINK_ERR_ROTOR_COUNT = -3,   /* estimate->rotor_count is 0 or > PROPID_MAVLINK_MAX_ROTORS */
     PROPID_MAVLINK_ERR_SYSTEM_ID = -4,     /* sender->system_id 0 is the broadcast id, not a sender */
+    PROPID_MAVLINK_ERR_NO_DETECTION = -5,  /* the damage detector has no detection to report */
 } propid_mavlink_status_t;
 
 /* The dialect's arrays hold 8 rotors, whatever PROPID_MAX_ROTORS is. */
@@ -46,6 +48,8 @@ typedef enum {
 #define PROPID_MAVLINK_MSG_ID_GYRO 53001u
 #define PROPID_MAVLINK_MSG_ID_STATUS 53002u
 #define PROPID_MAVLINK_MSG_ID_MODEL 53004u
+#define PROPID_MAVLINK_MSG_ID_DAMAGE 53003u
+#define PROPID_MAVLINK_MSG_ID_STATUSTEXT 253u
 #define PROPID_MAVLINK_CMD_RESET 53000u
 
 /* Largest frame of each message: 10 header + payload + 2 checksum bytes, unsigned.
@@ -54,9 +58,17 @@ typedef enum {
 #define PROPID_MAVLINK_GYRO_MAX_LEN (12u + 84u)
 #define PROPID_MAVLINK_STATUS_MAX_LEN (12u + 116u)
 #define PROPID_MAVLINK_MODEL_MAX_LEN (12u + 69u)
+#define PROPID_MAVLINK_DAMAGE_MAX_LEN (12u + 15u)
+#define PROPID_MAVLINK_STATUSTEXT_MAX_LEN (12u + 54u)
+#define PROPID_MAVLINK_DAMAGE_ALERT_MAX_LEN                                        \
+    (PROPID_MAVLINK_DAMAGE_MAX_LEN + PROPID_MAVLINK_STATUSTEXT_MAX_LEN)
 #define PROPID_MAVLINK_REPORT_MAX_LEN                                              \
     (PROPID_MAVLINK_COEFFICIENTS_MAX_LEN + PROPID_MAVLINK_GYRO_MAX_LEN +           \
      PROPID_MAVLINK_STATUS_MAX_LEN + PROPID_MAVLINK_MODEL_MAX_LEN)
+
+/* MAV_SEVERITY of the damage STATUSTEXT (common.xml): CRITICAL, a ground station
+ * shows and speaks it. */
+#define PROPID_MAVLINK_SEVERITY_CRITICAL 2u
 
 /* MAV_RESULT values returned by propid_mavlink_execute_reset (common.xml). */
 #define PROPID_MAVLINK_RESULT_ACCEPTED 0u
@@ -110,6 +122,23 @@ propid_mavlink_status_t propid_mavlink_pack_report(propid_mavlink_sender_t *send
                                                    const propid_counters_t *counters,
                                                    uint8_t *buf, uint16_t buf_size,
                                                    uint16_t *frame_len);
+
+/* PROPID_DAMAGE of the detector's latest detection: its time, the isolated rotor
+ * (1-based on the wire), the detection count and the damaged-rotor mask.
+ * PROPID_MAVLINK_ERR_NO_DETECTION when the detector has none (or its fields are
+ * out of range: rotor count above 8, rotor not below it). */
+propid_mavlink_status_t propid_mavlink_pack_damage(propid_mavlink_sender_t *sender,
+                                                   const propid_damage_t *detector,
+                                                   uint8_t *buf, uint16_t buf_size,
+                                                   uint16_t *frame_len);
+
+/* The alert to send once per detection: PROPID_DAMAGE, then a STATUSTEXT of
+ * severity CRITICAL, "propid: rotor N damaged, re-identifying" (N 1-based).
+ * All or nothing, like the report. */
+propid_mavlink_status_t propid_mavlink_pack_damage_alert(propid_mavlink_sender_t *sender,
+                                                         const propid_damage_t *detector,
+                                                         uint8_t *buf, uint16_t buf_size,
+                                                         uint16_t *frame_len);
 
 /* Execute MAV_CMD_PROPID_RESET with its param1 (rotor index, or -1 for all) on
  * filter. Returns the MAV_RESULT to acknowledge with: ACCEPTED, DENIED (param1

@@ -73,12 +73,14 @@ def format_model(model) -> list[str]:
     return lines
 
 
-def format_view(coeffs, gyro, status, frames: int, source: str, model=None) -> str:
-    """The text screen for the latest messages (any of them may be None)."""
+def format_view(coeffs, gyro, status, frames: int, source: str, model=None,
+                damage: list[str] | None = None) -> str:
+    """The text screen for the latest messages (any of them may be None); damage: the
+    damage detections and CRITICAL texts received so far (latest last)."""
     lines = [f"propid listen  {source}  frames {frames}"]
     if coeffs is None:
         lines.append("waiting for PROPID_COEFFICIENTS ...")
-        return "\n".join(lines)
+        return "\n".join(lines + (damage or [])[-4:])
     lines.append(f"filter time {coeffs.time_usec * 1e-6:10.3f} s   rotors {coeffs.rotor_count}")
     lines.append(f"{'rotor':>5}  {'kf [N/(rad/s)^2]':>17} {'+-1sigma':>9} {'':10}"
                  f"  {'km [N m/(rad/s)^2]':>18} {'+-1sigma':>9} {'':10}")
@@ -107,6 +109,8 @@ def format_view(coeffs, gyro, status, frames: int, source: str, model=None) -> s
                      f"  cov repairs {status.cov_repairs}")
     if model is not None:
         lines += format_model(model)
+    if damage:
+        lines += damage[-4:]
     return "\n".join(lines)
 
 
@@ -168,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.monotonic()
     last_draw = 0.0
     coeffs = gyro = status = model = None
+    damage: list[str] = []
     frames = 0
     got_propid = False
     reset_pending = args.reset is not None
@@ -195,6 +200,16 @@ def run(args: argparse.Namespace) -> int:
                     status, got_propid = msg, True
                 elif kind == mavlink_io.MSG_MODEL:
                     model, got_propid = msg, True
+                elif kind == mavlink_io.MSG_DAMAGE:
+                    got_propid = True
+                    line = mavlink_io.format_damage_event(mavlink_io.damage_event(msg))
+                    damage.append(line)
+                    print(line, file=sys.stderr, flush=True)
+                elif kind == "STATUSTEXT":
+                    severity, text = mavlink_io.statustext(msg)
+                    if severity <= mavlink_io.MAV_SEVERITY_CRITICAL:
+                        damage.append(f"STATUSTEXT: {text}")
+                        print(f"STATUSTEXT: {text}", file=sys.stderr, flush=True)
                 elif kind == "HEARTBEAT" and reset_pending:
                     reset_pending = False
                     result = mavlink_io.send_reset(conn, args.reset,
@@ -204,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
                     print(f"MAV_CMD_PROPID_RESET rotor {args.reset}: {reset_result}", flush=True)
             if now - last_draw >= REFRESH_S:
                 last_draw = now
-                view = format_view(coeffs, gyro, status, frames, args.connect, model)
+                view = format_view(coeffs, gyro, status, frames, args.connect, model, damage)
                 if interactive:
                     print("\033[H\033[J" + view, flush=True)
                 else:
