@@ -124,7 +124,7 @@ static void reopen_rotor(propid_filter_t *filter, uint8_t rotor)
          * re-opened rate variance covers it, so the next gyro samples correct
          * the rate instead of being read as a larger loss. */
         const float nu = filter->core.innovation[a];
-        filter->core.cov[a][a] += nu * nu;
+        filter->core.cov[propid_cov_index(a, a)] += nu * nu;
         filter->core.gated_run[a] = 0u;
     }
     propid_cov_reset_state(&filter->derived, &filter->core, (uint8_t)(propid_first_thrust() + rotor));
