@@ -322,7 +322,7 @@ static void teardown(flight_t *f, sitl_result_t *r)
 
 /* Damages due by time t: the plant's (true) kf and km drop; the Oracle's
  * allocation knows at once. */
-static void apply_damage(flight_t *f, const sitl_options_t *o, double t)
+static void apply_damage(flight_t *f, const sitl_options_t *o, sitl_result_t *r, double t)
 {
     for (int k = 0; k < o->damage_count; k++) {
         const sitl_damage_t *d = &o->damage[k];
@@ -330,6 +330,7 @@ static void apply_damage(flight_t *f, const sitl_options_t *o, double t)
             continue;
         }
         f->damage_applied[k] = 1;
+        r->damage_on_ground[k] = f->state.on_ground;
         f->true_kf[d->rotor] *= 1.0 - d->fraction;
         f->true_km[d->rotor] *= 1.0 - d->fraction;
         f->plant.thrust_coeff[d->rotor] = f->true_kf[d->rotor];
@@ -486,7 +487,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     for (;;) {
         const double t = (double)now_ns * 1e-9;
         const uint64_t t_us = (uint64_t)((now_ns + 500) / 1000);
-        apply_damage(f, o, t);
+        apply_damage(f, o, r, t);
 
         if (now_ns == esc.next_ns) {
             double speed[SITL_MAX_ROTORS];

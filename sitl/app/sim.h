@@ -54,6 +54,9 @@ typedef struct {
     int detection_count;
     int detection_rotor[SITL_MAX_DAMAGE];   /* 0-based */
     double detection_time_s[SITL_MAX_DAMAGE];
+    /* Per --damage: 1 when it struck a vehicle resting on the ground (the contact
+     * holds the attitude: the loss leaves no trace in the gyro). */
+    int damage_on_ground[SITL_MAX_DAMAGE];
 } sitl_result_t;
 
 /* Set-up pieces (sim_setup.c), public for tests. */

@@ -66,6 +66,20 @@ def test_missed_damage_counts_against_the_rate():
     assert result["median_detect_ms"] is None
 
 
+def test_damage_on_a_grounded_vehicle_is_counted_apart():
+    """A loss that strikes a vehicle already down (the contact holds the attitude)
+    leaves the airborne detection rate alone and is reported on its own."""
+    spec = {"damages": [[1, 2.5, 0.3], [2, 4.6, 0.4]], "effects": [], "index": 0}
+    flight = {"detections": [{"rotor": 1, "time_s": 2.505}], "on_ground": [False, True], "stable": True}
+    result = damage_bench.summarise([{"spec": spec, "filter": flight}], config())
+    assert result["damage_events"] == 2 and result["damage_events_on_ground"] == 1
+    assert result["detection_rate"] == 1.0 and result["detection_rate_ge20"] == 1.0
+    assert result["detection_rate_all_events"] == 0.5
+    flight["on_ground"] = [False, False]
+    result = damage_bench.summarise([{"spec": spec, "filter": flight}], config())
+    assert result["detection_rate"] == 0.5 and result["damage_events_on_ground"] == 0
+
+
 def test_extended_checks_ratio_and_stability():
     row = {"rmse_x": 0.02, "rmse_y": 0.05, "rmse_z": 0.004, "rmse_yaw_deg": 0.5, "stable_pct": 100.0,
            "t_conv_coeff_s": 0.4, "t_conv_bias_s": 3.0}
@@ -103,7 +117,7 @@ def test_sitl_damage_is_detected_isolated_and_reported(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     data = json.loads(summary.read_text())
-    assert data["damage"] == [{"rotor": 5, "time_s": 2.5, "fraction": 0.25}]
+    assert data["damage"] == [{"rotor": 5, "time_s": 2.5, "fraction": 0.25, "on_ground": False}]
     assert len(data["detections"]) == 1
     assert data["detections"][0]["rotor"] == 5
     assert 2.5 <= data["detections"][0]["time_s"] <= 2.55
