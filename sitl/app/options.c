@@ -325,6 +325,11 @@ static const opt_t options[] = {
          "coefficients"),
     NUMBER(NULL, "damage-false-alarm-rate", damage_false_alarms_per_hour, 1e-12, 1e6, "PER_H",
            "detector design false alarms per flight hour (default 1e-3)"),
+    NUMBER("Excitation (docs/results.md, \"Extended campaign\")", "null-dither", null_dither, 0.0, 0.5,
+           "FRACTION",
+           "more than 4 rotors: excite the allocation's null space\n"
+           "(wrench unchanged) with FRACTION of the mean Omega^2, so\n"
+           "the individual coefficients become observable (default 0)"),
 
     FLAG("Sensors (defaults: Bosch BMI088 IMU, bidirectional-DShot telemetry; docs/sitl.md)",
          "paper", paper, 1,

@@ -99,6 +99,7 @@ typedef struct {
     int damage_count;
     int detect_damage;                  /* run propid_damage_step after every gyro sample */
     double damage_false_alarms_per_hour; /* detector design rate (< 0 = library default) */
+    double null_dither;                 /* null-space excitation, fraction of mean Omega^2 (0 = off) */
 } sitl_options_t;
 
 void sitl_options_default(sitl_options_t *opts);

@@ -562,6 +562,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
                 sitl_controller_update(&f->controller, &vs, &ref, &cmd);
                 sitl_allocation_result_t alloc;
                 if (sitl_allocation_solve(&f->allocation, cmd.thrust, cmd.moment, &alloc) == 0) {
+                    (void)sitl_allocation_add_null_dither(&f->allocation, o->null_dither, t, &alloc);
                     memcpy(f->command, alloc.rotor_speed, (size_t)n * sizeof(double));
                 }
             }

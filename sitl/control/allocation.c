@@ -266,6 +266,50 @@ int sitl_allocation_solve(const sitl_allocation_t *alloc, double thrust, const d
     return 0;
 }
 
+int sitl_allocation_add_null_dither(const sitl_allocation_t *alloc, double fraction, double t,
+                                    sitl_allocation_result_t *result)
+{
+    if (alloc == NULL || result == NULL || !alloc->ready || !isfinite(fraction) || fraction < 0.0 ||
+        !isfinite(t)) {
+        return -1;
+    }
+    const int n = alloc->geometry.rotor_count;
+    if (n <= 4 || fraction == 0.0) {
+        return 0;
+    }
+    const double lo = alloc->geometry.rotor_speed_min * alloc->geometry.rotor_speed_min;
+    const double hi = alloc->geometry.rotor_speed_max * alloc->geometry.rotor_speed_max;
+    double u[SITL_ALLOC_MAX_ROTORS], d[SITL_ALLOC_MAX_ROTORS], mean = 0.0;
+    for (int i = 0; i < n; i++) {
+        u[i] = result->rotor_speed[i] * result->rotor_speed[i];
+        mean += u[i] / (double)n;
+    }
+    for (int i = 0; i < n; i++) {
+        d[i] = fraction * mean * sin(2.0 * SITL_PI * (1.1 + 0.37 * (double)i) * t + 1.3 * (double)i);
+    }
+    /* d - A^+ (A d): the part of d the wrench map does not see. */
+    double wrench[4];
+    for (int k = 0; k < 4; k++) {
+        double s = 0.0;
+        for (int i = 0; i < n; i++) {
+            s += alloc->wrench_map[k][i] * d[i];
+        }
+        wrench[k] = s;
+    }
+    for (int i = 0; i < n; i++) {
+        double s = d[i];
+        for (int k = 0; k < 4; k++) {
+            s -= alloc->inverse[i][k] * wrench[k];
+        }
+        d[i] = s;
+    }
+    const double scale = inside(u, n, lo, hi) ? largest_feasible_fraction(u, d, n, lo, hi) : 0.0;
+    for (int i = 0; i < n; i++) {
+        result->rotor_speed[i] = sqrt(u[i] + scale * d[i]);
+    }
+    return 0;
+}
+
 void sitl_allocation_wrench(const sitl_allocation_t *alloc, const double *rotor_speed,
                             double wrench[4])
 {

@@ -76,6 +76,21 @@ int sitl_allocation_set_coefficients(sitl_allocation_t *alloc, const double *thr
 int sitl_allocation_solve(const sitl_allocation_t *alloc, double thrust, const double moment[3],
                           sitl_allocation_result_t *result);
 
+/* Null-space excitation for more than 4 rotors: adds to the commanded squared
+ * speeds u the projection (I - A^+ A) d(t) of the dither
+ *     d_i(t) = fraction * mean(u) * sin(2 pi (1.1 + 0.37 i) t + 1.3 i)   [Hz, rad]
+ * (rotor i 0-based: a different frequency per rotor), which leaves the wrench A u
+ * unchanged for the coefficients in use, scaled down as a whole where it would
+ * cross a speed bound. With N rotors the controller alone moves u in a
+ * 4-dimensional family (collective and three moments); the dither moves the
+ * other N - 4 directions, where the individual kf and km differ (docs/results.md,
+ * "Extended campaign"). The motor lag is the same for every rotor, so it commutes
+ * with the projection: the rotors' actual speeds stay in the null space too (up
+ * to the square). No-op for 4 rotors (no null space) or fraction 0.
+ * Returns 0, or -1 on bad input (result untouched). */
+int sitl_allocation_add_null_dither(const sitl_allocation_t *alloc, double fraction, double t,
+                                    sitl_allocation_result_t *result);
+
 /* Forward map: rotor speeds -> wrench [thrust, Mx, My, Mz] with the coefficients in use. */
 void sitl_allocation_wrench(const sitl_allocation_t *alloc, const double *rotor_speed,
                             double wrench[4]);

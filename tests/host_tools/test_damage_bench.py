@@ -94,6 +94,31 @@ def test_extended_checks_ratio_and_stability():
     assert ("octo-x", ("oracle", "filter")) in plan and plan[0] == ("crazyflie-plus", ("oracle", "incorrect", "filter"))
 
 
+def test_extended_dithers_only_the_multirotors(monkeypatch, tmp_path):
+    """--null-dither goes to the hexa and octo campaigns, never to a quad; --presets
+    selects the presets; 0 turns the dither off."""
+    from propid.campaign import CampaignConfig
+
+    seen = []
+
+    def fake_run(configs, progress=True, desc=""):
+        seen.extend(configs)
+        return [{"_conditions": {}} for _ in configs]
+    monkeypatch.setattr(table1_extended, "run_campaigns", fake_run)
+    base = CampaignConfig(out_dir=tmp_path, sitl=Path("/bin/true"), extra_args=["--quiet"])
+    plan = table1_extended.presets_and_modes(presets=("crazyflie-x", "hexa-plus", "octo-x"))
+    assert [p for p, _ in plan] == ["crazyflie-x", "hexa-plus", "octo-x"]
+    out = table1_extended.run_extended(base, plan, progress=False)
+    args = {c.vehicle: c.extra_args for c in seen}
+    assert args["crazyflie-x"] == ["--quiet"]
+    assert args["hexa-plus"] == ["--quiet", "--null-dither", repr(table1_extended.MULTI_NULL_DITHER)]
+    assert "--null-dither" in args["octo-x"]
+    assert out["_conditions"]["null_dither_multirotors"] == table1_extended.MULTI_NULL_DITHER
+    seen.clear()
+    table1_extended.run_extended(base, plan, progress=False, null_dither=0.0)
+    assert all("--null-dither" not in c.extra_args for c in seen)
+
+
 def _sitl() -> Path:
     import os
 

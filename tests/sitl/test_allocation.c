@@ -206,9 +206,74 @@ static void test_bad_input(void)
     CHECK(sitl_allocation_solve(&alloc, 0.3, bad_moment, &r) == -1, "NaN moment accepted");
 }
 
+/* The null-space dither moves every rotor of a hexa and an octo without moving
+ * the wrench; on a quad (no null space) it changes nothing; at a speed bound it
+ * shrinks instead of clipping one rotor (which would move the wrench). */
+static void test_null_dither_keeps_the_wrench(void)
+{
+    const double thrust_per_rotor = 0.075, moment[3] = {2e-4, -1.5e-4, 3e-5};
+    for (int n = 4; n <= 8; n += 2) {
+        sitl_allocation_geometry_t g;
+        symmetric_geometry(&g, n, 0.3);
+        sitl_allocation_t alloc;
+        sitl_allocation_init(&alloc, &g);
+        double kf[SITL_ALLOC_MAX_ROTORS], km[SITL_ALLOC_MAX_ROTORS];
+        spread(n, kf, km, n);
+        CHECK(sitl_allocation_set_coefficients(&alloc, kf, km) == 0, "coefficients n=%d", n);
+        double largest_move = 0.0;
+        for (int k = 0; k < 50; k++) {
+            const double t = 0.037 * k;
+            sitl_allocation_result_t plain, dithered;
+            sitl_allocation_solve(&alloc, thrust_per_rotor * n, moment, &plain);
+            dithered = plain;
+            CHECK(sitl_allocation_add_null_dither(&alloc, 0.1, t, &dithered) == 0, "dither n=%d", n);
+            double w0[4], w1[4];
+            sitl_allocation_wrench(&alloc, plain.rotor_speed, w0);
+            sitl_allocation_wrench(&alloc, dithered.rotor_speed, w1);
+            for (int a = 0; a < 4; a++) {
+                const double scale = a == 0 ? w0[0] : (a == 3 ? 1e-5 : 1e-4);
+                CHECK(rel_close(w1[a], w0[a], scale, 1e-9), "n=%d t=%g wrench %d moved: %g -> %g", n, t,
+                      a, w0[a], w1[a]);
+            }
+            for (int i = 0; i < n; i++) {
+                const double u0 = plain.rotor_speed[i] * plain.rotor_speed[i];
+                const double u1 = dithered.rotor_speed[i] * dithered.rotor_speed[i];
+                largest_move = fmax(largest_move, fabs(u1 / u0 - 1.0));
+            }
+        }
+        if (n == 4) {
+            CHECK(largest_move < 1e-12, "quad: the dither moved a rotor (%g)", largest_move);
+        } else {
+            CHECK(largest_move > 0.03 && largest_move < 0.3, "n=%d: dither moved rotors by %g", n,
+                  largest_move);
+        }
+    }
+    /* near the top speed: scaled down, every rotor inside its bounds, wrench kept */
+    sitl_allocation_geometry_t g;
+    symmetric_geometry(&g, 6, 0.0);
+    sitl_allocation_t alloc;
+    sitl_allocation_init(&alloc, &g);
+    double kf[SITL_ALLOC_MAX_ROTORS], km[SITL_ALLOC_MAX_ROTORS];
+    spread(6, kf, km, 1);
+    sitl_allocation_set_coefficients(&alloc, kf, km);
+    sitl_allocation_result_t r;
+    sitl_allocation_solve(&alloc, 6 * kf_nom * 0.99 * speed_max * speed_max, moment, &r);
+    double w0[4], w1[4];
+    sitl_allocation_wrench(&alloc, r.rotor_speed, w0);
+    CHECK(sitl_allocation_add_null_dither(&alloc, 0.2, 0.4, &r) == 0, "dither at the top");
+    sitl_allocation_wrench(&alloc, r.rotor_speed, w1);
+    for (int i = 0; i < 6; i++) {
+        CHECK(r.rotor_speed[i] <= speed_max * (1.0 + 1e-12), "rotor %d above the top speed", i);
+    }
+    CHECK(rel_close(w1[0], w0[0], w0[0], 1e-9), "thrust moved at the top");
+    CHECK(sitl_allocation_add_null_dither(&alloc, -0.1, 0.0, &r) == -1, "negative fraction accepted");
+    CHECK(sitl_allocation_add_null_dither(&alloc, NAN, 0.0, &r) == -1, "NaN fraction accepted");
+}
+
 int main(void)
 {
     test_round_trips();
+    test_null_dither_keeps_the_wrench();
     test_yaw_sacrificed_first();
     test_thrust_moved_before_roll_pitch();
     test_bad_input();
