@@ -48,14 +48,18 @@ static uint16_t parse_frames(const uint8_t *bytes, uint16_t len, mavlink_message
     return frames;
 }
 
+/* Decoded into a struct (the generated getters read the packed payload in place,
+ * which is misaligned inside an array of messages). */
 static void assert_damage_fields(const mavlink_message_t *msg)
 {
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_DAMAGE, msg->msgid);
     TEST_ASSERT_EQUAL_UINT8(3u, msg->sysid);
-    TEST_ASSERT_EQUAL_UINT64(4123456789ull, mavlink_msg_propid_damage_get_time_usec(msg));
-    TEST_ASSERT_EQUAL_UINT8(5u, mavlink_msg_propid_damage_get_rotor(msg));
-    TEST_ASSERT_EQUAL_UINT32(2u, mavlink_msg_propid_damage_get_detections(msg));
-    TEST_ASSERT_EQUAL_HEX16(0x11u, mavlink_msg_propid_damage_get_damaged_mask(msg));
+    mavlink_propid_damage_t decoded;
+    mavlink_msg_propid_damage_decode(msg, &decoded);
+    TEST_ASSERT_EQUAL_UINT64(4123456789ull, decoded.time_usec);
+    TEST_ASSERT_EQUAL_UINT8(5u, decoded.rotor);
+    TEST_ASSERT_EQUAL_UINT32(2u, decoded.detections);
+    TEST_ASSERT_EQUAL_HEX16(0x11u, decoded.damaged_mask);
 }
 
 static void test_damage_round_trip(void)
@@ -82,9 +86,11 @@ static void test_alert_is_damage_then_critical_statustext(void)
     TEST_ASSERT_EQUAL_UINT16(2u, parse_frames(buf, len, msgs, 2u));
     assert_damage_fields(&msgs[0]);
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_STATUSTEXT, msgs[1].msgid);
-    TEST_ASSERT_EQUAL_UINT8(MAV_SEVERITY_CRITICAL, mavlink_msg_statustext_get_severity(&msgs[1]));
+    mavlink_statustext_t status;
+    mavlink_msg_statustext_decode(&msgs[1], &status);
+    TEST_ASSERT_EQUAL_UINT8(MAV_SEVERITY_CRITICAL, status.severity);
     char text[MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN + 1] = {0};
-    mavlink_msg_statustext_get_text(&msgs[1], text);
+    memcpy(text, status.text, MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN);
     TEST_ASSERT_EQUAL_STRING("propid: rotor 5 damaged, re-identifying", text);
     /* sequence numbers run on across the two frames and wrap */
     TEST_ASSERT_EQUAL_UINT8(254u, msgs[0].seq);
@@ -103,10 +109,12 @@ static void test_every_rotor_named_in_the_text(void)
                               propid_mavlink_pack_damage_alert(&sender, &detector, buf, sizeof buf, &len));
         mavlink_message_t msgs[2];
         TEST_ASSERT_EQUAL_UINT16(2u, parse_frames(buf, len, msgs, 2u));
-        TEST_ASSERT_EQUAL_UINT8((uint8_t)(rotor + 1), mavlink_msg_propid_damage_get_rotor(&msgs[0]));
-        char text[MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN + 1] = {0};
-        mavlink_msg_statustext_get_text(&msgs[1], text);
-        TEST_ASSERT_EQUAL_CHAR((char)('1' + rotor), text[14]);
+        mavlink_propid_damage_t damage;
+        mavlink_msg_propid_damage_decode(&msgs[0], &damage);
+        TEST_ASSERT_EQUAL_UINT8((uint8_t)(rotor + 1), damage.rotor);
+        mavlink_statustext_t status;
+        mavlink_msg_statustext_decode(&msgs[1], &status);
+        TEST_ASSERT_EQUAL_CHAR((char)('1' + rotor), status.text[14]);
     }
 }
 
