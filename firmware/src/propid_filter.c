@@ -411,7 +411,10 @@ propid_status_t propid_fuse_gyro(propid_filter_t *filter, uint64_t time_us, cons
 #if PROPID_CONSISTENCY
     propid_consistency_observe(filter, gated_mask);
 #endif
-    const uint32_t clamped = propid_clamp_coefficients(config, core);
+    uint32_t clamped = propid_clamp_coefficients(config, core);
+#if PROPID_WITH_ACCEL
+    clamped += propid_clamp_torque_scale(config, &filter->derived, core);
+#endif
     if (clamped != 0u) {
         core->health |= PROPID_HEALTH_STATE_CLAMPED;
         filter->counters.state_clamps += clamped;

@@ -245,6 +245,30 @@ uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3]);
  * returns how many were clamped. */
 uint32_t propid_clamp_coefficients(const propid_kept_config_t *config, propid_core_t *core);
 
+#if PROPID_WITH_ACCEL
+/* The thrust-torque scale (docs/math.md §9) kept in the coefficients' range: at or
+ * below zero the thrust torques would vanish or change sign, and a walking scale
+ * can be carried there by an update. Returns 1 when it clamped. */
+static inline uint32_t propid_clamp_torque_scale(const propid_kept_config_t *config, const propid_derived_t *derived,
+                                                 propid_core_t *core)
+{
+    const uint8_t scale = derived->layout.torque_scale;
+    if (scale == PROPID_NO_STATE) {
+        return 0u;
+    }
+    float *value = &core->state[scale];
+    if (*value < config->coeff_rel_min) {
+        *value = config->coeff_rel_min;
+        return 1u;
+    }
+    if (*value > config->coeff_rel_max) {
+        *value = config->coeff_rel_max;
+        return 1u;
+    }
+    return 0u;
+}
+#endif
+
 /* 1 when a value is outside [floor, ceiling] (or negative, or not finite): for
  * non-negative floats the bit patterns are ordered like the values, so one
  * unsigned comparison of (bits - floor_bits) with (ceiling_bits - floor_bits)

@@ -8,8 +8,9 @@ reference value (the reference kf only divides the results for display):
   vehicle file's esc_delay_s, else the per-log rule (--esc-delay default);
 - modes (the optional terms, docs/math.md §7-9): gyro only; + rotor inertia; + disturbance
   torque; + accelerometer (torque scale off); + accelerometer with the thrust-torque scale;
-  all combined. Every other setting is the library default. Added later, and NOT a rule fixed in
-  advance: + accelerometer with the scale as a random walk (SCALE_WALK below);
+  all combined. Every other setting is the library default. Added later: + accelerometer with the
+  scale as a random walk whose rate the per-log rule of replay/scale_walk.py measures (that rule was
+  written before it was run, but after a sweep of fixed walks on these logs: docs/real-data.md);
 - "square" runs are the logs whose name starts with "square", the others are the rest;
 - per run: kf = mean over rotors of the converged-part mean; rotor spread = the worst
   rotor's |kf_i / run mean - 1|; km converged = all rotors' relative std below 5 % at the end.
@@ -24,10 +25,6 @@ from pathlib import Path
 
 from propid.errors import UserError
 
-# The thrust-torque scale's random walk of the last mode [1/sqrt(s)]: NOT fixed in advance. It was
-# picked from a four-point sweep on these same logs (0.01, 0.05, 0.1, 0.2; docs/real-data.md), where the
-# fleet value stops changing from 0.1 on: a candidate to check on held-out flights, not a validated rule.
-SCALE_WALK = 0.1
 # (name, what it is, ReplayOptions fields)
 MODES = [
     ("gyro", "gyro only", dict(aiding="gyro", rotor_inertia="off", disturbance="off", torque_scale="off")),
@@ -39,9 +36,9 @@ MODES = [
                                                                   disturbance="off", torque_scale="on")),
     ("combined", "all: accelerometer + torque scale + disturbance + rotor inertia",
      dict(aiding="gyro+accel", rotor_inertia="on", disturbance="on", torque_scale="on")),
-    ("accel_scale_walk", "+ accelerometer with the torque scale as a random walk (0.1/sqrt(s))",
+    ("accel_scale_walk", "+ accelerometer with the torque scale as a random walk (per-log rule)",
      dict(aiding="gyro+accel", rotor_inertia="off", disturbance="off", torque_scale="on",
-          overrides={"torque_scale_walk": SCALE_WALK})),
+          torque_scale_walk="auto")),
 ]
 ROTOR_WITHIN = 0.05
 
@@ -70,6 +67,7 @@ def run_summary(summary: dict, reference_kf: float) -> dict:
         "km_converged_rotors": sum(summary["converged"]["km"]),
         "accel_bias": summary["accel_bias"],
         "torque_scale": summary["torque_scale"],
+        "torque_scale_walk": summary["config"].get("torque_scale_walk", 0.0),
         "esc_delay_s": summary["esc_delay_s"],
         "finite": summary["finite"],
     }
@@ -147,13 +145,16 @@ def render(result: dict) -> str:
             f"| {s['km_fleet']:.3g} ({100 * s['km_cv']:.0f}%) | {s['runs_km_converged']}/{s['runs']} "
             f"| {s['accel_bias_median']:.2f} |")
     names = sorted(result["modes"][0]["runs"])
-    lines += ["", "| run | ESC delay [ms] | " + " | ".join(f"{m['name']}: kf (rotor spread, km conv.)" for m in result["modes"]) + " |",
-              "|---|---|" + "---|" * len(result["modes"])]
+    walks = next((m["runs"] for m in result["modes"] if m["name"] == "accel_scale_walk"), None)
+    lines += ["", "| run | ESC delay [ms] | " + ("scale walk (rule) [1/sqrt(s)] | " if walks else "")
+              + " | ".join(f"{m['name']}: kf (rotor spread, km conv.)" for m in result["modes"]) + " |",
+              "|---|---|" + ("---|" if walks else "") + "---|" * len(result["modes"])]
     for name in names:
         delay = result["modes"][0]["runs"][name]["esc_delay_s"]
         cells = []
         for mode in result["modes"]:
             r = mode["runs"][name]
             cells.append(f"{r['kf_over_reference']:.2f} ({100 * r['rotor_spread']:.0f}%, {r['km_converged_rotors']}/4)")
-        lines.append(f"| {name} | {1e3 * delay + 0.0:.0f} | " + " | ".join(cells) + " |")
+        walk = f"{walks[name]['torque_scale_walk']:.3f} | " if walks else ""
+        lines.append(f"| {name} | {1e3 * delay + 0.0:.0f} | " + walk + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

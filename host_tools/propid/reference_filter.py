@@ -607,6 +607,10 @@ class ReferenceFilter:
         coeffs = self.state[3:self.first_bias]
         clamped = int(np.sum(coeffs < lo) + np.sum(coeffs > hi)) + extra
         self.state[3:self.first_bias] = np.clip(coeffs, lo, hi)
+        if self.torque_scale is not None:  # C: propid_clamp_torque_scale
+            s = self.torque_scale
+            clamped += int(not lo <= self.state[s] <= hi)
+            self.state[s] = min(max(self.state[s], lo), hi)
         if clamped:
             self.health |= HEALTH["STATE_CLAMPED"]
             self.counters_data["state_clamps"] += clamped

@@ -349,6 +349,35 @@ static void test_torque_scale_walk_follows_a_changing_torque_gain(void)
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
 }
 
+static void test_torque_scale_is_kept_in_the_coefficient_range(void)
+{
+    /* A walking scale carried to or below zero by an update would make the thrust
+     * torques vanish or change sign: the gyro and the accelerometer paths clamp it. */
+    propid_config_t config;
+    quad_config(&config);
+    config.mass = MASS;
+    config.torque_scale = 1u;
+    config.torque_scale_walk = 0.1f;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    const uint8_t scale = filter.derived.layout.torque_scale;
+    const float speeds[4] = {600.0f, 600.0f, 600.0f, 600.0f};
+    const float zero[3] = {0.0f, 0.0f, 0.0f};
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1000u, speeds, 4u));
+    TEST_ASSERT_TRUE(propid_push_gyro(&filter, 1000u, zero) >= 0);
+    filter.core.state[scale] = -0.5f;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 3000u, speeds, 4u));
+    TEST_ASSERT_TRUE(propid_push_gyro(&filter, 3000u, zero) >= 0);
+    TEST_ASSERT_EQUAL_FLOAT(config.coeff_rel_min, filter.core.state[scale]);
+    TEST_ASSERT_TRUE(filter.counters.state_clamps >= 1u);
+    filter.core.state[scale] = 50.0f;
+    const float force[3] = {0.0f, 0.0f, 9.81f};
+    TEST_ASSERT_TRUE(propid_push_accel(&filter, 3500u, force) >= 0);
+    TEST_ASSERT_EQUAL_FLOAT(config.coeff_rel_max, filter.core.state[scale]);
+    propid_estimate_t estimate;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    TEST_ASSERT_TRUE(estimate.health & PROPID_HEALTH_STATE_CLAMPED);
+}
+
 /* ---- rotor inertia: the yaw reaction in one step ------------------------ */
 static float yaw_rate_after_spin_up(float rotor_inertia)
 {
@@ -389,5 +418,6 @@ int main(void)
     RUN_TEST(test_disturbance_states_remove_the_closed_loop_bias);
     RUN_TEST(test_torque_scale_frees_kf_from_an_inertia_error);
     RUN_TEST(test_torque_scale_walk_follows_a_changing_torque_gain);
+    RUN_TEST(test_torque_scale_is_kept_in_the_coefficient_range);
     return UNITY_END();
 }

@@ -33,8 +33,19 @@ OVERRIDES = [
     ("rotor_stale_us", int, "rotor data older than this at a gyro sample is stale [us]"),
     ("max_gyro_gap_us", int, "a longer gap between gyro samples is a time jump (resync) [us]"),
     ("converged_rel_std", float, "a coefficient is converged below this relative std"),
-    ("torque_scale_walk", float, "random walk of the thrust-torque scale [1/sqrt(s)] (library default 0: constant)"),
 ]
+
+
+def _walk(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither auto nor a number") from None
+    if not (0.0 <= value <= 10.0):
+        raise argparse.ArgumentTypeError(f"{text}: the walk must be between 0 and 10 [1/sqrt(s)]")
+    return value
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -90,6 +101,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with the accelerometer, also estimate the scale of the thrust torques relative to the "
                              "vehicle file's inertia and arms, so kf's scale comes from the accelerometer alone "
                              "(auto: on with --aiding gyro+accel)")
+    parser.add_argument("--torque-scale-walk", metavar="auto|W", type=_walk,
+                        help="let that scale follow a torque gain that changes within the flight: random walk W "
+                             "[1/sqrt(s)], or auto: measured on the log from the change of the 2-10 Hz torque gain "
+                             "between 4 s windows (docs/real-data.md). Default: a constant scale")
     parser.add_argument("--unit-inertia", action="store_true",
                         help="run with J = identity: estimates are kf/J and km/Jzz ratios (for vehicles without inertia)")
     parser.add_argument("--kf-nominal", type=float, help="prior mean of kf (overrides the vehicle file)")
@@ -264,6 +279,7 @@ def run(args: argparse.Namespace) -> int:
         disturbance=args.disturbance,
         rotor_inertia=args.rotor_inertia,
         torque_scale=args.torque_scale,
+        torque_scale_walk=args.torque_scale_walk,
         progress=not args.no_progress and len(log_paths) == 1,
     )
     text_out = sys.stderr if args.json == "-" else sys.stdout

@@ -31,6 +31,8 @@ class ReplayOptions:
     disturbance: str = "off"  # "on": the filter's disturbance-torque states
     rotor_inertia: str = "auto"  # "auto"/"on": the vehicle's rotor_inertia enters the model; "off"
     torque_scale: str = "auto"  # "auto"/"on": estimate the thrust-torque scale when the accelerometer is fused; "off"
+    # Its random walk [1/sqrt(s)]: None (the library default, a constant), a number, or "auto" (replay/scale_walk.py).
+    torque_scale_walk: float | str | None = None
     record_every: int = 1  # keep every k-th estimate for the time series
     progress: bool = True
 

@@ -14,6 +14,7 @@ from propid.replay.noise import nis_mean, replay_nis
 from propid.replay.options import US, ReplayOptions, ReplayResult
 from propid.replay.prefilter import highpass_emulation_log, prefilter_log
 from propid.replay.session import FilterSession, segment_mask
+from propid.signals import median_dt
 
 
 def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = None) -> ReplayResult:
@@ -52,6 +53,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     esc_delay_s, delay_rule = resolve_esc_delay(log, vehicle, mask, options, logged_streams)
     delay_us = int(round(esc_delay_s * US))
     config_fields["rotor_delay_us"] = delay_us  # the firmware holds the leading stream (docs/math.md §12)
+    resolve_scale_walk(log, vehicle, mask, options, config_fields, notes, esc_delay_s)
     if prefilter_info is not None:
         notes["prefilter"] = prefilter_info
     if highpass_info is not None:
@@ -319,3 +321,27 @@ def replay_warnings(rates: dict, accepted: int, pushed: int) -> list[str]:
     if pushed and accepted < MIN_ACCEPTED_GYRO_FRACTION * pushed:
         warnings.append(f"the filter accepted only {accepted} of {pushed} gyro samples")
     return warnings
+
+
+def resolve_scale_walk(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, options: ReplayOptions,
+                       config_fields: dict, notes: dict, esc_delay_s: float) -> None:
+    """torque_scale_walk from --torque-scale-walk: a number, or auto (the per-log rule)."""
+    walk = options.torque_scale_walk
+    if walk is None:
+        return
+    if not config_fields.get("torque_scale"):
+        raise UserError("--torque-scale-walk needs the thrust-torque scale (--aiding gyro+accel, --torque-scale "
+                        "auto or on)")
+    if walk == "auto":
+        from propid.replay.scale_walk import estimate_scale_walk
+
+        lag = int(round(-esc_delay_s / median_dt(log.t)))
+        info = estimate_scale_walk(log, vehicle, mask, lag, filter_input_rule() == "trapezoid")
+        config_fields["torque_scale_walk"] = info["walk"]
+        notes["torque_scale_walk"] = info
+        return
+    value = float(walk)
+    if not (0.0 <= value <= 10.0):
+        raise UserError(f"--torque-scale-walk {walk!r}: choose auto or a number between 0 and 10 [1/sqrt(s)]")
+    config_fields["torque_scale_walk"] = value
+    notes["torque_scale_walk"] = "given"
