@@ -23,7 +23,8 @@ rows of T = F_rate P, the rate block collecting its coefficient-column terms
 during the sweep. Every element the kernel writes is checked, symbolically,
 against F P F^T + Q of the model before the file is written: the C is the
 model's arithmetic, only ordered for the Cortex-M4 (one multiply-add per term,
-the own element last so each sum starts in a fresh register).
+the own element last so each sum starts in a fresh register; a variance's
+loading and noise, (1 + PROPID_VAR_LOADING) P_jj + q, in one).
 
 --check regenerates in memory and exits 1 when the committed file differs (the
 test suite runs it: tests/host_tools/test_codegen.py).
@@ -157,9 +158,9 @@ def generate() -> str:
         if own is None:                                   # a bias column: not loaded yet
             emit(f"        const float own = cov[propid_cov_index({j}u, {j}u)];")
             own = "own"
-        emit(f"        cov[propid_cov_index({j}u, {j}u)] = {own} + (PROPID_VAR_LOADING * {own} + "
-             f"q_{kind(j)});")
-        checked[(j, j)] = p_symbol(j, j) + (loading * p_symbol(j, j) + q[kind(j)])
+        emit(f"        cov[propid_cov_index({j}u, {j}u)] = (1.0f + PROPID_VAR_LOADING) * {own} + "
+             f"q_{kind(j)};")
+        checked[(j, j)] = (1 + loading) * p_symbol(j, j) + q[kind(j)]
         emit("        PROPID_SCHEDULE_BARRIER();")
         emit("    }")
     # The rate block from the rate columns and the collected coefficient terms.
@@ -176,9 +177,9 @@ def generate() -> str:
             value += block[(a, b)]
             if a == b:
                 emit(f"    const float f{a}{b} = {' + '.join(terms)};")
-                emit(f"    cov[propid_cov_index({a}u, {b}u)] = f{a}{b} + (PROPID_VAR_LOADING * f{a}{b} + "
-                     f"q_rate);")
-                checked[(a, b)] = value + (loading * value + q["rate"])
+                emit(f"    cov[propid_cov_index({a}u, {b}u)] = (1.0f + PROPID_VAR_LOADING) * f{a}{b} + "
+                     f"q_rate;")
+                checked[(a, b)] = (1 + loading) * value + q["rate"]
             else:
                 emit(f"    cov[propid_cov_index({a}u, {b}u)] = {' + '.join(terms)};")
                 checked[(a, b)] = value

@@ -335,6 +335,8 @@ static __attribute__((noinline)) propid_status_t gyro_sample_check(propid_filter
     return PROPID_OK;
 }
 
+static propid_status_t fuse_gyro_timed(propid_filter_t *filter, uint64_t time_us, const float gyro_rad_s[3]);
+
 propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
                                  const float gyro_rad_s[3])
 {
@@ -351,18 +353,29 @@ propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
     /* Held rotor samples (the gyro lags) that act by now. */
     propid_delay_release_rotor(filter, time_us);
 #endif
-    return propid_fuse_gyro(filter, time_us, gyro_rad_s);
+    /* Not held: gyro_sample_check has already tested the time against the
+     * filter's clock, which is the test propid_fuse_gyro starts with. */
+    return fuse_gyro_timed(filter, time_us, gyro_rad_s);
 }
 
 propid_status_t propid_fuse_gyro(propid_filter_t *filter, uint64_t time_us, const float gyro_rad_s[3])
 {
-    const propid_kept_config_t *config = &filter->config;
-    propid_core_t *core = &filter->core;
-    const int anchor = !core->has_time; /* first sample after init/reset/resync */
-    const propid_status_t timing = gyro_time_check(config, core->time_us, anchor, time_us);
+    const propid_status_t timing =
+        gyro_time_check(&filter->config, filter->core.time_us, !filter->core.has_time, time_us);
     if (timing != PROPID_OK) {
         return reject(filter, timing);
     }
+    return fuse_gyro_timed(filter, time_us, gyro_rad_s);
+}
+
+/* propid_fuse_gyro after its time test (time_us is later than the filter's
+ * clock by at most the largest gap, or anchors it). */
+static __attribute__((noinline)) propid_status_t fuse_gyro_timed(propid_filter_t *filter, uint64_t time_us,
+                                                                 const float gyro_rad_s[3])
+{
+    const propid_kept_config_t *config = &filter->config;
+    propid_core_t *core = &filter->core;
+    const int anchor = !core->has_time; /* first sample after init/reset/resync */
     const float dt = anchor ? 0.0f : (float)(uint32_t)(time_us - core->time_us) * 1.0e-6f;
     if (!core->has_rotor_data) {
         return reject(filter, PROPID_ERR_NO_ROTOR_DATA);

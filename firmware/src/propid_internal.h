@@ -103,6 +103,15 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
  * instructions per kernel). No instruction is emitted. */
 #define PROPID_SCHEDULE_BARRIER() __asm__ volatile("" ::: "memory")
 
+/* A whole kernel compiled without GCC's scheduling pass before register
+ * allocation, for straight-line kernels whose hoisted loads outlive the FPU
+ * registers (clang has no such pass to switch off: empty there). */
+#if defined(__GNUC__) && !defined(__clang__)
+#define PROPID_NO_EARLY_SCHEDULE __attribute__((optimize("no-schedule-insns")))
+#else
+#define PROPID_NO_EARLY_SCHEDULE
+#endif
+
 /* Covariance health in float32 (docs/math.md §2 "Rounding loading", design.md
  * §12). Every prediction multiplies each variance by (1 + PROPID_VAR_LOADING):
  * a PSD diagonal term of one float32 epsilon of the variance per step, the size

@@ -74,7 +74,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(0u, 3u)] = t0;
         cov[propid_cov_index(1u, 3u)] = t1;
         cov[propid_cov_index(2u, 3u)] = t2;
-        cov[propid_cov_index(3u, 3u)] = k0 + (PROPID_VAR_LOADING * k0 + q_thrust);
+        cov[propid_cov_index(3u, 3u)] = (1.0f + PROPID_VAR_LOADING) * k0 + q_thrust;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 4 */
@@ -90,7 +90,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(0u, 4u)] = t0;
         cov[propid_cov_index(1u, 4u)] = t1;
         cov[propid_cov_index(2u, 4u)] = t2;
-        cov[propid_cov_index(4u, 4u)] = k1 + (PROPID_VAR_LOADING * k1 + q_thrust);
+        cov[propid_cov_index(4u, 4u)] = (1.0f + PROPID_VAR_LOADING) * k1 + q_thrust;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 5 */
@@ -106,7 +106,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(0u, 5u)] = t0;
         cov[propid_cov_index(1u, 5u)] = t1;
         cov[propid_cov_index(2u, 5u)] = t2;
-        cov[propid_cov_index(5u, 5u)] = k2 + (PROPID_VAR_LOADING * k2 + q_thrust);
+        cov[propid_cov_index(5u, 5u)] = (1.0f + PROPID_VAR_LOADING) * k2 + q_thrust;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 6 */
@@ -122,7 +122,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(0u, 6u)] = t0;
         cov[propid_cov_index(1u, 6u)] = t1;
         cov[propid_cov_index(2u, 6u)] = t2;
-        cov[propid_cov_index(6u, 6u)] = k3 + (PROPID_VAR_LOADING * k3 + q_thrust);
+        cov[propid_cov_index(6u, 6u)] = (1.0f + PROPID_VAR_LOADING) * k3 + q_thrust;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 7 */
@@ -138,7 +138,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(0u, 7u)] = t0;
         cov[propid_cov_index(1u, 7u)] = t1;
         cov[propid_cov_index(2u, 7u)] = t2;
-        cov[propid_cov_index(7u, 7u)] = d0 + (PROPID_VAR_LOADING * d0 + q_drag);
+        cov[propid_cov_index(7u, 7u)] = (1.0f + PROPID_VAR_LOADING) * d0 + q_drag;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 8 */
@@ -154,7 +154,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(0u, 8u)] = t0;
         cov[propid_cov_index(1u, 8u)] = t1;
         cov[propid_cov_index(2u, 8u)] = t2;
-        cov[propid_cov_index(8u, 8u)] = d1 + (PROPID_VAR_LOADING * d1 + q_drag);
+        cov[propid_cov_index(8u, 8u)] = (1.0f + PROPID_VAR_LOADING) * d1 + q_drag;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 9 */
@@ -170,7 +170,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(0u, 9u)] = t0;
         cov[propid_cov_index(1u, 9u)] = t1;
         cov[propid_cov_index(2u, 9u)] = t2;
-        cov[propid_cov_index(9u, 9u)] = d2 + (PROPID_VAR_LOADING * d2 + q_drag);
+        cov[propid_cov_index(9u, 9u)] = (1.0f + PROPID_VAR_LOADING) * d2 + q_drag;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 10 */
@@ -186,7 +186,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(0u, 10u)] = t0;
         cov[propid_cov_index(1u, 10u)] = t1;
         cov[propid_cov_index(2u, 10u)] = t2;
-        cov[propid_cov_index(10u, 10u)] = d3 + (PROPID_VAR_LOADING * d3 + q_drag);
+        cov[propid_cov_index(10u, 10u)] = (1.0f + PROPID_VAR_LOADING) * d3 + q_drag;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 11 */
@@ -200,7 +200,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(1u, 11u)] = t1;
         cov[propid_cov_index(2u, 11u)] = t2;
         const float own = cov[propid_cov_index(11u, 11u)];
-        cov[propid_cov_index(11u, 11u)] = own + (PROPID_VAR_LOADING * own + q_bias);
+        cov[propid_cov_index(11u, 11u)] = (1.0f + PROPID_VAR_LOADING) * own + q_bias;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 12 */
@@ -214,7 +214,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(1u, 12u)] = t1;
         cov[propid_cov_index(2u, 12u)] = t2;
         const float own = cov[propid_cov_index(12u, 12u)];
-        cov[propid_cov_index(12u, 12u)] = own + (PROPID_VAR_LOADING * own + q_bias);
+        cov[propid_cov_index(12u, 12u)] = (1.0f + PROPID_VAR_LOADING) * own + q_bias;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 13 */
@@ -228,19 +228,19 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(1u, 13u)] = t1;
         cov[propid_cov_index(2u, 13u)] = t2;
         const float own = cov[propid_cov_index(13u, 13u)];
-        cov[propid_cov_index(13u, 13u)] = own + (PROPID_VAR_LOADING * own + q_bias);
+        cov[propid_cov_index(13u, 13u)] = (1.0f + PROPID_VAR_LOADING) * own + q_bias;
         PROPID_SCHEDULE_BARRIER();
     }
     /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp. */
     const float f00 = rate_col0[0] + rate_col0[1] * g0_0 + rate_col0[2] * g0_1 + block00;
-    cov[propid_cov_index(0u, 0u)] = f00 + (PROPID_VAR_LOADING * f00 + q_rate);
+    cov[propid_cov_index(0u, 0u)] = (1.0f + PROPID_VAR_LOADING) * f00 + q_rate;
     cov[propid_cov_index(0u, 1u)] = rate_col0[1] + rate_col0[0] * g1_0 + rate_col0[2] * g1_1 + block01;
     cov[propid_cov_index(0u, 2u)] = rate_col0[2] + rate_col0[0] * g2_0 + rate_col0[1] * g2_1 + block02;
     const float f11 = rate_col1[1] + rate_col1[0] * g1_0 + rate_col1[2] * g1_1 + block11;
-    cov[propid_cov_index(1u, 1u)] = f11 + (PROPID_VAR_LOADING * f11 + q_rate);
+    cov[propid_cov_index(1u, 1u)] = (1.0f + PROPID_VAR_LOADING) * f11 + q_rate;
     cov[propid_cov_index(1u, 2u)] = rate_col1[2] + rate_col1[0] * g2_0 + rate_col1[1] * g2_1 + block12;
     const float f22 = rate_col2[2] + rate_col2[0] * g2_0 + rate_col2[1] * g2_1 + block22;
-    cov[propid_cov_index(2u, 2u)] = f22 + (PROPID_VAR_LOADING * f22 + q_rate);
+    cov[propid_cov_index(2u, 2u)] = (1.0f + PROPID_VAR_LOADING) * f22 + q_rate;
 }
 
 #endif /* PROPID_QUAD_PREDICT_H */
