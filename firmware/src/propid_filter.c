@@ -311,15 +311,16 @@ static __attribute__((noinline)) propid_status_t gyro_sample_check(propid_filter
         return reject(filter, PROPID_ERR_NULL);
     }
     const propid_kept_config_t *config = &filter->config;
-    for (uint8_t a = 0; a < 3u; ++a) {
-        if (!isfinite(gyro_rad_s[a])) {
-            return reject(filter, PROPID_ERR_NOT_FINITE);
+    /* One test per axis for the usual sample (NaN fails it, infinity is out of
+     * range); which of the two checks failed is sorted out after. */
+    if (!(fabsf(gyro_rad_s[0]) <= config->gyro_range) || !(fabsf(gyro_rad_s[1]) <= config->gyro_range) ||
+        !(fabsf(gyro_rad_s[2]) <= config->gyro_range)) {
+        for (uint8_t a = 0; a < 3u; ++a) {
+            if (!isfinite(gyro_rad_s[a])) {
+                return reject(filter, PROPID_ERR_NOT_FINITE);
+            }
         }
-    }
-    for (uint8_t a = 0; a < 3u; ++a) {
-        if (fabsf(gyro_rad_s[a]) > config->gyro_range) {
-            return reject(filter, PROPID_ERR_GYRO_RANGE);
-        }
+        return reject(filter, PROPID_ERR_GYRO_RANGE);
     }
     uint64_t previous = filter->core.time_us;
     int anchor = !filter->core.has_time;
