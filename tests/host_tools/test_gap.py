@@ -292,3 +292,51 @@ def test_an_unphysical_sign_is_not_an_effect(sign, physical):
     gr = scoring.grams(design)
     assert selection.physical_sign(gr, [0], [1], (0,)) is physical
     assert selection.physical_sign(gr, [0], [1], ()) is True  # a signed effect: no constraint
+
+
+@pytest.mark.parametrize("exponent,plausible", [(0.1, True), (-0.6, False)])
+def test_an_implausible_fit_is_not_an_effect(exponent, plausible):
+    """A thrust-vs-speed exponent far from a propeller's (|s| > 0.3) is some other error
+    taking the effect's shape: the effect is not significant and carries the reason; a
+    plausible exponent of the same evidence stays significant."""
+    from propid.gap import effects, scoring, selection
+
+    rng = np.random.default_rng(5)
+    n = 3000
+    x = rng.normal(size=(n, 2))
+    y = 0.1 * x[:, 0] + 0.2 * exponent * x[:, 1] + 0.002 * rng.normal(size=n)
+    design = _one_axis_design(y, x)
+    design.scale = np.array([1.0, 0.2])  # raw coefficient = scaled one / design.scale
+    design.groups["thrust_nonlinearity"] = design.groups.pop("effect")
+    gr = scoring.grams(design)
+    gr.weight = np.ones(1)
+    held = scoring.cv_sse(gr, [0])
+    ctx = effects.Context(positions=np.zeros((4, 3)), yaw_signs=np.ones(4), kf=np.ones(4), km=np.ones(4),
+                          mass=None, inertia=np.eye(3), rotor_radius=None, speed_ref=1.0)
+    bounds = {"thrust_nonlinearity": effects.by_id("thrust_nonlinearity").bounds(ctx)}
+    s = selection.score(design, gr, [0], "thrust_nonlinearity", held, bounds=bounds)
+    assert s["ci"][0] > 0 and s["effect_size"] >= scoring.MIN_SCALE_EFFECT_SIZE  # clear evidence either way
+    assert s["significant"] is plausible
+    assert ("implausible" in s) is not plausible
+    if not plausible:
+        assert "exponent" in s["implausible"]
+    # without ranges the same fit passes: the range, not the evidence, rejects it
+    assert selection.score(design, gr, [0], "thrust_nonlinearity", held)["significant"] is True
+
+
+def test_plausibility_ranges_follow_the_vehicle():
+    """Ranges derived from the vehicle: rotor inertia below m R^2 / N, CoM offset within the
+    rotors' extent; absolute bounds dropped when the file has no inertia."""
+    from propid.gap import effects
+
+    pos = np.array([[0.1, -0.1, 0], [-0.1, -0.1, 0], [-0.1, 0.1, 0], [0.1, 0.1, 0]])
+    ctx = effects.Context(positions=pos, yaw_signs=np.array([-1, 1, -1, 1.0]), kf=np.full(4, 1e-6),
+                          km=np.full(4, 1e-8), mass=1.0, inertia=np.diag([0.01, 0.01, 0.02]),
+                          rotor_radius=0.1, speed_ref=800.0)
+    assert effects.by_id("rotor_inertia").bounds(ctx) == [(-effects.INF, pytest.approx(1.0 * 0.01 / 4))]
+    assert effects.by_id("com_offset").bounds(ctx) == [(-0.1, 0.1), (-0.1, 0.1)]
+    damping = effects.by_id("aero_damping").bounds(ctx)
+    assert all(0 < hi < effects.INF for _, hi in damping)
+    ctx.inertia_known = False
+    assert effects.by_id("rotor_inertia").bounds(ctx) == [effects.UNBOUNDED]
+    assert effects.by_id("aero_damping").bounds(ctx) == [effects.UNBOUNDED] * 3

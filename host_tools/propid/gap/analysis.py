@@ -197,6 +197,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
 
     # 3. candidate effects on top of the base model
     ctx = make_context(work, vehicle, kf_rotor, km_rotor)
+    ctx.inertia_known = not unit_inertia
     effects = [by_id(e) for e in candidates]
     design = build_design(work, ctx, effects, vehicle.mass, with_thrust)
     gr = scoring.grams(design)
@@ -212,7 +213,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     gr_w.weight = scoring.axis_weights(design_w, base_cols)
     progress(10)
     sel = selection.forward_select(design_w, gr_w, candidates, base_cols, progress=lambda n: progress(n),
-                                   size_gr=gr)
+                                   size_gr=gr, bounds={e.id: e.bounds(ctx) for e in effects if e.bounds})
 
     # final model on all training data
     final_cols = sel["columns"]
@@ -236,6 +237,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                         "axes": s["axes"], "params": _physical(design, th, s["id"], ctx),
                         "effect_size": s["effect_size"], "per_axis": s["per_axis"],
                         "explained_fraction_all_axes": s["explained_fraction_all_axes"],
+                        **({"implausible": s["implausible"]} if "implausible" in s else {}),
                         "significant": s["significant"], **({"step": s["step"]} if "step" in s else {})})
     if delay_significant:  # the alignment is applied before any effect is scored: it ranks by its own share
         first = next((e for e in entries if e.get("step") == 1), None)

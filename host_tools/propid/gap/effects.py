@@ -14,6 +14,7 @@ before the others (alignment.py).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -36,6 +37,9 @@ class Context:
     inertia: np.ndarray
     rotor_radius: float | None
     speed_ref: float  # median flying rotor speed over all flights [rad/s]
+    # False when the vehicle file has no inertia (torques are then angular accelerations and
+    # the fitted torque coefficients kf/J-like ratios: bounds in absolute units do not apply)
+    inertia_known: bool = True
 
 
 @dataclass
@@ -52,6 +56,9 @@ class Effect:
     # coefficient, a lift or ground gain, a time constant); selection.py rejects a fit that
     # needs one of them clearly negative
     nonnegative: tuple[int, ...] = ()
+    # physical plausibility range of each fitted coefficient (raw column units), from the
+    # vehicle's geometry (docs/gap.md "Plausibility ranges"); None where a bound is unknown
+    bounds: Callable[[Context], list[tuple[float, float]]] | None = None
 
 
 def _thrusts(f: Flight, c: Context) -> np.ndarray:
@@ -194,41 +201,146 @@ def _com_physical(coef, c):
     return {"com_offset_x": float(coef[0]), "com_offset_y": float(coef[1])}
 
 
+# --- plausibility ranges (docs/gap.md "Plausibility ranges" gives the physics of each) ---
+
+INF = math.inf
+RHO_AIR = 1.225  # kg/m^3, standard sea-level air
+MAX_LAG_S = 0.1  # a sensor or estimator lag beyond this would be a different vehicle (100 ms)
+MAX_THRUST_EXPONENT = 0.3  # static thrust of small fixed-pitch propellers ~ Omega^(1.7..2.3)
+INERTIA_SCALE = 2.0  # the file's inertia within a factor 2 of the true one
+GYRO_SCALE_ERROR = 0.1  # MEMS sensitivity tolerance (a few %) plus mounting misalignment (~5 deg), doubled
+MAX_GROUND_GAIN = 2.0  # multirotor ground effect up to ~2x the single-rotor image model
+UNBOUNDED = (-INF, INF)
+
+
+def _hover_rotor(c: Context) -> tuple[float, float] | None:
+    """Thrust per rotor at the reference speed and its induced velocity (momentum theory,
+    T = 2 rho A v_i^2); None when radius, inertia (absolute kf) or a positive kf is missing."""
+    kf = float(np.mean(c.kf))
+    if c.rotor_radius is None or not c.inertia_known or kf <= 0:
+        return None
+    thrust = kf * c.speed_ref**2
+    return thrust, math.sqrt(thrust / (2.0 * RHO_AIR * math.pi * c.rotor_radius**2))
+
+
+def _rotor_inertia_bounds(c: Context) -> list:
+    # every spinning part of a rotor weighs less than the vehicle's share m/N and sits within R
+    if c.mass is None or c.rotor_radius is None or not c.inertia_known:
+        return [UNBOUNDED]
+    return [(-INF, c.mass * c.rotor_radius**2 / len(c.kf))]
+
+
+def _inertia_bounds(c: Context) -> list:
+    # scale = 1/(1 + alpha) in [1/INERTIA_SCALE, INERTIA_SCALE]
+    return [(1.0 / INERTIA_SCALE - 1.0, INERTIA_SCALE - 1.0)] * 2
+
+
+def _gyro_scale_bounds(c: Context) -> list:
+    # M = J^-1 (I + A) J: M_ii = 1 + a_ii, M_ij = a_ij J_jj / J_ii (diagonal J)
+    j = np.diag(c.inertia)
+    out = []
+    for k in range(8):
+        i, jj = divmod(k, 3)
+        limit = GYRO_SCALE_ERROR if i == jj else GYRO_SCALE_ERROR * j[i] / j[jj]
+        out.append((-limit, limit))
+    return out
+
+
+def _lowpass_bounds(c: Context) -> list:
+    return [(-INF, MAX_LAG_S)]
+
+
+def _com_bounds(c: Context) -> list:
+    # outside the rotors' extent the vehicle cannot hover with positive thrusts
+    reach = np.max(np.abs(c.positions[:, :2]), axis=0)
+    return [(-reach[0], reach[0]), (-reach[1], reach[1])]
+
+
+def _damping_bounds(c: Context) -> list:
+    # a rotor moving axially at v changes its thrust by at most T/v_i per m/s; a body rate w
+    # moves rotor i at w * (its distance from the axis); margin x2
+    hover = _hover_rotor(c)
+    if hover is None:
+        return [UNBOUNDED] * 3
+    thrust, v_i = hover
+    pos = c.positions
+    dist2 = (pos[:, 1] ** 2, pos[:, 0] ** 2, pos[:, 0] ** 2 + pos[:, 1] ** 2)
+    return [(-INF, 2.0 * thrust / v_i * float(np.sum(d))) for d in dist2]
+
+
+def _rotor_drag_bounds(c: Context) -> list:
+    # in-plane drag <= mu T (mu = v / Omega R): k_d <= kf / R; axial dT/dv <= T / v_i:
+    # k_z <= kf Omega_ref / v_i; flapping tilt <= 2 mu with a lever <= the arm: k_flap <= 2 kf arm / R
+    hover = _hover_rotor(c)
+    if hover is None:
+        return [UNBOUNDED] * 3
+    thrust, v_i = hover
+    kf = thrust / c.speed_ref**2
+    arm = float(np.max(np.linalg.norm(c.positions, axis=1)))
+    r = c.rotor_radius
+    return [(-INF, kf / r), (-INF, kf * c.speed_ref / v_i), (-INF, 2.0 * kf * arm / r)]
+
+
+def _lift_bounds(c: Context) -> list:
+    # forward flight at v >= v_i removes at most the whole induced inflow, doubling thrust
+    # at most: k_h v_i^2 <= T = 2 rho A v_i^2
+    if c.rotor_radius is None:
+        return [UNBOUNDED]
+    return [(-INF, 2.0 * RHO_AIR * math.pi * c.rotor_radius**2)]
+
+
+def _ground_bounds(c: Context) -> list:
+    return [(-INF, MAX_GROUND_GAIN)]
+
+
+def _exponent_bounds(c: Context) -> list:
+    return [(-MAX_THRUST_EXPONENT, MAX_THRUST_EXPONENT)]
+
+
 EFFECTS: list[Effect] = [
     Effect("rotor_inertia", ("rotor_inertia",), ("kg m^2",), (), ("yaw",), _rotor_inertia,
            _identity_physical(("rotor_inertia",)),
-           "yaw reaction of spinning rotors up/down: J_r sum s_i dOmega_i/dt", nonnegative=(0,)),
+           "yaw reaction of spinning rotors up/down: J_r sum s_i dOmega_i/dt", nonnegative=(0,),
+           bounds=_rotor_inertia_bounds),
     Effect("rotor_gyroscopic", ("rotor_inertia",), ("kg m^2",), (), ("roll", "pitch"), _rotor_gyroscopic,
            _identity_physical(("rotor_inertia",)),
-           "gyroscopic torque of the rotors' angular momentum: J_r sum s_i Omega_i (w x z)", nonnegative=(0,)),
+           "gyroscopic torque of the rotors' angular momentum: J_r sum s_i Omega_i (w x z)", nonnegative=(0,),
+           bounds=_rotor_inertia_bounds),
     Effect("inertia_error", ("alpha_roll", "alpha_pitch"), ("1", "1"), ("acc", "mass", "inertia"), ("roll", "pitch"),
            _inertia_error, _inertia_physical,
-           "body inertia differs from the file's: roll/pitch torque scale (needs the accelerometer kf)"),
+           "body inertia differs from the file's: roll/pitch torque scale (needs the accelerometer kf)",
+           bounds=_inertia_bounds),
     Effect("gyro_scale", tuple(f"a_{i}{j}" for i in "xyz" for j in "xyz")[:8], ("1",) * 8, ("acc", "mass", "inertia"),
            ("roll", "pitch", "yaw"), _gyro_scale, _gyro_scale_physical,
-           "gyro scale and axis misalignment: measured rate M w, cross-axis coupling is its signature"),
+           "gyro scale and axis misalignment: measured rate M w, cross-axis coupling is its signature",
+           bounds=_gyro_scale_bounds),
     Effect("gyro_lowpass", ("time_constant_s",), ("s",), (), ("roll", "pitch", "yaw"), _gyro_lowpass,
            _identity_physical(("time_constant_s",)),
-           "the logged rate is low-pass filtered (sensor filter, on-board estimator): first-order lag tau", nonnegative=(0,)),
+           "the logged rate is low-pass filtered (sensor filter, on-board estimator): first-order lag tau", nonnegative=(0,),
+           bounds=_lowpass_bounds),
     Effect("com_offset", ("com_offset_x", "com_offset_y"), ("m", "m"), (), ("roll", "pitch"), _com_offset,
-           _com_physical, "centre of mass off the described centre: torque d x (total thrust)"),
+           _com_physical, "centre of mass off the described centre: torque d x (total thrust)", bounds=_com_bounds),
     Effect("aero_damping", ("damping_x", "damping_y", "damping_z"), ("N m s/rad",) * 3, (),
            ("roll", "pitch", "yaw"), _aero_damping, _identity_physical(("damping_x", "damping_y", "damping_z")),
-           "aerodynamic rate damping: torque -D w, D proportional to rotor speed (D at the median speed)", nonnegative=(0, 1, 2)),
+           "aerodynamic rate damping: torque -D w, D proportional to rotor speed (D at the median speed)", nonnegative=(0, 1, 2),
+           bounds=_damping_bounds),
     Effect("rotor_drag", ("k_drag", "k_drag_axial", "k_flap"), ("N/(rad/s m/s)", "N/(rad/s m/s)", "N m/(rad/s m/s)"),
            ("velocity", "attitude"), ("roll", "pitch", "yaw", "thrust"), _rotor_drag,
            _identity_physical(("k_drag", "k_drag_axial", "k_flap")),
            "velocity-dependent rotor drag and blade flapping (body velocity from attitude + velocity)",
-           nonnegative=(0, 1, 2)),
+           nonnegative=(0, 1, 2), bounds=_rotor_drag_bounds),
     Effect("translational_lift", ("k_lift",), ("N/(m/s)^2 per rotor",), ("velocity", "attitude", "acc", "mass"),
            ("thrust",), _translational_lift, _identity_physical(("k_lift",)),
-           "extra thrust in horizontal flight: k_h (v_x^2 + v_y^2) per rotor", nonnegative=(0,)),
+           "extra thrust in horizontal flight: k_h (v_x^2 + v_y^2) per rotor", nonnegative=(0,),
+           bounds=_lift_bounds),
     Effect("ground_effect", ("ground_gain",), ("1",), ("height", "rotor_radius"), ("roll", "pitch", "thrust"),
            _ground_effect, _identity_physical(("ground_gain",)),
-           "thrust gain near the ground: T (1 + s (1/(1 - (R/4h)^2) - 1))", nonnegative=(0,)),
+           "thrust gain near the ground: T (1 + s (1/(1 - (R/4h)^2) - 1))", nonnegative=(0,),
+           bounds=_ground_bounds),
     Effect("thrust_nonlinearity", ("exponent",), ("1",), (), ("roll", "pitch", "yaw", "thrust"),
            _thrust_nonlinearity, _identity_physical(("exponent",)),
-           "thrust/drag not exactly quadratic: T = kf Omega^2 (Omega/Omega_ref)^s"),
+           "thrust/drag not exactly quadratic: T = kf Omega^2 (Omega/Omega_ref)^s",
+           bounds=_exponent_bounds),
 ]
 
 ESC_DELAY = "esc_delay"

@@ -17,7 +17,8 @@ Rules (docs/gap.md, "Scoring"):
 - the rows are whitened first (whitening.py: generalised least squares for the residual's
   noise spectrum) and cut into 1 s blocks, so the held-out fraction measures signal over
   noise and the blocks are close to independent;
-- significant: physical sign (selection.physical_sign) AND family-wise interval lower
+- significant: physical sign (selection.physical_sign) AND fit inside its physical
+  plausibility range (selection.implausible, effects.py bounds) AND family-wise interval lower
   bound > 0 AND, for the effects whose evidence is a torque scale against the
   accelerometer kf (inertia_error, gyro_scale, thrust_nonlinearity), effect size >=
   MIN_SCALE_EFFECT_SIZE (3 %): a MEMS accelerometer's zero-g offset (~20 mg) moves that

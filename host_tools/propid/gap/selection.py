@@ -4,6 +4,7 @@ Rule (docs/gap.md, "Which"):
 1. start from the base model (plus the stream alignment if esc_delay was significant);
 2. score every remaining testable effect added to the current model (held-out
    explained fraction of the current residual on the effect's axes, bootstrap CI);
+   significant = physical sign, fit inside its physical plausibility range, family-wise CI > 0;
 3. among the significant ones take the one explaining most of the residual summed over
    all axes (so one-axis and four-axis effects compete on one scale); if a look-alike of it is also
    significant and the bootstrap CI of their score difference contains 0, the two
@@ -37,7 +38,8 @@ def _look_alike(a: str, b: str) -> bool:
 
 
 def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
-          held_current: np.ndarray, candidates: int = 1, size_gr: scoring.Grams | None = None) -> dict:
+          held_current: np.ndarray, candidates: int = 1, size_gr: scoring.Grams | None = None,
+          bounds: dict | None = None) -> dict:
     cols = current + design.groups[effect_id]
     held = scoring.cv_sse(gr, cols)
     axes = by_id(effect_id).axes
@@ -49,13 +51,33 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
     # size on the unwhitened rows: the effect's share of the measured signal (physical relevance)
     size = scoring.effect_size(size_gr or gr, current, design.groups[effect_id], idx)
     physical = physical_sign(gr, current, design.groups[effect_id], by_id(effect_id).nonnegative)
+    cols = design.groups[effect_id]
+    reason = implausible(gr, current, cols, design.scale[cols], by_id(effect_id).params,
+                         (bounds or {}).get(effect_id))
     floor = scoring.MIN_SCALE_EFFECT_SIZE if effect_id in SCALE_EFFECTS else 0.0
     return {"id": effect_id, "explained_fraction": frac, "ci": ci, "held": held, "effect_size": size,
             "explained_fraction_all_axes": frac_all,
             "per_axis": per_axis,
             "axes": [a for a in axes if a in design.axes],
             "physical_sign": physical,
-            "significant": bool(physical and ci[0] > 0 and size >= floor)}
+            **({"implausible": reason} if reason else {}),
+            "significant": bool(physical and reason is None and ci[0] > 0 and size >= floor)}
+
+
+def implausible(gr: scoring.Grams, current: list[int], effect_cols: list[int], scale: np.ndarray,
+                names: tuple[str, ...], bounds: list[tuple[float, float]] | None) -> str | None:
+    """Why the effect's fit is physically implausible, or None: a coefficient outside its
+    physical range (effects.py bounds, docs/gap.md) by more than SIGN_SIGMAS standard errors.
+    `scale`: raw coefficient = scaled coefficient / scale."""
+    if not bounds:
+        return None
+    theta, se = scoring.coefficients_with_se(gr, current + effect_cols)
+    value = theta[len(current):] / scale
+    err = se[len(current):] / np.abs(scale)
+    for name, v, e, (lo, hi) in zip(names, value, err, bounds):
+        if v > hi + SIGN_SIGMAS * e or v < lo - SIGN_SIGMAS * e:
+            return f"implausible: {name} = {v:.3g} outside its physical range [{lo:.3g}, {hi:.3g}]"
+    return None
 
 
 def physical_sign(gr: scoring.Grams, current: list[int], effect_cols: list[int], nonnegative: tuple[int, ...]) -> bool:
@@ -74,7 +96,8 @@ def physical_sign(gr: scoring.Grams, current: list[int], effect_cols: list[int],
 
 
 def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], base_cols: list[int],
-                   progress=None, size_gr: scoring.Grams | None = None) -> dict:
+                   progress=None, size_gr: scoring.Grams | None = None, bounds: dict | None = None) -> dict:
+    """`bounds`: effect id -> physical range per coefficient (Effect.bounds of the context)."""
     current = list(base_cols)
     held_current = scoring.cv_sse(gr, current)
     held_base = held_current
@@ -82,7 +105,7 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
     ambiguous: list[dict] = []
     remaining = list(candidates)
     while remaining and len(selected) < MAX_EFFECTS:
-        scores = [score(design, gr, current, e, held_current, len(remaining), size_gr) for e in remaining]
+        scores = [score(design, gr, current, e, held_current, len(remaining), size_gr, bounds) for e in remaining]
         if progress:
             progress(len(scores))
         good = sorted([s for s in scores if s["significant"]], key=lambda s: -s["explained_fraction_all_axes"])
@@ -115,7 +138,7 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
             for cand in amb["candidates"]:
                 if cand in remaining and amb["kept"] == best["id"]:
                     remaining.remove(cand)
-    others = [score(design, gr, current, e, held_current, 1, size_gr) for e in candidates
+    others = [score(design, gr, current, e, held_current, 1, size_gr, bounds) for e in candidates
               if e not in {s["id"] for s in selected}]
     for o in others:
         o["significant"] = False
