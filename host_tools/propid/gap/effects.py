@@ -205,7 +205,7 @@ def _com_physical(coef, c):
 
 INF = math.inf
 RHO_AIR = 1.225  # kg/m^3, standard sea-level air
-MAX_LAG_S = 0.1  # a sensor or estimator lag beyond this would be a different vehicle (100 ms)
+MAX_SENSOR_LAG_S = 0.1  # a sensor or estimator lag beyond this would be a different vehicle (100 ms)
 MAX_THRUST_EXPONENT = 0.3  # static thrust of small fixed-pitch propellers ~ Omega^(1.7..2.3)
 INERTIA_SCALE = 2.0  # the file's inertia within a factor 2 of the true one
 GYRO_SCALE_ERROR = 0.1  # MEMS sensitivity tolerance (a few %) plus mounting misalignment (~5 deg), doubled
@@ -247,7 +247,7 @@ def _gyro_scale_bounds(c: Context) -> list:
 
 
 def _lowpass_bounds(c: Context) -> list:
-    return [(-INF, MAX_LAG_S)]
+    return [(-INF, MAX_SENSOR_LAG_S)]
 
 
 def _com_bounds(c: Context) -> list:

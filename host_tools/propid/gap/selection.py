@@ -66,16 +66,16 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
 
 def implausible(gr: scoring.Grams, current: list[int], effect_cols: list[int], scale: np.ndarray,
                 names: tuple[str, ...], bounds: list[tuple[float, float]] | None) -> str | None:
-    """Why the effect's fit is physically implausible, or None: a coefficient outside its
-    physical range (effects.py bounds, docs/gap.md) by more than SIGN_SIGMAS standard errors.
+    """Why the effect's fit is physically implausible, or None: a coefficient's all-data
+    estimate outside its physical range (effects.py bounds, docs/gap.md). No standard-error
+    margin: the point estimate is what the after-fit and the corrected vehicle use.
     `scale`: raw coefficient = scaled coefficient / scale."""
     if not bounds:
         return None
-    theta, se = scoring.coefficients_with_se(gr, current + effect_cols)
+    theta = scoring.solve(gr, current + effect_cols, np.arange(gr.s.shape[0]))
     value = theta[len(current):] / scale
-    err = se[len(current):] / np.abs(scale)
-    for name, v, e, (lo, hi) in zip(names, value, err, bounds):
-        if v > hi + SIGN_SIGMAS * e or v < lo - SIGN_SIGMAS * e:
+    for name, v, (lo, hi) in zip(names, value, bounds):
+        if not lo <= v <= hi:
             return f"implausible: {name} = {v:.3g} outside its physical range [{lo:.3g}, {hi:.3g}]"
     return None
 
