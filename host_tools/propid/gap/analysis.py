@@ -217,7 +217,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
 
     # final model on all training data
     final_cols = sel["columns"]
-    theta_final = scoring.solve(gr_w, final_cols, np.arange(design.n_blocks))
+    theta_final = scoring.solve(gr_w, final_cols, np.arange(design_w.n_blocks))  # every whitened (1 s) block
     pos_of = {c: k for k, c in enumerate(final_cols)}
 
     entries = []
@@ -231,7 +231,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
             th = np.array([theta_final[pos_of[c]] for c in cols])
         else:
             cols_all = final_cols + cols
-            th_all = scoring.solve(gr_w, cols_all, np.arange(design.n_blocks))
+            th_all = scoring.solve(gr_w, cols_all, np.arange(design_w.n_blocks))
             th = th_all[len(final_cols):]
         entries.append({"id": s["id"], "explained_fraction": s["explained_fraction"], "ci": s["ci"],
                         "axes": s["axes"], "params": _physical(design, th, s["id"], ctx),
