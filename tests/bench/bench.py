@@ -10,7 +10,9 @@ the figures (it fails only when a measurement cannot be made). Measurements:
              instruction trace, target build flags): the quad build
              (PROPID_QUAD_BUILD=1, propid_config.h) for the quad and the dense
              baseline (tests/qemu/dense_ekf.c) beside it, checked to give the same
-             estimates; the full build for 4, 6 and 8 rotors (*_full keys).
+             estimates; the full build for 4, 6 and 8 rotors (*_full keys), and
+             with each optional model term on (disturbance torque, rotor
+             inertia, a held telemetry delay: mcu_instr_per_step_quad_<term>).
   footprint  of the quad build (the issue's keys) and of the full build (*_full):
              flash (.text + .rodata) of the filter alone, the library
              (build/target/firmware/libpropid_quad.a, libpropid.a) and linked
@@ -68,6 +70,15 @@ def run(cmd: list[str], **kw) -> subprocess.CompletedProcess:
 
 
 # ---------------------------------------------------------------------------
+# Optional model terms counted by `make bench` (tests/qemu/count_step.c flags):
+# the rotor inertia is a small multirotor's order of magnitude per rotor.
+OPTION_FLAGS = (
+    ("disturbance", "-DCOUNT_STEP_DISTURBANCE"),
+    ("rotor_inertia", "-DCOUNT_STEP_ROTOR_INERTIA=6e-5f"),
+    ("delay_4ms", "-DCOUNT_STEP_DELAY_US=4000"),
+)
+
+
 def count_steps(repo: pathlib.Path, work: pathlib.Path, name: str, cflags: str) -> dict:
     out = work / f"count_step_{name}.json"
     env = {**os.environ, "COUNT_STEP_CFLAGS": cflags}
@@ -83,10 +94,19 @@ def bench_mcu(repo: pathlib.Path, work: pathlib.Path) -> dict:
     full = count_steps(repo, work, "full", "-DCOUNT_STEP_NO_DENSE")
     variants = counts["variants"]
     full_variants = full["variants"]
+    # Every optional model term the harness can switch on, full build (the
+    # quad build compiles them out); same flight, same counting.
+    options = {}
+    for option, flag in OPTION_FLAGS:
+        say(f"Cortex-M4 instruction counts under QEMU: full build with {option}...")
+        options[option] = count_steps(repo, work, option, f"-DCOUNT_STEP_NO_DENSE {flag}")["variants"]
     result = {"variants": {k: {x: v[x] for x in ("median", "min", "max", "steps")}
                            for k, v in variants.items()},
               "variants_full": {k: {x: v[x] for x in ("median", "min", "max", "steps")}
                                 for k, v in full_variants.items()},
+              "variants_options": {option: {k: {x: v[x] for x in ("median", "min", "max", "steps")}
+                                            for k, v in counted.items()}
+                                   for option, counted in options.items()},
               "dense_max_state_diff_in_std": counts.get("dense_max_state_diff_in_std"),
               "harness_output": counts["harness_output"] + full["harness_output"]}
     result["mcu_instr_per_step_quad"] = variants["quad_plus"]["median"]
@@ -95,6 +115,8 @@ def bench_mcu(repo: pathlib.Path, work: pathlib.Path) -> dict:
     result["mcu_instr_per_step_hexa"] = full_variants.get("hexa", {}).get("median")
     result["mcu_instr_per_step_octo"] = full_variants.get("octo", {}).get("median")
     result["dense_instr_per_step_quad"] = variants["dense_quad_plus"]["median"]
+    for option, counted in options.items():
+        result[f"mcu_instr_per_step_quad_{option}"] = counted["quad_plus"]["median"]
     result["dense_ratio_quad"] = result["dense_instr_per_step_quad"] / result["mcu_instr_per_step_quad"]
     load = {}
     for name, clock, cpi in CPU_MODELS:
@@ -342,6 +364,10 @@ def print_table(r: dict) -> None:
             for label, counts in mcu.get(key, {}).items():  # every variant the harness flew
                 rows.append((f"Cortex-M4 instructions per step, {build_name}, {names.get(label, label)}",
                              f"{fmt(counts['median'])} ({fmt(counts['min'])}-{fmt(counts['max'])})"))
+        for option, counted in mcu.get("variants_options", {}).items():
+            rows.append((f"Cortex-M4 instructions per step, full build + {option}, quad (plus) / hexa / octo",
+                         " / ".join(fmt(counted[v]["median"]) for v in ("quad_plus", "hexa", "octo")
+                                    if v in counted)))
         for key, percent in mcu["cpu_percent_quad"].items():
             rows.append((f"CPU load, quad, {key} (CPI {mcu['cpu_model_cpi'][key.split(',')[0]]})",
                          f"{percent:.2f} %"))

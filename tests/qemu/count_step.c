@@ -127,6 +127,17 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
         return 1;
     }
     propid_config_set_inertia_diag(&config, jxx, jyy, jzz);
+#ifdef COUNT_STEP_DISTURBANCE
+    /* -DCOUNT_STEP_DISTURBANCE: the three disturbance-torque states on. */
+    config.disturbance_torque = 1u;
+#endif
+#ifdef COUNT_STEP_ROTOR_INERTIA
+    /* -DCOUNT_STEP_ROTOR_INERTIA=J: every rotor spins with inertia J [kg m^2]
+     * (yaw reaction and gyroscopic terms in the prediction). */
+    for (uint32_t i = 0; i < rotors; ++i) {
+        config.rotor_inertia[i] = COUNT_STEP_ROTOR_INERTIA;
+    }
+#endif
 #ifdef COUNT_STEP_DELAY_US
     /* -DCOUNT_STEP_DELAY_US=D: the telemetry delay D held by the filter; each counted
      * step is then the rotor push and the gyro push together (a held sample is fused

@@ -14,7 +14,9 @@
 # propid_count_end(), i.e. inside each counted gyro step including its callees.
 # Prints, per variant (quad plus, quad X, hexa, octo, dense baseline on the quad),
 # median/min/max instructions per step and the mean per function (self); --json
-# writes the same. QEMU does not model cycles: these are instruction counts.
+# writes the same. Optional terms: -DCOUNT_STEP_DISTURBANCE, -DCOUNT_STEP_ROTOR_INERTIA=J,
+# -DCOUNT_STEP_DELAY_US=D in COUNT_STEP_CFLAGS. QEMU does not model cycles: these are
+# instruction counts.
 set -euo pipefail
 
 here=$(cd "$(dirname "$0")" && pwd)
@@ -25,7 +27,7 @@ while [ $# -gt 0 ]; do
     case "$1" in
         --src) src=$(cd "$2" && pwd); shift 2 ;;
         --json) json=$2; shift 2 ;;
-        -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
+        -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
         *) break ;;
     esac
 done
