@@ -94,6 +94,29 @@ static uint16_t frame_size(const mavlink_message_t *msg)
 }
 
 /* A link status that carries only the caller's sequence number (MAVLink 2, unsigned). */
+/* Serialise `count` built messages into buf all or nothing (a ground station
+ * must not see half a report); the sender's sequence advances only when written. */
+static propid_mavlink_status_t write_frames(propid_mavlink_sender_t *sender, const mavlink_status_t *link,
+                                            const mavlink_message_t *msgs, uint8_t count, uint8_t *buf,
+                                            uint16_t buf_size, uint16_t *frame_len)
+{
+    uint32_t total = 0u;
+    for (uint8_t i = 0u; i < count; ++i) {
+        total += frame_size(&msgs[i]);
+    }
+    if (total > buf_size) {
+        *frame_len = 0u;
+        return PROPID_MAVLINK_ERR_BUFFER;
+    }
+    uint16_t used = 0u;
+    for (uint8_t i = 0u; i < count; ++i) {
+        used = (uint16_t)(used + mavlink_msg_to_send_buffer(buf + used, &msgs[i]));
+    }
+    sender->sequence = link->current_tx_seq;
+    *frame_len = used;
+    return PROPID_MAVLINK_OK;
+}
+
 static void link_from_sequence(uint8_t sequence, mavlink_status_t *link)
 {
     const mavlink_status_t zero = {0};
@@ -225,13 +248,7 @@ static propid_mavlink_status_t pack_one(frame_kind_t kind, propid_mavlink_sender
     } else {
         build_status(sender, &link, estimate, counters, &msg);
     }
-    if (frame_size(&msg) > buf_size) {
-        *frame_len = 0u;
-        return PROPID_MAVLINK_ERR_BUFFER;
-    }
-    *frame_len = mavlink_msg_to_send_buffer(buf, &msg);
-    sender->sequence = link.current_tx_seq;
-    return PROPID_MAVLINK_OK;
+    return write_frames(sender, &link, &msg, 1u, buf, buf_size, frame_len);
 }
 
 propid_mavlink_status_t propid_mavlink_pack_coefficients(propid_mavlink_sender_t *sender,
@@ -300,21 +317,7 @@ propid_mavlink_status_t propid_mavlink_pack_report(propid_mavlink_sender_t *send
     build_gyro(sender, &link, estimate, &msgs[count++]);
     build_coefficients(sender, &link, estimate, &msgs[count++]);
 
-    uint32_t total = 0u;
-    for (uint8_t i = 0u; i < count; ++i) {
-        total += frame_size(&msgs[i]);
-    }
-    if (total > buf_size) {
-        *frame_len = 0u;
-        return PROPID_MAVLINK_ERR_BUFFER;
-    }
-    uint16_t used = 0u;
-    for (uint8_t i = 0u; i < count; ++i) {
-        used = (uint16_t)(used + mavlink_msg_to_send_buffer(buf + used, &msgs[i]));
-    }
-    sender->sequence = link.current_tx_seq;
-    *frame_len = used;
-    return PROPID_MAVLINK_OK;
+    return write_frames(sender, &link, msgs, count, buf, buf_size, frame_len);
 }
 
 /* A detection the wire can carry: a rotor below the rotor count, at most 8 rotors. */
@@ -380,21 +383,7 @@ static propid_mavlink_status_t pack_damage(propid_mavlink_sender_t *sender,
     if (with_text) {
         build_damage_text(sender, &link, detector, &msgs[count++]);
     }
-    uint32_t total = 0u;
-    for (uint8_t i = 0u; i < count; ++i) {
-        total += frame_size(&msgs[i]);
-    }
-    if (total > buf_size) {
-        *frame_len = 0u;
-        return PROPID_MAVLINK_ERR_BUFFER;
-    }
-    uint16_t used = 0u;
-    for (uint8_t i = 0u; i < count; ++i) {
-        used = (uint16_t)(used + mavlink_msg_to_send_buffer(buf + used, &msgs[i]));
-    }
-    sender->sequence = link.current_tx_seq;
-    *frame_len = used;
-    return PROPID_MAVLINK_OK;
+    return write_frames(sender, &link, msgs, count, buf, buf_size, frame_len);
 }
 
 propid_mavlink_status_t propid_mavlink_pack_damage(propid_mavlink_sender_t *sender,
