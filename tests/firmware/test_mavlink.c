@@ -13,9 +13,8 @@
 #include "propid/propid_mavlink.h"
 
 #define MAVLINK_NO_CONVERSION_HELPERS
-#include "mavlink/propid/mavlink.h"
+#include "mavlink_frames.h"
 
-#define GUARD_BYTE 0xA5u
 #define GUARD_LEN 32u
 
 static propid_estimate_t estimate;
@@ -84,42 +83,16 @@ void setUp(void)
     sender.system_id = 7u;
     sender.component_id = 42u;
     sender.sequence = 200u;
-    mavlink_reset_channel_status(MAVLINK_COMM_0);
+    mavlink_frames_reset();
 }
 
 void tearDown(void) {}
-
-/* Feed bytes to the parser; returns how many complete frames passed the checksum,
- * leaving the last one in *msg. Fails the test on a frame the parser rejects. */
-static uint16_t parse_frames(const uint8_t *bytes, uint16_t len, mavlink_message_t *msgs,
-                             uint16_t max_msgs)
-{
-    mavlink_message_t msg;
-    mavlink_status_t status;
-    uint16_t frames = 0u;
-    for (uint16_t i = 0u; i < len; ++i) {
-        const uint8_t result = mavlink_parse_char(MAVLINK_COMM_0, bytes[i], &msg, &status);
-        if (result == MAVLINK_FRAMING_OK) {
-            TEST_ASSERT_TRUE(frames < max_msgs);
-            msgs[frames++] = msg;
-        }
-        TEST_ASSERT_NOT_EQUAL(MAVLINK_FRAMING_BAD_CRC, result);
-    }
-    return frames;
-}
-
-static void assert_guard_intact(const uint8_t *guard)
-{
-    for (uint16_t i = 0u; i < GUARD_LEN; ++i) {
-        TEST_ASSERT_EQUAL_HEX8(GUARD_BYTE, guard[i]);
-    }
-}
 
 static void test_coefficients_round_trip(void)
 {
     uint8_t buf[PROPID_MAVLINK_COEFFICIENTS_MAX_LEN + GUARD_LEN];
     uint16_t len = 0u;
-    memset(buf, GUARD_BYTE, sizeof buf);
+    memset(buf, MAVLINK_FRAMES_GUARD_BYTE, sizeof buf);
 
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
                           propid_mavlink_pack_coefficients(&sender, &estimate, buf,
@@ -128,10 +101,10 @@ static void test_coefficients_round_trip(void)
     TEST_ASSERT_TRUE(len > 12u && len <= PROPID_MAVLINK_COEFFICIENTS_MAX_LEN);
     TEST_ASSERT_EQUAL_HEX8(MAVLINK_STX, buf[0]);
     TEST_ASSERT_EQUAL_UINT8(201u, sender.sequence);
-    assert_guard_intact(&buf[PROPID_MAVLINK_COEFFICIENTS_MAX_LEN]);
+    mavlink_frames_assert_untouched(&buf[PROPID_MAVLINK_COEFFICIENTS_MAX_LEN], GUARD_LEN);
 
     mavlink_message_t msg;
-    TEST_ASSERT_EQUAL_UINT16(1u, parse_frames(buf, len, &msg, 1u));
+    TEST_ASSERT_EQUAL_UINT16(1u, mavlink_frames_parse(buf, len, &msg, 1u));
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_COEFFICIENTS, msg.msgid);
     TEST_ASSERT_EQUAL_UINT8(7u, msg.sysid);
     TEST_ASSERT_EQUAL_UINT8(42u, msg.compid);
@@ -162,7 +135,7 @@ static void test_eight_rotors_round_trip(void)
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
                           propid_mavlink_pack_coefficients(&sender, &estimate, buf, sizeof buf, &len));
     mavlink_message_t msg;
-    TEST_ASSERT_EQUAL_UINT16(1u, parse_frames(buf, len, &msg, 1u));
+    TEST_ASSERT_EQUAL_UINT16(1u, mavlink_frames_parse(buf, len, &msg, 1u));
     mavlink_propid_coefficients_t decoded;
     mavlink_msg_propid_coefficients_decode(&msg, &decoded);
     TEST_ASSERT_EQUAL_UINT8(8u, decoded.rotor_count);
@@ -177,7 +150,7 @@ static void test_gyro_round_trip_is_frd(void)
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
                           propid_mavlink_pack_gyro(&sender, &estimate, buf, sizeof buf, &len));
     mavlink_message_t msg;
-    TEST_ASSERT_EQUAL_UINT16(1u, parse_frames(buf, len, &msg, 1u));
+    TEST_ASSERT_EQUAL_UINT16(1u, mavlink_frames_parse(buf, len, &msg, 1u));
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_GYRO, msg.msgid);
 
     mavlink_propid_gyro_t decoded;
@@ -204,7 +177,7 @@ static void test_status_round_trip(void)
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK, propid_mavlink_pack_status(&sender, &estimate, &counters,
                                                                         buf, sizeof buf, &len));
     mavlink_message_t msg;
-    TEST_ASSERT_EQUAL_UINT16(1u, parse_frames(buf, len, &msg, 1u));
+    TEST_ASSERT_EQUAL_UINT16(1u, mavlink_frames_parse(buf, len, &msg, 1u));
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_STATUS, msg.msgid);
 
     mavlink_propid_status_t decoded;
@@ -239,7 +212,7 @@ static void test_rejected_total_saturates(void)
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK, propid_mavlink_pack_status(&sender, &estimate, &counters,
                                                                         buf, sizeof buf, &len));
     mavlink_message_t msg;
-    TEST_ASSERT_EQUAL_UINT16(1u, parse_frames(buf, len, &msg, 1u));
+    TEST_ASSERT_EQUAL_UINT16(1u, mavlink_frames_parse(buf, len, &msg, 1u));
     TEST_ASSERT_EQUAL_UINT32(UINT32_MAX, mavlink_msg_propid_status_get_rejected_total(&msg));
 }
 
@@ -247,16 +220,16 @@ static void test_report_three_frames_in_sequence(void)
 {
     uint8_t buf[PROPID_MAVLINK_REPORT_MAX_LEN + GUARD_LEN];
     uint16_t len = 0u;
-    memset(buf, GUARD_BYTE, sizeof buf);
+    memset(buf, MAVLINK_FRAMES_GUARD_BYTE, sizeof buf);
     sender.sequence = 254u; /* and the sequence number wraps */
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
                           propid_mavlink_pack_report(&sender, &estimate, &counters, buf,
                                                      PROPID_MAVLINK_REPORT_MAX_LEN, &len));
-    assert_guard_intact(&buf[PROPID_MAVLINK_REPORT_MAX_LEN]);
+    mavlink_frames_assert_untouched(&buf[PROPID_MAVLINK_REPORT_MAX_LEN], GUARD_LEN);
     TEST_ASSERT_EQUAL_UINT8(1u, sender.sequence);
 
     mavlink_message_t msgs[3];
-    TEST_ASSERT_EQUAL_UINT16(3u, parse_frames(buf, len, msgs, 3u));
+    TEST_ASSERT_EQUAL_UINT16(3u, mavlink_frames_parse(buf, len, msgs, 3u));
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_STATUS, msgs[0].msgid);
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_GYRO, msgs[1].msgid);
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_COEFFICIENTS, msgs[2].msgid);
@@ -268,7 +241,7 @@ static void test_report_three_frames_in_sequence(void)
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
                           propid_mavlink_pack_report(&sender, &estimate, NULL, buf,
                                                      PROPID_MAVLINK_REPORT_MAX_LEN, &len));
-    TEST_ASSERT_EQUAL_UINT16(2u, parse_frames(buf, len, msgs, 3u));
+    TEST_ASSERT_EQUAL_UINT16(2u, mavlink_frames_parse(buf, len, msgs, 3u));
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_GYRO, msgs[0].msgid);
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_COEFFICIENTS, msgs[1].msgid);
     TEST_ASSERT_EQUAL_UINT8(3u, sender.sequence);
@@ -299,13 +272,13 @@ static void test_model_round_trip_is_frd(void)
     fill_model();
     uint8_t buf[PROPID_MAVLINK_MODEL_MAX_LEN + GUARD_LEN];
     uint16_t len = 0u;
-    memset(buf, GUARD_BYTE, sizeof buf);
+    memset(buf, MAVLINK_FRAMES_GUARD_BYTE, sizeof buf);
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
                           propid_mavlink_pack_model(&sender, &estimate, &counters, buf,
                                                     PROPID_MAVLINK_MODEL_MAX_LEN, &len));
-    assert_guard_intact(&buf[PROPID_MAVLINK_MODEL_MAX_LEN]);
+    mavlink_frames_assert_untouched(&buf[PROPID_MAVLINK_MODEL_MAX_LEN], GUARD_LEN);
     mavlink_message_t msg;
-    TEST_ASSERT_EQUAL_UINT16(1u, parse_frames(buf, len, &msg, 1u));
+    TEST_ASSERT_EQUAL_UINT16(1u, mavlink_frames_parse(buf, len, &msg, 1u));
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_MODEL, msg.msgid);
     mavlink_propid_model_t decoded;
     mavlink_msg_propid_model_decode(&msg, &decoded);
@@ -331,7 +304,7 @@ static void test_model_round_trip_is_frd(void)
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
                           propid_mavlink_pack_model(&sender, &estimate, NULL, buf,
                                                     PROPID_MAVLINK_MODEL_MAX_LEN, &len));
-    TEST_ASSERT_EQUAL_UINT16(1u, parse_frames(buf, len, &msg, 1u));
+    TEST_ASSERT_EQUAL_UINT16(1u, mavlink_frames_parse(buf, len, &msg, 1u));
     TEST_ASSERT_EQUAL_UINT32(0u, mavlink_msg_propid_model_get_accel_accepted(&msg));
 }
 
@@ -341,13 +314,13 @@ static void test_report_with_model_terms_has_four_frames(void)
     fill_model();
     uint8_t buf[PROPID_MAVLINK_REPORT_MAX_LEN + GUARD_LEN];
     uint16_t len = 0u;
-    memset(buf, GUARD_BYTE, sizeof buf);
+    memset(buf, MAVLINK_FRAMES_GUARD_BYTE, sizeof buf);
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
                           propid_mavlink_pack_report(&sender, &estimate, &counters, buf,
                                                      PROPID_MAVLINK_REPORT_MAX_LEN, &len));
-    assert_guard_intact(&buf[PROPID_MAVLINK_REPORT_MAX_LEN]);
+    mavlink_frames_assert_untouched(&buf[PROPID_MAVLINK_REPORT_MAX_LEN], GUARD_LEN);
     mavlink_message_t msgs[4];
-    TEST_ASSERT_EQUAL_UINT16(4u, parse_frames(buf, len, msgs, 4u));
+    TEST_ASSERT_EQUAL_UINT16(4u, mavlink_frames_parse(buf, len, msgs, 4u));
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_STATUS, msgs[0].msgid);
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_MODEL, msgs[1].msgid);
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_PROPID_GYRO, msgs[2].msgid);
@@ -378,15 +351,13 @@ static void test_buffer_too_small_writes_nothing(void)
                                                      &full));
     for (uint16_t size = 0u; size < full; ++size) {
         uint16_t len = 123u;
-        memset(buf, GUARD_BYTE, sizeof buf);
+        memset(buf, MAVLINK_FRAMES_GUARD_BYTE, sizeof buf);
         TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_ERR_BUFFER,
                               propid_mavlink_pack_report(&sender, &estimate, &counters, buf, size,
                                                          &len));
         TEST_ASSERT_EQUAL_UINT16(0u, len);
         TEST_ASSERT_EQUAL_UINT8(200u, sender.sequence);
-        for (uint16_t i = 0u; i < sizeof buf; ++i) {
-            TEST_ASSERT_EQUAL_HEX8(GUARD_BYTE, buf[i]);
-        }
+        mavlink_frames_assert_untouched(buf, sizeof buf);
     }
     uint16_t single = 0u;
     probe = sender;
@@ -394,14 +365,12 @@ static void test_buffer_too_small_writes_nothing(void)
                           propid_mavlink_pack_gyro(&probe, &estimate, buf, sizeof buf, &single));
     for (uint16_t size = 0u; size < single; ++size) {
         uint16_t len = 123u;
-        memset(buf, GUARD_BYTE, sizeof buf);
+        memset(buf, MAVLINK_FRAMES_GUARD_BYTE, sizeof buf);
         TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_ERR_BUFFER,
                               propid_mavlink_pack_gyro(&sender, &estimate, buf, size, &len));
         TEST_ASSERT_EQUAL_UINT16(0u, len);
         TEST_ASSERT_EQUAL_UINT8(200u, sender.sequence);
-        for (uint16_t i = 0u; i < sizeof buf; ++i) {
-            TEST_ASSERT_EQUAL_HEX8(GUARD_BYTE, buf[i]);
-        }
+        mavlink_frames_assert_untouched(buf, sizeof buf);
     }
     /* Exactly the frame's size is enough. */
     uint16_t len = 0u;
@@ -420,17 +389,14 @@ static void test_corrupted_frame_fails_crc(void)
                           propid_mavlink_pack_coefficients(&sender, &estimate, buf, sizeof buf, &len));
     buf[20] ^= 0x40u;
     mavlink_message_t msg;
-    mavlink_status_t status;
-    const uint8_t errors_before = mavlink_get_channel_status(MAVLINK_COMM_0)->parse_error;
+    const uint8_t errors_before = mavlink_frames_parse_errors();
     for (uint16_t i = 0u; i < len; ++i) {
-        TEST_ASSERT_NOT_EQUAL(MAVLINK_FRAMING_OK,
-                              mavlink_parse_char(MAVLINK_COMM_0, buf[i], &msg, &status));
+        TEST_ASSERT_NOT_EQUAL(MAVLINK_FRAMING_OK, mavlink_frames_parse_byte(buf[i], &msg));
     }
-    TEST_ASSERT_EQUAL_UINT8((uint8_t)(errors_before + 1u),
-                            mavlink_get_channel_status(MAVLINK_COMM_0)->parse_error);
+    TEST_ASSERT_EQUAL_UINT8((uint8_t)(errors_before + 1u), mavlink_frames_parse_errors());
 
     buf[20] ^= 0x40u;
-    TEST_ASSERT_EQUAL_UINT16(1u, parse_frames(buf, len, &msg, 1u));
+    TEST_ASSERT_EQUAL_UINT16(1u, mavlink_frames_parse(buf, len, &msg, 1u));
 }
 
 static void test_bad_arguments_rejected(void)

@@ -6,12 +6,10 @@
  */
 #include <string.h>
 
-#include "mavlink/propid/mavlink.h"
+#include "mavlink_frames.h"
 #include "propid/propid_damage.h"
 #include "propid/propid_mavlink.h"
 #include "unity.h"
-
-#define GUARD_BYTE 0xA5u
 
 static propid_mavlink_sender_t sender;
 static propid_damage_t detector;
@@ -27,26 +25,10 @@ void setUp(void)
     sender.system_id = 3u;
     sender.component_id = 1u;
     sender.sequence = 254u;
-    mavlink_reset_channel_status(MAVLINK_COMM_0);
+    mavlink_frames_reset();
 }
 
 void tearDown(void) {}
-
-static uint16_t parse_frames(const uint8_t *bytes, uint16_t len, mavlink_message_t *msgs, uint16_t max_msgs)
-{
-    mavlink_message_t msg;
-    mavlink_status_t status;
-    uint16_t frames = 0u;
-    for (uint16_t i = 0u; i < len; ++i) {
-        const uint8_t result = mavlink_parse_char(MAVLINK_COMM_0, bytes[i], &msg, &status);
-        if (result == MAVLINK_FRAMING_OK) {
-            TEST_ASSERT_TRUE(frames < max_msgs);
-            msgs[frames++] = msg;
-        }
-        TEST_ASSERT_NOT_EQUAL(MAVLINK_FRAMING_BAD_CRC, result);
-    }
-    return frames;
-}
 
 /* Decoded into a struct (the generated getters read the packed payload in place,
  * which is misaligned inside an array of messages). */
@@ -70,7 +52,7 @@ static void test_damage_round_trip(void)
                           propid_mavlink_pack_damage(&sender, &detector, buf, sizeof buf, &len));
     TEST_ASSERT_TRUE(len > 0u && len <= PROPID_MAVLINK_DAMAGE_MAX_LEN);
     mavlink_message_t msg;
-    TEST_ASSERT_EQUAL_UINT16(1u, parse_frames(buf, len, &msg, 1u));
+    TEST_ASSERT_EQUAL_UINT16(1u, mavlink_frames_parse(buf, len, &msg, 1u));
     assert_damage_fields(&msg);
     TEST_ASSERT_EQUAL_UINT8(254u, msg.seq);
     TEST_ASSERT_EQUAL_UINT8(255u, sender.sequence);
@@ -83,7 +65,7 @@ static void test_alert_is_damage_then_critical_statustext(void)
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
                           propid_mavlink_pack_damage_alert(&sender, &detector, buf, sizeof buf, &len));
     mavlink_message_t msgs[2];
-    TEST_ASSERT_EQUAL_UINT16(2u, parse_frames(buf, len, msgs, 2u));
+    TEST_ASSERT_EQUAL_UINT16(2u, mavlink_frames_parse(buf, len, msgs, 2u));
     assert_damage_fields(&msgs[0]);
     TEST_ASSERT_EQUAL_UINT32(MAVLINK_MSG_ID_STATUSTEXT, msgs[1].msgid);
     mavlink_statustext_t status;
@@ -108,7 +90,7 @@ static void test_every_rotor_named_in_the_text(void)
         TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_OK,
                               propid_mavlink_pack_damage_alert(&sender, &detector, buf, sizeof buf, &len));
         mavlink_message_t msgs[2];
-        TEST_ASSERT_EQUAL_UINT16(2u, parse_frames(buf, len, msgs, 2u));
+        TEST_ASSERT_EQUAL_UINT16(2u, mavlink_frames_parse(buf, len, msgs, 2u));
         mavlink_propid_damage_t damage;
         mavlink_msg_propid_damage_decode(&msgs[0], &damage);
         TEST_ASSERT_EQUAL_UINT8((uint8_t)(rotor + 1), damage.rotor);
@@ -121,7 +103,7 @@ static void test_every_rotor_named_in_the_text(void)
 static void test_short_buffer_writes_nothing(void)
 {
     uint8_t buf[PROPID_MAVLINK_DAMAGE_ALERT_MAX_LEN];
-    memset(buf, GUARD_BYTE, sizeof buf);
+    memset(buf, MAVLINK_FRAMES_GUARD_BYTE, sizeof buf);
     uint16_t len = 77u;
     /* room for PROPID_DAMAGE but not the STATUSTEXT: the alert writes nothing */
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_ERR_BUFFER,
@@ -129,12 +111,10 @@ static void test_short_buffer_writes_nothing(void)
                                                            PROPID_MAVLINK_DAMAGE_MAX_LEN + 10u, &len));
     TEST_ASSERT_EQUAL_UINT16(0u, len);
     TEST_ASSERT_EQUAL_UINT8(254u, sender.sequence);
-    for (size_t i = 0u; i < sizeof buf; ++i) {
-        TEST_ASSERT_EQUAL_HEX8(GUARD_BYTE, buf[i]);
-    }
+    mavlink_frames_assert_untouched(buf, sizeof buf);
     TEST_ASSERT_EQUAL_INT(PROPID_MAVLINK_ERR_BUFFER,
                           propid_mavlink_pack_damage(&sender, &detector, buf, 5u, &len));
-    TEST_ASSERT_EQUAL_HEX8(GUARD_BYTE, buf[0]);
+    TEST_ASSERT_EQUAL_HEX8(MAVLINK_FRAMES_GUARD_BYTE, buf[0]);
 }
 
 static void test_no_detection_and_bad_arguments_rejected(void)
