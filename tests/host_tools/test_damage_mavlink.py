@@ -5,47 +5,24 @@ CRITICAL STATUSTEXT on the wire that the host decoder (propid.mavlink_io) reads 
 as the detection the simulator reports, and the live view shows it.
 
 The simulator binary comes from PROPID_BUILD_DIR (default <repo>/build/host); see
-test_e2e_mavlink.py for the skip / fail rule.
+conftest.py for the skip / fail rule.
 """
 
 from __future__ import annotations
 
-import os
-import socket
 import subprocess
-from pathlib import Path
 
 import pytest
 
 from propid import mavlink_io
 from propid.commands import listen
 
-REPO = Path(__file__).resolve().parents[2]
-BUILD_DIR = Path(os.environ.get("PROPID_BUILD_DIR", REPO / "build" / "host"))
-SITL = BUILD_DIR / "sitl" / "propid_sitl"
-
-
-def _require_sitl() -> None:
-    if SITL.is_file() and os.access(SITL, os.X_OK):
-        return
-    if "PROPID_BUILD_DIR" in os.environ:
-        pytest.fail(f"{SITL} missing although PROPID_BUILD_DIR is set (build it: make host)")
-    pytest.skip(f"{SITL} not built (run `make host`, or set PROPID_BUILD_DIR)")
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def test_damage_alert_crosses_the_link(tmp_path):
-    _require_sitl()
-    port = _free_udp_port()
+def test_damage_alert_crosses_the_link(tmp_path, sitl_binary, free_udp_port):
+    port = free_udp_port()
     conn = mavlink_io.connect(f"udp:127.0.0.1:{port}")
     summary = tmp_path / "summary.json"
     sitl = subprocess.Popen(
-        [str(SITL), "--vehicle", "crazyflie-plus", "--trajectory", "lissajous", "--mode", "filter",
+        [str(sitl_binary), "--vehicle", "crazyflie-plus", "--trajectory", "lissajous", "--mode", "filter",
          "--paper", "--duration", "3", "--seed", "4", "--realtime", "5", "--detect-damage",
          "--damage", "3@2.2=0.3", "--mavlink", f"udp:127.0.0.1:{port}",
          "--summary-json", str(summary), "--quiet"],

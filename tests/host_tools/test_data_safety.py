@@ -286,13 +286,6 @@ def test_noise_values_used_are_recorded(cfilter_available):
     assert short["config"]["rate_process_noise"] == DEFAULT_TUNING["rate_process_noise"]
 
 
-@pytest.fixture(scope="module")
-def cfilter_available():
-    from propid import cfilter
-
-    cfilter.load_library()
-
-
 # --------------------------------------------------------------------------- plots
 def test_plot_lines_break_across_skipped_segments():
     from propid.plotting import broken_at_gaps

@@ -5,29 +5,22 @@ estimates must converge to the simulator's truth, the standard messages must be 
 MAVLink's NED/FRD frames, the .tlog must decode with pymavlink's mavlogdump, and a
 COMMAND_LONG reset must be executed and acknowledged.
 
-The simulator binary comes from PROPID_BUILD_DIR (default <repo>/build/host). When
-PROPID_BUILD_DIR is set (as `make test` does) a missing binary is a failure; in a
-plain dev run without a build the tests are skipped.
+The simulator binary comes from PROPID_BUILD_DIR (default <repo>/build/host); see
+conftest.py for the skip / fail rule.
 """
 
 from __future__ import annotations
 
 import math
-import os
 import socket
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from propid import mavlink_io, plotting
-
-REPO = Path(__file__).resolve().parents[2]
-BUILD_DIR = Path(os.environ.get("PROPID_BUILD_DIR", REPO / "build" / "host"))
-SITL = BUILD_DIR / "sitl" / "propid_sitl"
 
 FLIGHT_S = 10.0
 ESTIMATE_HZ = 20.0           # sitl_mavlink_default_rates()
@@ -48,20 +41,6 @@ def _rotation_from_quaternion(w: float, x: float, y: float, z: float):
             [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
 
 
-def _require_sitl() -> None:
-    if SITL.is_file() and os.access(SITL, os.X_OK):
-        return
-    if "PROPID_BUILD_DIR" in os.environ:
-        pytest.fail(f"{SITL} missing although PROPID_BUILD_DIR is set (build it: make host)")
-    pytest.skip(f"{SITL} not built (run `make host`, or set PROPID_BUILD_DIR)")
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _wait_until_bound(port: int, proc: subprocess.Popen, timeout: float = 30.0) -> None:
     """The logger has bound the port once we can no longer bind it ourselves."""
     deadline = time.monotonic() + timeout
@@ -79,24 +58,20 @@ def _wait_until_bound(port: int, proc: subprocess.Popen, timeout: float = 30.0) 
     raise AssertionError("propid log did not bind its port")
 
 
-@pytest.fixture(scope="module")
-def recorded_flight(tmp_path_factory):
-    _require_sitl()
-    work = tmp_path_factory.mktemp("e2e")
-    port = _free_udp_port()
-    tlog, est_csv, sitl_csv = work / "flight.tlog", work / "estimates.csv", work / "sitl.csv"
+def _fly_while_logging(sitl_binary, port: int, flight: list[str], csv, tlog=None) -> str:
+    """`propid log` listens on the port while propid_sitl flies `flight` streaming to it,
+    paced at 20x real time (fast, yet no burst can overflow the receive buffer) and
+    writing its own flight log; both must succeed. Returns the simulator's stderr."""
     logger = subprocess.Popen(
         [sys.executable, "-m", "propid.cli", "log", "--connect", f"udp:127.0.0.1:{port}",
-         "--tlog", str(tlog), "--csv", str(est_csv), "--timeout", "60",
-         "--stop-when-idle", "2", "--quiet"],
+         *(["--tlog", str(tlog)] if tlog is not None else []), "--csv", str(csv),
+         "--timeout", "60", "--stop-when-idle", "2", "--quiet"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         _wait_until_bound(port, logger)
-        # Paced at 20x real time: fast, yet no burst can overflow the receive buffer.
         sitl = subprocess.run(
-            [str(SITL), "--trajectory", "lissajous", "--mode", "filter", "--paper",
-             "--duration", str(FLIGHT_S), "--seed", "1", "--realtime", "20",
-             "--mavlink", f"udp:127.0.0.1:{port}", "--log", str(sitl_csv), "--quiet"],
+            [str(sitl_binary), *flight, "--realtime", "20", "--mavlink", f"udp:127.0.0.1:{port}",
+             "--quiet"],
             capture_output=True, text=True, timeout=300)
         assert sitl.returncode == 0, sitl.stderr
         _, log_err = logger.communicate(timeout=60)
@@ -104,7 +79,34 @@ def recorded_flight(tmp_path_factory):
         if logger.poll() is None:
             logger.kill()
     assert logger.returncode == 0, log_err
-    return {"tlog": tlog, "estimates": est_csv, "sitl": sitl_csv, "sitl_stderr": sitl.stderr}
+    return sitl.stderr
+
+
+def _same_instants(rec, sim):
+    """(k, j, t): recorded row k and simulator log row j at the same time t (within 1 ns)."""
+    for k, t in enumerate(rec["t"]):
+        j = int(np.argmin(np.abs(sim["t"] - t)))
+        if abs(sim["t"][j] - t) <= 1e-9:
+            yield k, j, t
+
+
+def _assert_same_coefficients(rec, sim, k: int, j: int, t: float, rotor_count: int) -> None:
+    """Every rotor's kf/km and their std as the link carried them = the filter's (float32)."""
+    for i in range(1, rotor_count + 1):
+        for name in (f"est_kf_{i}", f"std_kf_{i}", f"est_km_{i}", f"std_km_{i}"):
+            assert rec[name][k] == pytest.approx(sim[name][j], rel=1e-6), (name, t)
+
+
+@pytest.fixture(scope="module")
+def recorded_flight(tmp_path_factory, sitl_binary, free_udp_port):
+    work = tmp_path_factory.mktemp("e2e")
+    tlog, est_csv, sitl_csv = work / "flight.tlog", work / "estimates.csv", work / "sitl.csv"
+    stderr = _fly_while_logging(
+        sitl_binary, free_udp_port(),
+        ["--trajectory", "lissajous", "--mode", "filter", "--paper", "--duration", str(FLIGHT_S),
+         "--seed", "1", "--log", str(sitl_csv)],
+        est_csv, tlog=tlog)
+    return {"tlog": tlog, "estimates": est_csv, "sitl": sitl_csv, "sitl_stderr": stderr}
 
 
 def test_recording_is_complete(recorded_flight):
@@ -118,14 +120,9 @@ def test_recorded_estimates_are_the_filters_estimates(recorded_flight):
     rec = plotting.read_csv_columns(recorded_flight["estimates"])
     sim = plotting.read_csv_columns(recorded_flight["sitl"])
     matched = 0
-    for k, t in enumerate(rec["t"]):
-        j = int(np.argmin(np.abs(sim["t"] - t)))
-        if abs(sim["t"][j] - t) > 1e-9:
-            continue
+    for k, j, t in _same_instants(rec, sim):
         matched += 1
-        for i in range(1, 5):
-            for name in (f"est_kf_{i}", f"std_kf_{i}", f"est_km_{i}", f"std_km_{i}"):
-                assert rec[name][k] == pytest.approx(sim[name][j], rel=1e-6), (name, t)
+        _assert_same_coefficients(rec, sim, k, j, t, 4)
         for a in "xyz":
             assert rec[f"est_bg_{a}"][k] == pytest.approx(sim[f"est_bg_{a}"][j], rel=1e-5,
                                                           abs=1e-9), (a, t)
@@ -218,12 +215,11 @@ def test_plot_of_the_recording(recorded_flight, tmp_path):
     assert out.stat().st_size > 30_000
 
 
-def test_reset_command_is_executed_and_acknowledged(tmp_path):
-    _require_sitl()
-    port = _free_udp_port()
+def test_reset_command_is_executed_and_acknowledged(tmp_path, sitl_binary, free_udp_port):
+    port = free_udp_port()
     conn = mavlink_io.connect(f"udp:127.0.0.1:{port}")
     sitl = subprocess.Popen(
-        [str(SITL), "--trajectory", "hover", "--mode", "filter", "--paper",
+        [str(sitl_binary), "--trajectory", "hover", "--mode", "filter", "--paper",
          "--duration", "3", "--realtime", "1", "--mavlink", f"udp:127.0.0.1:{port}", "--quiet"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     failure = None
@@ -265,51 +261,31 @@ def test_reset_command_is_executed_and_acknowledged(tmp_path):
     ("tcp:127.0.0.1:14550", "is not udp:HOST:PORT"),
     ("udp:127.0.0.1:99999", "bad port"),
 ])
-def test_bad_mavlink_url_is_refused(url, message):
-    _require_sitl()
-    result = subprocess.run([str(SITL), "--duration", "0.1", "--quiet", "--mavlink", url],
+def test_bad_mavlink_url_is_refused(url, message, sitl_binary):
+    result = subprocess.run([str(sitl_binary), "--duration", "0.1", "--quiet", "--mavlink", url],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode != 0
     assert message in result.stderr
 
 
-def test_octocopter_estimates_cross_the_link(tmp_path):
+def test_octocopter_estimates_cross_the_link(tmp_path, sitl_binary, free_udp_port):
     """Eight rotors: every rotor's kf/km and std arrive, equal to the filter's (float32); with
     optional terms configured (disturbance states, the rotor samples held 1 ms: a gyro lagging)
     PROPID_MODEL arrives too and `propid log` writes its columns."""
-    _require_sitl()
-    port = _free_udp_port()
     est_csv, sitl_csv = tmp_path / "estimates.csv", tmp_path / "sitl.csv"
-    logger = subprocess.Popen(
-        [sys.executable, "-m", "propid.cli", "log", "--connect", f"udp:127.0.0.1:{port}",
-         "--csv", str(est_csv), "--timeout", "60", "--stop-when-idle", "2", "--quiet"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        _wait_until_bound(port, logger)
-        sitl = subprocess.run(
-            [str(SITL), "--vehicle", "octo-x", "--trajectory", "lissajous", "--mode", "filter",
-             "--paper", "--duration", "3", "--seed", "2", "--realtime", "20",
-             "--filter-disturbance", "--filter-esc-delay", "-0.001",
-             "--mavlink", f"udp:127.0.0.1:{port}", "--log", str(sitl_csv), "--quiet"],
-            capture_output=True, text=True, timeout=300)
-        assert sitl.returncode == 0, sitl.stderr
-        _, log_err = logger.communicate(timeout=60)
-    finally:
-        if logger.poll() is None:
-            logger.kill()
-    assert logger.returncode == 0, log_err
+    _fly_while_logging(
+        sitl_binary, free_udp_port(),
+        ["--vehicle", "octo-x", "--trajectory", "lissajous", "--mode", "filter", "--paper",
+         "--duration", "3", "--seed", "2", "--filter-disturbance", "--filter-esc-delay", "-0.001",
+         "--log", str(sitl_csv)],
+        est_csv)
     rec = plotting.read_csv_columns(est_csv)
     sim = plotting.read_csv_columns(sitl_csv)
     assert "est_kf_8" in rec and "est_kf_9" not in rec
     matched = 0
-    for k, t in enumerate(rec["t"]):
-        j = int(np.argmin(np.abs(sim["t"] - t)))
-        if abs(sim["t"][j] - t) > 1e-9:
-            continue
+    for k, j, t in _same_instants(rec, sim):
         matched += 1
-        for i in range(1, 9):
-            for name in (f"est_kf_{i}", f"std_kf_{i}", f"est_km_{i}", f"std_km_{i}"):
-                assert rec[name][k] == pytest.approx(sim[name][j], rel=1e-6), (name, t)
+        _assert_same_coefficients(rec, sim, k, j, t, 8)
     assert matched >= 0.9 * rec["t"].size > 0
     assert np.all(rec["esc_delay_s"] == pytest.approx(-0.001))
     assert np.all(rec["model_terms"] == 1 + 16)  # PROPID_MODEL_TERMS_DISTURBANCE | _ESC_DELAY

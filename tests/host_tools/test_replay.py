@@ -13,6 +13,7 @@ import pytest
 from propid.errors import UserError
 from propid.flightlog import FlightLog, parse_vehicle, read_flightlog, read_vehicle, write_flightlog, write_vehicle
 from propid.replay import ReplayOptions, fleet_summary, replay
+from synthetic_vehicles import x_quad
 
 SHARED = Path(__file__).resolve().parents[2].parent / "shared"
 CRAZYFLIE = SHARED / "data" / "real" / "crazyflie21b"
@@ -21,32 +22,10 @@ BETAFLIGHT = SHARED / "data" / "real" / "betaflight"
 KF_NOMINAL = 2.3e-8
 KM_NOMINAL = 7.8e-10
 ARM = 0.043 / np.sqrt(2)
-VEHICLE = {
-    "name": "synthetic-x",
-    "mass": 0.03,
-    "inertia": [1.43e-5, 1.43e-5, 2.89e-5],
-    "rotors": [
-        {"position": [ARM, -ARM, 0.0], "yaw_sign": -1},
-        {"position": [-ARM, -ARM, 0.0], "yaw_sign": 1},
-        {"position": [-ARM, ARM, 0.0], "yaw_sign": -1},
-        {"position": [ARM, ARM, 0.0], "yaw_sign": 1},
-    ],
-    "kf_nominal": KF_NOMINAL,
-    "km_nominal": KM_NOMINAL,
-}
+VEHICLE = x_quad("synthetic-x", 0.03, [1.43e-5, 1.43e-5, 2.89e-5], ARM, KF_NOMINAL, KM_NOMINAL)
 KF_TRUE = KF_NOMINAL * np.array([1.10, 0.92, 1.05, 0.97])
 KM_TRUE = KM_NOMINAL * np.array([0.95, 1.10, 1.00, 1.08])
 BIAS_TRUE = np.array([0.02, -0.015, 0.01])
-
-
-@pytest.fixture(scope="module")
-def cfilter_available():
-    from propid import cfilter
-
-    try:
-        cfilter.load_library()
-    except Exception as exc:  # the C library is built by `make` before the Python tests
-        pytest.fail(f"the firmware shared library is not built or does not load: {exc}")
 
 
 def synthetic_log(duration: float = 20.0, rate: float = 500.0, seed: int = 7) -> FlightLog:
@@ -225,16 +204,7 @@ def test_real_betaflight_needs_unit_inertia(cfilter_available):
     assert all(v > 0 for v in s["kf_mean"]) and all(v > 0 for v in s["km_mean"])
 
 
-def _sitl_binary() -> Path | None:
-    import os
-
-    build = Path(os.environ.get("PROPID_BUILD_DIR", Path(__file__).resolve().parents[2] / "build" / "host"))
-    binary = build / "sitl" / "propid_sitl"
-    return binary if binary.is_file() else None
-
-
-@pytest.mark.skipif(_sitl_binary() is None, reason="propid_sitl not built")
-def test_replay_of_a_sitl_log_reproduces_the_in_loop_filter(cfilter_available, tmp_path):
+def test_replay_of_a_sitl_log_reproduces_the_in_loop_filter(cfilter_available, sitl_binary, tmp_path):
     """The SITL runs the same C filter in the loop with the library defaults and logs its
     estimates; replaying its log with --noise default must land on the same numbers.
     --paper: sensors sampled at the control rate, so the log holds exactly what the filter
@@ -243,7 +213,7 @@ def test_replay_of_a_sitl_log_reproduces_the_in_loop_filter(cfilter_available, t
     import subprocess
 
     log_path = tmp_path / "sitl.csv"
-    subprocess.run([str(_sitl_binary()), "--paper", "--duration", "3", "--log", str(log_path)],
+    subprocess.run([str(sitl_binary), "--paper", "--duration", "3", "--log", str(log_path)],
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120, check=False)
     assert log_path.is_file(), "propid_sitl wrote no log"
     vehicle = read_vehicle(tmp_path / "sitl.vehicle.json")

@@ -12,7 +12,7 @@ from propid.realdata_checks import absurd_speed_limit
 from propid.replay import ReplayOptions, replay
 from propid.replay.config import build_config
 from propid.replay.run import estimates_finite
-from test_replay import VEHICLE, cfilter_available, synthetic_log  # noqa: F401 (fixture)
+from test_replay import VEHICLE, synthetic_log
 
 
 def with_spikes(log: FlightLog, fraction: float, value_of, seed: int = 11) -> FlightLog:

@@ -10,24 +10,13 @@ from propid.errors import UserError
 from propid.flightlog import FlightLog, parse_vehicle
 from propid.replay import ReplayOptions, replay
 from propid.replay.scale_walk import WINDOW_S, estimate_scale_walk, window_gains
+from synthetic_vehicles import x_quad
 
 KF = 3.0e-8
 KM = 1.0e-10
 ARM = 0.035
 MASS = 0.045
-VEHICLE = {
-    "name": "walk-x",
-    "mass": MASS,
-    "inertia": [2.5e-5, 2.8e-5, 4.9e-5],
-    "rotors": [
-        {"position": [ARM, -ARM, 0.0], "yaw_sign": -1},
-        {"position": [-ARM, -ARM, 0.0], "yaw_sign": 1},
-        {"position": [-ARM, ARM, 0.0], "yaw_sign": -1},
-        {"position": [ARM, ARM, 0.0], "yaw_sign": 1},
-    ],
-    "kf_nominal": KF,
-    "km_nominal": KM,
-}
+VEHICLE = x_quad("walk-x", MASS, [2.5e-5, 2.8e-5, 4.9e-5], ARM, KF, KM)
 
 
 def flight(gain_late: float, duration: float = 48.0, rate: float = 100.0, seed: int = 3) -> FlightLog:
@@ -104,13 +93,3 @@ def test_replay_uses_the_rule_or_a_given_walk_and_refuses_it_without_the_scale(c
         replay(log, vehicle, ReplayOptions(progress=False, aiding="gyro", torque_scale_walk=0.1))
     with pytest.raises(UserError, match="between 0 and 10"):
         replay(log, vehicle, ReplayOptions(progress=False, aiding="gyro+accel", torque_scale_walk=-1.0))
-
-
-@pytest.fixture(scope="module")
-def cfilter_available():
-    from propid import cfilter
-
-    try:
-        cfilter.load_library()
-    except Exception as exc:  # the C library is built by `make` before the Python tests
-        pytest.fail(f"the firmware shared library is not built or does not load: {exc}")

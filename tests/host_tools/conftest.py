@@ -1,0 +1,53 @@
+"""Fixtures shared by the host-tool tests: the built simulator, the C filter library, a free
+UDP port.
+
+The simulator binary comes from PROPID_BUILD_DIR (default <repo>/build/host). When
+PROPID_BUILD_DIR is set (as `make test` does) a missing binary is a failure; in a plain dev
+run without a build the tests that need it are skipped.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+BUILD_DIR = Path(os.environ.get("PROPID_BUILD_DIR", REPO / "build" / "host"))
+SITL = BUILD_DIR / "sitl" / "propid_sitl"
+
+
+@pytest.fixture(scope="session")
+def sitl_binary() -> Path:
+    """propid_sitl, built (or the test fails / is skipped, see the module text)."""
+    if SITL.is_file() and os.access(SITL, os.X_OK):
+        return SITL
+    if "PROPID_BUILD_DIR" in os.environ:
+        pytest.fail(f"{SITL} missing although PROPID_BUILD_DIR is set (build it: make host)")
+    pytest.skip(f"{SITL} not built (run `make host`, or set PROPID_BUILD_DIR)")
+
+
+@pytest.fixture(scope="session")
+def free_udp_port() -> Callable[[], int]:
+    """Returns a function giving a UDP port on 127.0.0.1 that nothing is bound to now."""
+
+    def port() -> int:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind(("127.0.0.1", 0))
+            return s.getsockname()[1]
+
+    return port
+
+
+@pytest.fixture(scope="session")
+def cfilter_available() -> None:
+    """The firmware filter's shared library loads (propid.cfilter); built by `make`."""
+    from propid import cfilter
+
+    try:
+        cfilter.load_library()
+    except Exception as exc:  # the C library is built by `make` before the Python tests
+        pytest.fail(f"the firmware shared library is not built or does not load: {exc}")
