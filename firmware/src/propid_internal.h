@@ -75,37 +75,58 @@ static inline uint8_t propid_quad_layout_column(uint8_t a, uint8_t p)
     return (uint8_t)(PROPID_RATE_STATES + (a < 2u ? 0u : 4u) + (p - 2u));
 }
 
-/* Entries of rate row a of G, and the state column of entry p (the general
- * lists, or the fixed quad layout above). */
+/* Entries of rate row a of G, and the state column of entry p: one pair of
+ * accessors per build, so every caller reads the same names. */
+#if PROPID_GENERAL_VEHICLES
+/* General vehicles: the lists propid_init derived from the configuration. */
 static inline uint8_t propid_jacobian_entries(const propid_derived_t *derived, uint8_t a)
 {
-#if PROPID_GENERAL_VEHICLES
     return derived->jac_count[a];
-#else
-    (void)derived;
-    (void)a;
-    return (uint8_t)PROPID_QUAD_JAC_ENTRIES;
-#endif
 }
 static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, uint8_t a, uint8_t p)
 {
-#if PROPID_GENERAL_VEHICLES
     return derived->jac_column[a][p];
+}
 #else
+/* Quad build: the fixed quad layout above; there are no lists to read. */
+static inline uint8_t propid_jacobian_entries(const propid_derived_t *derived, uint8_t a)
+{
+    (void)derived;
+    (void)a;
+    return (uint8_t)PROPID_QUAD_JAC_ENTRIES;
+}
+static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, uint8_t a, uint8_t p)
+{
     (void)derived;
     return propid_quad_layout_column(a, p);
-#endif
 }
+#endif
 
-/* Keeps the compiler's instruction scheduler from hoisting the loads of later
- * iterations of a fully unrolled kernel above this point: hoisted loads outlive
- * the 32 FPU registers and are spilled to the stack (measured: ~100 extra
- * instructions per kernel). No instruction is emitted. */
+/*
+ * Scheduling hints for the unrolled kernels. They change which instructions
+ * the compiler emits, never a result: a compiler without them builds the same
+ * filter, with a different instruction count than docs/performance.md's (which
+ * is measured with arm-none-eabi-gcc).
+ *
+ * PROPID_SCHEDULE_BARRIER(): keeps the instruction scheduler from hoisting the
+ * loads of later iterations of a fully unrolled kernel above this point:
+ * hoisted loads outlive the 32 FPU registers and are spilled to the stack
+ * (measured: ~100 extra instructions per kernel). No instruction is emitted.
+ * GNU inline assembly (GCC, clang and the clang-based Arm Compiler 6);
+ * nothing elsewhere.
+ *
+ * PROPID_NO_EARLY_SCHEDULE: a whole kernel compiled without GCC's scheduling
+ * pass before register allocation (-fschedule-insns), for straight-line
+ * kernels whose hoisted loads outlive the FPU registers. GCC only: clang
+ * defines __GNUC__ too but has no per-function switch for its scheduler and
+ * warns on the unknown `optimize` attribute, so it is empty there (and on any
+ * other compiler).
+ */
+#if defined(__GNUC__)
 #define PROPID_SCHEDULE_BARRIER() __asm__ volatile("" ::: "memory")
-
-/* A whole kernel compiled without GCC's scheduling pass before register
- * allocation, for straight-line kernels whose hoisted loads outlive the FPU
- * registers (clang has no such pass to switch off: empty there). */
+#else
+#define PROPID_SCHEDULE_BARRIER() ((void)0)
+#endif
 #if defined(__GNUC__) && !defined(__clang__)
 #define PROPID_NO_EARLY_SCHEDULE __attribute__((optimize("no-schedule-insns")))
 #else
@@ -139,27 +160,31 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
 #define PROPID_PREDICT_CLAMPED ((propid_status_t)2)
 
 
-/* The rotor-inertia terms' data (0 when compiled out, propid_config.h). */
+/* The rotor-inertia terms' data: one pair of accessors per build. */
+#if PROPID_WITH_ROTOR_INERTIA
 static inline int propid_rotor_inertia_on(const propid_derived_t *derived)
 {
-#if PROPID_WITH_ROTOR_INERTIA
     return derived->rotor_inertia_on != 0u;
-#else
-    (void)derived;
-    return 0;
-#endif
 }
 static inline float propid_rotor_gyro(const propid_derived_t *derived, uint8_t a, uint8_t b)
 {
-#if PROPID_WITH_ROTOR_INERTIA
     return derived->rotor_gyro[a][b];
+}
 #else
+/* Compiled out (propid_config.h): off, and every term 0. */
+static inline int propid_rotor_inertia_on(const propid_derived_t *derived)
+{
+    (void)derived;
+    return 0;
+}
+static inline float propid_rotor_gyro(const propid_derived_t *derived, uint8_t a, uint8_t b)
+{
     (void)derived;
     (void)a;
     (void)b;
     return 0.0f;
-#endif
 }
+#endif
 
 /* Index of the first thrust coefficient, first drag coefficient, first bias. */
 static inline uint8_t propid_first_thrust(void) { return PROPID_RATE_STATES; }
