@@ -107,8 +107,8 @@ static void test_oracle_tracks_every_trajectory(void)
 }
 
 /* The paper's conditions with a filter tuning that matches them (exact model,
- * no walk, priors = the truth's spread): the estimates land on the truth. */
-static void test_filter_converges_to_the_truth_paper_conditions(void)
+ * no walk, priors = the truth's spread), flown into `result`. */
+static void fly_paper_filter_flight(void)
 {
     const char *argv[] = {"propid_sitl", "--paper", "--mode", "filter", "--trajectory", "lissajous",
                           "--filter-rate-noise", "0.002", "--filter-coeff-walk", "0",
@@ -117,6 +117,12 @@ static void test_filter_converges_to_the_truth_paper_conditions(void)
     TEST_ASSERT_EQUAL_INT(0, sitl_options_parse(&opts, (int)(sizeof(argv) / sizeof(argv[0])),
                                                 (char **)argv));
     TEST_ASSERT_EQUAL_INT_MESSAGE(SITL_EXIT_OK, fly(), result.message);
+}
+
+/* Paper conditions, matched tuning: the estimates land on the truth. */
+static void test_filter_converges_to_the_truth_paper_conditions(void)
+{
+    fly_paper_filter_flight();
     char msg[200];
     snprintf(msg, sizeof(msg), "kf %.4f km %.4f bias %.5f conv %.3f", result.kf_rel_error_max,
              result.km_rel_error_max, result.bias_error_max, result.coeff_converged_s);
@@ -138,13 +144,7 @@ static void test_filter_converges_to_the_truth_paper_conditions(void)
  * below the bias itself (up to 0.0175 rad/s). */
 static void test_filter_recovers_gyro_bias_paper_conditions(void)
 {
-    const char *argv[] = {"propid_sitl", "--paper", "--mode", "filter", "--trajectory", "lissajous",
-                          "--filter-rate-noise", "0.002", "--filter-coeff-walk", "0",
-                          "--prior-kf-std", "0.1155", "--prior-km-std", "0.1155",
-                          "--prior-bias-std", "0.0101", "--quiet"};
-    TEST_ASSERT_EQUAL_INT(0, sitl_options_parse(&opts, (int)(sizeof(argv) / sizeof(argv[0])),
-                                                (char **)argv));
-    TEST_ASSERT_EQUAL_INT_MESSAGE(SITL_EXIT_OK, fly(), result.message);
+    fly_paper_filter_flight();
     char msg[200];
     snprintf(msg, sizeof(msg), "bias error %.5f rad/s, true bias %.5f %.5f %.5f",
              result.bias_error_max, result.true_bias[0], result.true_bias[1], result.true_bias[2]);
