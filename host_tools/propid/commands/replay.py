@@ -130,50 +130,38 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def _delay(text: str):
-    if text == "auto":
+def _word_or_number(text: str, words: tuple[str, ...], convert, in_range, expected: str, out_of_range: str):
+    """argparse type: one of `words` as written, or a number (`convert`) that `in_range` accepts."""
+    if text in words:
         return text
     try:
-        value = float(text)
+        value = convert(text)
     except ValueError:
-        raise argparse.ArgumentTypeError("expected seconds or 'auto'") from None
-    if not -1.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError("rotor delay must be within -1..1 s")
+        raise argparse.ArgumentTypeError(f"expected {expected}") from None
+    if not in_range(value):
+        raise argparse.ArgumentTypeError(out_of_range)
     return value
+
+
+def _delay(text: str):
+    return _word_or_number(text, ("auto",), float, lambda v: -1.0 <= v <= 1.0,
+                           "seconds or 'auto'", "rotor delay must be within -1..1 s")
 
 
 def _esc_delay(text: str):
-    if text in ("auto", "vehicle", "default"):
-        return text
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError("expected seconds, 'auto' or 'vehicle'") from None
-    if not -1.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError("the ESC delay must be within -1..1 s")
-    return value
+    return _word_or_number(text, ("auto", "vehicle", "default"), float, lambda v: -1.0 <= v <= 1.0,
+                           "seconds, 'auto' or 'vehicle'", "the ESC delay must be within -1..1 s")
 
 
 def _prefilter(text: str):
-    if text in ("auto", "off"):
-        return None if text == "off" else text
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError("expected a cut-off in Hz, 'auto' or 'off'") from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError("the pre-filter cut-off must be positive")
-    return value
+    value = _word_or_number(text, ("auto", "off"), float, lambda v: v > 0,
+                            "a cut-off in Hz, 'auto' or 'off'", "the pre-filter cut-off must be positive")
+    return None if value == "off" else value
 
 
 def _dpi(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError("expected a whole number of dots per inch") from None
-    if not 20 <= value <= 1200:
-        raise argparse.ArgumentTypeError("dpi must be within 20..1200")
-    return value
+    return _word_or_number(text, (), int, lambda v: 20 <= v <= 1200,
+                           "a whole number of dots per inch", "dpi must be within 20..1200")
 
 
 def _finite_json(value):
