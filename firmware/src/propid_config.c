@@ -695,13 +695,26 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         }
         if (k < PROPID_RATE_STATES) {
             /* An update computes the new variance as P - P^2 / S, exact only to
-             * ~epsilon P in float32: the rate variance is kept below R / (64
-             * epsilon) (or the prior, if larger: the update loading handles
-             * that, propid_internal.h), applied before an update that finds S
-             * beyond it and after every update. */
+             * ~epsilon P in float32. Every element of the rate rows then carries
+             * rounding of ~epsilon P_omega, and the next axis' update (after
+             * the first made it nearly certain through a correlation of ~1)
+             * sees it as part of its S: the rate variance is kept below
+             * R / (64 epsilon), so that rounding stays below R / 64 for every
+             * update of the sample. Applied before an update that finds S
+             * beyond it and after every update. The rate prior is held at the
+             * same bound: it only weighs the anchoring sample, whose innovation
+             * is zero (fuzz finding: a prior of 1e10 let one prediction inflate
+             * the rate variance 1e7-fold, and P lost definiteness). */
             const float rate_var_max = out.gyro_var * (1.0f / PROPID_UPDATE_LOADING);
+            ceiling = 4.0f * config->gyro_range * config->gyro_range;
             if (ceiling > rate_var_max) {
-                ceiling = rate_var_max > prior ? rate_var_max : prior;
+                ceiling = rate_var_max;
+            }
+            if (ceiling < floor_var) {
+                ceiling = floor_var;
+            }
+            if (prior > ceiling) {
+                prior = ceiling;
             }
         }
         if (!positive_finite(prior) || prior < floor_var) {

@@ -459,6 +459,59 @@ static void test_covariance_stays_positive_definite_under_random_calls(void)
     TEST_ASSERT_EQUAL_UINT32(0u, failures);
 }
 
+
+#if PROPID_MAX_ROTORS >= 5
+/* Fuzz finding (tests/fuzz/corpus/regression-rate-prior-1e10): a five-rotor
+ * vehicle with one rotor's kf 1000x its nominal, a rate prior std of 1e5 rad/s
+ * and a quiet gyro (R = 1.25e-6). At 4059 rad/s one prediction inflated the
+ * rate variances from 0.6 to 3.9e7 with correlations of +-1 to that kf; the
+ * three updates of the next sample then left P with a negative eigenvalue
+ * (float32 rounding of ~epsilon 3.9e7 on every rate element, far above R).
+ * The rate variance is now held below R / (64 epsilon), its prior too. The
+ * exact call sequence of the fuzz input, P tested (Cholesky in double) after
+ * every accepted gyro sample. */
+static void test_covariance_definite_after_huge_rate_prior_and_torque(void)
+{
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 5u, 0x1.33cd68p-2f, 0.7853982f, 1.0f,
+                                                                 5.57e-6f, 1.36e-7f));
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    config.rate_std0 = 1.0e5f;
+    config.gyro_noise_density = 0x1.a36e3p-15f;   /* 5e-5: a tenth of the default */
+    config.rate_process_noise = 0x1.47ae16p-6f;   /* 0.02 */
+    config.thrust_coeff_rel_walk = 0x1.0624dep-9f; /* 0.002 */
+    config.rotor[0].thrust_coeff_nominal = 0x1.6d0918p-8f; /* 5.57e-3 */
+    init_filter();
+    const float still[PROPID_MAX_ROTORS] = {0.0f};
+    float fast[PROPID_MAX_ROTORS] = {0.0f};
+    for (uint8_t i = 0; i < 5u; ++i) {
+        fast[i] = 0x1.fb67a6p+11f; /* 4059 rad/s */
+    }
+    const float g[3] = {1.8f, 1.8f, 1.8f};
+    const float g_x[3] = {-2.12f, 1.8f, 1.8f};
+    const float g_bad[3] = {-3.4f, NAN, 0.0f};
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1007801u, still, 5u));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, 1007801u, g));
+    TEST_ASSERT_TRUE(covariance_is_positive_definite());
+    TEST_ASSERT_TRUE(propid_push_gyro(&filter, 1015602u, g_x) >= 0);
+    TEST_ASSERT_TRUE(covariance_is_positive_definite());
+    TEST_ASSERT_TRUE(propid_push_gyro(&filter, 1023403u, g) >= 0);
+    TEST_ASSERT_TRUE(covariance_is_positive_definite());
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_NOT_FINITE, propid_push_gyro(&filter, 1023404u, g_bad));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1015602u, fast, 5u));
+    TEST_ASSERT_TRUE(propid_push_gyro(&filter, 1031205u, g) >= 0);
+    TEST_ASSERT_TRUE_MESSAGE(covariance_is_positive_definite(), "P not positive definite after the torque step");
+    /* and on: the same input for a while, every accepted sample */
+    uint64_t t = 1031205u;
+    for (uint32_t k = 0; k < 200u; ++k) {
+        t += 7801u;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, fast, 5u));
+        TEST_ASSERT_TRUE(propid_push_gyro(&filter, t, g) >= 0);
+        TEST_ASSERT_TRUE(covariance_is_positive_definite());
+    }
+}
+#endif
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -471,5 +524,8 @@ int main(void)
     RUN_TEST(test_first_sample_fused_at_high_rate);
     RUN_TEST(test_config_bounds_noise_fields);
     RUN_TEST(test_covariance_stays_positive_definite_under_random_calls);
+#if PROPID_MAX_ROTORS >= 5
+    RUN_TEST(test_covariance_definite_after_huge_rate_prior_and_torque);
+#endif
     return UNITY_END();
 }
