@@ -9,6 +9,9 @@
 #   --jobs J      parallel fuzzing processes (default: number of cores)
 #   --out DIR     build and work directory (default: build/fuzz)
 #   --json FILE   summary (default: build/results/fuzz.json)
+#   --fail-on-indefinite  also fail when any covariance check found P not
+#                 positive definite (make test's short run: the seed corpus
+#                 holds inputs that did, so a regression fails the run)
 #
 # Starts from the committed seed corpus (tests/fuzz/corpus, read-only) plus the
 # working corpus in DIR/corpus. Exits non-zero on any crash, sanitizer report or
@@ -22,6 +25,7 @@ seconds=""
 jobs=$(nproc 2>/dev/null || echo 2)
 out=$repo/build/fuzz
 json=$repo/build/results/fuzz.json
+strict_pd=0
 while [ $# -gt 0 ]; do
     case "$1" in
         --runs) runs=$2; shift 2 ;;
@@ -29,7 +33,8 @@ while [ $# -gt 0 ]; do
         --jobs) jobs=$2; shift 2 ;;
         --out) out=$2; shift 2 ;;
         --json) json=$2; shift 2 ;;
-        -h|--help) sed -n '2,17p' "$0"; exit 0 ;;
+        --fail-on-indefinite) strict_pd=1; shift ;;
+        -h|--help) sed -n '2,20p' "$0"; exit 0 ;;
         *) echo "run_fuzz.sh: unknown argument $1" >&2; exit 2 ;;
     esac
 done
@@ -114,6 +119,13 @@ print(f"fuzz: {executions} executions in {elapsed} s ({jobs} jobs), {crashes} cr
       f"coverage {coverage} edges, {checks} covariance checks, {failures} not positive definite "
       f"-> {path}")
 EOF
+if [ "$strict_pd" -eq 1 ] && [ "$status" -eq 0 ]; then
+    failures=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["cholesky_failures"])' "$json")
+    if [ "$failures" -ne 0 ]; then
+        echo "fuzz: FAILED: $failures covariance checks found P not positive definite" >&2
+        exit 1
+    fi
+fi
 if [ "$status" -ne 0 ]; then
     echo "fuzz: FAILED (exit $status); see $out/fuzz-*.log and crash-* inputs" >&2
     grep -ah "propid fuzz check failed\|ERROR: \|runtime error" "$out"/fuzz-*.log | head -5 >&2 || true
