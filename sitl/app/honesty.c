@@ -29,6 +29,7 @@ void sitl_honesty_init(sitl_honesty_t *h, int rotor_count, const double *true_kf
     h->rotor_inside_since_s = -1.0;
     h->max_rotor_recovery_s = -1.0;
     h->last_inside = 1;
+    h->first_all_claimed_s = -1.0;
 }
 
 /* e^T P^-1 e by Cholesky (double); returns -1 when P is not positive definite. */
@@ -112,6 +113,7 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
     int finite = 1;
     int inside = 1;
     int rotors_inside = 1;
+    int all_claimed = n > 0;
     unsigned changed = 0u;
     for (int i = 0; i < n; i++) {
         finite &= isfinite(estimate->thrust_coeff[i]) && isfinite(estimate->thrust_coeff_std[i]) &&
@@ -126,6 +128,7 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
             h->converged_claims++;
             h->false_converged += km_err > HONESTY_CONVERGED_TOL;
         }
+        all_claimed &= (int)((estimate->thrust_coeff_converged >> i) & (estimate->drag_coeff_converged >> i) & 1u);
         const int rotor_inside = kf_err <= HONESTY_RECOVERED_TOL && km_err <= HONESTY_RECOVERED_TOL;
         inside &= rotor_inside;
         const unsigned bit = 1u << i;
@@ -145,6 +148,10 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
     if (!finite) {
         h->nonfinite_estimates++;
     }
+    if (all_claimed && h->first_all_claimed_s < 0.0) {
+        h->first_all_claimed_s = t;
+    }
+    h->all_claimed_at_end = all_claimed;
     if (changed) {
         sitl_honesty_finish(h); /* the previous change, if any: recovered or not */
         h->changes++;

@@ -22,6 +22,8 @@ typedef struct {
     long nonfinite_estimates;   /* steps with a non-finite estimate or std */
     long converged_claims;      /* coefficient-steps flagged converged */
     long false_converged;       /* ... of them more than 5 % off */
+    double first_all_claimed_s; /* first step with every kf and km claimed converged, -1: never */
+    int all_claimed_at_end;     /* every kf and km claimed converged at the latest step */
     double last_true_kf[SITL_MAX_ROTORS], last_true_km[SITL_MAX_ROTORS];
     double change_time_s;       /* latest change of the true coefficients, -1: none */
     double inside_since_s;      /* every coefficient within 10 % since then, -1: outside */

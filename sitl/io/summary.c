@@ -160,6 +160,8 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
     cJSON_AddNumberToObject(honesty, "nonfinite_estimates", (double)h->nonfinite_estimates);
     cJSON_AddNumberToObject(honesty, "converged_claims", (double)h->converged_claims);
     cJSON_AddNumberToObject(honesty, "false_converged", (double)h->false_converged);
+    add_time(honesty, "first_all_claimed_s", h->first_all_claimed_s);
+    cJSON_AddNumberToObject(honesty, "all_claimed_at_end", h->all_claimed_at_end);
     cJSON_AddNumberToObject(honesty, "coefficient_changes", h->changes);
     cJSON_AddNumberToObject(honesty, "unrecovered", h->unrecovered);
     add_time(honesty, "max_recovery_s", h->max_recovery_s);

@@ -233,7 +233,11 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
                     "case": case["case"], "vehicle": case["vehicle"], "trajectory": case["trajectory"],
                     "duration_s": case["duration_s"], "sensors": case["sensors"], "tuning": case["tuning"],
                     "dof": int(honesty.get("nees_dof", 0)), "nees_mean": honesty.get("nees_mean"),
-                    "in_bounds_pct": round(100.0 * inside / samples, 2) if samples else None})
+                    "in_bounds_pct": round(100.0 * inside / samples, 2) if samples else None,
+                    "first_all_claimed_s": honesty.get("first_all_claimed_s"),
+                    "all_claimed_at_end": bool(honesty.get("all_claimed_at_end", 0)),
+                    "false_converged": int(honesty.get("false_converged", 0)),
+                    "converged_claims": int(honesty.get("converged_claims", 0))})
         if pair.get("filter", {}).get("exit") == 3 and pair.get("oracle", {}).get("exit") == 0:
             out["filter_only_diverged"] += 1
     out["nees_samples"] = nees_all
@@ -241,6 +245,17 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
         out["nees_in_bounds_pct"] = round(100.0 * nees_in / nees_all, 2)
     out["nees_by_group"] = {key: {"in_bounds_pct": round(100.0 * g[0] / g[1], 2) if g[1] else None,
                                   "samples": g[1], "flights": g[2]} for key, g in sorted(groups.items())}
+    # Honest flights (the clean ones): do they still claim convergence, and when?
+    firsts = sorted(f["first_all_claimed_s"] for f in out["nees_flights"] if f["first_all_claimed_s"] is not None)
+    fractions = sorted(f["first_all_claimed_s"] / f["duration_s"] for f in out["nees_flights"]
+                       if f["first_all_claimed_s"] is not None)
+    out["clean_flights_claims"] = {
+        "flights": len(out["nees_flights"]),
+        "all_claimed_once": len(firsts),
+        "all_claimed_at_end": sum(1 for f in out["nees_flights"] if f["all_claimed_at_end"]),
+        "first_all_claimed_s_median": firsts[len(firsts) // 2] if firsts else None,
+        "first_all_claimed_s_max": firsts[-1] if firsts else None,
+        "first_all_claimed_fraction_of_flight_median": round(fractions[len(fractions) // 2], 3) if fractions else None}
     out["false_converged_by_group"] = {
         key: {"false": g[0], "claims": g[1], "flights": g[2]} for key, g in sorted(false_groups.items())}
     if out["converged_claims"]:
