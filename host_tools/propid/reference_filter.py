@@ -133,15 +133,15 @@ class ReferenceFilter:
             else:  # disturbance
                 prior, psd, floor = c["disturbance_std0"] ** 2, c["disturbance_walk"] ** 2, 1e-12
                 ceiling = 100.0 * prior
+            if k < 3:
+                # C: the rate variance is kept below R / (64 epsilon) (float32 rounding),
+                # whatever the prior, and the rate prior is held at that ceiling.
+                ceiling = max(min(ceiling, self.gyro_var / UPDATE_LOADING), floor)
+                prior = min(prior, ceiling)
             self.prior_var[k] = prior
             self.process_psd[k] = psd
             self.var_floor[k] = floor
             self.var_ceiling[k] = max(ceiling, prior)
-            if k < 3:
-                # C: the rate variance is kept below R / (64 epsilon) (float32 rounding).
-                rate_var_max = self.gyro_var / UPDATE_LOADING
-                if self.var_ceiling[k] > rate_var_max:
-                    self.var_ceiling[k] = max(rate_var_max, prior)
 
         self.counters_data = {
             "gyro_accepted": 0, "rotor_accepted": 0, "axis_gated": [0, 0, 0], "gate_reopened": 0,
