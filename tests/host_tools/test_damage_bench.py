@@ -119,24 +119,12 @@ def test_extended_dithers_only_the_multirotors(monkeypatch, tmp_path):
     assert all("--null-dither" not in c.extra_args for c in seen)
 
 
-def _sitl() -> Path:
-    import os
-
-    build = Path(os.environ.get("PROPID_BUILD_DIR", Path(__file__).resolve().parents[2] / "build" / "host"))
-    sitl = build / "sitl" / "propid_sitl"
-    if not sitl.is_file():
-        if "PROPID_BUILD_DIR" in os.environ:
-            pytest.fail(f"{sitl} missing although PROPID_BUILD_DIR is set")
-        pytest.skip("propid_sitl not built")
-    return sitl
-
-
-def test_sitl_damage_is_detected_isolated_and_reported(tmp_path):
+def test_sitl_damage_is_detected_isolated_and_reported(tmp_path, sitl_binary):
     import json
     import subprocess
 
     summary = tmp_path / "s.json"
-    proc = subprocess.run([str(_sitl()), "--vehicle", "hexa-x", "--trajectory", "circle", "--seed", "4",
+    proc = subprocess.run([str(sitl_binary), "--vehicle", "hexa-x", "--trajectory", "circle", "--seed", "4",
                            "--duration", "4", "--start-at-rest", "--damage", "5@2.5=0.25",
                            "--detect-damage", "--summary-json", str(summary), "--quiet"],
                           capture_output=True, text=True, timeout=120)
@@ -150,11 +138,11 @@ def test_sitl_damage_is_detected_isolated_and_reported(tmp_path):
     assert abs(data["est_kf"][4] / data["true_kf"][4] - 1) < 0.05  # re-learnt in flight
 
 
-def test_sitl_rejects_bad_damage_specs():
+def test_sitl_rejects_bad_damage_specs(sitl_binary):
     import subprocess
 
     for bad in ("0@1=0.2", "2@1=1.5", "2@-1=0.2", "2at1=0.2", "9@1=0.2"):
-        proc = subprocess.run([str(_sitl()), "--damage", bad, "--duration", "0.1", "--quiet"],
+        proc = subprocess.run([str(sitl_binary), "--damage", bad, "--duration", "0.1", "--quiet"],
                               capture_output=True, text=True, timeout=60)
         assert proc.returncode == 2, (bad, proc.stderr)
         assert "damage" in proc.stderr

@@ -6,19 +6,13 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
 from propid import effects_demo
 
-SITL = Path(__file__).resolve().parents[2] / "build" / "host" / "sitl" / "propid_sitl"
-
-
-def test_esc_delay_case(tmp_path):
-    if not SITL.is_file():
-        pytest.fail(f"{SITL} is not built (make host)")
-    config = effects_demo.DemoConfig(sitl=SITL, out_dir=tmp_path, seeds=1, duration_s=8.0, cases=("esc_delay",))
+def test_esc_delay_case(tmp_path, sitl_binary):
+    config = effects_demo.DemoConfig(sitl=sitl_binary, out_dir=tmp_path, seeds=1, duration_s=8.0, cases=("esc_delay",))
     result = effects_demo.run_demo(config, progress=False)
     rows = {row["mode"]: row for row in result["rows"]}
     assert set(rows) == {"oracle", "filter"}

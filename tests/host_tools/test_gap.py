@@ -7,9 +7,7 @@ sensors); the analysis runs once per flight (module fixture) and every test read
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,17 +17,8 @@ from propid.flightlog import read_flightlog, read_vehicle
 DURATION = "12"
 
 
-def _sitl_binary() -> Path | None:
-    build = Path(os.environ.get("PROPID_BUILD_DIR", Path(__file__).resolve().parents[2] / "build" / "host"))
-    binary = build / "sitl" / "propid_sitl"
-    return binary if binary.is_file() else None
-
-
-needs_sitl = pytest.mark.skipif(_sitl_binary() is None, reason="propid_sitl not built")
-
-
 @pytest.fixture(scope="module")
-def flights(tmp_path_factory):
+def flights(tmp_path_factory, sitl_binary):
     """effect id -> (log path, analysis result)."""
     from propid.gap import analysis
     from propid.gap.prep import Band
@@ -41,7 +30,7 @@ def flights(tmp_path_factory):
         key = (effect, strength, seed)
         if key not in cache:
             log_path = root / f"{effect}_{strength}_{seed}.csv"
-            cmd = [str(_sitl_binary()), "--quiet", "--duration", DURATION, "--seed", str(seed), "--log", str(log_path)]
+            cmd = [str(sitl_binary), "--quiet", "--duration", DURATION, "--seed", str(seed), "--log", str(log_path)]
             if effect != "none":
                 cmd += ["--effect", effect if strength is None else f"{effect}={strength}"]
             subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120, check=True)
@@ -59,7 +48,6 @@ def _entry(result: dict, effect_id: str) -> dict:
 
 
 # ------------------------------------------------------------------ regressors: sign and size
-@needs_sitl
 @pytest.mark.parametrize("strength", ["2"])
 def test_rotor_inertia_regressor_recovers_the_sitl_rotor_inertia(flights, strength):
     """SITL: tau_z += s * J_r * sum_i yaw_sign_i dOmega_i/dt; the fitted J_r is s * J_r."""
@@ -69,7 +57,6 @@ def test_rotor_inertia_regressor_recovers_the_sitl_rotor_inertia(flights, streng
     assert result["verdict"] == "rotor_inertia"
 
 
-@needs_sitl
 def test_rotor_gyroscopic_regressor_recovers_the_rotor_inertia(flights):
     _, vehicle, result = flights("rotor_gyroscopic", "3")
     fitted = _entry(result, "rotor_gyroscopic")["params"]["rotor_inertia"]
@@ -77,7 +64,6 @@ def test_rotor_gyroscopic_regressor_recovers_the_rotor_inertia(flights):
     assert result["verdict"] == "rotor_gyroscopic"
 
 
-@needs_sitl
 def test_esc_delay_is_the_fitted_stream_lag(flights):
     """SITL: telemetry reports Omega(t - 1 ms latency - s); the fitted lag is s plus the
     sensor chain's own few ms (never more than 4 ms off)."""
@@ -86,7 +72,6 @@ def test_esc_delay_is_the_fitted_stream_lag(flights):
     assert result["verdict"] == "esc_delay"
 
 
-@needs_sitl
 def test_inertia_error_gives_the_true_to_file_inertia_ratio(flights):
     """SITL: J_true = 1.1 J_file; the accelerometer's zero-g offset (up to 2 %) limits it."""
     _, _, result = flights("inertia_error", "0.1")
@@ -96,7 +81,6 @@ def test_inertia_error_gives_the_true_to_file_inertia_ratio(flights):
     assert result["verdict"] == "inertia_error"
 
 
-@needs_sitl
 def test_com_offset_regressor_recovers_the_offset(flights):
     """SITL: d = s * arm * (0.6, 0.8, -0.5) with arm 0.043 m (crazyflie-plus)."""
     _, vehicle, result = flights("com_offset", "0.1")
@@ -107,14 +91,12 @@ def test_com_offset_regressor_recovers_the_offset(flights):
     assert result["verdict"] == "com_offset"
 
 
-@needs_sitl
 def test_thrust_nonlinearity_exponent_has_the_sitl_sign_and_size(flights):
     _, _, result = flights("thrust_nonlinearity", "0.2")
     assert _entry(result, "thrust_nonlinearity")["params"]["exponent"] == pytest.approx(0.2, abs=0.08)
     assert "thrust_nonlinearity" in result["significant"]
 
 
-@needs_sitl
 def test_aero_damping_is_positive_damping(flights):
     _, _, result = flights("aero_damping", "3")
     p = _entry(result, "aero_damping")["params"]
@@ -124,7 +106,6 @@ def test_aero_damping_is_positive_damping(flights):
 
 
 # ------------------------------------------------------------------ verdicts
-@needs_sitl
 def test_effect_free_flight_gives_none(flights):
     _, _, result = flights("none")
     assert result["verdict"] == "none", [(e["id"], e["explained_fraction"], e.get("effect_size")) for e in result["effects"]]
@@ -135,7 +116,6 @@ def test_effect_free_flight_gives_none(flights):
         assert base[key]["value"] == pytest.approx(base["kf_thrust"]["value"], rel=0.05)
 
 
-@needs_sitl
 def test_out_json_has_the_issue_keys_and_shapes(flights):
     _, _, result = flights("inertia_error", "0.1")
     for key in ("verdict", "effects", "base_fit", "base_fit_after", "where", "shrink", "untestable", "ambiguous"):
@@ -157,7 +137,6 @@ def test_out_json_has_the_issue_keys_and_shapes(flights):
 
 
 # ------------------------------------------------------------------ CLI: vehicle-out, report, errors
-@needs_sitl
 def test_cli_writes_json_report_and_a_corrected_vehicle_that_replays(flights, tmp_path):
     from propid.cli import main
     from propid.replay import ReplayOptions, replay

@@ -1,17 +1,13 @@
 """gap-bench: scoring rules on hand-made answer/result pairs, signal helpers, and a
 three-flight bench end to end with a stand-in diagnosis that records what it was given.
 
-The end-to-end test needs propid_sitl from PROPID_BUILD_DIR (default
-<repo>/build/host): with PROPID_BUILD_DIR set (as `make test` does) a missing
-binary is a failure, otherwise the test skips.
+The end-to-end test needs propid_sitl (the sitl_binary fixture, conftest.py).
 """
 
 from __future__ import annotations
 
 import json
-import os
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,11 +16,6 @@ from propid.gapbench.rigid_body import lowpass
 from propid.gapbench.runner import BenchConfig, run_bench
 from propid.gapbench.scoring import score_flight, shrink_of, summarize
 from propid.gapbench.table import render
-
-REPO = Path(__file__).resolve().parents[2]
-BUILD_DIR = Path(os.environ.get("PROPID_BUILD_DIR", REPO / "build" / "host"))
-SITL = BUILD_DIR / "sitl" / "propid_sitl"
-
 
 def answer(flight_id, kind, effects, below=False, index=12.0):
     return {"flight_id": flight_id, "kind": kind,
@@ -130,15 +121,11 @@ json.dump({"verdict": "none", "effects": [], "shrink": {}, "seen_columns": heade
 """
 
 
-def test_three_flights_end_to_end_blind_and_scored(tmp_path):
-    if not SITL.is_file():
-        if "PROPID_BUILD_DIR" in os.environ:
-            pytest.fail(f"{SITL} missing although PROPID_BUILD_DIR is set (build it: make host)")
-        pytest.skip(f"{SITL} not built (run `make host`, or set PROPID_BUILD_DIR)")
+def test_three_flights_end_to_end_blind_and_scored(tmp_path, sitl_binary):
     tool = tmp_path / "fake_gap.py"
     tool.write_text(FAKE_TOOL)
     config = BenchConfig(out_dir=tmp_path / "bench", result_path=tmp_path / "gap_bench.json",
-                         sitl=SITL, seed=3, singles_per_effect=1, pairs=0, nones=1,
+                         sitl=sitl_binary, seed=3, singles_per_effect=1, pairs=0, nones=1,
                          effects=("esc_delay", "com_offset"), duration_s=6.0, workers=2,
                          tool_command=[sys.executable, str(tool)])
     out = run_bench(config, progress=False)
