@@ -9,8 +9,10 @@
  *     g_i,a = dt u_i (a_i,a kf_rel_i + d_i,a km_rel_i) / sqrt(S_a)
  * (and keep growing while the filter's rate absorbs the missing torque).
  * Rotor i's test statistic is the projection s_i = -(g_i . z) / |g_i|, N(0, 1)
- * on a healthy vehicle, positive mean after a loss on rotor i; a one-sided
- * CUSUM on it, C_i = max(0, C_i + s_i - k), alarms at C_i > h.
+ * on a healthy vehicle, positive mean after a loss on rotor i; it is
+ * standardised by running moments (and, for correlated model error, by the
+ * prediction error of an AR(1) fit) and a one-sided CUSUM on it,
+ * C_i = max(0, C_i + x_i - k), alarms at C_i > h.
  */
 #include "propid/propid_damage.h"
 
@@ -30,6 +32,9 @@
 #define PROPID_DAMAGE_CLIP 3.0f
 /* Floor of the running variance (an honest filter gives 1). */
 #define PROPID_DAMAGE_VAR_FLOOR 0.25f
+/* Largest lag-1 correlation the whitening uses: the prediction error keeps at
+ * least sqrt(1 - 0.95^2) = 31 % of the projection's own variance. */
+#define PROPID_DAMAGE_RHO_MAX 0.95f
 
 void propid_damage_config_default(propid_damage_config_t *config)
 {
@@ -40,6 +45,21 @@ void propid_damage_config_default(propid_damage_config_t *config)
     config->design_shift_sigma = 8.0f;
     config->hold_s = 0.5f;
     config->adapt_time_s = 0.5f;
+}
+
+/* An honest filter's moments: centred, unit variance, white. */
+static void reset_moments(propid_damage_t *detector, uint8_t rotor)
+{
+    detector->mean[rotor] = 0.0f;
+    detector->var[rotor] = 1.0f;
+    detector->cov1[rotor] = 0.0f;
+    detector->residual_var[rotor] = 1.0f;
+    detector->previous[rotor] = 0.0f;
+}
+
+static float clip_symmetric(float value, float bound)
+{
+    return value > bound ? bound : value < -bound ? -bound : value;
 }
 
 /* In-control average run length of a CUSUM with drift k and threshold h. */
@@ -105,7 +125,7 @@ propid_status_t propid_damage_init(propid_damage_t *detector, const propid_damag
     detector->rotor_count = rotor_count;
     detector->last_rotor = -1;
     for (uint8_t i = 0; i < rotor_count; ++i) {
-        detector->var[i] = 1.0f; /* an honest filter's value */
+        reset_moments(detector, i);
     }
     return PROPID_OK;
 }
@@ -198,18 +218,46 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
             continue;
         }
         const float projection = -dot / sqrtf(norm_sq);
-        /* Standardise by the running mean and variance, then update them with
-         * the value clipped to +-3 running sigmas, so an onset is not absorbed. */
+        /* The projection of a real filter's innovations is neither centred nor
+         * white: slow model error shifts it (the running mean removes that),
+         * and fast correlated model error (estimates drifting under quantised
+         * rotor speeds) makes successive values alike, which a CUSUM derived
+         * for independent increments reads as evidence. So the deviation from
+         * the running mean is also treated as an AR(1) process,
+         * d_t = rho d_t-1 + e_t, whose one-step prediction error e_t is white.
+         * Two standardised values: the deviation itself (right when the
+         * projection is white) and e_t over its own running variance (right
+         * when it is AR(1)); the CUSUM adds the smaller, so it alarms no
+         * sooner than the CUSUM of either alone and the derived false-alarm
+         * rate holds whenever either description does. A damage is a step and
+         * passes both: its first prediction error is the whole step, and as
+         * d_t-1 enters clipped at 3 running sigmas, a persisting step of s
+         * sigmas keeps a prediction error of at least s - 3 rho sigmas. */
         const float sd = sqrtf(detector->var[i]);
-        float standard = (projection - detector->mean[i]) / sd;
-        const float clipped = standard > PROPID_DAMAGE_CLIP ? PROPID_DAMAGE_CLIP
-                              : standard < -PROPID_DAMAGE_CLIP ? -PROPID_DAMAGE_CLIP
-                                                                : standard;
-        const float deviation = clipped * sd;
-        detector->mean[i] += alpha * deviation;
-        detector->var[i] += alpha * (deviation * deviation - detector->var[i]);
+        const float deviation = projection - detector->mean[i];
+        const float rho = detector->cov1[i] > 0.0f ? detector->cov1[i] / detector->var[i] : 0.0f;
+        const float correlation = rho < PROPID_DAMAGE_RHO_MAX ? rho : PROPID_DAMAGE_RHO_MAX;
+        const float residual = deviation - correlation * detector->previous[i];
+        const float residual_sd = sqrtf(detector->residual_var[i]);
+        const float level = deviation / sd;
+        const float whitened = residual / residual_sd;
+        const float standard = level < whitened ? level : whitened;
+        /* Update the moments with values clipped to +-3 running sigmas, so an
+         * onset is not absorbed. */
+        const float dev_clipped = clip_symmetric(deviation, PROPID_DAMAGE_CLIP * sd);
+        const float res_clipped = clip_symmetric(residual, PROPID_DAMAGE_CLIP * residual_sd);
+        detector->mean[i] += alpha * dev_clipped;
+        detector->var[i] += alpha * (dev_clipped * dev_clipped - detector->var[i]);
+        detector->cov1[i] += alpha * (dev_clipped * detector->previous[i] - detector->cov1[i]);
+        detector->residual_var[i] += alpha * (res_clipped * res_clipped - detector->residual_var[i]);
+        detector->previous[i] = dev_clipped;
+        /* Floors (an honest filter gives 1): a near-constant projection cannot
+         * make every small wiggle a many-sigma event. */
         if (detector->var[i] < PROPID_DAMAGE_VAR_FLOOR) {
             detector->var[i] = PROPID_DAMAGE_VAR_FLOOR;
+        }
+        if (detector->residual_var[i] < PROPID_DAMAGE_VAR_FLOOR) {
+            detector->residual_var[i] = PROPID_DAMAGE_VAR_FLOOR;
         }
         if (!armed || holding) {
             continue;
@@ -238,8 +286,7 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
     detector->armed_s = 0.0f;
     for (uint8_t i = 0; i < rotor_count; ++i) {
         detector->statistic[i] = 0.0f;
-        detector->mean[i] = 0.0f;
-        detector->var[i] = 1.0f;
+        reset_moments(detector, i);
     }
     *detected_rotor = best;
     return PROPID_OK;

@@ -26,7 +26,7 @@ extern "C" {
 
 typedef struct {
     /* Design false-alarm rate of the whole bank on a healthy vehicle whose
-     * filter innovations are white and honest [alarms per flight hour]. */
+     * projected innovations are white or AR(1) Gaussian [alarms per flight hour]. */
     float false_alarms_per_hour;
     /* Mean shift of the projected, normalised innovation the test is tuned to
      * detect fastest [standard deviations]; the CUSUM drift is half of it. */
@@ -48,6 +48,9 @@ typedef struct {
     float statistic[PROPID_MAX_ROTORS];    /* CUSUM statistic per rotor [sigma] */
     float mean[PROPID_MAX_ROTORS];         /* running mean of the projection */
     float var[PROPID_MAX_ROTORS];          /* running variance of the projection */
+    float cov1[PROPID_MAX_ROTORS];         /* running lag-1 autocovariance of the projection */
+    float residual_var[PROPID_MAX_ROTORS]; /* running variance of its AR(1) prediction error */
+    float previous[PROPID_MAX_ROTORS];     /* previous deviation from the mean, clipped at 3 sigma */
     float armed_s;                         /* time since (re-)start, arms the bank */
     uint64_t last_time_us;                 /* estimate time of the previous step */
     uint64_t hold_until_us;                /* bank frozen until then */
