@@ -238,6 +238,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                         "effect_size": s["effect_size"], "per_axis": s["per_axis"],
                         "explained_fraction_all_axes": s["explained_fraction_all_axes"],
                         **({"implausible": s["implausible"]} if "implausible" in s else {}),
+                        "p_value": s["p_value"], "effect_test": s["effect_test"],
+                        "held_out_p_value": s["held_out_p_value"], "physical_sign": s["physical_sign"],
                         "significant": s["significant"], **({"step": s["step"]} if "step" in s else {})})
     if delay_significant:  # the alignment is applied before any effect is scored: it ranks by its own share
         first = next((e for e in entries if e.get("step") == 1), None)

@@ -35,6 +35,7 @@ class Design:
     block_flight: np.ndarray  # (B,) flight of each block
     time: np.ndarray  # (n,) time within its flight [s]
     extra: dict = field(default_factory=dict)
+    fold_group: np.ndarray | None = None  # (B,) block of which each block is a piece (folds keep pieces together)
 
     @property
     def n_blocks(self) -> int:

@@ -1,28 +1,30 @@
 """Cross-validated scoring: least squares on training blocks, residual on held-out
-blocks, confidence by block bootstrap.
+blocks.
 
 Rules (docs/gap.md, "Scoring"):
 - folds: with 3 or more flights, whole flights (flight index mod 5); otherwise the
-  2 s time blocks, block index mod 5;
+  fold blocks (Design.fold_group, 1 s on the whitened rows), block index mod 5;
 - each axis is weighted by 1/sigma_a^2, sigma_a the base model's residual RMS on it
   (so torque [N m] and thrust [N] rows count alike);
 - an effect's explained fraction = mean over its axes of 1 - SSE_with / SSE_without,
   both summed over held-out blocks (every block held out exactly once); the same mean over
   all modelled axes ranks effects against each other; `per_axis` gives it by axis;
-- its interval: percentiles of the same fraction over 4000 block-bootstrap resamples
-  of the held-out blocks, 95 % when reported, family-wise 95 % over the candidates of a
-  selection step when deciding significance (selection.py: Bonferroni);
+- its interval and significance: significance.py (a paired test over short held-out
+  blocks with a Newey-West variance for the interval; a Wald test on all whitened rows,
+  Holm over the candidates of a selection step, for significance); the block-bootstrap
+  interval below is kept for the stream alignment;
 - effect size: RMS of what the effect adds to the fit (all data, beyond the current
   model) over the response's variation, largest over its axes;
 - the rows are whitened first (whitening.py: generalised least squares for the residual's
-  noise spectrum) and cut into 1 s blocks, so the held-out fraction measures signal over
-  noise and the blocks are close to independent;
+  noise spectrum); folds keep 1 s blocks together, the test blocks are ten autocorrelation
+  times of the whitened residual long;
 - significant: physical sign (selection.physical_sign) AND fit inside its physical
-  plausibility range (selection.implausible, effects.py bounds) AND family-wise interval lower
-  bound > 0 AND, for the effects whose evidence is a torque scale against the
-  accelerometer kf (inertia_error, gyro_scale, thrust_nonlinearity), effect size >=
-  MIN_SCALE_EFFECT_SIZE (3 %): a MEMS accelerometer's zero-g offset (~20 mg) moves that
-  reference by ~2 %, so a smaller scale is not evidence of the effect.
+  plausibility range (selection.implausible, effects.py bounds) AND held-out fraction > 0
+  AND the Wald test rejected by Holm at 5 % family-wise AND, for the effects whose
+  evidence is a torque scale against the accelerometer kf (inertia_error, gyro_scale,
+  thrust_nonlinearity), effect size >= MIN_SCALE_EFFECT_SIZE (3 %): a MEMS
+  accelerometer's zero-g offset (~20 mg) moves that reference by ~2 %, so a smaller
+  scale is not evidence of the effect.
 Everything runs on per-block Gram matrices, so a model (any column subset) costs a
 few small solves, whatever the log length.
 """
@@ -80,7 +82,8 @@ def grams(design: Design, weight: np.ndarray | None = None) -> Grams:
             m[b, k] = y[lo:hi].sum()
     flights = design.block_flight
     n_flights = int(flights.max()) + 1 if flights.size else 1
-    fold = flights % FOLDS if n_flights >= 3 else np.arange(nb) % FOLDS
+    group = np.arange(nb) if design.fold_group is None else design.fold_group
+    fold = flights % FOLDS if n_flights >= 3 else group % FOLDS
     w = np.ones(len(axes)) if weight is None else weight
     return Grams(axes, g, h, s, m, count, w, fold)
 
@@ -115,6 +118,28 @@ def cv_sse(gr: Grams, cols: list[int]) -> np.ndarray:
             train = test
         theta = solve(gr, cols, train)
         out[test] = block_sse(gr, cols, theta, test)
+    return out
+
+
+def cv_cross(gr: Grams, without: list[int], with_: list[int]) -> np.ndarray:
+    """(B, A) held-out sum over each block's rows of r_with * (r_without - r_with): the
+    with-model's held-out residual times what adding the columns changed in the prediction
+    (each block predicted by the fits on the other folds). `without` must be a prefix of
+    `with_`. The noise part of the held-out improvement is twice this (significance.py)."""
+    out = np.zeros_like(gr.s)
+    all_blocks = np.arange(gr.s.shape[0])
+    for k in np.unique(gr.fold):
+        test = all_blocks[gr.fold == k]
+        train = all_blocks[gr.fold != k]
+        if train.size == 0:
+            train = test
+        t1 = solve(gr, with_, train)
+        t0 = np.zeros_like(t1)
+        t0[:len(without)] = solve(gr, without, train)
+        d = t1 - t0
+        g = gr.g[test][:, :, with_][:, :, :, with_]
+        h = gr.h[test][:, :, with_]
+        out[test] = h @ d - np.einsum("bapq,p,q->ba", g, t1, d)
     return out
 
 

@@ -3,8 +3,11 @@
 Rule (docs/gap.md, "Which"):
 1. start from the base model (plus the stream alignment if esc_delay was significant);
 2. score every remaining testable effect added to the current model (held-out
-   explained fraction of the current residual on the effect's axes, bootstrap CI);
-   significant = physical sign, fit inside its physical plausibility range, family-wise CI > 0;
+   explained fraction of the current residual on the effect's axes, one-sided paired test
+   over short held-out blocks with an autocorrelation-consistent variance, significance.py);
+   significant = physical sign, fit inside its physical plausibility range, Wald test
+   rejected by Holm's step-down over the candidates of the step (family-wise level 5 %)
+   and the held-out improvement confirmed (one-sided paired test, 5 %);
 3. among the significant ones take the one explaining most of the residual summed over
    all axes (so one-axis and four-axis effects compete on one scale); if a look-alike of it is also
    significant and the bootstrap CI of their score difference contains 0, the two
@@ -18,13 +21,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from propid.gap import scoring
+from propid.gap import significance, scoring
 from propid.gap.design import Design
 from propid.gap.effects import LOOK_ALIKES, by_id
 
 MAX_EFFECTS = 4
 SIGN_SIGMAS = 2.0
-FAMILY_LEVEL = 0.05  # per selection step, over all the candidates scored at that step (Bonferroni)
+FAMILY_LEVEL = significance.FAMILY_LEVEL  # per selection step, over its candidates (Holm)
 SCALE_EFFECTS = ("inertia_error", "gyro_scale", "thrust_nonlinearity")
 NESTED = {("inertia_error", "gyro_scale")}  # (smaller, larger): the larger's columns span the smaller's
 
@@ -46,7 +49,10 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
     idx = _axis_idx(design, axes)
     all_idx = list(range(len(design.axes)))
     frac_all, _ = scoring.explained(held_current, held, all_idx, bootstrap=False)
-    frac, ci = scoring.explained(held_current, held, idx, level=FAMILY_LEVEL / max(candidates, 1))
+    test = significance.paired_test(held_current, held, idx, scoring.cv_cross(gr, current, cols))
+    frac, ci = test["value"], test["ci"]
+    lm = significance.effect_test(gr, current, design.groups[effect_id])
+    replicated = test["p_value"] <= significance.REPLICATION_LEVEL
     per_axis = {a: scoring.explained(held_current, held, [k], bootstrap=False)[0] for k, a in enumerate(design.axes)}
     # size on the unwhitened rows: the effect's share of the measured signal (physical relevance)
     size = scoring.effect_size(size_gr or gr, current, design.groups[effect_id], idx)
@@ -59,9 +65,15 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
             "explained_fraction_all_axes": frac_all,
             "per_axis": per_axis,
             "axes": [a for a in axes if a in design.axes],
-            "physical_sign": physical,
+            "physical_sign": physical, "p_value": lm["p_value"],
+            "effect_test": {"statistic": lm["statistic"], "dof": lm["dof"]},
             **({"implausible": reason} if reason else {}),
-            "significant": bool(physical and reason is None and ci[0] > 0 and size >= floor)}
+            # the family's multiplicity is applied by forward_select (Holm over the step's candidates)
+            "held_out_p_value": test["p_value"],
+            # replicated: the effect predicts blocks its fit did not see better than without it
+            "admissible": bool(physical and reason is None and size >= floor and replicated),
+            "significant": bool(physical and reason is None and size >= floor and replicated
+                                and lm["p_value"] <= FAMILY_LEVEL / max(candidates, 1))}
 
 
 def implausible(gr: scoring.Grams, current: list[int], effect_cols: list[int], scale: np.ndarray,
@@ -108,6 +120,9 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
         scores = [score(design, gr, current, e, held_current, len(remaining), size_gr, bounds) for e in remaining]
         if progress:
             progress(len(scores))
+        rejected = significance.holm([s["p_value"] for s in scores], FAMILY_LEVEL)
+        for s, r in zip(scores, rejected):
+            s["significant"] = bool(s["admissible"] and r)
         good = sorted([s for s in scores if s["significant"]], key=lambda s: -s["explained_fraction_all_axes"])
         if not good:
             break
@@ -116,7 +131,7 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
             if not _look_alike(best["id"], other["id"]):
                 continue
             idx = sorted(set(_axis_idx(design, tuple(best["axes"]))) | set(_axis_idx(design, tuple(other["axes"]))))
-            diff = scoring.difference_ci(held_current, best["held"], other["held"], idx)
+            diff = significance.difference_interval(held_current, best["held"], other["held"], idx)
             if diff[0] <= 0:
                 pair = (best["id"], other["id"])
                 keep = best

@@ -20,6 +20,7 @@ independent and explained fractions measure signal over noise.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -27,7 +28,8 @@ import numpy as np
 from propid.gap.design import Design
 
 WINDOW_S = 2.0
-SCORE_BLOCK_S = 1.0  # held-out and bootstrap blocks on the whitened rows
+SCORE_BLOCK_S = 1.0  # fold blocks on the whitened rows (each held out whole)
+TEST_BLOCK_TAUS = 10.0  # test blocks: this many autocorrelation times of the whitened residual
 SMOOTH_OCTAVES = 1.0 / 3.0
 
 
@@ -112,6 +114,7 @@ def whiten(design: Design, residual: dict[str, np.ndarray], rates: list[float],
     x = {a: np.array(v, copy=True) for a, v in design.x.items()}
     y = {a: np.array(v, copy=True) for a, v in design.y.items()}
     info = {}
+    taus = []
     for a in design.axes:
         for fi in sorted(set(seg_flight)):
             segs = [(s, e) for (s, e), f in zip(bounds, seg_flight) if f == fi]
@@ -123,12 +126,57 @@ def whiten(design: Design, residual: dict[str, np.ndarray], rates: list[float],
             # scaled to a unit-variance whitened residual: flights then weigh by their noise (GLS)
             white = np.concatenate([_apply(residual[a][s:e], rates[fi], freqs, w) for s, e in segs])
             w = w / max(float(np.sqrt(np.mean(white**2))), 1e-300)
+            taus += [autocorrelation_time(_apply(residual[a][s:e], rates[fi], freqs, w)) for s, e in segs]
             for s, e in segs:
                 y[a][s:e] = _apply(design.y[a][s:e], rates[fi], freqs, w)
                 x[a][s:e] = _apply(design.x[a][s:e], rates[fi], freqs, w)
             info.setdefault(a, {})[fi] = {"freqs_hz": freqs.tolist(), "gain": w.tolist()}
     block, block_flight = split_blocks(design, SCORE_BLOCK_S)
-    return replace(design, x=x, y=y, block=block, block_flight=block_flight), info
+    tau = max(taus) if taus else 1.0
+    rows = max(int(math.ceil(TEST_BLOCK_TAUS * tau)), 2)
+    test_block, test_flight, parent = split_rows(block, block_flight, rows)
+    info["test_block_rows"] = rows
+    info["autocorrelation_time_rows"] = tau
+    return replace(design, x=x, y=y, block=test_block, block_flight=test_flight, fold_group=parent), info
+
+
+def autocorrelation_time(r: np.ndarray) -> float:
+    """Integrated autocorrelation time [rows] of r: 1 + 2 sum of its autocorrelations up to
+    the first lag where it is no longer positive (the initial positive sequence)."""
+    n = r.shape[0]
+    if n < 4:
+        return 1.0
+    u = r - r.mean()
+    spec = np.fft.rfft(u, n=2 * n)
+    acf = np.fft.irfft(np.abs(spec) ** 2)[:n]
+    if acf[0] <= 0:
+        return 1.0
+    rho = acf / acf[0]
+    tau = 1.0
+    for k in range(1, n // 2):
+        if rho[k] <= 0:
+            break
+        tau += 2.0 * rho[k]
+    return float(tau)
+
+
+def split_rows(block: np.ndarray, block_flight: np.ndarray, rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cut every block into consecutive pieces of about `rows` rows (test blocks); returns
+    the piece of every row, the flight and the parent block of every piece."""
+    new_block = np.empty_like(block)
+    flights, parents = [], []
+    nb = 0
+    for b in range(block_flight.shape[0]):
+        idx = np.flatnonzero(block == b)
+        if idx.size == 0:
+            continue
+        pieces = max(int(round(idx.size / rows)), 1)
+        for part in np.array_split(idx, pieces):
+            new_block[part] = nb
+            flights.append(int(block_flight[b]))
+            parents.append(b)
+            nb += 1
+    return new_block, np.array(flights, dtype=int), np.array(parents, dtype=int)
 
 
 def split_blocks(design: Design, length_s: float) -> tuple[np.ndarray, np.ndarray]:
