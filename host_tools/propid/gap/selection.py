@@ -7,7 +7,8 @@ Rule (docs/gap.md, "Which"):
    over short held-out blocks with an autocorrelation-consistent variance, significance.py);
    significant = physical sign, fit inside its physical plausibility range, Wald test
    rejected by Holm's step-down over the candidates of the step (family-wise level 5 %)
-   and the held-out improvement confirmed (one-sided paired test, 5 %);
+   and the held-out improvement confirmed (one-sided paired test, Holm at 5 % over the
+   same candidates);
 3. among the significant ones take the one explaining most of the residual summed over
    all axes (so one-axis and four-axis effects compete on one scale); if a look-alike of it is also
    significant and the bootstrap CI of their score difference contains 0, the two
@@ -52,7 +53,7 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
     test = significance.paired_test(held_current, held, idx, scoring.cv_cross(gr, current, cols))
     frac, ci = test["value"], test["ci"]
     lm = significance.effect_test(gr, current, design.groups[effect_id])
-    replicated = test["p_value"] <= significance.REPLICATION_LEVEL
+    replicated = test["p_value"] <= significance.REPLICATION_LEVEL / max(candidates, 1)
     per_axis = {a: scoring.explained(held_current, held, [k], bootstrap=False)[0] for k, a in enumerate(design.axes)}
     # size on the unwhitened rows: the effect's share of the measured signal (physical relevance)
     size = scoring.effect_size(size_gr or gr, current, design.groups[effect_id], idx)
@@ -71,7 +72,7 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
             # the family's multiplicity is applied by forward_select (Holm over the step's candidates)
             "held_out_p_value": test["p_value"],
             # replicated: the effect predicts blocks its fit did not see better than without it
-            "admissible": bool(physical and reason is None and size >= floor and replicated),
+            "admissible": bool(physical and reason is None and size >= floor),
             "significant": bool(physical and reason is None and size >= floor and replicated
                                 and lm["p_value"] <= FAMILY_LEVEL / max(candidates, 1))}
 
@@ -121,8 +122,9 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
         if progress:
             progress(len(scores))
         rejected = significance.holm([s["p_value"] for s in scores], FAMILY_LEVEL)
-        for s, r in zip(scores, rejected):
-            s["significant"] = bool(s["admissible"] and r)
+        replicated = significance.holm([s["held_out_p_value"] for s in scores], significance.REPLICATION_LEVEL)
+        for s, r, h in zip(scores, rejected, replicated):
+            s["significant"] = bool(s["admissible"] and r and h)
         good = sorted([s for s in scores if s["significant"]], key=lambda s: -s["explained_fraction_all_axes"])
         if not good:
             break
