@@ -46,6 +46,8 @@ class BenchConfig:
     base_seed: int = 1000
     workers: int = 2
     false_alarms_per_hour: float | None = None  # detector design rate (None: library default)
+    # extra propid_sitl options for every flight (e.g. a filter option), recorded in the conditions
+    sitl_args: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -92,7 +94,7 @@ def _command(config: BenchConfig, spec: FlightSpec, mode: str, log: Path, summar
         cmd += ["--damage", f"{rotor}@{time_s}={fraction}"]
     for effect in spec.effects:
         cmd += ["--effect", effect]
-    return cmd
+    return cmd + list(config.sitl_args)
 
 
 def _fly(config: BenchConfig, spec: FlightSpec, mode: str, work: Path,
@@ -242,7 +244,8 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
                        "loss_range": [0.1, 0.5], "first_damage_s": [2.0, 3.0],
                        "second_damage_after_s": [2.0, 2.5], "mild_effects": list(MILD_EFFECTS),
                        "sensors": "propid_sitl defaults (BMI088 1 kHz, DShot telemetry)",
-                       "false_alarms_per_hour": config.false_alarms_per_hour or 1e-3},
+                       "false_alarms_per_hour": config.false_alarms_per_hour or 1e-3,
+                       "sitl_args": list(config.sitl_args)},
         "per_flight": records,
     }
 

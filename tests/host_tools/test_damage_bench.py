@@ -31,6 +31,16 @@ def test_flight_plan_is_deterministic_and_as_documented():
     assert {s.preset for s in specs} == set(damage_bench.PRESETS)
 
 
+def test_extra_sitl_arguments_reach_every_flight_command(tmp_path):
+    cfg = config(damaged=2, undamaged=1, sitl_args=["--filter-rate-noise", "0.001"])
+    for spec in damage_bench.flight_specs(cfg):
+        for mode in ("filter", "oracle"):
+            cmd = damage_bench._command(cfg, spec, mode, tmp_path / "f.csv", tmp_path / "f.json")
+            assert cmd[-2:] == ["--filter-rate-noise", "0.001"]
+            # the campaign's own value comes earlier, so the extra one wins
+            assert cmd.index("--filter-rate-noise") < len(cmd) - 2
+
+
 def test_scoring_detection_isolation_and_false_alarms():
     spec = {"damages": [[2, 3.0, 0.3], [4, 5.5, 0.15]], "effects": [], "index": 0}
     flight = {"detections": [{"rotor": 1, "time_s": 3.004}, {"rotor": 2, "time_s": 3.6},

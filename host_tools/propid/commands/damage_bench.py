@@ -24,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=1000, help="base seed (default 1000)")
     parser.add_argument("--false-alarm-rate", type=float, metavar="PER_H",
                         help="detector design false alarms per flight hour (default: library's 1e-3)")
+    parser.add_argument("--sitl-arg", action="append", default=[], metavar="ARG",
+                        help="extra propid_sitl argument for every flight, repeatable, e.g. "
+                             "--sitl-arg=--filter-rate-noise --sitl-arg=0.001")
     parser.add_argument("--sitl", metavar="PATH", help="propid_sitl binary (default $PROPID_BUILD_DIR/sitl/propid_sitl)")
     parser.add_argument("--workers", type=int, default=2, help="parallel flights (default 2)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -37,7 +40,8 @@ def run(args: argparse.Namespace) -> int:
     config = damage_bench.BenchConfig(
         sitl=Path(args.sitl) if args.sitl else locate_sitl(None), out_dir=Path(args.out),
         damaged=args.damaged, undamaged=args.undamaged, duration_s=args.duration,
-        base_seed=args.seed, workers=args.workers, false_alarms_per_hour=args.false_alarm_rate)
+        base_seed=args.seed, workers=args.workers, false_alarms_per_hour=args.false_alarm_rate,
+        sitl_args=list(args.sitl_arg))
     result = damage_bench.run_bench(config, progress=not args.no_progress)
     print(damage_bench.render(result), end="")
     for error in result["errors"]:
