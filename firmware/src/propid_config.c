@@ -58,6 +58,8 @@ void propid_config_default(propid_config_t *config)
     config->torque_scale = 0u;
     config->torque_scale_std0 = 0.5f;
     config->torque_scale_walk = 0.0f;
+    config->rotor_speed_noise = 0.0f;
+    config->rotor_speed_noise_time = 0.0f;
 }
 
 propid_status_t propid_config_set_symmetric(propid_config_t *config, uint8_t rotor_count,
@@ -503,7 +505,23 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!propid_delay_config_ok(config)) {
         PROPID_BAD("rotor_delay_us"); /* beyond 1 s or what PROPID_DELAY_SLOTS holds */
     }
+    /* Compiled out, only 0 (off) is accepted; a rotor-speed error beyond the
+     * largest speed is not a measurement. */
+    if (!isfinite(config->rotor_speed_noise) || config->rotor_speed_noise < 0.0f ||
+        config->rotor_speed_noise > config->max_rotor_speed ||
+        (!PROPID_WITH_INPUT_NOISE && config->rotor_speed_noise != 0.0f)) {
+        PROPID_BAD("rotor_speed_noise");
+    }
+    if (!isfinite(config->rotor_speed_noise_time) || config->rotor_speed_noise_time < 0.0f ||
+        config->rotor_speed_noise_time > 1.0f) {
+        PROPID_BAD("rotor_speed_noise_time");
+    }
 
+#if PROPID_WITH_INPUT_NOISE
+    /* Var(Omega^2) = (2 Omega sigma)^2 = input_noise_var Omega^2 (docs/math.md §14). */
+    out.input_noise_var = 4.0f * config->rotor_speed_noise * config->rotor_speed_noise;
+    out.input_noise_time = config->rotor_speed_noise_time;
+#endif
     out.layout.rate = 0u;
     out.layout.thrust = propid_first_thrust();
     out.layout.drag = propid_first_drag(rotor_count);

@@ -331,14 +331,113 @@ predict_covariance_quad_layout(const propid_derived_t *derived, float *restrict 
                                    derived->kind_process_psd[PROPID_KIND_BIAS] * dt);
 }
 
+#if PROPID_WITH_INPUT_NOISE
+/* Rotor-speed input error (docs/math.md §14): the step integrates the rotor
+ * torques with the measured u_i = Omega_i^2, whose error e_i (variance
+ * input_noise_var u_i, correlated over input_noise_time) moves the predicted rate
+ * by dt B e with B_ai = d(omega_dot_a)/d(u_i) at the current coefficients. Its
+ * white-noise equivalent over the step is B Sigma_u B^T dt max(dt, time): a 3x3
+ * symmetric add to the rate block (6 entries), after the propagation. */
+static void add_input_block(float *cov, const float (*gain)[PROPID_MAX_ROTORS], const float *input_var,
+                            uint8_t rotor_count)
+{
+    for (uint8_t b = 0; b < 3u; ++b) {
+        for (uint8_t a = 0; a <= b; ++a) {
+            float sum = 0.0f;
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                sum += gain[a][i] * gain[b][i] * input_var[i];
+            }
+            cov[propid_cov_index(a, b)] += sum;
+        }
+    }
+}
+
+/* The quad layout (propid_internal.h): entries 2..5 of each row are rotors 0..3,
+ * thrust columns in the roll and pitch rows, drag columns in the yaw row;
+ * straight-line. */
+static __attribute__((noinline)) void add_input_noise_quad(const propid_derived_t *derived,
+                                                           propid_core_t *core, float weight)
+{
+    const float *state = core->state;
+    float input_var[4];
+    float gain[3][4];
+#pragma GCC unroll 4
+    for (uint8_t i = 0; i < 4u; ++i) {
+        input_var[i] = weight * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
+        gain[0][i] = derived->jac_torque[0][2u + i] * state[PROPID_QUAD_FIRST_THRUST + i];
+        gain[1][i] = derived->jac_torque[1][2u + i] * state[PROPID_QUAD_FIRST_THRUST + i];
+        gain[2][i] = derived->jac_torque[2][2u + i] * state[PROPID_QUAD_FIRST_DRAG + i];
+    }
+    float *cov = core->cov;
+#pragma GCC unroll 3
+    for (uint8_t b = 0; b < 3u; ++b) {
+#pragma GCC unroll 3
+        for (uint8_t a = 0; a <= b; ++a) {
+            cov[propid_cov_index(a, b)] += gain[a][0] * gain[b][0] * input_var[0] +
+                                           gain[a][1] * gain[b][1] * input_var[1] +
+                                           gain[a][2] * gain[b][2] * input_var[2] +
+                                           gain[a][3] * gain[b][3] * input_var[3];
+        }
+    }
+}
+
+/* Any vehicle, over the sparsity lists. */
+static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t *derived,
+                                                          propid_core_t *core, float weight)
+{
+    const float *state = core->state;
+    const uint8_t rotor_count = (uint8_t)(derived->layout.drag - derived->layout.thrust);
+    float input_var[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        input_var[i] = weight * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
+    }
+    const float torque_scale =
+        PROPID_WITH_ACCEL && derived->layout.torque_scale != PROPID_NO_STATE
+            ? state[derived->layout.torque_scale] : 1.0f;
+    float gain[3][PROPID_MAX_ROTORS] = {{0.0f}}; /* B */
+    for (uint8_t a = 0; a < 3u; ++a) {
+        const uint8_t count = derived->jac_count[a];
+        for (uint8_t p = derived->jac_rate_count[a]; p < count; ++p) {
+            const uint8_t rotor = derived->jac_rotor[a][p];
+            if (rotor >= rotor_count) { /* the scale's and the disturbance's entries */
+                continue;
+            }
+            const uint8_t column = derived->jac_column[a][p];
+            const float entry = derived->jac_torque[a][p] * state[column];
+            gain[a][rotor] += column < derived->layout.drag ? entry * torque_scale : entry;
+        }
+    }
+    add_input_block(core->cov, (const float (*)[PROPID_MAX_ROTORS])gain, input_var, rotor_count);
+}
+
+static void add_input_noise(const propid_derived_t *derived, propid_core_t *core, float dt)
+{
+    /* Var(u_i) dt max(dt, time) = input_noise_var u_i dt span, u_i the trapezoid mean
+     * (the factor 0.5 of that mean folded in). */
+    const float span = derived->input_noise_time > dt ? derived->input_noise_time : dt;
+    const float weight = 0.5f * derived->input_noise_var * dt * span;
+    if (derived->quad_layout) {
+        add_input_noise_quad(derived, core, weight);
+    } else {
+        add_input_noise_any(derived, core, weight);
+    }
+}
+#endif
+
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
                                const float jacobian_dt[3][PROPID_JAC_ROW])
 {
 #if PROPID_GENERAL_VEHICLES
     if (!derived->quad_layout) {
         predict_covariance_any(derived, core->cov, dt, jacobian_dt, derived->state_count);
-        return;
+    } else
+#endif
+    {
+        predict_covariance_quad_layout(derived, core->cov, dt, jacobian_dt);
+    }
+#if PROPID_WITH_INPUT_NOISE
+    if (derived->input_noise_var > 0.0f) {
+        add_input_noise(derived, core, dt);
     }
 #endif
-    predict_covariance_quad_layout(derived, core->cov, dt, jacobian_dt);
 }

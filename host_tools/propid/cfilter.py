@@ -153,6 +153,8 @@ _OPTIONAL_FIELDS = [
     ("torque_scale_std0", ctypes.c_float),
     ("torque_scale_walk", ctypes.c_float),
     ("rotor_delay_us", ctypes.c_int32),
+    ("rotor_speed_noise", ctypes.c_float),
+    ("rotor_speed_noise_time", ctypes.c_float),
 ]
 _INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int32)
 
@@ -270,6 +272,9 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "torque_scale_walk": 0.0,
     # Telemetry delay (docs/math.md §12): > 0 rotor speeds lag the gyro, < 0 the gyro lags.
     "rotor_delay_us": 0,
+    # Rotor-speed input error (docs/math.md §14): std [rad/s] and correlation time [s]; 0: off.
+    "rotor_speed_noise": 0.0,
+    "rotor_speed_noise_time": 0.0,
 }
 
 
@@ -321,6 +326,8 @@ class FilterConfig:
     torque_scale_std0: float = DEFAULT_TUNING["torque_scale_std0"]
     torque_scale_walk: float = DEFAULT_TUNING["torque_scale_walk"]
     rotor_delay_us: int = DEFAULT_TUNING["rotor_delay_us"]
+    rotor_speed_noise: float = DEFAULT_TUNING["rotor_speed_noise"]
+    rotor_speed_noise_time: float = DEFAULT_TUNING["rotor_speed_noise_time"]
 
     @property
     def rotor_count(self) -> int:

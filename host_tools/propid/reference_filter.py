@@ -103,6 +103,8 @@ class ReferenceFilter:
         else:
             self.gate_sq, self.inv_gate_sq = GATE_OFF_SQ, 1.0
         self.rate_limit = 2.0 * c["gyro_range"]
+        self.input_noise_var = 4.0 * _f32(config.rotor_speed_noise) ** 2
+        self.input_noise_time = _f32(config.rotor_speed_noise_time)
         self.converged_var = c["converged_rel_std"] ** 2
 
         n = self.n
@@ -450,6 +452,15 @@ class ReferenceFilter:
             # Q dt and the rounding loading (C: PROPID_VAR_LOADING, docs/math.md §2).
             diag = np.diag_indices(n)
             self.cov[diag] += VAR_LOADING * self.cov[diag] + self.process_psd * dt
+            if self.input_noise_var > 0.0:
+                # Rotor-speed input error (C: add_input_noise, docs/math.md §14): B Sigma_u B^T
+                # dt max(dt, time), B = d(omega_dot)/d(Omega^2) at the current coefficients.
+                n_rot = self.rotor_count
+                _, unit_rows = self.rate_derivative_and_jacobian(self.state, np.ones(n_rot))
+                gain = (unit_rows[:, 3:3 + n_rot] * self.state[3:3 + n_rot]
+                        + unit_rows[:, 3 + n_rot:3 + 2 * n_rot] * self.state[3 + n_rot:3 + 2 * n_rot])
+                input_var = self.input_noise_var * speed_sq * dt * max(dt, self.input_noise_time)
+                self.cov[:3, :3] += (gain * input_var) @ gain.T
             self.state[:3] = rate_next
         else:
             # The rates start at the anchoring sample (C: propid_push_gyro).

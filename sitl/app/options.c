@@ -300,6 +300,11 @@ static const opt_t options[] = {
            "filter: telemetry delay it holds [s] (> 0: rotor speeds lag the\n"
            "gyro; docs/math.md §12). Default 0. The ESC telemetry lags by\n"
            "--esc-latency plus the esc_delay effect"),
+    NUMBER(NULL, "filter-rotor-speed-noise", filter_rotor_speed_noise, 0.0, 1e4, "RAD_S",
+           "filter: std of a rotor-speed sample's error, carried into the\n"
+           "rate process noise (docs/math.md §14). Default 0 (exact)"),
+    NUMBER(NULL, "filter-rotor-speed-noise-time", filter_rotor_speed_noise_time, 0.0, 1.0, "S",
+           "filter: correlation time of that error [s] (default 0: one step)"),
 
     NUMBER("Vehicle overrides", "motor-tau", motor_time_constant, 1e-5, 10.0, "S",
            "motor time constant [s]"),

@@ -93,6 +93,8 @@ typedef struct {
     int filter_torque_scale;            /* 1: with filter_accel, the thrust-torque scale state */
     int filter_rotor_inertia;           /* 1: the vehicle's rotor inertia in the filter's model */
     double filter_esc_delay_s;          /* telemetry delay the filter holds [s]: > 0 rotor speeds lag */
+    double filter_rotor_speed_noise;    /* rotor_speed_noise [rad/s] (docs/math.md §14); 0: off */
+    double filter_rotor_speed_noise_time; /* rotor_speed_noise_time [s] */
 
     /* Propeller damage scenario and the firmware's damage detector. */
     sitl_damage_t damage[SITL_MAX_DAMAGE];

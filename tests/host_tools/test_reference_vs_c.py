@@ -171,6 +171,22 @@ def test_c_agrees_with_reference_with_every_option(flight):
     assert cov_err < COV_TOL_REL
 
 
+@pytest.mark.parametrize("options", ["plain", "all"])
+def test_c_agrees_with_reference_with_input_noise(flight, options):
+    """Rotor-speed input error in the rate process noise (docs/math.md §14): same bounds, and the
+    term changes the run (the comparison would see it missing on one side)."""
+    config = make_config(options).with_overrides(rotor_speed_noise=20.0, rotor_speed_noise_time=0.01)
+    trace_ref = replay(ReferenceFilter(config), flight)
+    trace_c = replay(CFilter(config), flight)
+    state_err, cov_err = disagreement(trace_c, trace_ref)
+    print(f"C vs reference, input noise ({options}): max |dx|/std = {state_err:.3g}, "
+          f"max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+    _, cov_off = disagreement(replay(CFilter(make_config(options)), flight), trace_ref)
+    assert cov_off > 10.0 * COV_TOL_REL
+
+
 def arriving(events, rotor_shift_us: int, offset_us: int = 10_000):
     """The flight as it arrives when the rotor telemetry is stamped rotor_shift_us late (> 0: the
     rotor speeds lag) or early (< 0: the gyro lags), in arrival order (rotor speeds first at equal

@@ -138,6 +138,12 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
         config.rotor_inertia[i] = COUNT_STEP_ROTOR_INERTIA;
     }
 #endif
+#ifdef COUNT_STEP_INPUT_NOISE
+    /* -DCOUNT_STEP_INPUT_NOISE=S: rotor-speed input error of std S [rad/s] in the rate
+     * process noise (docs/math.md §14), correlated over 10 ms. */
+    config.rotor_speed_noise = COUNT_STEP_INPUT_NOISE;
+    config.rotor_speed_noise_time = 0.01f;
+#endif
 #ifdef COUNT_STEP_DELAY_US
     /* -DCOUNT_STEP_DELAY_US=D: the telemetry delay D held by the filter; each counted
      * step is then the rotor push and the gyro push together (a held sample is fused

@@ -147,6 +147,11 @@ typedef struct {
                                          t + delay): gyro and accelerometer samples are held until
                                          then; < 0, the gyro lags the rotor speeds: rotor samples are
                                          held |delay|. 0: none. Bounded by PROPID_DELAY_SLOTS. */
+    float rotor_speed_noise;          /* std of the error of a rotor-speed sample [rad/s] (telemetry
+                                         resolution, timing): enters the rate process noise through the
+                                         torque Jacobian (docs/math.md §14). 0: exact inputs (off) */
+    float rotor_speed_noise_time;     /* correlation time of that error [s]: how long one error stays
+                                         in the input (e.g. the telemetry interval); 0: one step */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -299,6 +304,10 @@ typedef struct {
 #if PROPID_WITH_ACCEL
     float thrust_per_mass[PROPID_MAX_ROTORS];       /* kf_nominal_i / mass (accelerometer row) */
     float accel_var;                                /* accel_noise_std^2 */
+#endif
+#if PROPID_WITH_INPUT_NOISE
+    float input_noise_var;                          /* 4 rotor_speed_noise^2: Var(u_i) per unit u_i */
+    float input_noise_time;                         /* rotor_speed_noise_time */
 #endif
     float quad_gyro[3][2];                          /* quad layout only: A_ab = quad_gyro[a][p] omega_c for
                                                        entry p (column b) of row a, c the third axis */

@@ -36,6 +36,18 @@ OVERRIDES = [
 ]
 
 
+def _noise_std(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither auto nor a number") from None
+    if not (0.0 <= value <= 1.0e4):
+        raise argparse.ArgumentTypeError(f"{text}: the std must be between 0 and 10000 [rad/s]")
+    return value
+
+
 def _walk(text: str) -> float | str:
     if text == "auto":
         return text
@@ -105,6 +117,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="let that scale follow a torque gain that changes within the flight: random walk W "
                              "[1/sqrt(s)], or auto: measured on the log from the change of the 2-10 Hz torque gain "
                              "between 4 s windows (docs/real-data.md). Default: a constant scale")
+    parser.add_argument("--rotor-speed-noise", metavar="auto|SIGMA", type=_noise_std,
+                        help="std of a rotor-speed sample's error [rad/s], carried into the rate process noise "
+                             "(docs/math.md §14), or auto: measured on the log's rotor-speed stream (second "
+                             "differences of new samples; docs/real-data.md). Default: exact rotor speeds")
+    parser.add_argument("--rotor-speed-noise-time", metavar="S", type=float,
+                        help="correlation time of that error [s] (default: auto's median sample interval, "
+                             "or one step with a given SIGMA)")
     parser.add_argument("--unit-inertia", action="store_true",
                         help="run with J = identity: estimates are kf/J and km/Jzz ratios (for vehicles without inertia)")
     parser.add_argument("--kf-nominal", type=float, help="prior mean of kf (overrides the vehicle file)")
@@ -268,6 +287,8 @@ def run(args: argparse.Namespace) -> int:
         rotor_inertia=args.rotor_inertia,
         torque_scale=args.torque_scale,
         torque_scale_walk=args.torque_scale_walk,
+        rotor_speed_noise=args.rotor_speed_noise,
+        rotor_speed_noise_time=args.rotor_speed_noise_time,
         progress=not args.no_progress and len(log_paths) == 1,
     )
     text_out = sys.stderr if args.json == "-" else sys.stdout

@@ -54,6 +54,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     delay_us = int(round(esc_delay_s * US))
     config_fields["rotor_delay_us"] = delay_us  # the firmware holds the leading stream (docs/math.md §12)
     resolve_scale_walk(log, vehicle, mask, options, config_fields, notes, esc_delay_s)
+    resolve_rotor_speed_noise(log, mask, options, config_fields, notes)
     if prefilter_info is not None:
         notes["prefilter"] = prefilter_info
     if highpass_info is not None:
@@ -321,6 +322,33 @@ def replay_warnings(rates: dict, accepted: int, pushed: int) -> list[str]:
     if pushed and accepted < MIN_ACCEPTED_GYRO_FRACTION * pushed:
         warnings.append(f"the filter accepted only {accepted} of {pushed} gyro samples")
     return warnings
+
+
+def resolve_rotor_speed_noise(log: FlightLog, mask: np.ndarray, options: ReplayOptions, config_fields: dict,
+                              notes: dict) -> None:
+    """rotor_speed_noise(_time) from --rotor-speed-noise: a std, or auto (the per-log rule)."""
+    noise = options.rotor_speed_noise
+    time = options.rotor_speed_noise_time
+    if time is not None and not (0.0 <= time <= 1.0):
+        raise UserError(f"--rotor-speed-noise-time {time!r}: choose a number between 0 and 1 [s]")
+    if noise is None:
+        if time is not None:
+            raise UserError("--rotor-speed-noise-time needs --rotor-speed-noise")
+        return
+    if noise == "auto":
+        from propid.replay.input_noise import estimate_rotor_speed_noise
+
+        info = estimate_rotor_speed_noise(log, mask)
+        config_fields["rotor_speed_noise"] = info["sigma"]
+        config_fields["rotor_speed_noise_time"] = info["time"] if time is None else time
+        notes["rotor_speed_noise"] = info
+        return
+    value = float(noise)
+    if not (0.0 <= value <= 1.0e4):
+        raise UserError(f"--rotor-speed-noise {noise!r}: choose auto or a number between 0 and 10000 [rad/s]")
+    config_fields["rotor_speed_noise"] = value
+    config_fields["rotor_speed_noise_time"] = 0.0 if time is None else time
+    notes["rotor_speed_noise"] = "given"
 
 
 def resolve_scale_walk(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, options: ReplayOptions,

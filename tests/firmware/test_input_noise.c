@@ -1,0 +1,189 @@
+/*
+ * Rotor-speed input error in the prediction (config.rotor_speed_noise,
+ * docs/math.md §14):
+ * - off (0) the covariance prediction is bit-identical to the plain one;
+ * - on, it adds exactly B Sigma_u B^T dt max(dt, time) to the rate block and
+ *   nothing elsewhere, B computed here densely from the model's Jacobian at the
+ *   current coefficients (quad layout, general lists, hexa);
+ * - the configuration check refuses bad values by name.
+ */
+#include <math.h>
+#include <string.h>
+
+#include "propid/propid.h"
+#include "unity.h"
+#include "../../firmware/src/propid_internal.h"
+#include "../../firmware/src/propid_model.h"
+
+void setUp(void) {}
+void tearDown(void) {}
+
+#if PROPID_WITH_INPUT_NOISE
+static propid_filter_t with_noise;
+static propid_filter_t without_noise;
+
+static void configure(propid_config_t *config, uint8_t rotors, int full_inertia)
+{
+    propid_config_default(config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(config, rotors, 0.17f, 0.785398f, 1.0f,
+                                                                 5.57e-6f, 1.36e-7f));
+    propid_config_set_inertia_diag(config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    if (full_inertia) {
+        config->inertia[0][1] = 1.0e-4f;
+        config->inertia[1][0] = 1.0e-4f;
+    }
+}
+
+/* Both filters in the same state, off the prior (coefficients not 1, rates
+ * non-zero, rotor speeds different at the two ends of the interval). */
+static void prepare(propid_filter_t *filter, const propid_config_t *config)
+{
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(filter, config));
+    const uint8_t rotors = config->rotor_count;
+    filter->core.state[0] = 0.3f;
+    filter->core.state[1] = -0.2f;
+    filter->core.state[2] = 0.1f;
+    for (uint8_t i = 0; i < rotors; ++i) {
+        filter->core.state[PROPID_RATE_STATES + i] = 0.8f + 0.1f * (float)i;
+        filter->core.state[PROPID_RATE_STATES + rotors + i] = 1.3f - 0.1f * (float)i;
+        const float start = 500.0f + 20.0f * (float)i;
+        const float end = 520.0f - 10.0f * (float)i;
+        filter->core.input_speed_sq[i] = start * start;
+        filter->core.rotor_speed_sq[i] = end * end;
+    }
+}
+
+static void check_added_block(uint8_t rotors, int full_inertia, float time)
+{
+    const float sigma = 3.0f;
+    const float dt = 0.002f;
+    propid_config_t config;
+    configure(&config, rotors, full_inertia);
+    prepare(&without_noise, &config);
+    config.rotor_speed_noise = sigma;
+    config.rotor_speed_noise_time = time;
+    prepare(&with_noise, &config);
+
+    float rate_next[3];
+    float jac_dt[3][PROPID_JAC_ROW];
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_noise, dt, rate_next, jac_dt));
+    propid_predict_covariance(&without_noise.derived, &without_noise.core, dt, jac_dt);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_noise, dt, rate_next, jac_dt));
+    propid_predict_covariance(&with_noise.derived, &with_noise.core, dt, jac_dt);
+
+    /* B_ai = d(omega_dot_a)/d(u_i): the model's coefficient columns divided by u_i. */
+    float rows[3][PROPID_MAX_STATES];
+    float unit_speed_sq[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < rotors; ++i) {
+        unit_speed_sq[i] = 1.0f;
+    }
+    propid_model_rate_jacobian(&with_noise.config, &with_noise.derived, with_noise.core.state, unit_speed_sq,
+                               rows);
+    const float span = time > dt ? time : dt;
+    for (uint8_t a = 0; a < 3u; ++a) {
+        for (uint8_t b = a; b < 3u; ++b) {
+            float expected = 0.0f;
+            for (uint8_t i = 0; i < rotors; ++i) {
+                const float gain_a = rows[a][PROPID_RATE_STATES + i] * with_noise.core.state[PROPID_RATE_STATES + i] +
+                                     rows[a][PROPID_RATE_STATES + rotors + i] *
+                                         with_noise.core.state[PROPID_RATE_STATES + rotors + i];
+                const float gain_b = rows[b][PROPID_RATE_STATES + i] * with_noise.core.state[PROPID_RATE_STATES + i] +
+                                     rows[b][PROPID_RATE_STATES + rotors + i] *
+                                         with_noise.core.state[PROPID_RATE_STATES + rotors + i];
+                const float mean_u = 0.5f * (with_noise.core.input_speed_sq[i] + with_noise.core.rotor_speed_sq[i]);
+                expected += gain_a * gain_b * 4.0f * sigma * sigma * mean_u * dt * span;
+            }
+            const uint32_t k = propid_cov_index(a, b);
+            const float added = with_noise.core.cov[k] - without_noise.core.cov[k];
+            TEST_ASSERT_FLOAT_WITHIN(1.0e-3f * fabsf(expected) + 1.0e-6f * fabsf(with_noise.core.cov[k]), expected,
+                                     added);
+            if (a == b) {
+                TEST_ASSERT_TRUE(expected > 0.0f);
+            }
+        }
+    }
+    /* Everything outside the rate block is the plain prediction, bit for bit. */
+    const uint8_t n = with_noise.derived.state_count;
+    for (uint8_t i = 0; i < n; ++i) {
+        for (uint8_t j = i; j < n; ++j) {
+            if (j < 3u) {
+                continue;
+            }
+            const uint32_t k = propid_cov_index(i, j);
+            TEST_ASSERT_EQUAL_MEMORY(&without_noise.core.cov[k], &with_noise.core.cov[k], sizeof(float));
+        }
+    }
+}
+
+static void test_input_noise_adds_its_block_to_the_rate_covariance(void)
+{
+    check_added_block(4u, 0, 0.0f);    /* quad layout, one step */
+    check_added_block(4u, 0, 0.02f);   /* quad layout, a longer correlation time */
+    check_added_block(4u, 1, 0.01f);   /* general lists (full inertia) */
+    check_added_block(6u, 0, 0.0f);    /* hexa */
+}
+
+static void test_input_noise_off_is_the_plain_prediction(void)
+{
+    propid_config_t config;
+    configure(&config, 4u, 0);
+    prepare(&without_noise, &config);
+    config.rotor_speed_noise_time = 0.05f; /* a time alone switches nothing on */
+    prepare(&with_noise, &config);
+    float rate_next[3];
+    float jac_dt[3][PROPID_JAC_ROW];
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_noise, 0.002f, rate_next, jac_dt));
+    propid_predict_covariance(&without_noise.derived, &without_noise.core, 0.002f, jac_dt);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_noise, 0.002f, rate_next, jac_dt));
+    propid_predict_covariance(&with_noise.derived, &with_noise.core, 0.002f, jac_dt);
+    TEST_ASSERT_EQUAL_MEMORY(without_noise.core.cov, with_noise.core.cov, sizeof(with_noise.core.cov));
+}
+
+static void test_input_noise_config_is_checked(void)
+{
+    propid_config_t config;
+    configure(&config, 4u, 0);
+    const char *bad = NULL;
+    const float bad_noise[] = {-1.0f, NAN, INFINITY, 1.0e5f};
+    for (uint8_t k = 0; k < 4u; ++k) {
+        config.rotor_speed_noise = bad_noise[k];
+        TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+        TEST_ASSERT_EQUAL_STRING("rotor_speed_noise", bad);
+    }
+    config.rotor_speed_noise = 2.0f;
+    const float bad_time[] = {-0.1f, NAN, 1.5f};
+    for (uint8_t k = 0; k < 3u; ++k) {
+        config.rotor_speed_noise_time = bad_time[k];
+        TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+        TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_time", bad);
+    }
+    config.rotor_speed_noise_time = 0.002f;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
+}
+#else
+static void test_input_noise_compiled_out_refuses_the_option(void)
+{
+    propid_config_t config;
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.17f, 0.785398f, 1.0f,
+                                                                 5.57e-6f, 1.36e-7f));
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    config.rotor_speed_noise = 1.0f;
+    const char *bad = NULL;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("rotor_speed_noise", bad);
+}
+#endif
+
+int main(void)
+{
+    UNITY_BEGIN();
+#if PROPID_WITH_INPUT_NOISE
+    RUN_TEST(test_input_noise_adds_its_block_to_the_rate_covariance);
+    RUN_TEST(test_input_noise_off_is_the_plain_prediction);
+    RUN_TEST(test_input_noise_config_is_checked);
+#else
+    RUN_TEST(test_input_noise_compiled_out_refuses_the_option);
+#endif
+    return UNITY_END();
+}
