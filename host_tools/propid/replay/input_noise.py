@@ -16,8 +16,10 @@ reference value):
   input until the next sample replaces it);
 - quantisation: the stream's step q near its median speed (the median gap between adjacent
   distinct values within +-QUANT_BAND of the median), std q / sqrt(12); its correlation time
-  is the time the speed takes to cross one step, q / (total variation / flying time),
-  bounded to [sample interval, MAX_TIME_S] (a speed that sits on one step keeps its error);
+  is how long a value stays on its step: with holds h_k between changes of the value and
+  independent levels, the integral of the error's autocorrelation is sum(h^2) / sum(h)
+  (a time-weighted mean hold: a speed that sits on one step keeps its error), bounded to
+  [sample interval, MAX_TIME_S];
 - the larger of the two parts with its correlation time (a grid crossed at every sample is
   already in the second difference; a slowly crossed one is not).
 The filter gets the median over the rotors of both. Too few new samples (< MIN_SAMPLES on
@@ -64,11 +66,10 @@ def estimate_rotor_speed_noise(log: FlightLog, mask: np.ndarray) -> dict:
         white_var = (1.4826 * mad) ** 2 / 1.5
         step = _resolution(values)
         quant_var = step * step / 12.0
-        # The quantisation error stays while the speed moves less than one step.
-        # Mean slew over the flying time (total variation / time): one step per step / slew.
-        flying_s = float(np.count_nonzero(mask)) * float(np.median(np.diff(t)))
-        slew = float(np.sum(np.abs(np.diff(values)))) / flying_s if flying_s > 0.0 else 0.0
-        quant_time = step / slew if slew > 0.0 else MAX_TIME_S
+        # The quantisation error stays while the value stays on its step: holds h between
+        # changes, independent levels -> integral of the autocorrelation sum(h^2) / sum(h).
+        holds = np.diff(stamps)
+        quant_time = float(np.sum(holds ** 2) / np.sum(holds)) if np.sum(holds) > 0.0 else MAX_TIME_S
         quant_time = min(max(quant_time, interval), MAX_TIME_S)
         # A grid crossed at every sample already shows in the second difference: the larger
         # part, not the sum, with its own correlation time.
