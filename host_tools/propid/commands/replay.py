@@ -36,23 +36,14 @@ OVERRIDES = [
 ]
 
 
-def _auto_or_number(high: float, what: str):
-    """argparse type: the word auto, or a number in [0, high] (what: its name and unit)."""
-    def parse(text: str) -> float | str:
-        if text == "auto":
-            return text
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is neither auto nor a number") from None
-        if not (0.0 <= value <= high):
-            raise argparse.ArgumentTypeError(f"{text}: {what} must be between 0 and {high:g}")
-        return value
-    return parse
+def _noise_std(text: str):
+    return _word_or_number(text, ("auto",), float, lambda v: 0.0 <= v <= 1.0e4,
+                           "a std in rad/s or 'auto'", f"{text}: the std [rad/s] must be between 0 and 10000")
 
 
-_noise_std = _auto_or_number(1.0e4, "the std [rad/s]")
-_walk = _auto_or_number(10.0, "the walk [1/sqrt(s)]")
+def _walk(text: str):
+    return _word_or_number(text, ("auto",), float, lambda v: 0.0 <= v <= 10.0,
+                           "a walk in 1/sqrt(s) or 'auto'", f"{text}: the walk must be between 0 and 10 [1/sqrt(s)]")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
