@@ -11,7 +11,7 @@
  * (each h_a and S_a equals the sequential one in exact arithmetic), then one
  * sweep over the upper triangle writes
  *   P_ij -= sum_a g_a,i h_a,j,   x_i += sum_a g_a,i nu_a,
- * four rows at a time (fuse_quad_usual, apply_three_quad). Any other sample or
+ * five rows at a time (fuse_quad_usual, apply_three_quad). Any other sample or
  * vehicle takes the generic scalar update per axis. */
 #include <math.h>
 #include <string.h>
@@ -20,37 +20,37 @@
 
 
 /* The three pending vectors h[a] = P H_a^T (the quad step's largest stack
- * object: 3 x 14 floats in the quad build). */
+ * object: 3 x 14 floats in the quad build); their innovations are the ones
+ * recorded in core->innovation. */
 typedef struct {
-    uint8_t count;                      /* pending fused axes */
     float h[3][PROPID_MAX_STATES];      /* P H^T of each pending axis (its gain is h / S) */
     float inv_var[3];                   /* 1 / S: the gain is g = h / S */
-    float innovation[3];
 } pending_t;
 
 /* Rows first .. first + rows - 1 of the quad's three-term pass: their gains
  * g_k,i = h_k,i / S_k and state updates, the upper triangle of their diagonal
  * block, then every column to the right, where each h_j triple is loaded once
- * for all the group's rows (4 rows: 23 instructions per 4 elements, with the 12
+ * for all the group's rows (5 rows: 28 instructions per 5 elements, with the 15
  * gains in registers). Returns non-zero when a new variance of the group is
  * outside its [floor, ceiling]. */
 static inline __attribute__((always_inline)) uint32_t
-apply_row_group(float *restrict cov, float *restrict state,
+apply_row_group(float *restrict cov, propid_core_t *restrict core,
                 const pending_t *restrict pending, const propid_derived_t *restrict derived,
                 const uint8_t first, const uint8_t rows)
 {
+    float *state = core->state;
     const float *h0 = pending->h[0];
     const float *h1 = pending->h[1];
     const float *h2 = pending->h[2];
     const float inv0 = pending->inv_var[0];
     const float inv1 = pending->inv_var[1];
     const float inv2 = pending->inv_var[2];
-    const float nu0 = pending->innovation[0];
-    const float nu1 = pending->innovation[1];
-    const float nu2 = pending->innovation[2];
-    float gain[4][3];
+    const float nu0 = core->innovation[0];
+    const float nu1 = core->innovation[1];
+    const float nu2 = core->innovation[2];
+    float gain[5][3];
     uint32_t outside = 0u;
-#pragma GCC unroll 4
+#pragma GCC unroll 5
     for (uint8_t r = 0; r < rows; ++r) {
         const uint8_t i = (uint8_t)(first + r);
         gain[r][0] = h0[i] * inv0;
@@ -59,10 +59,10 @@ apply_row_group(float *restrict cov, float *restrict state,
         /* Summed from the state on: three multiply-adds. */
         state[i] = state[i] + gain[r][0] * nu0 + gain[r][1] * nu1 + gain[r][2] * nu2;
     }
-#pragma GCC unroll 4
+#pragma GCC unroll 5
     for (uint8_t r = 0; r < rows; ++r) {
         const uint8_t i = (uint8_t)(first + r);
-#pragma GCC unroll 4
+#pragma GCC unroll 5
         for (uint8_t c = r; c < rows; ++c) {
             const uint8_t j = (uint8_t)(first + c);
             float *p = &cov[propid_cov_index(i, j)];
@@ -82,7 +82,7 @@ apply_row_group(float *restrict cov, float *restrict state,
         const float hj0 = h0[j];
         const float hj1 = h1[j];
         const float hj2 = h2[j];
-#pragma GCC unroll 4
+#pragma GCC unroll 5
         for (uint8_t r = 0; r < rows; ++r) {
             float *p = &cov[propid_cov_index((uint32_t)first + r, j)];
             *p = *p - gain[r][0] * hj0 - gain[r][1] * hj1 - gain[r][2] * hj2;
@@ -92,8 +92,8 @@ apply_row_group(float *restrict cov, float *restrict state,
 }
 
 /* P_ij -= sum_k g_k,i h_k,j on the stored upper triangle, x += sum_k g_k nu_k,
- * for three pending terms of a quad: n constant, fully unrolled, four rows at a
- * time. Also tests every new variance against its floor and ceiling; returns 1
+ * for three pending terms of a quad: n constant, fully unrolled, rows in groups
+ * of 5 + 5 + 4. Also tests every new variance against its floor and ceiling; returns 1
  * when all are inside. Not inlined: with the covariance as its own pointer every
  * element is within the 1 KiB reach of a VFP load (from the filter's base the
  * compiler folds the offsets and needs an address computation per element).
@@ -102,13 +102,19 @@ apply_row_group(float *restrict cov, float *restrict state,
  * more per step with it, every element still one load, three multiply-adds and
  * one store). */
 static __attribute__((noinline)) PROPID_NO_EARLY_SCHEDULE int
-apply_three_quad(float *restrict cov, float *restrict state, const pending_t *restrict pending,
+apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *restrict pending,
                  const propid_derived_t *restrict derived)
 {
-    uint32_t outside = apply_row_group(cov, state, pending, derived, 0u, 4u);
-    outside |= apply_row_group(cov, state, pending, derived, 4u, 4u);
-    outside |= apply_row_group(cov, state, pending, derived, 8u, 4u);
-    outside |= apply_row_group(cov, state, pending, derived, 12u, 2u);
+    /* Each group loads the vectors' values it needs: without the barriers the
+     * compiler keeps the ones an earlier group loaded alive for the later groups
+     * and spills them (groups of 4 + 4 + 4 + 2 rows: 77 spill stores and reloads,
+     * 80 B of stack, 12 instructions more per step than with the barriers; with
+     * them and no spill, 5 + 5 + 4 rows saves 9 more; 7 + 7 spills again, 887). */
+    uint32_t outside = apply_row_group(cov, core, pending, derived, 0u, 5u);
+    PROPID_RELOAD_BARRIER(pending->h);
+    outside |= apply_row_group(cov, core, pending, derived, 5u, 5u);
+    PROPID_RELOAD_BARRIER(pending->h);
+    outside |= apply_row_group(cov, core, pending, derived, 10u, 4u);
     return outside == 0u;
 }
 
@@ -124,8 +130,9 @@ static void reanchor_rate(propid_filter_t *filter, uint8_t axis, uint8_t bias, f
 
 /* One axis through the generic scalar update: gate, and after
  * gate_max_consecutive gated samples in a row the re-anchor. Returns 1 when the
- * axis was gated out. */
-static uint32_t fuse_axis(propid_filter_t *filter, uint8_t axis, float measured)
+ * axis was gated out. Not inlined into fuse_generic: the two calls' locals stay
+ * in one frame per axis (the per-axis path's stack: 32 B less). */
+static __attribute__((noinline)) uint32_t fuse_axis(propid_filter_t *filter, uint8_t axis, float measured)
 {
     propid_core_t *core = &filter->core;
     const propid_derived_t *derived = &filter->derived;
@@ -238,6 +245,10 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
     float *h1 = pending->h[1];
     float *h2 = pending->h[2];
     float check = 0.0f;
+    /* The vectors' elements 0..2 and 11..13 sum P values the scalars above
+     * loaded already: loaded again here, not kept alive through the loop
+     * (spilled, that was 60 B more stack for 5 instructions fewer). */
+    PROPID_SCHEDULE_BARRIER();
 #pragma GCC unroll 14
     for (uint8_t i = 0; i < PROPID_QUAD_STATES; ++i) {
         const float value0 = PROPID_P(0, i) + PROPID_P(b0, i);
@@ -262,13 +273,9 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
     core->gated_run[0] = 0u;
     core->gated_run[1] = 0u;
     core->gated_run[2] = 0u;
-    pending->innovation[0] = nu0;
-    pending->innovation[1] = nu1;
-    pending->innovation[2] = nu2;
     pending->inv_var[0] = inv0;
     pending->inv_var[1] = inv1;
     pending->inv_var[2] = inv2;
-    pending->count = 3u;
     return 1;
 }
 
@@ -340,19 +347,21 @@ fuse_usual_any(const float *restrict cov, propid_core_t *restrict core,
         core->innovation[a] = nu[a];
         core->innovation_test_ratio[a] = nu_sq[a] * inv[a] * derived->inv_gate_sq;
         core->gated_run[a] = 0u;
-        pending->innovation[a] = nu[a];
         pending->inv_var[a] = inv[a];
     }
-    pending->count = 3u;
     return 1;
 }
 
 /* P_ij -= sum_k g_k,i h_k,j on the stored upper triangle, x += sum_k g_k nu_k, for
  * any n; returns 1 when every new variance is inside its floor and ceiling. */
 static __attribute__((noinline)) int
-apply_three_any(float *restrict cov, float *restrict state,
+apply_three_any(float *restrict cov, propid_core_t *restrict core,
                 const pending_t *restrict pending, const propid_derived_t *restrict derived)
 {
+    float *state = core->state;
+    const float nu0 = core->innovation[0];
+    const float nu1 = core->innovation[1];
+    const float nu2 = core->innovation[2];
     const uint8_t n = derived->state_count;
     const float *h0 = pending->h[0];
     const float *h1 = pending->h[1];
@@ -363,7 +372,7 @@ apply_three_any(float *restrict cov, float *restrict state,
         const float g0 = h0[i] * pending->inv_var[0];
         const float g1 = h1[i] * pending->inv_var[1];
         const float g2 = h2[i] * pending->inv_var[2];
-        state[i] += g0 * pending->innovation[0] + g1 * pending->innovation[1] + g2 * pending->innovation[2];
+        state[i] += g0 * nu0 + g1 * nu1 + g2 * nu2;
         float *row = diagonal - i; /* row[j] = P_ij, j >= i */
         for (uint8_t j = i; j < n; ++j) {
             row[j] = row[j] - g0 * h0[j] - g1 * h1[j] - g2 * h2[j];
@@ -410,14 +419,14 @@ static __attribute__((noinline)) int fuse_one_pass(propid_filter_t *filter, cons
         if (!fuse_usual_any(cov, core, derived, &pending, gyro)) {
             return 0;
         }
-        inside = apply_three_any(core->cov, core->state, &pending, derived);
+        inside = apply_three_any(core->cov, core, &pending, derived);
     } else
 #endif
     {
         if (!fuse_quad_usual(cov, core, derived, &pending, gyro)) {
             return 0;
         }
-        inside = apply_three_quad(core->cov, core->state, &pending, derived);
+        inside = apply_three_quad(core->cov, core, &pending, derived);
     }
     /* Variance floors and ceilings: tested inside the pass; the full pass (which
      * also repairs) only when one is outside. */

@@ -115,6 +115,14 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
  * GNU inline assembly (GCC, clang and the clang-based Arm Compiler 6);
  * nothing elsewhere.
  *
+ * PROPID_RELOAD_BARRIER(object): `object` (a local array or struct) counts as
+ * rewritten here, no instruction emitted: values loaded from it before are
+ * loaded again after it, and values stored into it stay in memory, instead of
+ * being held in registers across it. For kernels that need more values than
+ * the 32 FPU registers hold: what the compiler would otherwise keep alive
+ * costs a spill store and reload (and stack) each. GNU inline assembly, as
+ * above; nothing elsewhere.
+ *
  * PROPID_NO_EARLY_SCHEDULE: a whole kernel compiled without GCC's scheduling
  * pass before register allocation (-fschedule-insns), for straight-line
  * kernels whose hoisted loads outlive the FPU registers. GCC only: clang
@@ -124,8 +132,10 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
  */
 #if defined(__GNUC__)
 #define PROPID_SCHEDULE_BARRIER() __asm__ volatile("" ::: "memory")
+#define PROPID_RELOAD_BARRIER(object) __asm__ volatile("" : "+m"(object))
 #else
 #define PROPID_SCHEDULE_BARRIER() ((void)0)
+#define PROPID_RELOAD_BARRIER(object) ((void)0)
 #endif
 #if defined(__GNUC__) && !defined(__clang__)
 #define PROPID_NO_EARLY_SCHEDULE __attribute__((optimize("no-schedule-insns")))
