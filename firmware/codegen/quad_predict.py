@@ -142,6 +142,12 @@ def generate() -> str:
                 emit(f"        rate_col{a}[{j}] = t{a};")
                 rate_cols[(a, j)] = t[a]
             emit("        PROPID_SCHEDULE_BARRIER();")
+            if j == FIRST_THRUST - 1:
+                # In memory until the rate block: held in registers through the
+                # coefficient columns they were spilled (4 instructions more).
+                emit("        PROPID_RELOAD_BARRIER(rate_col0);")
+                emit("        PROPID_RELOAD_BARRIER(rate_col1);")
+                emit("        PROPID_RELOAD_BARRIER(rate_col2);")
             emit("    }")
             continue
         # The coefficient columns' share of the rate block (T F^T)_ab, b >= a.
@@ -206,7 +212,8 @@ def generate() -> str:
  * rate rows only: column by column, the 11 non-bias P_cj loaded once for the
  * three rows of T = F_rate P, the 18 G entries in registers, the rate block's
  * coefficient-column terms collected during the sweep; the rate columns (j < 3)
- * go to locals first because later columns overwrite rows 0..2. Every element
+ * go to a local array (kept in memory) first because later columns overwrite
+ * rows 0..2. Every element
  * written was checked against the model's F P F^T + Q by the generator. */
 #ifndef PROPID_QUAD_PREDICT_H
 #define PROPID_QUAD_PREDICT_H

@@ -239,8 +239,9 @@ propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_
     return PROPID_OK;
 }
 
-/* Round-robin integrity check: one covariance row per accepted gyro sample. */
-static void check_next_row(propid_filter_t *filter)
+/* Round-robin integrity check: one covariance row per accepted gyro sample
+ * (inlined: a call level less on every step). */
+static inline __attribute__((always_inline)) void check_next_row(propid_filter_t *filter)
 {
     propid_core_t *core = &filter->core;
     const propid_derived_t *derived = &filter->derived;
@@ -275,6 +276,32 @@ static __attribute__((noinline)) propid_status_t predict_step(propid_filter_t *f
     core->state[0] = rate_next[0];
     core->state[1] = rate_next[1];
     core->state[2] = rate_next[2];
+    return PROPID_OK;
+}
+
+/* The first sample after init, reset or resync only anchors the clock (no
+ * prediction): the state's finiteness test (a non-finite state returns
+ * PROPID_ERR_NUMERIC with nothing written) and the row check, then the rates
+ * start at this sample (the prior mean of omega given y = omega + b): its
+ * innovation is then zero, so it is fused whatever the rate, and the bias is
+ * not pulled by an unknown initial rate. Not inlined: this rare path's frame
+ * stays off the usual step's. */
+static __attribute__((noinline)) propid_status_t anchor_step(propid_filter_t *filter, const float gyro_rad_s[3])
+{
+    propid_core_t *core = &filter->core;
+    float check = 0.0f;
+    for (uint8_t k = 0; k < filter->derived.state_count; ++k) {
+        check += core->state[k];
+    }
+    if (!isfinite(check)) {
+        return PROPID_ERR_NUMERIC;
+    }
+    core->health &= ~(PROPID_HEALTH_GATED | PROPID_HEALTH_STATE_CLAMPED);
+    check_next_row(filter);
+    const uint8_t first_bias = propid_first_bias(filter->config.rotor_count);
+    for (uint8_t a = 0; a < 3u; ++a) {
+        core->state[a] = gyro_rad_s[a] - core->state[first_bias + a];
+    }
     return PROPID_OK;
 }
 
@@ -394,30 +421,9 @@ static __attribute__((noinline)) propid_status_t fuse_gyro_timed(propid_filter_t
         return reject(filter, PROPID_ERR_ROTOR_STALE);
     }
 
-    if (!anchor) {
-        if (predict_step(filter, dt) != PROPID_OK) {
-            return reject(filter, PROPID_ERR_NUMERIC);
-        }
-    } else {
-        /* The first sample only anchors the clock (no prediction). */
-        float check = 0.0f;
-        for (uint8_t k = 0; k < filter->derived.state_count; ++k) {
-            check += core->state[k];
-        }
-        if (!isfinite(check)) {
-            return reject(filter, PROPID_ERR_NUMERIC);
-        }
-        core->health &= ~(PROPID_HEALTH_GATED | PROPID_HEALTH_STATE_CLAMPED);
-        check_next_row(filter);
-    }
-    if (anchor) {
-        /* The rates start at this sample (the prior mean of omega given y = omega
-         * + b): its innovation is then zero, so it is fused whatever the rate,
-         * and the bias is not pulled by an unknown initial rate. */
-        const uint8_t first_bias = propid_first_bias(config->rotor_count);
-        for (uint8_t a = 0; a < 3u; ++a) {
-            core->state[a] = gyro_rad_s[a] - core->state[first_bias + a];
-        }
+    const propid_status_t stepped = anchor ? anchor_step(filter, gyro_rad_s) : predict_step(filter, dt);
+    if (stepped != PROPID_OK) {
+        return reject(filter, PROPID_ERR_NUMERIC);
     }
     /* Accepted: the filter has changed (prediction); now the measurement. */
     const uint32_t gated_mask = propid_update_gyro(filter, gyro_rad_s);

@@ -6,7 +6,8 @@
  * rate rows only: column by column, the 11 non-bias P_cj loaded once for the
  * three rows of T = F_rate P, the 18 G entries in registers, the rate block's
  * coefficient-column terms collected during the sweep; the rate columns (j < 3)
- * go to locals first because later columns overwrite rows 0..2. Every element
+ * go to a local array (kept in memory) first because later columns overwrite
+ * rows 0..2. Every element
  * written was checked against the model's F P F^T + Q by the generator. */
 #ifndef PROPID_QUAD_PREDICT_H
 #define PROPID_QUAD_PREDICT_H
@@ -60,6 +61,9 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         rate_col1[2] = t1;
         rate_col2[2] = t2;
         PROPID_SCHEDULE_BARRIER();
+        PROPID_RELOAD_BARRIER(rate_col0);
+        PROPID_RELOAD_BARRIER(rate_col1);
+        PROPID_RELOAD_BARRIER(rate_col2);
     }
     { /* column 3 */
         const float p0 = cov[propid_cov_index(0u, 3u)], p1 = cov[propid_cov_index(1u, 3u)], p2 = cov[propid_cov_index(2u, 3u)];
