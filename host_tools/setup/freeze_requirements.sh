@@ -2,10 +2,17 @@
 # Regenerate requirements.txt: every package of a clean venv pinned, with the
 # sha256 of the wheel pip picks on this platform (CPython 3.11, Linux x86_64).
 # Run it by hand when a dependency must change; `make setup` only reads the result.
+# With --bench it writes bench-requirements.txt instead: RotorPy and everything it
+# pulls in, for the bench-only venv of `make bench` (its speed depends on numpy/scipy).
 #
-#   host_tools/setup/freeze_requirements.sh [python3]
+#   host_tools/setup/freeze_requirements.sh [--bench] [python3]
 set -euo pipefail
 
+out_name=requirements.txt
+if [ "${1:-}" = "--bench" ]; then
+    out_name=bench-requirements.txt
+    shift
+fi
 python=${1:-python3}
 here=$(cd "$(dirname "$0")" && pwd)
 work=$(mktemp -d)
@@ -15,6 +22,8 @@ trap 'rm -rf "$work"' EXIT
 # orangebox 0.5.0's wheel declares invalid console-script entry points that
 # pip refuses to install, so we stay on 0.4.0.
 top_level=(numpy matplotlib pymavlink tqdm "orangebox==0.4.0" pyulog sympy pytest hypothesis setuptools wheel pip)
+# The bench compares against RotorPy at a fixed version (tests/bench/bench.py ROTORPY_VERSION).
+[ "$out_name" = requirements.txt ] || top_level=("rotorpy==3.0.0" pip)
 
 "$python" -m venv "$work/venv"
 "$work/venv/bin/python" -m pip install -q --upgrade pip
@@ -35,6 +44,6 @@ top_level=(numpy matplotlib pymavlink tqdm "orangebox==0.4.0" pyulog sympy pytes
         echo "$pin \\"
         echo "    --hash=sha256:$hash"
     done < "$work/freeze.txt"
-} > "$here/requirements.txt.new"
-mv "$here/requirements.txt.new" "$here/requirements.txt"
-echo "wrote $here/requirements.txt"
+} > "$here/$out_name.new"
+mv "$here/$out_name.new" "$here/$out_name"
+echo "wrote $here/$out_name"

@@ -36,6 +36,7 @@ Prints a table and writes every figure to --out (default BUILD/results/bench.jso
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import pathlib
@@ -313,16 +314,19 @@ def bench_sitl(build: pathlib.Path, work: pathlib.Path) -> dict:
 def bench_rotorpy(repo: pathlib.Path, build: pathlib.Path, sitl: dict | None) -> dict:
     venv = build / "bench-venv"
     python = venv / "bin/python"
-    result: dict = {"rotorpy_pinned": ROTORPY_VERSION}
+    # RotorPy's speed depends on numpy/scipy: the bench venv installs every package
+    # pinned with its hash (host_tools/setup/bench-requirements.txt), rebuilt when the pins change.
+    pins = repo / "host_tools/setup/bench-requirements.txt"
+    stamp = venv / "bench-requirements.sha256"
+    wanted = hashlib.sha256(pins.read_bytes()).hexdigest()
+    result: dict = {"rotorpy_pinned": ROTORPY_VERSION, "rotorpy_requirements": str(pins.relative_to(repo))}
     try:
-        if not python.exists() or subprocess.run(
-                [str(python), "-c", f"import importlib.metadata as m; "
-                 f"assert m.version('rotorpy') == '{ROTORPY_VERSION}'"],
-                capture_output=True).returncode != 0:
-            say(f"installing rotorpy=={ROTORPY_VERSION} into {venv} (bench only)...")
-            run([sys.executable, "-m", "venv", str(venv)])
+        if not python.exists() or not stamp.exists() or stamp.read_text().strip() != wanted:
+            say(f"installing rotorpy=={ROTORPY_VERSION} and its pinned dependencies into {venv} (bench only)...")
+            run([sys.executable, "-m", "venv", "--clear", str(venv)])
             run([str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
-                 f"rotorpy=={ROTORPY_VERSION}"])
+                 "--require-hashes", "--only-binary=:all:", "-r", str(pins)])
+            stamp.write_text(wanted + "\n")
     except (subprocess.CalledProcessError, OSError) as error:
         detail = getattr(error, "stderr", "") or str(error)
         result["rotorpy_error"] = f"rotorpy {ROTORPY_VERSION} could not be installed: " + \
