@@ -35,6 +35,11 @@
  * them absorb more of the unmodelled effect, which in closed-loop SITL made
  * their error several times larger).
  *
+ * The monitor also vouches for "converged" claims (propid_get_estimate): a
+ * claim needs passed_windows > 0 (a full window passed since the start or the
+ * last inconsistent one) and the coefficient's bit in steady_coeff (its change
+ * in the last window within PROPID_CLAIM_DRIFT_Z of the explained std).
+ *
  * Gated axes are not counted: they were not fused (faults have their own
  * counters). Cost: three adds and a compare per gyro sample; per window one
  * pass over the coefficients. */
@@ -49,6 +54,10 @@
 #define PROPID_CONSISTENCY_CLEAR_WINDOWS 10u
 #define PROPID_CONSISTENCY_NIS_Z 4.0f
 #define PROPID_CONSISTENCY_DRIFT_Z 4.5f
+/* A coefficient is "steady" for a converged claim when its change over the last
+ * window is within 3 std of the change its updates explain (two-sided 0.27 % of
+ * the windows of a consistent filter lose the claim for one window). */
+#define PROPID_CLAIM_DRIFT_Z 3.0f
 
 /* Upper z-quantile of chi-square(k), Wilson-Hilferty: k (1 - c + z sqrt(c))^3, c = 2 / (9k). */
 static float chi_square_upper(float k, float z)
@@ -93,6 +102,8 @@ void propid_consistency_reset(propid_filter_t *filter)
     monitor->nis_count = 0u;
     monitor->started = 0u;
     monitor->clean_windows = 0u;
+    monitor->passed_windows = 0u;
+    monitor->steady_coeff = 0u;
     monitor->flagged = 0u;
     monitor->last_mean_nis = 0.0f;
     monitor->last_drift = 0.0f;
@@ -102,6 +113,8 @@ void propid_consistency_reset(propid_filter_t *filter)
 void propid_consistency_restart(propid_filter_t *filter)
 {
     filter->consistency.started = 0u;
+    filter->consistency.passed_windows = 0u;
+    filter->consistency.steady_coeff = 0u;
 }
 
 /* End of a window: both tests and the flag. */
@@ -123,14 +136,25 @@ static void close_window(propid_filter_t *filter)
 
     const float elapsed_s = (float)(uint32_t)(core->time_us - monitor->start_time_us) * 1.0e-6f;
     const float drift_bound = PROPID_CONSISTENCY_DRIFT_Z * PROPID_CONSISTENCY_DRIFT_Z;
+    const float steady_bound = PROPID_CLAIM_DRIFT_Z * PROPID_CLAIM_DRIFT_Z;
+    uint16_t steady = 0u;
     float worst = 0.0f;
     for (uint8_t c = 0; c < count; ++c) {
         const uint8_t k = (uint8_t)(first + c);
-        const float removed = monitor->start_var[c] + propid_process_psd(derived, k) * elapsed_s - core->cov[propid_cov_index(k, k)];
-        if (!(removed > propid_var_floor(derived, k))) {
+        const float var_end = core->cov[propid_cov_index(k, k)];
+        const float removed = monitor->start_var[c] + propid_process_psd(derived, k) * elapsed_s - var_end;
+        const float change = core->state[k] - monitor->start_coeff[c];
+        /* Steady (for a claim): within 3 explained std; down to the variance floor
+         * (the resolution of P) when the window explained less: a coefficient
+         * about which nothing was learnt should not move. */
+        const float floor = propid_var_floor(derived, k);
+        const float explained = removed > floor ? removed : floor;
+        if (change * change <= steady_bound * explained) {
+            steady |= (uint16_t)(1u << c);
+        }
+        if (!(removed > floor)) {
             continue; /* nothing learnt about it (or its variance was reset): no test */
         }
-        const float change = core->state[k] - monitor->start_coeff[c];
         const float drift = change * change / removed;
         worst = drift > worst ? drift : worst;
         if (drift > drift_bound) {
@@ -138,13 +162,18 @@ static void close_window(propid_filter_t *filter)
         }
     }
     monitor->last_drift = worst;
+    monitor->steady_coeff = steady;
 
     if (inconsistent) {
         filter->counters.model_mismatch++;
         monitor->flagged = 1u;
         monitor->clean_windows = 0u;
+        monitor->passed_windows = 0u;
         filter->core.health |= PROPID_HEALTH_MODEL_MISMATCH;
-    } else if (monitor->flagged) {
+    } else {
+        monitor->passed_windows = (uint16_t)(monitor->passed_windows < 0xFFFFu ? monitor->passed_windows + 1u : 0xFFFFu);
+    }
+    if (!inconsistent && monitor->flagged) {
         monitor->clean_windows++;
         if (monitor->clean_windows >= PROPID_CONSISTENCY_CLEAR_WINDOWS) {
             monitor->flagged = 0u;

@@ -6,6 +6,12 @@
 
 #include "propid_internal.h"
 
+/* A "converged" claim (docs/reliability.md "Converged claims"): the coefficient's
+ * relative error is below converged_rel_std. With an honest Gaussian std that
+ * holds with 99.73 % when PROPID_CLAIM_SIGMAS std < converged_rel_std (the old
+ * rule, 1 std, failed 32 % of the claims it could make at the threshold). */
+#define PROPID_CLAIM_SIGMAS 3.0f
+
 static float std_of(float variance)
 {
     return variance > 0.0f ? sqrtf(variance) : 0.0f;
@@ -38,6 +44,7 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         estimate->innovation_test_ratio[a] = core->innovation_test_ratio[a];
     }
     uint16_t all_rotors = 0u;
+    const float claim_var = derived->converged_var * (1.0f / (PROPID_CLAIM_SIGMAS * PROPID_CLAIM_SIGMAS));
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const uint8_t kf = (uint8_t)(propid_first_thrust() + i);
         const uint8_t km = (uint8_t)(first_drag + i);
@@ -58,10 +65,10 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         if (km_var < 0.25f * propid_prior_var(derived, km)) {
             estimate->drag_coeff_converging |= bit;
         }
-        if (kf_var < derived->converged_var) {
+        if (kf_var < claim_var) {
             estimate->thrust_coeff_converged |= bit;
         }
-        if (km_var < derived->converged_var) {
+        if (km_var < claim_var) {
             estimate->drag_coeff_converged |= bit;
         }
     }
@@ -105,6 +112,19 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     terms |= config->rotor_delay_us != 0 ? PROPID_TERM_ESC_DELAY : 0u;
     estimate->model_terms = terms;
     estimate->rotor_delay_us = config->rotor_delay_us;
+#if PROPID_CONSISTENCY
+    {
+        /* And the data vouch for the std: at least one full window of the
+         * consistency monitor passed since the start (or the last mismatch),
+         * and in the last window the coefficient moved by no more than
+         * PROPID_CLAIM_DRIFT_Z of the std its updates explain
+         * (propid_consistency.c). */
+        const propid_consistency_t *monitor = &filter->consistency;
+        const uint16_t steady = monitor->passed_windows > 0u ? monitor->steady_coeff : 0u;
+        estimate->thrust_coeff_converged &= (uint16_t)(steady & all_rotors);
+        estimate->drag_coeff_converged &= (uint16_t)((uint32_t)steady >> rotor_count & all_rotors);
+    }
+#endif
     uint32_t health = core->health;
     if (health & PROPID_HEALTH_MODEL_MISMATCH) {
         /* The innovations say the model misses something: a small std is then

@@ -639,8 +639,10 @@ class ReferenceFilter:
         def mask(condition: np.ndarray) -> int:
             return int(np.sum(bits[condition]))
 
-        kf_converged = mask(var[kf] < self.converged_var)
-        km_converged = mask(var[km] < self.converged_var)
+        # C (propid_estimate.c): converged when 3 std < converged_rel_std; the C filter
+        # also asks its consistency monitor to vouch, which this reference does not have.
+        kf_converged = mask(9.0 * var[kf] < self.converged_var)
+        km_converged = mask(9.0 * var[km] < self.converged_var)
         health = self.health
         if not self.has_rotor_data:
             health |= HEALTH["NO_ROTOR_DATA"]

@@ -172,7 +172,7 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
            "unrecovered": 0, "losses_from_accurate": 0, "recovered_from_accurate": 0,
            "lost_rotor_recovered": 0, "max_lost_rotor_recovery_s": None, "nees_in_bounds_pct": None, "nees_samples": 0, "nees_by_group": {},
            "false_converged": 0, "converged_claims": 0, "false_converged_pct": None,
-           "false_converged_by_group": {}, "nees_flights": [],
+           "false_converged_by_group": {}, "false_converged_flights": [], "nees_flights": [],
            "cov_repairs": 0, "model_mismatch_windows": 0, "diverged_filter": 0, "diverged_oracle": 0,
            "filter_only_diverged": 0, "errors": []}
     nees_in = nees_all = 0
@@ -209,6 +209,12 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
             claims[0] += int(honesty.get("false_converged", 0))
             claims[1] += int(honesty.get("converged_claims", 0))
             claims[2] += 1
+            if int(honesty.get("false_converged", 0)):
+                out["false_converged_flights"].append({
+                    "case": case["case"], "vehicle": case["vehicle"], "trajectory": case["trajectory"],
+                    "sensors": case["sensors"], "tuning": case["tuning"], "effects": case["effects"],
+                    "faults": case["faults"], "damage": case["damage"],
+                    "false": int(honesty.get("false_converged", 0)), "claims": int(honesty.get("converged_claims", 0))})
             out["rotor_losses"] += int(honesty.get("coefficient_changes", 0))
             out["unrecovered"] += int(honesty.get("unrecovered", 0))
             recovery = honesty.get("max_recovery_s")
@@ -330,7 +336,7 @@ def main(argv: list[str] | None = None) -> int:
     Path(args.out).write_text(json.dumps(figures, indent=2) + "\n", encoding="utf-8")
     width = max(len(k) for k in figures)
     for key, value in figures.items():
-        if key in ("errors", "nees_flights"):
+        if key in ("errors", "nees_flights", "false_converged_flights"):
             value = len(value)
         print(f"{key:<{width}}  {json.dumps(value) if isinstance(value, (dict, list)) else value}")
     print(f"soak: {args.out}")

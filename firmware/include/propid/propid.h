@@ -120,7 +120,8 @@ typedef struct {
     uint32_t max_gyro_gap_us;         /* longer gap between gyro samples is a time jump */
     float coeff_rel_min;              /* clamp of kf/kf_nom and km/km_nom, e.g. 0.05 */
     float coeff_rel_max;              /* e.g. 5 */
-    float converged_rel_std;          /* a coefficient is converged below this relative std */
+    float converged_rel_std;          /* relative error a "converged" claim bounds: claimed when 3 x the
+                                         relative std is below it and the consistency monitor vouches */
 
     /* Optional model terms and sensors (docs/math.md §7-9). Each is off at its
      * default: the plain filter is the 6 + 2N state one above. */
@@ -342,6 +343,8 @@ typedef struct {
     uint8_t started;                                /* the window has its start snapshot */
     uint8_t flagged;                                /* PROPID_HEALTH_MODEL_MISMATCH is up */
     uint16_t clean_windows;                         /* consistent windows since the last inconsistent one */
+    uint16_t passed_windows;                        /* consistent windows in a row (saturating) */
+    uint16_t steady_coeff;                          /* bit c: coefficient c's last-window change within its claim bound */
     float last_mean_nis;                            /* mean nu^2 / S of the last window */
     float last_drift;                               /* largest Delta^2 / D of the last window */
 } propid_consistency_t;
@@ -440,7 +443,7 @@ typedef struct {
     float innovation[3];                              /* last gyro innovation [rad/s] */
     float innovation_test_ratio[3];                   /* innovation^2 / (gate^2 * S) */
     uint16_t thrust_coeff_converging;                 /* bit i: std below half its prior */
-    uint16_t thrust_coeff_converged;                  /* bit i: rel std < converged_rel_std */
+    uint16_t thrust_coeff_converged;                  /* bit i: 3 rel std < converged_rel_std, monitor vouches */
     uint16_t drag_coeff_converging;
     uint16_t drag_coeff_converged;
     uint32_t health;                                  /* PROPID_HEALTH_* */

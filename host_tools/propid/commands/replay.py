@@ -32,7 +32,8 @@ OVERRIDES = [
     ("gyro_range", float, "|gyro| above this is a saturated sensor [rad/s]"),
     ("rotor_stale_us", int, "rotor data older than this at a gyro sample is stale [us]"),
     ("max_gyro_gap_us", int, "a longer gap between gyro samples is a time jump (resync) [us]"),
-    ("converged_rel_std", float, "a coefficient is converged below this relative std"),
+    ("converged_rel_std", float, "relative error a converged claim bounds (claimed at 3 std below it); "
+                              "the averaging window starts at 1 std below it"),
 ]
 
 

@@ -19,8 +19,9 @@ A gyro push answered with PROPID_ERR_TIME_JUMP (a gap, e.g. a cut-out segment) i
 followed by propid_resync() at that time and pushed again.
 
 Definitions used in the output (docs/real-data.md):
-- converged part of a coefficient: from the first replayed gyro sample at which the
-  filter reports it converged (relative std below config.converged_rel_std) to the end;
+- converged part of a coefficient: from the first replayed gyro sample at which its
+  relative std falls below config.converged_rel_std to the end (the filter's own
+  "converged" flag asks 3 std below it and the consistency monitor's vouching);
   kf_mean/km_mean average the estimate over it. A coefficient that never converges is
   averaged over the second half of the replayed samples and flagged converged = false.
 - unit-inertia mode (vehicle without inertia, e.g. the Betaflight file): the filter

@@ -134,9 +134,10 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
                 rec_bg.append(est["gyro_bias"])
                 rec_bgs.append(est["gyro_bias_std"])
                 rec_rate.append(est["body_rate"])
-                # The averaging window starts where the std says converged, whatever
-                # the model-mismatch flag says (the flag withdraws the claim, the
-                # estimate is the same).
+                # The averaging window starts where the relative std first falls below
+                # converged_rel_std (one std: the estimate has settled), whatever the
+                # filter's claim says (that asks 3 std and the consistency monitor's
+                # vouching, docs/reliability.md; the estimate is the same).
                 rec_conv_kf.append([est["thrust_coeff_std"][k] < converged_rel_std * kf_nominal[k] for k in range(n)])
                 rec_conv_km.append([est["drag_coeff_std"][k] < converged_rel_std * km_nominal[k] for k in range(n)])
                 rec_nis.append(est["innovation_test_ratio"] if status >= 0 else [np.nan] * 3)
