@@ -78,7 +78,12 @@ def test_synthetic_replay_recovers_known_coefficients(cfilter_available, tmp_pat
     # per-rotor kf within 5 % of the truth, km within 15 %
     np.testing.assert_allclose(s["kf_mean"], KF_TRUE, rtol=0.05)
     np.testing.assert_allclose(s["km_mean"], KM_TRUE, rtol=0.15)
-    assert all(s["converged"]["kf"])
+    # The filter's claims follow its rule: 3 std below converged_rel_std (5 %) of the
+    # nominal, the consistency monitor vouching (no mismatch on this model-true log).
+    # After 20 s kf's std is ~2 %: an error up to ~6 % is possible, so no claim.
+    assert not s["model_mismatch"]
+    for name, nominal in (("kf", VEHICLE["kf_nominal"]), ("km", VEHICLE["km_nominal"])):
+        assert s["converged"][name] == [bool(3.0 * std < 0.05 * nominal) for std in s[f"{name}_std"]]
     # A constant gyro bias and a constant body rate look alike to a gyro-only model (only
     # w x Jw tells them apart), so the bias must stay uncertain: its std may not collapse.
     assert all(0.5 * 0.05 < std < 0.06 for std in s["gyro_bias_std"])
@@ -136,7 +141,9 @@ def test_unit_inertia_mode_estimates_kf_over_j(cfilter_available):
     assert s["mode"] == "unit_inertia" and s["finite"]
     # Jxx = Jyy, so the roll/pitch "kf" is kf/Jxx
     np.testing.assert_allclose(s["kf_mean"], KF_TRUE / VEHICLE["inertia"][0], rtol=0.05)
-    assert all(s["converged"]["kf"])
+    # never claimed while its std allows an error beyond 5 % (3 std, nominal ~ estimate)
+    for k in range(4):
+        assert not s["converged"]["kf"][k] or 3.0 * s["kf_std"][k] < 0.06 * s["kf_mean"][k]
     # yaw "km" is km/Jzz; its prior comes from a weak least-squares fit here, and the
     # filter must not claim convergence on a value that is off
     km_true = KM_TRUE / VEHICLE["inertia"][2]
