@@ -241,20 +241,24 @@ static void derive_quad_layout(const propid_config_t *config, const geometry_t *
     for (uint8_t a = 0; a < 3u; ++a) {
         for (uint8_t p = 0; p < (uint8_t)PROPID_QUAD_JAC_ENTRIES; ++p) {
             const uint8_t i = (uint8_t)(p - 2u);
-            out->jac_torque[a][p] = p < 2u ? 0.0f : (a < 2u ? geo->thrust_torque[i][a] : geo->drag_torque[i][a]);
 #if PROPID_GENERAL_VEHICLES
+            out->jac_torque[a][p] = p < 2u ? 0.0f : (a < 2u ? geo->thrust_torque[i][a] : geo->drag_torque[i][a]);
             out->jac_column[a][p] = propid_quad_layout_column(a, p);
             out->jac_rotor[a][p] = p < 2u ? 0u : i;
+#else
+            if (p >= 2u) {
+                out->jac_torque[a][i] = a < 2u ? geo->thrust_torque[i][a] : geo->drag_torque[i][a];
+            }
 #endif
         }
 #if PROPID_GENERAL_VEHICLES
         out->jac_rate_count[a] = 2u;
         out->jac_count[a] = (uint8_t)PROPID_QUAD_JAC_ENTRIES;
 #endif
-        for (uint8_t p = 0; p < 2u; ++p) {
-            const uint8_t b = propid_quad_layout_column(a, p);
-            out->quad_gyro[a][p] = geo->gyro_jacobian[a][b][3u - a - b];
-        }
+        /* gyro_jacobian[a][b][c] is symmetric in b and c (the same two cross
+         * products summed in either order): one value per row. */
+        const uint8_t b = propid_quad_layout_column(a, 0u);
+        out->quad_gyro[a] = geo->gyro_jacobian[a][b][3u - a - b];
     }
 }
 
@@ -640,7 +644,6 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         uint32_t high_bits;
         memcpy(&low_bits, &out.gyro_var, sizeof(low_bits));
         memcpy(&high_bits, &s_max, sizeof(high_bits));
-        out.innovation_var_bits = low_bits;
         out.innovation_range_bits = high_bits - low_bits;
     }
     out.converged_var = config->converged_rel_std * config->converged_rel_std;
@@ -744,7 +747,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
                        : k == out.layout.torque_scale ? "torque_scale_std0" : "disturbance_std0");
         }
         /* (A kind's values do not depend on k: the last write is the first's.) */
+#if PROPID_GENERAL_VEHICLES
         out.state_kind[k] = kind;
+#endif
         out.kind_prior_var[kind] = prior;
         out.kind_process_psd[kind] = psd;
         /* Both positive and finite, floor <= ceiling: their bit patterns are ordered. */

@@ -19,13 +19,22 @@
 #include "propid_internal.h"
 
 
-/* The three pending vectors h[a] = P H_a^T (the quad step's largest stack
- * object: 3 x 14 floats in the quad build); their innovations are the ones
- * recorded in core->innovation. */
+/* The quad's pending vectors h[a] = P H_a^T of axes 0 and 1 (the quad step's
+ * largest stack object: 2 x 14 floats); axis 2's is core->update_vector, in the
+ * filter object (off the stack: the one pass's chain is the step's deepest).
+ * Their innovations are the ones recorded in core->innovation. */
 typedef struct {
-    float h[3][PROPID_MAX_STATES];      /* P H^T of each pending axis (its gain is h / S) */
+    float h[2][PROPID_MAX_STATES];      /* P H^T of pending axes 0 and 1 (the gain is h / S) */
     float inv_var[3];                   /* 1 / S: the gain is g = h / S */
 } pending_t;
+
+#if PROPID_GENERAL_VEHICLES
+/* The general path's three pending vectors (any state count), on the stack. */
+typedef struct {
+    float h[3][PROPID_MAX_STATES];
+    float inv_var[3];
+} pending_any_t;
+#endif
 
 /* Rows first .. first + rows - 1 of the quad's three-term pass: their gains
  * g_k,i = h_k,i / S_k and state updates, the upper triangle of their diagonal
@@ -41,7 +50,7 @@ apply_row_group(float *restrict cov, propid_core_t *restrict core,
     float *state = core->state;
     const float *h0 = pending->h[0];
     const float *h1 = pending->h[1];
-    const float *h2 = pending->h[2];
+    const float *h2 = core->update_vector;
     const float inv0 = pending->inv_var[0];
     const float inv1 = pending->inv_var[1];
     const float inv2 = pending->inv_var[2];
@@ -112,8 +121,10 @@ apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *r
      * them and no spill, 5 + 5 + 4 rows saves 9 more; 7 + 7 spills again, 887). */
     uint32_t outside = apply_row_group(cov, core, pending, derived, 0u, 5u);
     PROPID_RELOAD_BARRIER(pending->h);
+    PROPID_RELOAD_BARRIER(core->update_vector);
     outside |= apply_row_group(cov, core, pending, derived, 5u, 5u);
     PROPID_RELOAD_BARRIER(pending->h);
+    PROPID_RELOAD_BARRIER(core->update_vector);
     outside |= apply_row_group(cov, core, pending, derived, 10u, 4u);
     return outside == 0u;
 }
@@ -185,7 +196,8 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
     const float gate_sq = derived->gate_sq;
     /* S outside [R, R + R / loading] (or NaN) leaves the fast path: below, the
      * generic path decides about rounding; above, it loads R. */
-    const uint32_t var_bits = derived->innovation_var_bits;
+    uint32_t var_bits; /* gyro_var's bit pattern */
+    memcpy(&var_bits, &derived->gyro_var, sizeof(var_bits));
     const uint32_t var_range_bits = derived->innovation_range_bits;
     const uint8_t b0 = PROPID_QUAD_FIRST_BIAS; /* the three gyro-bias states */
     const uint8_t b1 = PROPID_QUAD_FIRST_BIAS + 1u;
@@ -243,7 +255,7 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
      * any of the three makes that element of h_2 non-finite; summing h_2 covers all. */
     float *h0 = pending->h[0];
     float *h1 = pending->h[1];
-    float *h2 = pending->h[2];
+    float *h2 = core->update_vector;
     float check = 0.0f;
     /* The vectors' elements 0..2 and 11..13 sum P values the scalars above
      * loaded already: loaded again here, not kept alive through the loop
@@ -287,7 +299,7 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
  * anything (the per-axis path then handles the sample). */
 static __attribute__((noinline)) int
 fuse_usual_any(const float *restrict cov, propid_core_t *restrict core,
-               const propid_derived_t *restrict derived, pending_t *restrict pending,
+               const propid_derived_t *restrict derived, pending_any_t *restrict pending,
                const float *restrict gyro)
 {
     const uint8_t n = derived->state_count;
@@ -295,7 +307,8 @@ fuse_usual_any(const float *restrict cov, propid_core_t *restrict core,
     const float *state = core->state;
     const float noise_var = derived->gyro_var;
     const float gate_sq = derived->gate_sq;
-    const uint32_t var_bits = derived->innovation_var_bits;
+    uint32_t var_bits; /* gyro_var's bit pattern */
+    memcpy(&var_bits, &derived->gyro_var, sizeof(var_bits));
     const uint32_t var_range_bits = derived->innovation_range_bits;
     /* Rows 0 and 1 are written (axes 0 and 1) before they are read (axes 1 and 2). */
     // cppcheck-suppress [uninitvar,ctuuninitvar]
@@ -356,7 +369,7 @@ fuse_usual_any(const float *restrict cov, propid_core_t *restrict core,
  * any n; returns 1 when every new variance is inside its floor and ceiling. */
 static __attribute__((noinline)) int
 apply_three_any(float *restrict cov, propid_core_t *restrict core,
-                const pending_t *restrict pending, const propid_derived_t *restrict derived)
+                const pending_any_t *restrict pending, const propid_derived_t *restrict derived)
 {
     float *state = core->state;
     const float nu0 = core->innovation[0];
@@ -412,10 +425,10 @@ static __attribute__((noinline)) int fuse_one_pass(propid_filter_t *filter, cons
     propid_core_t *core = &filter->core;
     const propid_derived_t *derived = &filter->derived;
     const float *cov = core->cov;
-    pending_t pending;
     int inside;
 #if PROPID_GENERAL_VEHICLES
     if (!derived->quad_core) {
+        pending_any_t pending;
         if (!fuse_usual_any(cov, core, derived, &pending, gyro)) {
             return 0;
         }
@@ -423,6 +436,7 @@ static __attribute__((noinline)) int fuse_one_pass(propid_filter_t *filter, cons
     } else
 #endif
     {
+        pending_t pending;
         if (!fuse_quad_usual(cov, core, derived, &pending, gyro)) {
             return 0;
         }

@@ -62,8 +62,12 @@ static inline uint32_t propid_cov_diagonal_step(uint8_t j)
 #define PROPID_JAC_TORQUE_ROW (PROPID_MAX_STATES - 3) /* derived->jac_torque[3][...] */
 #else
 #define PROPID_JAC_ROW PROPID_QUAD_JAC_ENTRIES
-#define PROPID_JAC_TORQUE_ROW 6
+#define PROPID_JAC_TORQUE_ROW 4 /* the quad layout's rotor entries 2..5 only */
 #endif
+/* Where entry 2 of a quad layout row (rotor 0) is in derived->jac_torque[a]: the
+ * general path's lists keep every entry in place, the quad build only the four
+ * rotor entries. */
+#define PROPID_QUAD_TORQUE_FIRST (PROPID_GENERAL_VEHICLES ? 2u : 0u)
 
 /* State column of entry p of rate row a in the fixed quad layout. */
 static inline uint8_t propid_quad_layout_column(uint8_t a, uint8_t p)
@@ -333,23 +337,37 @@ static inline uint32_t propid_outside_positive_range(float value, uint32_t floor
 #define PROPID_KIND_ACCEL_BIAS (4u + PROPID_WITH_DISTURBANCE)
 #define PROPID_KIND_TORQUE_SCALE (5u + PROPID_WITH_DISTURBANCE)
 
+/* Kind of state i: derived->state_kind, or without the general path (the quad
+ * build) the fixed quad layout's rate, thrust, drag and bias blocks. */
+static inline uint8_t propid_state_kind(const propid_derived_t *derived, uint8_t i)
+{
+#if PROPID_GENERAL_VEHICLES
+    return derived->state_kind[i];
+#else
+    (void)derived;
+    return i < PROPID_QUAD_FIRST_THRUST ? PROPID_KIND_RATE
+           : (i < PROPID_QUAD_FIRST_DRAG ? PROPID_KIND_THRUST
+              : (i < PROPID_QUAD_FIRST_BIAS ? PROPID_KIND_DRAG : PROPID_KIND_BIAS));
+#endif
+}
+
 /* Per-state process noise rate, prior variance and variance bounds (stored once
  * per kind of state). */
 static inline float propid_process_psd(const propid_derived_t *derived, uint8_t i)
 {
-    return derived->kind_process_psd[derived->state_kind[i]];
+    return derived->kind_process_psd[propid_state_kind(derived, i)];
 }
 static inline float propid_prior_var(const propid_derived_t *derived, uint8_t i)
 {
-    return derived->kind_prior_var[derived->state_kind[i]];
+    return derived->kind_prior_var[propid_state_kind(derived, i)];
 }
 static inline uint32_t propid_floor_bits(const propid_derived_t *derived, uint8_t i)
 {
-    return derived->kind_floor_bits[derived->state_kind[i]];
+    return derived->kind_floor_bits[propid_state_kind(derived, i)];
 }
 static inline uint32_t propid_range_bits(const propid_derived_t *derived, uint8_t i)
 {
-    return derived->kind_range_bits[derived->state_kind[i]];
+    return derived->kind_range_bits[propid_state_kind(derived, i)];
 }
 
 /* The per-state variance floor and ceiling, kept only as bit patterns (positive

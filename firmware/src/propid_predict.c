@@ -44,7 +44,7 @@ static propid_status_t bound_rates(float rate_next[3], float limit, float check)
  * extra address computation. */
 static __attribute__((noinline)) propid_status_t
 predict_stage_quad(const float *restrict state, const float *restrict input_speed_sq,
-                   const float *restrict latest_speed_sq, const float (*restrict quad_gyro)[2],
+                   const float *restrict latest_speed_sq, const float *restrict quad_gyro,
                    const float (*restrict jac_torque)[PROPID_JAC_TORQUE_ROW], float dt,
                    float rate_limit, float *restrict rate_next,
                    float (*restrict jacobian_dt)[PROPID_JAC_ROW])
@@ -69,15 +69,15 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
         const uint8_t other1 = a == 2u ? 1u : 2u;
         /* A_a,other0 depends on the third rate, which is other1, and vice versa
          * (the general loop's other two products are exact zeros). */
-        const float entry0 = dt * (quad_gyro[a][0] * rate[other1]);
-        const float entry1 = dt * (quad_gyro[a][1] * rate[other0]);
+        const float entry0 = dt * (quad_gyro[a] * rate[other1]);
+        const float entry1 = dt * (quad_gyro[a] * rate[other0]);
         gyroscopic[a] = entry0 * rate[other0] + entry1 * rate[other1];
         const float *coefficient = state + (a < 2u ? PROPID_QUAD_FIRST_THRUST : PROPID_QUAD_FIRST_DRAG);
         const float *torque = jac_torque[a];
         float sum = 0.0f;
 #pragma GCC unroll 4
         for (uint8_t i = 0; i < 4u; ++i) {
-            const float entry = torque[2u + i] * speed_sq_dt[i];
+            const float entry = torque[PROPID_QUAD_TORQUE_FIRST + i] * speed_sq_dt[i];
             sum += entry * coefficient[i];
             g[2u + i] = entry;
         }
@@ -89,13 +89,13 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
         float *g = jacobian_dt[a];
         const uint8_t other0 = a == 0u ? 1u : 0u;
         const uint8_t other1 = a == 2u ? 1u : 2u;
-        const float entry0 = dt * (quad_gyro[a][0] * predictor[other1]);
-        const float entry1 = dt * (quad_gyro[a][1] * predictor[other0]);
+        const float entry0 = dt * (quad_gyro[a] * predictor[other1]);
+        const float entry1 = dt * (quad_gyro[a] * predictor[other0]);
         const float corrector = entry0 * predictor[other0] + entry1 * predictor[other1];
         /* The rate block of F: the gyroscopic Jacobian at the midpoint of omega and
          * the predictor (it is linear in omega, so this is the mean of the two). */
-        g[0] = 0.5f * (entry0 + dt * (quad_gyro[a][0] * rate[other1]));
-        g[1] = 0.5f * (entry1 + dt * (quad_gyro[a][1] * rate[other0]));
+        g[0] = 0.5f * (entry0 + dt * (quad_gyro[a] * rate[other1]));
+        g[1] = 0.5f * (entry1 + dt * (quad_gyro[a] * rate[other0]));
         rate_next[a] = rate[a] + (rotors[a] + 0.25f * (gyroscopic[a] + corrector));
     }
     /* rate_next holds every rate, the rotor sums and the correctors, and through
@@ -364,9 +364,9 @@ static __attribute__((noinline)) void add_input_noise_quad(const propid_derived_
 #pragma GCC unroll 4
     for (uint8_t i = 0; i < 4u; ++i) {
         input_var[i] = weight * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
-        gain[0][i] = derived->jac_torque[0][2u + i] * state[PROPID_QUAD_FIRST_THRUST + i];
-        gain[1][i] = derived->jac_torque[1][2u + i] * state[PROPID_QUAD_FIRST_THRUST + i];
-        gain[2][i] = derived->jac_torque[2][2u + i] * state[PROPID_QUAD_FIRST_DRAG + i];
+        gain[0][i] = derived->jac_torque[0][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_THRUST + i];
+        gain[1][i] = derived->jac_torque[1][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_THRUST + i];
+        gain[2][i] = derived->jac_torque[2][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_DRAG + i];
     }
     float *cov = core->cov;
 #pragma GCC unroll 3

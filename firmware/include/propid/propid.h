@@ -190,6 +190,10 @@ static inline uint32_t propid_cov_index(uint32_t i, uint32_t j)
 }
 
 typedef struct {
+    /* Private: the gyro update's work vector, meaningless between calls (the one
+     * pass's third P H^T, the per-axis update's P H^T: off the stack). First, so
+     * the update kernels reach it and the state from one base register. */
+    float update_vector[PROPID_MAX_STATES];
     /* Scaled state: body rate [rad/s], kf/kf_nominal, km/km_nominal, gyro bias [rad/s]. */
     float state[PROPID_MAX_STATES];
     float cov[PROPID_COV_SIZE];                       /* symmetric, kept in the scaled units: the
@@ -270,12 +274,15 @@ typedef struct {
     float inv_gate_sq;                              /* 1 / gate_sq (1 when gating is off) */
     float converged_var;                            /* converged_rel_std^2 */
     float rate_limit;                               /* |predicted body rate| bound: 2 gyro_range */
-    uint32_t innovation_var_bits;                   /* bit pattern of gyro_var (S range test) */
-    uint32_t innovation_range_bits;                 /* bits(S at which R is loaded) - bits(gyro_var) */
+    uint32_t innovation_range_bits;                 /* bits(S at which R is loaded) - bits(gyro_var)
+                                                       (S range test, on gyro_var's bit pattern) */
     /* Process noise, prior and variance bounds are the same for every state of a
      * kind (rate, thrust, drag, gyro bias and each optional block): one value per
-     * kind, state_kind[i] the kind of state i (propid_internal.h: propid_prior_var ...). */
+     * kind, state_kind[i] the kind of state i (propid_internal.h: propid_prior_var ...;
+     * without the general path the quad layout fixes it: propid_state_kind). */
+#if PROPID_GENERAL_VEHICLES
     uint8_t state_kind[PROPID_MAX_STATES];
+#endif
     float kind_process_psd[PROPID_STATE_KINDS];     /* Q rate: Q_ii = psd * dt */
     float kind_prior_var[PROPID_STATE_KINDS];       /* prior variance */
     uint32_t kind_floor_bits[PROPID_STATE_KINDS];   /* bit pattern of the variance floor */
@@ -293,7 +300,7 @@ typedef struct {
     float jac_torque[3][PROPID_MAX_STATES - 3];     /* coefficient entry: A = jac_torque * u_rotor */
     float gyro_jacobian[3][3][3];                   /* A_ab = sum_c gyro_jacobian[a][b][c] omega_c */
 #else
-    float jac_torque[3][6];                         /* the quad layout's entries (2..5 used) */
+    float jac_torque[3][4];                         /* the quad layout's rotor entries 2..5 */
 #endif
     /* Optional terms' data: compiled out with their terms (propid_config.h). */
 #if PROPID_WITH_ROTOR_INERTIA
@@ -310,8 +317,8 @@ typedef struct {
     float input_noise_var;                          /* 4 rotor_speed_noise^2: Var(u_i) per unit u_i */
     float input_noise_time;                         /* rotor_speed_noise_time */
 #endif
-    float quad_gyro[3][2];                          /* quad layout only: A_ab = quad_gyro[a][p] omega_c for
-                                                       entry p (column b) of row a, c the third axis */
+    float quad_gyro[3];                             /* quad layout only: A_ab = quad_gyro[a] omega_c for
+                                                       both other axes b, c of row a (symmetric in b, c) */
 } propid_derived_t;
 
 #if PROPID_DELAY_SLOTS > 0
