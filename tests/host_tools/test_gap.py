@@ -372,6 +372,30 @@ def test_effect_test_names_no_effect_beyond_its_family_level_when_none_is_there(
     assert hits / 300 <= 0.05 + 2.6 * np.sqrt(0.05 * 0.95 / 300)
 
 
+def test_one_sided_effect_test_keeps_its_level_and_names_only_the_physical_direction():
+    """One candidate whose one parameter physics keeps >= 0: not in the data, the one-sided
+    Wald test rejects at 5 % on about 5 % of the seeds (a p halved whatever the sign would
+    reject on ~10 %); a weak positive effect (t ~ 2.5) it names more often than the
+    two-sided test; a negative one of that size never."""
+    from propid.gap import scoring, significance
+
+    rng = np.random.default_rng(31)
+    null = one = two = negative = 0
+    seeds = 300
+    for _ in range(seeds):
+        gr = scoring.grams(_family_design(rng, 1200, 0.0, 1))
+        null += significance.effect_test(gr, [0], [1], nonnegative=True)["p_value"] <= 0.05
+    for _ in range(100):
+        gr = scoring.grams(_family_design(rng, 1200, 0.07, 1))
+        one += significance.effect_test(gr, [0], [1], nonnegative=True)["p_value"] <= 0.05
+        two += significance.effect_test(gr, [0], [1])["p_value"] <= 0.05
+        gr = scoring.grams(_family_design(rng, 1200, -0.07, 1))
+        negative += significance.effect_test(gr, [0], [1], nonnegative=True)["p_value"] <= 0.05
+    assert null / seeds <= 0.05 + 2.6 * np.sqrt(0.05 * 0.95 / seeds)
+    assert one > two + 5
+    assert negative == 0
+
+
 def test_effect_test_finds_an_effect_and_then_nothing_else():
     """An effect at 25 % of the noise RMS on a 12 s, 100 Hz flight (a t-statistic of ~9):
     the rule (Wald with Holm over 11 candidates, held-out replication with Holm) names it

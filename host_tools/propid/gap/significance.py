@@ -4,7 +4,8 @@ paired test over short held-out blocks.
 
 Rules (docs/gap.md, "Scoring"):
 - the evidence: a Wald test (effect_test, the joint fit's residual in its covariance) of "the effect's columns add nothing
-  to the current model" on all whitened rows;
+  to the current model" on all whitened rows; one-sided (one_sided_p) for a one-parameter
+  effect whose parameter physics keeps >= 0;
 - replication: the held-out improvement must be confirmed by its own one-sided paired
   test (paired_test), Holm at REPLICATION_LEVEL = 5 % over the same candidates: the Wald
   test on a whole flight also flags fits that soak up what the model gets wrong
@@ -197,7 +198,15 @@ def chi2_sf(x: float, dof: int) -> float:
     return float(min(max(1.0 - lower, 0.0), 1.0))
 
 
-def effect_test(gr, current: list[int], effect_cols: list[int]) -> dict:
+def one_sided_p(p_two_sided: float, estimate: float) -> float:
+    """One-sided p-value of "the parameter is > 0" from a two-sided test of one parameter
+    (F(1, d) = t^2 with a symmetric t): p/2 when the estimate is above 0, 1 - p/2 otherwise.
+    Under "the parameter is 0" it is uniform like the two-sided one, so Holm's level holds;
+    the power is that of a two-sided test at twice the level, in the physical direction."""
+    return p_two_sided / 2.0 if estimate > 0 else 1.0 - p_two_sided / 2.0
+
+
+def effect_test(gr, current: list[int], effect_cols: list[int], nonnegative: bool = False) -> dict:
     """Wald test of "the effect's columns add nothing to the current model" on all whitened
     rows, with a covariance that does not assume independent rows:
         theta_e = the effect's coefficients in the joint all-data fit,
@@ -212,7 +221,10 @@ def effect_test(gr, current: list[int], effect_cols: list[int]) -> dict:
     The residual is the joint fit's (with the effect in): a strong effect does not inflate
     the covariance that judges it (a score test on the current model's residual would:
     its block scores then carry the smooth effect itself, and a Newey-West window over them
-    loses power exactly when the effect is large)."""
+    loses power exactly when the effect is large).
+    `nonnegative`: a one-parameter effect whose parameter physics keeps >= 0 (the physical
+    sign rule names no negative fit): the alternative is one-sided, so the p-value is the
+    one-sided t-test's (one_sided_p)."""
     from propid.gap import scoring
 
     blocks = np.arange(gr.s.shape[0])
@@ -252,4 +264,6 @@ def effect_test(gr, current: list[int], effect_cols: list[int]) -> dict:
     nu = variance_dof(n, bw)
     d2 = nu - rank + 1.0
     p = f_sf(stat * d2 / (nu * rank), rank, d2) if d2 >= 1.0 else 1.0
+    if nonnegative and k == 1:
+        p = one_sided_p(p, float(theta_e[0]))
     return {"statistic": stat, "dof": rank, "variance_dof": nu, "p_value": p, "bandwidth": bw}
