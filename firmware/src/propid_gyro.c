@@ -451,9 +451,27 @@ static __attribute__((noinline)) int fuse_one_pass(propid_filter_t *filter, cons
     return 1;
 }
 
+/* 1 when every rate variance is inside its [floor, ceiling]. The one pass tests
+ * each axis' S after the earlier axes' terms are folded in, so a rate variance
+ * far above its ceiling passes when a correlation of ~1 with an earlier axis
+ * takes it back below; its rounding (~epsilon P_omega) then stays in the rate
+ * rows, beyond R (fuzz finding: a gyroscopic coupling (Ixx - Iyy) omega_x /
+ * Izz of 5e5 /s inflated P_zz to 7e4, 4 500 times its ceiling, in one step,
+ * correlated with omega_x through omega_y, and P lost definiteness). Such a
+ * sample takes the generic path, which applies the ceilings first. */
+static inline int rate_variances_inside(const propid_derived_t *derived, const float *cov)
+{
+    /* (The rates are the first three states of every layout: fixed offsets.) */
+    const uint32_t floor_bits = derived->kind_floor_bits[PROPID_KIND_RATE];
+    const uint32_t range_bits = derived->kind_range_bits[PROPID_KIND_RATE];
+    return (propid_outside_positive_range(cov[propid_cov_index(0u, 0u)], floor_bits, range_bits) |
+            propid_outside_positive_range(cov[propid_cov_index(1u, 1u)], floor_bits, range_bits) |
+            propid_outside_positive_range(cov[propid_cov_index(2u, 2u)], floor_bits, range_bits)) == 0u;
+}
+
 uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
 {
-    if (fuse_one_pass(filter, gyro)) {
+    if (rate_variances_inside(&filter->derived, filter->core.cov) && fuse_one_pass(filter, gyro)) {
         return 0u;
     }
     return fuse_generic(filter, gyro);

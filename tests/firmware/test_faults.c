@@ -460,6 +460,39 @@ static void test_covariance_stays_positive_definite_under_random_calls(void)
 }
 
 
+/* Fuzz finding (tests/fuzz/corpus/regression-gyroscopic-inflation): a quad with
+ * Iyy 1000x and Izz 1e-4x their defaults, rotors still, spinning at 3.4 rad/s
+ * about z. The gyroscopic coupling (Ixx - Iyy) omega_x / Izz of -5e5 /s
+ * inflated P_zz from 0.0026 to 7e4 (4 500 times the rate ceiling R / (64
+ * epsilon) = 16.4) in one 10.8 ms prediction, correlated -0.9999 with omega_x
+ * through omega_y. The gyro one pass tests each axis' S after the earlier axes'
+ * terms: z's S, about 16 after the x term, passed, and the rounding of
+ * ~epsilon 7e4 in the z rows left P with a negative eigenvalue. A rate
+ * variance outside its bounds now sends the sample to the generic path, which
+ * applies the ceilings first. The exact call sequence of the fuzz input, then
+ * the same sample for a while; P tested (Cholesky in double) every time. */
+static void test_covariance_definite_after_gyroscopic_rate_inflation(void)
+{
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 0x1.d70a3ep+1f, 0x1.796b94p-21f); /* 3.68, 7.03e-7 */
+    init_filter();
+    const float still[ROTORS] = {0.0f, 0.0f, 0.0f, 0.0f};
+    const float anchor[3] = {0x1.7e4b4p-4f, 0x1.fffffep-120f, 0x1.b33334p+1f}; /* 0.0933, ~0, 3.4 */
+    const float next[3] = {0x1.7e4b4p-4f, 0x1.7e4b4p-4f, 0x1.afc964p+1f};
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1005281u, still, ROTORS));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, 1010201u, anchor));
+    TEST_ASSERT_TRUE(covariance_is_positive_definite());
+    TEST_ASSERT_TRUE(propid_push_gyro(&filter, 1021043u, next) >= 0);
+    TEST_ASSERT_TRUE_MESSAGE(covariance_is_positive_definite(), "P not positive definite after the inflating step");
+    uint64_t t = 1021043u;
+    for (uint32_t k = 0; k < 200u; ++k) {
+        t += 2000u;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, still, ROTORS));
+        TEST_ASSERT_TRUE(propid_push_gyro(&filter, t, next) >= 0);
+        assert_sane();
+        TEST_ASSERT_TRUE(covariance_is_positive_definite());
+    }
+}
+
 #if PROPID_MAX_ROTORS >= 5
 /* Fuzz finding (tests/fuzz/corpus/regression-rate-prior-1e10): a five-rotor
  * vehicle with one rotor's kf 1000x its nominal, a rate prior std of 1e5 rad/s
@@ -524,6 +557,7 @@ int main(void)
     RUN_TEST(test_first_sample_fused_at_high_rate);
     RUN_TEST(test_config_bounds_noise_fields);
     RUN_TEST(test_covariance_stays_positive_definite_under_random_calls);
+    RUN_TEST(test_covariance_definite_after_gyroscopic_rate_inflation);
 #if PROPID_MAX_ROTORS >= 5
     RUN_TEST(test_covariance_definite_after_huge_rate_prior_and_torque);
 #endif
