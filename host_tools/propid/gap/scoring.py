@@ -107,15 +107,19 @@ def block_sse(gr: Grams, cols: list[int], theta: np.ndarray, blocks: np.ndarray)
     return gr.s[blocks] - 2.0 * h @ theta + np.einsum("bapq,p,q->ba", g, theta, theta)
 
 
-def cv_sse(gr: Grams, cols: list[int]) -> np.ndarray:
-    """(B, A) held-out SSE: each block predicted by the fit on the other folds."""
-    out = np.zeros_like(gr.s)
+def folds(gr: Grams):
+    """(test, train) block indices per cross-validation fold (a single fold trains on itself)."""
     all_blocks = np.arange(gr.s.shape[0])
     for k in np.unique(gr.fold):
         test = all_blocks[gr.fold == k]
         train = all_blocks[gr.fold != k]
-        if train.size == 0:
-            train = test
+        yield test, (test if train.size == 0 else train)
+
+
+def cv_sse(gr: Grams, cols: list[int]) -> np.ndarray:
+    """(B, A) held-out SSE: each block predicted by the fit on the other folds."""
+    out = np.zeros_like(gr.s)
+    for test, train in folds(gr):
         theta = solve(gr, cols, train)
         out[test] = block_sse(gr, cols, theta, test)
     return out
@@ -127,12 +131,7 @@ def cv_cross(gr: Grams, without: list[int], with_: list[int]) -> np.ndarray:
     (each block predicted by the fits on the other folds). `without` must be a prefix of
     `with_`. The noise part of the held-out improvement is twice this (significance.py)."""
     out = np.zeros_like(gr.s)
-    all_blocks = np.arange(gr.s.shape[0])
-    for k in np.unique(gr.fold):
-        test = all_blocks[gr.fold == k]
-        train = all_blocks[gr.fold != k]
-        if train.size == 0:
-            train = test
+    for test, train in folds(gr):
         t1 = solve(gr, with_, train)
         t0 = np.zeros_like(t1)
         t0[:len(without)] = solve(gr, without, train)
