@@ -635,7 +635,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         out.gate_sq = PROPID_GATE_OFF_SQ;
         out.inv_gate_sq = 1.0f;
     }
+#if PROPID_GENERAL_VEHICLES
     out.rate_limit = 2.0f * config->gyro_range;
+#endif
     {
         /* S range of the quad's fast update path: [R, R + R / loading]; above
          * it the general path loads R (propid_internal.h). */
@@ -775,7 +777,9 @@ void propid_config_keep(const propid_config_t *config, propid_kept_config_t *kep
     memset(kept, 0, sizeof(*kept));
     kept->rotor_count = config->rotor_count;
     kept->gate_max_consecutive = config->gate_max_consecutive;
+#if PROPID_DELAY_SLOTS > 0
     kept->rotor_delay_us = config->rotor_delay_us;
+#endif
     kept->rotor_stale_us = config->rotor_stale_us;
     kept->max_gyro_gap_us = config->max_gyro_gap_us;
     kept->max_rotor_speed = config->max_rotor_speed;

@@ -109,9 +109,9 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
 #if PROPID_WITH_ROTOR_INERTIA
     terms |= derived->rotor_inertia_on ? PROPID_TERM_ROTOR_INERTIA : 0u;
 #endif
-    terms |= config->rotor_delay_us != 0 ? PROPID_TERM_ESC_DELAY : 0u;
+    terms |= propid_kept_delay_us(config) != 0 ? PROPID_TERM_ESC_DELAY : 0u;
     estimate->model_terms = terms;
-    estimate->rotor_delay_us = config->rotor_delay_us;
+    estimate->rotor_delay_us = propid_kept_delay_us(config);
 #if PROPID_CONSISTENCY
     {
         /* And the data vouch for the std: at least one full window of the

@@ -254,13 +254,20 @@ static inline __attribute__((always_inline)) void check_next_row(propid_filter_t
 
 /* The accepted gyro sample's prediction over dt: the rate step (decided first:
  * a non-finite step returns PROPID_ERR_NUMERIC with nothing written), then the
- * integrity check of one covariance row and the covariance propagation. Not
- * inlined: the Jacobian rows live in this frame, not under the update's. */
+ * integrity check of one covariance row and the covariance propagation. The
+ * quad build's Jacobian rows (3 x 6) are in the filter's work area, which the
+ * update uses only after them (off the stack: the prediction's chain); the
+ * full build's longer rows are in this frame. Not inlined: this frame stays off
+ * the update's chain. */
 static __attribute__((noinline)) propid_status_t predict_step(propid_filter_t *filter, float dt)
 {
     propid_core_t *core = &filter->core;
     float rate_next[3];
+#if PROPID_GENERAL_VEHICLES
     float rate_jacobian_dt[3][PROPID_JAC_ROW];
+#else
+    float (*rate_jacobian_dt)[PROPID_JAC_ROW] = (float (*)[PROPID_JAC_ROW])(void *)core->update_vector;
+#endif
     const propid_status_t staged = propid_predict_stage(filter, dt, rate_next, rate_jacobian_dt);
     if (staged < 0) {
         return PROPID_ERR_NUMERIC;

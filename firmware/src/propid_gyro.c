@@ -19,12 +19,12 @@
 #include "propid_internal.h"
 
 
-/* The quad's pending vectors h[a] = P H_a^T of axes 0 and 1 (the quad step's
- * largest stack object: 2 x 14 floats); axis 2's is core->update_vector, in the
- * filter object (off the stack: the one pass's chain is the step's deepest).
- * Their innovations are the ones recorded in core->innovation. */
+/* The quad's pending vector h_0 = P H_0^T of axis 0 (the quad step's largest
+ * stack object: 14 floats); axes 1 and 2's are core->update_vector[0] and [1],
+ * in the filter object (off the stack: the one pass's chain is the step's
+ * deepest). Their innovations are the ones recorded in core->innovation. */
 typedef struct {
-    float h[2][PROPID_MAX_STATES];      /* P H^T of pending axes 0 and 1 (the gain is h / S) */
+    float h0[PROPID_MAX_STATES];        /* P H^T of pending axis 0 (the gain is h / S) */
     float inv_var[3];                   /* 1 / S: the gain is g = h / S */
 } pending_t;
 
@@ -48,9 +48,9 @@ apply_row_group(float *restrict cov, propid_core_t *restrict core,
                 const uint8_t first, const uint8_t rows)
 {
     float *state = core->state;
-    const float *h0 = pending->h[0];
-    const float *h1 = pending->h[1];
-    const float *h2 = core->update_vector;
+    const float *h0 = pending->h0;
+    const float *h1 = core->update_vector[0];
+    const float *h2 = core->update_vector[1];
     const float inv0 = pending->inv_var[0];
     const float inv1 = pending->inv_var[1];
     const float inv2 = pending->inv_var[2];
@@ -120,10 +120,10 @@ apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *r
      * 80 B of stack, 12 instructions more per step than with the barriers; with
      * them and no spill, 5 + 5 + 4 rows saves 9 more; 7 + 7 spills again, 887). */
     uint32_t outside = apply_row_group(cov, core, pending, derived, 0u, 5u);
-    PROPID_RELOAD_BARRIER(pending->h);
+    PROPID_RELOAD_BARRIER(pending->h0);
     PROPID_RELOAD_BARRIER(core->update_vector);
     outside |= apply_row_group(cov, core, pending, derived, 5u, 5u);
-    PROPID_RELOAD_BARRIER(pending->h);
+    PROPID_RELOAD_BARRIER(pending->h0);
     PROPID_RELOAD_BARRIER(core->update_vector);
     outside |= apply_row_group(cov, core, pending, derived, 10u, 4u);
     return outside == 0u;
@@ -253,9 +253,9 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
     /* The three vectors, with one finiteness test over all of them: h_2 folds in
      * h_0 and h_1 (c * Inf is Inf, or NaN when c = 0), so a non-finite element of
      * any of the three makes that element of h_2 non-finite; summing h_2 covers all. */
-    float *h0 = pending->h[0];
-    float *h1 = pending->h[1];
-    float *h2 = core->update_vector;
+    float *h0 = pending->h0;
+    float *h1 = core->update_vector[0];
+    float *h2 = core->update_vector[1];
     float check = 0.0f;
     /* The vectors' elements 0..2 and 11..13 sum P values the scalars above
      * loaded already: loaded again here, not kept alive through the loop
@@ -416,6 +416,24 @@ static __attribute__((noinline)) uint32_t fuse_generic(propid_filter_t *filter, 
     return gated_mask;
 }
 
+/* 1 when every rate variance is inside its [floor, ceiling]. The one pass tests
+ * each axis' S after the earlier axes' terms are folded in, so a rate variance
+ * far above its ceiling passes when a correlation of ~1 with an earlier axis
+ * takes it back below; its rounding (~epsilon P_omega) then stays in the rate
+ * rows, beyond R (fuzz finding: a gyroscopic coupling (Ixx - Iyy) omega_x /
+ * Izz of 5e5 /s inflated P_zz to 7e4, 4 500 times its ceiling, in one step,
+ * correlated with omega_x through omega_y, and P lost definiteness). Such a
+ * sample takes the generic path, which applies the ceilings first. */
+static inline int rate_variances_inside(const propid_derived_t *derived, const float *cov)
+{
+    /* (The rates are the first three states of every layout: fixed offsets.) */
+    const uint32_t floor_bits = derived->kind_floor_bits[PROPID_KIND_RATE];
+    const uint32_t range_bits = derived->kind_range_bits[PROPID_KIND_RATE];
+    return (propid_outside_positive_range(cov[propid_cov_index(0u, 0u)], floor_bits, range_bits) |
+            propid_outside_positive_range(cov[propid_cov_index(1u, 1u)], floor_bits, range_bits) |
+            propid_outside_positive_range(cov[propid_cov_index(2u, 2u)], floor_bits, range_bits)) == 0u;
+}
+
 /* The one pass over P for the usual sample (every axis inside its gate): the
  * quad's straight-line kernels or the loops for any other vehicle. Returns 1
  * when it fused the sample, 0 with nothing written. Not inlined: `pending` lives
@@ -425,6 +443,9 @@ static __attribute__((noinline)) int fuse_one_pass(propid_filter_t *filter, cons
     propid_core_t *core = &filter->core;
     const propid_derived_t *derived = &filter->derived;
     const float *cov = core->cov;
+    if (!rate_variances_inside(derived, cov)) {
+        return 0;
+    }
     int inside;
 #if PROPID_GENERAL_VEHICLES
     if (!derived->quad_core) {
@@ -451,27 +472,9 @@ static __attribute__((noinline)) int fuse_one_pass(propid_filter_t *filter, cons
     return 1;
 }
 
-/* 1 when every rate variance is inside its [floor, ceiling]. The one pass tests
- * each axis' S after the earlier axes' terms are folded in, so a rate variance
- * far above its ceiling passes when a correlation of ~1 with an earlier axis
- * takes it back below; its rounding (~epsilon P_omega) then stays in the rate
- * rows, beyond R (fuzz finding: a gyroscopic coupling (Ixx - Iyy) omega_x /
- * Izz of 5e5 /s inflated P_zz to 7e4, 4 500 times its ceiling, in one step,
- * correlated with omega_x through omega_y, and P lost definiteness). Such a
- * sample takes the generic path, which applies the ceilings first. */
-static inline int rate_variances_inside(const propid_derived_t *derived, const float *cov)
-{
-    /* (The rates are the first three states of every layout: fixed offsets.) */
-    const uint32_t floor_bits = derived->kind_floor_bits[PROPID_KIND_RATE];
-    const uint32_t range_bits = derived->kind_range_bits[PROPID_KIND_RATE];
-    return (propid_outside_positive_range(cov[propid_cov_index(0u, 0u)], floor_bits, range_bits) |
-            propid_outside_positive_range(cov[propid_cov_index(1u, 1u)], floor_bits, range_bits) |
-            propid_outside_positive_range(cov[propid_cov_index(2u, 2u)], floor_bits, range_bits)) == 0u;
-}
-
 uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
 {
-    if (rate_variances_inside(&filter->derived, filter->core.cov) && fuse_one_pass(filter, gyro)) {
+    if (fuse_one_pass(filter, gyro)) {
         return 0u;
     }
     return fuse_generic(filter, gyro);

@@ -64,6 +64,34 @@ static inline uint32_t propid_cov_diagonal_step(uint8_t j)
 #define PROPID_JAC_ROW PROPID_QUAD_JAC_ENTRIES
 #define PROPID_JAC_TORQUE_ROW 4 /* the quad layout's rotor entries 2..5 only */
 #endif
+/* The quad build's Jacobian rows fit the filter's work area (predict_step). */
+#if !PROPID_GENERAL_VEHICLES
+_Static_assert(3u * PROPID_JAC_ROW <= 2u * PROPID_MAX_STATES, "Jacobian rows fit core.update_vector");
+#endif
+
+/* |predicted body rate| bound, 2 config.gyro_range: derived once in the full
+ * build; the quad build does not store it (one multiply by 2, exact). */
+static inline float propid_rate_limit(const propid_filter_t *filter)
+{
+#if PROPID_GENERAL_VEHICLES
+    return filter->derived.rate_limit;
+#else
+    return 2.0f * filter->config.gyro_range;
+#endif
+}
+
+/* config.rotor_delay_us as kept: without the delay buffer (PROPID_DELAY_SLOTS
+ * 0) the configuration check admits only 0 and the quad build does not store it. */
+static inline int32_t propid_kept_delay_us(const propid_kept_config_t *config)
+{
+#if PROPID_GENERAL_VEHICLES || PROPID_DELAY_SLOTS > 0
+    return config->rotor_delay_us;
+#else
+    (void)config;
+    return 0;
+#endif
+}
+
 /* Where entry 2 of a quad layout row (rotor 0) is in derived->jac_torque[a]: the
  * general path's lists keep every entry in place, the quad build only the four
  * rotor entries. */
@@ -221,8 +249,10 @@ static inline uint8_t propid_first_bias(uint8_t rotor_count)
 #define PROPID_SCALE_ENTRY 0xFEu
 
 /* One scalar measurement y = H x + v with a sparse H (propid_scalar_update.c):
- * H has `count` non-zero entries, value[k] in column index[k]. */
-#define PROPID_SPARSE_MAX (PROPID_MAX_ROTORS + 1u)
+ * H has `count` non-zero entries, value[k] in column index[k]. The longest row
+ * is the accelerometer's (every thrust coefficient and its bias), else the
+ * gyro's two (a rate and its bias). */
+#define PROPID_SPARSE_MAX (PROPID_WITH_ACCEL ? PROPID_MAX_ROTORS + 1u : 2u)
 typedef struct {
     uint8_t count;
     uint8_t index[PROPID_SPARSE_MAX];

@@ -242,7 +242,7 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
 #endif
     return predict_stage_quad(filter->core.state, filter->core.input_speed_sq,
                               filter->core.rotor_speed_sq, filter->derived.quad_gyro,
-                              filter->derived.jac_torque, dt, filter->derived.rate_limit,
+                              filter->derived.jac_torque, dt, propid_rate_limit(filter),
                               rate_next, jacobian_dt);
 }
 

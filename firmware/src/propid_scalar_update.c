@@ -39,7 +39,7 @@ propid_scalar_result_t propid_scalar_update(propid_filter_t *filter, const propi
     const propid_derived_t *derived = &filter->derived;
     const uint8_t n = derived->state_count;
     float *cov = core->cov;
-    float *ph = core->update_vector; /* in the filter object: off the stack */
+    float *ph = core->update_vector[0]; /* in the filter object: off the stack */
     float innovation_var = noise_var;
     for (uint8_t attempt = 0; attempt < 2u; ++attempt) {
         const float check = form_gain_vector(cov, row, n, ph);

@@ -9,6 +9,12 @@ graph; the deepest chain from each public entry point is its worst-case stack
 counted as 0: the report names them). A cycle in the graph is recursion, which
 the firmware rules forbid.
 
+A tail call (the caller's frame is released before it branches to the callee,
+`b` instead of `bl`) does not stack the two frames: the callee's chain then
+counts without the caller's frame. Tail calls are read from the objects' code
+(objdump -dr next to each .ci file: a branch without link relocated to a
+function); without objdump every call counts as a call (an over-estimate).
+
     stack_report.py [--budget FUNCTION=BYTES]... DIR...
 
 Prints the worst chains from the entry points (functions nothing else in these
@@ -21,11 +27,15 @@ from __future__ import annotations
 import argparse
 import pathlib
 import re
+import shutil
+import subprocess
 import sys
 
 NODE = re.compile(r'node: \{ title: "([^"]+)" label: "([^"]*)"')
 EDGE = re.compile(r'edge: \{ sourcename: "([^"]+)" targetname: "([^"]+)"')
 FRAME = re.compile(r"\\n(\d+) bytes \((\w+)")
+NODE_TITLE = re.compile(r'node: \{ title: "([^"]+)"')
+TAIL_MARK = "(tail) "  # printed before a callee reached by a tail call
 
 
 def load(directories: list[str]) -> tuple[dict[str, int], dict[str, str], dict[str, set[str]]]:
@@ -50,22 +60,84 @@ def load(directories: list[str]) -> tuple[dict[str, int], dict[str, str], dict[s
     return frames, kinds, calls
 
 
+# Branches without link: ARM/Thumb relocations of B (not BL); x86 jumps.
+TAIL_RELOCATIONS = {"R_ARM_THM_JUMP24", "R_ARM_THM_JUMP19", "R_ARM_THM_JUMP11", "R_ARM_THM_JUMP8",
+                    "R_ARM_JUMP24"}
+FUNCTION = re.compile(r"^[0-9a-f]+ <([^>]+)>:$")
+INSTRUCTION = re.compile(r"^\s+[0-9a-f]+:\s+(\S+)")
+RELOCATION = re.compile(r"^\s+[0-9a-f]+: (R_\S+)\s+([A-Za-z_.$][\w.$]*)")
+
+
+def objdump_for(objects: list[pathlib.Path]) -> str | None:
+    """arm-none-eabi-objdump for ARM objects, else the host's objdump; None when absent."""
+    arm = any(o.read_bytes()[18:20] == b"\x28\x00" for o in objects[:1])  # e_machine EM_ARM
+    for tool in (["arm-none-eabi-objdump"] if arm else []) + ["objdump"]:
+        if shutil.which(tool):
+            return tool
+    return None
+
+
+def load_tail_calls(directories: list[str]) -> set[tuple[str, str]]:
+    """(caller, callee) pairs, named as in the .ci files, where every branch from
+    the caller to the callee is a tail call (no call with link)."""
+    pairs: set[tuple[str, str]] = set()
+    cis = sorted(p for d in directories for p in pathlib.Path(d).rglob("*.ci"))
+    objects = [o for ci in cis for o in (ci.with_suffix(".obj"), ci.with_suffix(".o")) if o.exists()]
+    tool = objdump_for(objects) if objects else None
+    if tool is None:
+        return pairs
+    for ci in cis:
+        obj = next((o for o in (ci.with_suffix(".obj"), ci.with_suffix(".o")) if o.exists()), None)
+        if obj is None:
+            continue
+        # Static functions are titled "path/file.c:name" in the .ci file.
+        titles = {t.rsplit(":", 1)[-1]: t for t in NODE_TITLE.findall(ci.read_text())}
+        dump = subprocess.run([tool, "-dr", "--no-show-raw-insn", str(obj)], capture_output=True,
+                              text=True, check=False).stdout
+        kinds: dict[tuple[str, str], set[str]] = {}
+        function, mnemonic = None, ""
+        for line in dump.splitlines():
+            head = FUNCTION.match(line)
+            if head:
+                function = head.group(1)
+                continue
+            relocation = RELOCATION.match(line)
+            if relocation and function is not None:
+                kind, target = relocation.groups()
+                tail = kind in TAIL_RELOCATIONS or (kind.startswith("R_X86") and mnemonic.startswith("j"))
+                key = (titles.get(function, function), titles.get(target, target))
+                kinds.setdefault(key, set()).add("tail" if tail else "call")
+                continue
+            instruction = INSTRUCTION.match(line)
+            if instruction:
+                mnemonic = instruction.group(1)
+        pairs.update(key for key, found in kinds.items() if found == {"tail"})
+    return pairs
+
+
 def worst_chain(function: str, frames: dict[str, int], calls: dict[str, set[str]],
-                memo: dict[str, tuple[int, list[str]]], active: list[str]) -> tuple[int, list[str]]:
-    """Deepest (bytes, chain) below `function`; raises on recursion."""
+                memo: dict[str, tuple[int, list[str]]], active: list[str],
+                tails: set[tuple[str, str]] = frozenset()) -> tuple[int, list[str]]:
+    """Deepest (bytes, chain) below `function`; raises on recursion. A callee in
+    `tails` (a tail call) runs after the caller's frame is released."""
     if function in active:
         cycle = active[active.index(function):] + [function]
         raise RecursionError(" -> ".join(cycle))
     if function in memo:
         return memo[function]
     active.append(function)
-    best_depth, best_chain = 0, []
+    own = frames.get(function, 0)
+    best_depth, best_chain = own, [function]
     for callee in sorted(calls.get(function, ())):
-        depth, chain = worst_chain(callee, frames, calls, memo, active)
-        if depth > best_depth or not best_chain:
+        depth, chain = worst_chain(callee, frames, calls, memo, active, tails)
+        if (function, callee) in tails:
+            depth, chain = depth, [function, TAIL_MARK + chain[0]] + chain[1:]
+        else:
+            depth, chain = own + depth, [function] + chain
+        if depth > best_depth or len(best_chain) == 1:
             best_depth, best_chain = depth, chain
     active.pop()
-    result = (frames.get(function, 0) + best_depth, [function] + best_chain)
+    result = (best_depth, best_chain)
     memo[function] = result
     return result
 
@@ -81,6 +153,7 @@ def main() -> int:
     args = parser.parse_args()
 
     frames, kinds, calls = load(args.directories)
+    tails = load_tail_calls(args.directories)
     memo: dict[str, tuple[int, list[str]]] = {}
     status = 0
     dynamic = sorted(f for f, kind in kinds.items() if kind != "static")
@@ -96,7 +169,7 @@ def main() -> int:
     # Walk every function (a cycle need not be reachable from an entry point).
     for function in roots + sorted(set(frames) - set(roots)):
         try:
-            depth, chain = worst_chain(function, frames, calls, memo, [])
+            depth, chain = worst_chain(function, frames, calls, memo, [], tails)
         except RecursionError as cycle:
             members = str(cycle).split(" -> ")
             if not cyclic.intersection(members):
@@ -105,11 +178,12 @@ def main() -> int:
             status = 1
             continue
         if function in roots:
-            unknown = [f for f in chain if f not in frames]
+            unknown = [f for f in chain if f.removeprefix(TAIL_MARK) not in frames]
             rows.append((depth, function, chain, unknown))
 
     def short(name: str) -> str:
-        return name.rsplit(":", 1)[-1]  # static functions are titled "path/file.c:name"
+        mark = TAIL_MARK if name.startswith(TAIL_MARK) else ""
+        return mark + name.removeprefix(mark).rsplit(":", 1)[-1]  # static functions are titled "path/file.c:name"
 
     for depth, function, chain, unknown in sorted(rows, key=lambda r: (-r[0], r[1]))[: args.show]:
         note = f"  (+ {', '.join(short(u) for u in unknown)}: library, not counted)" if unknown else ""

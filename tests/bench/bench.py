@@ -237,10 +237,11 @@ def footprint_of(repo: pathlib.Path, build: pathlib.Path, work: pathlib.Path, ta
 
     dirs = [str(d) for d in (build / f"target/firmware/CMakeFiles/{target}.dir",) if d.exists()]
     frames, _kinds, calls = stack_report.load(dirs)
+    tails = stack_report.load_tail_calls(dirs)  # a tail call does not stack the caller's frame
     stacks = {}
     for function in public_functions(repo):
         if function in frames:
-            depth, chain = stack_report.worst_chain(function, frames, calls, {}, [])
+            depth, chain = stack_report.worst_chain(function, frames, calls, {}, [], tails)
             stacks[function] = {"bytes": depth, "chain": chain}
     result["stack"] = stacks
     # What the per-sample calls reach (the rest is configuration and init-only code).

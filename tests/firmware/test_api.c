@@ -117,7 +117,9 @@ static void test_init_gives_prior(void)
     TEST_ASSERT_LESS_OR_EQUAL_UINT32(1024u, (uint32_t)sizeof(propid_filter_t));
     TEST_ASSERT_EQUAL_UINT8(config.rotor_count, filter.config.rotor_count);
     TEST_ASSERT_EQUAL_UINT16(config.gate_max_consecutive, filter.config.gate_max_consecutive);
+#if PROPID_DELAY_SLOTS > 0
     TEST_ASSERT_EQUAL_INT32(config.rotor_delay_us, filter.config.rotor_delay_us);
+#endif
     TEST_ASSERT_EQUAL_UINT32(config.rotor_stale_us, filter.config.rotor_stale_us);
     TEST_ASSERT_EQUAL_UINT32(config.max_gyro_gap_us, filter.config.max_gyro_gap_us);
     TEST_ASSERT_EQUAL_FLOAT(config.max_rotor_speed, filter.config.max_rotor_speed);

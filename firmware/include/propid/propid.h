@@ -190,10 +190,12 @@ static inline uint32_t propid_cov_index(uint32_t i, uint32_t j)
 }
 
 typedef struct {
-    /* Private: the gyro update's work vector, meaningless between calls (the one
-     * pass's third P H^T, the per-axis update's P H^T: off the stack). First, so
-     * the update kernels reach it and the state from one base register. */
-    float update_vector[PROPID_MAX_STATES];
+    /* Private: the gyro step's work area, meaningless between calls (off the
+     * stack): the one pass's P H^T of the y and z axes, the per-axis update's
+     * P H^T (update_vector[0]), and in the quad build the prediction's Jacobian
+     * rows. First, so the update kernels reach it and the state from one base
+     * register. */
+    float update_vector[2][PROPID_MAX_STATES];
     /* Scaled state: body rate [rad/s], kf/kf_nominal, km/km_nominal, gyro bias [rad/s]. */
     float state[PROPID_MAX_STATES];
     float cov[PROPID_COV_SIZE];                       /* symmetric, kept in the scaled units: the
@@ -201,6 +203,9 @@ typedef struct {
     float rotor_speed_sq[PROPID_MAX_ROTORS];          /* latest accepted rotor speeds squared */
     float input_speed_sq[PROPID_MAX_ROTORS];          /* rotor speeds squared in force at time_us
                                                          (start of the next prediction interval) */
+    /* (Ordered so the 64-bit stamps need no padding before them.) */
+    uint32_t stale_mark;                              /* private: counters.rejected[-ROTOR_STALE] at
+                                                         last accepted gyro */
     uint64_t rotor_time_us;                           /* time of the latest accepted rotor speeds */
     uint64_t time_us;                                 /* filter time = last accepted gyro time */
     uint8_t has_rotor_data;
@@ -219,7 +224,6 @@ typedef struct {
     float accel_innovation;                           /* last accelerometer z innovation [m/s^2] */
     float accel_innovation_test_ratio;
 #endif
-    uint32_t stale_mark;                              /* counters.rejected[-ROTOR_STALE] at last accepted gyro */
     uint8_t check_row;                                /* next covariance row of the round-robin integrity check */
 } propid_core_t;
 
@@ -273,7 +277,9 @@ typedef struct {
     float gate_sq;                                  /* gate_sigma^2, PROPID_GATE_OFF_SQ when gating is off */
     float inv_gate_sq;                              /* 1 / gate_sq (1 when gating is off) */
     float converged_var;                            /* converged_rel_std^2 */
+#if PROPID_GENERAL_VEHICLES /* (the quad build: 2 config.gyro_range, propid_rate_limit) */
     float rate_limit;                               /* |predicted body rate| bound: 2 gyro_range */
+#endif
     uint32_t innovation_range_bits;                 /* bits(S at which R is loaded) - bits(gyro_var)
                                                        (S range test, on gyro_var's bit pattern) */
     /* Process noise, prior and variance bounds are the same for every state of a
@@ -369,7 +375,9 @@ typedef struct {
 typedef struct {
     uint8_t rotor_count;
     uint16_t gate_max_consecutive;
+#if PROPID_DELAY_SLOTS > 0 /* (without the delay buffer the configuration check admits only 0) */
     int32_t rotor_delay_us;
+#endif
     uint32_t rotor_stale_us;
     uint32_t max_gyro_gap_us;
     float max_rotor_speed;
