@@ -32,10 +32,13 @@ void sitl_honesty_init(sitl_honesty_t *h, int rotor_count, const double *true_kf
     h->first_all_claimed_s = -1.0;
 }
 
-/* e^T P^-1 e by Cholesky (double); returns -1 when P is not positive definite. */
+/* e^T P^-1 e by Cholesky (double); reads the lower triangle of P only;
+ * returns -1 when P is not positive definite. The divisions by the diagonal
+ * are multiplications by its reciprocals (rounding-level difference). */
 static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const double *e, int n)
 {
     double l[HONESTY_MAX_DOF][HONESTY_MAX_DOF];
+    double inv_diag[HONESTY_MAX_DOF];
     double y[HONESTY_MAX_DOF];
     for (int i = 0; i < n; i++) {
         for (int j = 0; j <= i; j++) {
@@ -48,8 +51,9 @@ static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const do
                     return -1.0;
                 }
                 l[i][i] = sqrt(s);
+                inv_diag[i] = 1.0 / l[i][i];
             } else {
-                l[i][j] = s / l[j][j];
+                l[i][j] = s * inv_diag[j];
             }
         }
     }
@@ -59,7 +63,7 @@ static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const do
         for (int k = 0; k < i; k++) {
             s -= l[i][k] * y[k];
         }
-        y[i] = s / l[i][i];
+        y[i] = s * inv_diag[i];
         nees += y[i] * y[i];
     }
     return nees;
@@ -88,7 +92,7 @@ static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const dou
     double e[HONESTY_MAX_DOF];
     for (int i = 0; i < n; i++) {
         e[i] = (double)filter->core.state[index[i]] - truth[i];
-        for (int j = 0; j < n; j++) {
+        for (int j = 0; j <= i; j++) { /* nees_of reads the lower triangle */
             const int a = index[i] < index[j] ? index[i] : index[j];
             const int b = index[i] < index[j] ? index[j] : index[i];
             p[i][j] = (double)filter->core.cov[propid_cov_index(a, b)]; /* the filter keeps the upper triangle */

@@ -20,6 +20,13 @@ void sitl_metrics_init(sitl_metrics_t *m, int rotor_count, const double *kf_prio
     m->bias_converged_since = -1.0;
 }
 
+/* fmax(m, x) for m never NaN (a NaN x keeps m, as fmax does) without libm's
+ * call: metrics run at every control step. */
+static double larger(double m, double x)
+{
+    return x > m ? x : m;
+}
+
 void sitl_metrics_add(sitl_metrics_t *m, double t, const double position[3],
                       const double ref_position[3], double yaw, double ref_yaw,
                       const propid_estimate_t *e, const double *true_kf, const double *true_km,
@@ -40,15 +47,15 @@ void sitl_metrics_add(sitl_metrics_t *m, double t, const double position[3],
         double dkf = (double)e->thrust_coeff[i] - true_kf[i];
         double dkm = (double)e->drag_coeff[i] - true_km[i];
         coeff_inside &= fabs(dkf) <= m->kf_tolerance[i] && fabs(dkm) <= m->km_tolerance[i];
-        m->kf_rel_error_max = fmax(m->kf_rel_error_max, fabs(dkf / true_kf[i]));
-        m->km_rel_error_max = fmax(m->km_rel_error_max, fabs(dkm / true_km[i]));
+        m->kf_rel_error_max = larger(m->kf_rel_error_max, fabs(dkf / true_kf[i]));
+        m->km_rel_error_max = larger(m->km_rel_error_max, fabs(dkm / true_km[i]));
     }
     int bias_inside = 1;
     m->bias_error_max = 0.0;
     for (int k = 0; k < 3; k++) {
         double db = fabs((double)e->gyro_bias[k] - true_bias[k]);
         bias_inside &= db <= m->bias_tolerance;
-        m->bias_error_max = fmax(m->bias_error_max, db);
+        m->bias_error_max = larger(m->bias_error_max, db);
     }
     if (!coeff_inside) {
         m->coeff_converged_since = -1.0;

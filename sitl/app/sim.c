@@ -37,18 +37,30 @@ typedef struct {
     int64_t next_ns;
 } schedule_t;
 
+/* llround without the libm call (three per loop pass): for 0 <= x < 2^52 the
+ * truncation and the fraction x - trunc(x) are exact, so adding one for a
+ * fraction >= 0.5 rounds half away from zero as llround does (same value). */
+static int64_t round_ns(double x)
+{
+    if (!(x >= 0.0 && x < 4.0e15)) {
+        return (int64_t)llround(x);
+    }
+    const int64_t whole = (int64_t)x;
+    return whole + (x - (double)whole >= 0.5);
+}
+
 static void schedule_init(schedule_t *s, double phase_s, double rate_hz)
 {
     s->phase_ns = phase_s * 1e9;
     s->period_ns = 1e9 / rate_hz;
     s->k = 0;
-    s->next_ns = (int64_t)llround(s->phase_ns);
+    s->next_ns = round_ns(s->phase_ns);
 }
 
 static void schedule_advance(schedule_t *s)
 {
     s->k++;
-    s->next_ns = (int64_t)llround(s->phase_ns + (double)s->k * s->period_ns);
+    s->next_ns = round_ns(s->phase_ns + (double)s->k * s->period_ns);
 }
 
 static double wall_seconds(void)

@@ -3,6 +3,8 @@
 
 #include <math.h>
 
+#include "sitl_sincos.h"
+
 static uint64_t splitmix64(uint64_t *x)
 {
     uint64_t z = (*x += 0x9E3779B97F4A7C15ull);
@@ -63,8 +65,9 @@ double sitl_rng_normal(sitl_rng_t *rng)
         u1 = 1e-300;
     }
     double r = sqrt(-2.0 * log(u1));
-    double a = 2.0 * 3.14159265358979323846 * u2;
-    rng->spare = r * sin(a);
+    double s, c;
+    sitl_sincos(2.0 * 3.14159265358979323846 * u2, &s, &c);
+    rng->spare = r * s;
     rng->has_spare = 1;
-    return r * cos(a);
+    return r * c;
 }

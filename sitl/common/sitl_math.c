@@ -47,12 +47,13 @@ int sitl_mat4_solve(double a[4][4], double b[4][4], int columns, double tol)
                 b[pivot][j] = t;
             }
         }
-        double p = a[col][col];
+        /* One division per pivot, not one per element (rounding-level change). */
+        const double inv_p = 1.0 / a[col][col];
         for (int j = 0; j < 4; j++) {
-            a[col][j] /= p;
+            a[col][j] *= inv_p;
         }
         for (int j = 0; j < columns; j++) {
-            b[col][j] /= p;
+            b[col][j] *= inv_p;
         }
         for (int r = 0; r < 4; r++) {
             if (r != col) {
@@ -158,8 +159,9 @@ void sitl_quat_normalise(double q[4])
 {
     double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
     if (n > 0.0 && isfinite(n)) {
+        const double inv_n = 1.0 / n; /* once per RK4 step: rounding-level vs four divisions */
         for (int i = 0; i < 4; i++) {
-            q[i] /= n;
+            q[i] *= inv_n;
         }
     }
 }

@@ -69,12 +69,13 @@ set_coefficients(sitl_allocation_t *alloc, const int n, const double *thrust_coe
     }
     double gram[4][4], gram_inv[4][4];
     for (int a = 0; a < 4; a++) {
-        for (int b = 0; b < 4; b++) {
+        for (int b = a; b < 4; b++) {
             double s = 0.0;
             for (int i = 0; i < n; i++) {
                 s += scaled[a][i] * scaled[b][i];
             }
             gram[a][b] = s;
+            gram[b][a] = s; /* the same products in the same order: symmetric bit for bit */
         }
     }
     for (int i = 0; i < 4; i++) {
@@ -249,7 +250,9 @@ int sitl_allocation_solve(const sitl_allocation_t *alloc, double thrust, const d
 
     /* 5. final clip: removes rounding residue, or everything when nothing fits. */
     for (int i = 0; i < n; i++) {
-        double c = fmin(fmax(u[i], lo), hi);
+        /* fmin(fmax(u, lo), hi) without libm's calls (a NaN u gives lo, as there). */
+        const double c_lo = u[i] > lo ? u[i] : lo;
+        double c = c_lo < hi ? c_lo : hi;
         if (c != u[i] && fabs(c - u[i]) > 1e-9 * hi) {
             result->saturation |= SITL_ALLOC_SAT_CLIPPED;
         }

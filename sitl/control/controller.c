@@ -1,6 +1,7 @@
 /* SE(3) geometric tracking controller (Lee, Leok, McClamroch 2010); see controller.h. */
 #include "controller.h"
 #include "sitl_math.h"
+#include "sitl_sincos.h"
 
 #include <math.h>
 #include <string.h>
@@ -139,7 +140,8 @@ void sitl_controller_update(const sitl_controller_t *ctl, const sitl_vehicle_sta
      * perpendicular to y_c = (-sin yaw, cos yaw, 0) and to b3. Then the ZYX yaw
      * of R_d equals the desired yaw exactly (Lee's projection of b1_c does not),
      * so the yaw tracking metric measures tracking, not the construction. */
-    double cy = cos(flat->yaw), sy = sin(flat->yaw);
+    double sy, cy;
+    sitl_sincos(flat->yaw, &sy, &cy);
     double r = flat->yaw_rate, ra = flat->yaw_acceleration;
     vec3 yc = {-sy, cy, 0.0};
     vec3 dyc = {-cy * r, -sy * r, 0.0};

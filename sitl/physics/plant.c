@@ -156,15 +156,50 @@ static int plain_physics(const sitl_plant_t *plant)
 
 /*
  * sitl_plant_derivative without effects and without the loads, for the RK4
- * stages: the same operations in the same order (so the same bits), minus
- * what only the loads need (body velocity, specific force) and the products
- * with the zero x/y body force. clamped_command = sitl_motor_clamp(command),
- * which is the same at every stage of a step.
+ * stages: the same model, minus what only the loads need (body velocity,
+ * specific force) and the products with the zero x/y body force. What does
+ * not change within a step is taken once per step (plain_constants_t): the
+ * clamped commands, the reciprocals of the motor time constant and of the
+ * mass (7 divisions per stage were on the stages' dependent chain), and each
+ * rotor's thrust and yaw-torque coefficients times its lever arms. Against
+ * sitl_plant_derivative the results differ by rounding only.
  */
 #define SITL_INLINE static inline __attribute__((always_inline))
 
-SITL_INLINE void plain_derivative(const sitl_plant_t *plant, int n, const sitl_state_t *state,
-                                  const double *clamped_command, sitl_state_derivative_t *deriv)
+typedef struct {
+    double clamped_command[SITL_MAX_ROTORS]; /* sitl_motor_clamp(command) */
+    double thrust[SITL_MAX_ROTORS];          /* kf: thrust per speed^2 */
+    double roll[SITL_MAX_ROTORS];            /* r_y kf: x torque per speed^2 */
+    double pitch[SITL_MAX_ROTORS];           /* -r_x kf: y torque per speed^2 */
+    double yaw[SITL_MAX_ROTORS];             /* yaw_sign km: z torque per speed^2 */
+    double inv_time_constant, inv_mass;
+    int diagonal_inertia; /* J and J^-1 diagonal: the 3x3 products are 3 */
+} plain_constants_t;
+
+SITL_INLINE void plain_setup(const sitl_plant_t *plant, int n, const double *rotor_command,
+                             plain_constants_t *c)
+{
+    for (int i = 0; i < n; i++) {
+        const double *r = plant->rotor_position[i];
+        c->clamped_command[i] = sitl_motor_clamp(&plant->motor, rotor_command[i]);
+        c->thrust[i] = plant->thrust_coeff[i];
+        c->roll[i] = r[1] * plant->thrust_coeff[i];
+        c->pitch[i] = -r[0] * plant->thrust_coeff[i];
+        c->yaw[i] = plant->yaw_sign[i] * plant->drag_coeff[i];
+    }
+    c->inv_time_constant = 1.0 / plant->motor.time_constant;
+    c->inv_mass = 1.0 / plant->mass;
+    const double (*J)[3] = plant->inertia, (*Ji)[3] = plant->inertia_inv;
+    c->diagonal_inertia = J[0][1] == 0.0 && J[0][2] == 0.0 && J[1][0] == 0.0 &&
+                          J[1][2] == 0.0 && J[2][0] == 0.0 && J[2][1] == 0.0 &&
+                          Ji[0][1] == 0.0 && Ji[0][2] == 0.0 && Ji[1][0] == 0.0 &&
+                          Ji[1][2] == 0.0 && Ji[2][0] == 0.0 && Ji[2][1] == 0.0;
+}
+
+/* diagonal: a constant where inlined (c->diagonal_inertia picks the copy). */
+SITL_INLINE void plain_derivative(const sitl_plant_t *plant, int n, int diagonal,
+                                  const sitl_state_t *state, const plain_constants_t *c,
+                                  sitl_state_derivative_t *deriv)
 {
     const double *q = state->quat;
     const double w = q[0], x = q[1], y = q[2], z = q[3];
@@ -175,28 +210,30 @@ SITL_INLINE void plain_derivative(const sitl_plant_t *plant, int n, const sitl_s
 
     double force_z = 0.0, torque[3] = {0.0, 0.0, 0.0};
     for (int i = 0; i < n; i++) {
-        deriv->rotor_speed[i] =
-            (clamped_command[i] - state->rotor_speed[i]) / plant->motor.time_constant;
         const double speed = state->rotor_speed[i];
+        deriv->rotor_speed[i] = (c->clamped_command[i] - speed) * c->inv_time_constant;
         const double speed_sq = speed * speed;
-        const double thrust = plant->thrust_coeff[i] * speed_sq;
-        const double drag_torque = plant->drag_coeff[i] * speed_sq;
-        const double *r = plant->rotor_position[i];
-        force_z += thrust;
-        torque[0] += r[1] * thrust;
-        torque[1] -= r[0] * thrust;
-        torque[2] += plant->yaw_sign[i] * drag_torque;
+        force_z += c->thrust[i] * speed_sq;
+        torque[0] += c->roll[i] * speed_sq;
+        torque[1] += c->pitch[i] * speed_sq;
+        torque[2] += c->yaw[i] * speed_sq;
     }
 
     /* a = R (0, 0, F) / m - g z: the x and y products are +-0 and add nothing. */
-    double accel[3] = {r02 * force_z / plant->mass, r12 * force_z / plant->mass,
-                       r22 * force_z / plant->mass};
+    const double specific_thrust = force_z * c->inv_mass;
+    double accel[3] = {r02 * specific_thrust, r12 * specific_thrust, r22 * specific_thrust};
     accel[2] -= plant->gravity;
 
     const double *rate = state->body_rate;
     const double (*J)[3] = plant->inertia;
     double jw[3], net[3];
-    sitl_mat3_mul_vec(jw, J, rate);
+    if (diagonal) {
+        jw[0] = J[0][0] * rate[0];
+        jw[1] = J[1][1] * rate[1];
+        jw[2] = J[2][2] * rate[2];
+    } else {
+        sitl_mat3_mul_vec(jw, J, rate);
+    }
     net[0] = torque[0] - (rate[1] * jw[2] - rate[2] * jw[1]);
     net[1] = torque[1] - (rate[2] * jw[0] - rate[0] * jw[2]);
     net[2] = torque[2] - (rate[0] * jw[1] - rate[1] * jw[0]);
@@ -208,7 +245,14 @@ SITL_INLINE void plain_derivative(const sitl_plant_t *plant, int n, const sitl_s
         memset(deriv->body_rate, 0, sizeof(deriv->body_rate));
         return;
     }
-    sitl_mat3_mul_vec(deriv->body_rate, plant->inertia_inv, net);
+    if (diagonal) {
+        const double (*Ji)[3] = plant->inertia_inv;
+        deriv->body_rate[0] = Ji[0][0] * net[0];
+        deriv->body_rate[1] = Ji[1][1] * net[1];
+        deriv->body_rate[2] = Ji[2][2] * net[2];
+    } else {
+        sitl_mat3_mul_vec(deriv->body_rate, plant->inertia_inv, net);
+    }
     sitl_vec3_copy(deriv->position, state->velocity);
     sitl_vec3_copy(deriv->velocity, accel);
     deriv->quat[0] = 0.5 * (-x * rate[0] - y * rate[1] - z * rate[2]);
@@ -268,24 +312,20 @@ SITL_INLINE void add_scaled(int rotor_count, const sitl_state_t *base,
     out->on_ground = base->on_ground;
 }
 
-/* The four stages without effects; n is a constant where it is inlined, so
- * the rotor loops unroll. */
-SITL_INLINE void plain_stages(const sitl_plant_t *plant, int n, const sitl_state_t *state,
-                              const double *rotor_command, double dt,
+/* The four stages without effects; n and diagonal are constants where it is
+ * inlined, so the rotor loops unroll and the inertia products shrink. */
+SITL_INLINE void plain_stages(const sitl_plant_t *plant, int n, int diagonal,
+                              const sitl_state_t *state, const plain_constants_t *c, double dt,
                               sitl_state_derivative_t k[4])
 {
-    double clamped[SITL_MAX_ROTORS];
     sitl_state_t tmp;
-    for (int i = 0; i < n; i++) {
-        clamped[i] = sitl_motor_clamp(&plant->motor, rotor_command[i]);
-    }
-    plain_derivative(plant, n, state, clamped, &k[0]);
+    plain_derivative(plant, n, diagonal, state, c, &k[0]);
     add_scaled(n, state, &k[0], 0.5 * dt, &tmp);
-    plain_derivative(plant, n, &tmp, clamped, &k[1]);
+    plain_derivative(plant, n, diagonal, &tmp, c, &k[1]);
     add_scaled(n, state, &k[1], 0.5 * dt, &tmp);
-    plain_derivative(plant, n, &tmp, clamped, &k[2]);
+    plain_derivative(plant, n, diagonal, &tmp, c, &k[2]);
     add_scaled(n, state, &k[2], dt, &tmp);
-    plain_derivative(plant, n, &tmp, clamped, &k[3]);
+    plain_derivative(plant, n, diagonal, &tmp, c, &k[3]);
 }
 
 void sitl_plant_step(const sitl_plant_t *plant, sitl_state_t *state, const double *rotor_command,
@@ -294,10 +334,12 @@ void sitl_plant_step(const sitl_plant_t *plant, sitl_state_t *state, const doubl
     const int n = plant->rotor_count;
     sitl_state_derivative_t stage[4];
     if (plain_physics(plant)) {
-        if (n == 4) {
-            plain_stages(plant, 4, state, rotor_command, dt, stage);
+        plain_constants_t c;
+        plain_setup(plant, n, rotor_command, &c);
+        if (n == 4 && c.diagonal_inertia) {
+            plain_stages(plant, 4, 1, state, &c, dt, stage);
         } else {
-            plain_stages(plant, n, state, rotor_command, dt, stage);
+            plain_stages(plant, n, 0, state, &c, dt, stage);
         }
     } else {
         sitl_state_t tmp;

@@ -68,7 +68,8 @@ void sitl_esc_record(sitl_esc_telemetry_t *esc, double t, const double *speed)
     sitl_speed_sample_t *s = &esc->history[esc->head];
     s->time = t;
     memcpy(s->speed, speed, (size_t)esc->rotor_count * sizeof(double));
-    esc->head = (esc->head + 1) % esc->capacity;
+    /* After every RK4 step: a compare, not an integer division. */
+    esc->head = esc->head + 1 < esc->capacity ? esc->head + 1 : 0;
     if (esc->size < esc->capacity) {
         esc->size++;
     }

@@ -5,6 +5,8 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "sitl_sincos.h"
+
 /* M_PI is not in strict C11. */
 static const double pi = 3.14159265358979323846;
 
@@ -117,7 +119,8 @@ int sitl_trajectory_init(sitl_trajectory_t *traj, sitl_trajectory_kind_t kind,
  */
 static void sine_derivatives(double amplitude, double omega, double t, double out[5])
 {
-    double s = sin(omega * t), c = cos(omega * t);
+    double s, c;
+    sitl_sincos(omega * t, &s, &c);
     double w1 = omega, w2 = w1 * omega, w3 = w2 * omega, w4 = w3 * omega;
     out[0] = amplitude * s;
     out[1] = amplitude * w1 * c;
@@ -128,7 +131,8 @@ static void sine_derivatives(double amplitude, double omega, double t, double ou
 
 static void one_minus_cos_derivatives(double amplitude, double omega, double t, double out[5])
 {
-    double s = sin(omega * t), c = cos(omega * t);
+    double s, c;
+    sitl_sincos(omega * t, &s, &c);
     double w1 = omega, w2 = w1 * omega, w3 = w2 * omega, w4 = w3 * omega;
     out[0] = amplitude * (1.0 - c);
     out[1] = amplitude * w1 * s;

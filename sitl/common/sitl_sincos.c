@@ -1,0 +1,63 @@
+/* sin and cos together by quadrant reduction and Taylor polynomials (see sitl_sincos.h). */
+#include "sitl_sincos.h"
+
+#include <math.h>
+#include <stdint.h>
+
+/* pi/2 in three parts: the first two have 33 significant bits, so k * part is
+ * exact for |k| < 2^20 and x - k pi/2 loses nothing to cancellation. */
+static const double half_pi_1 = 0x1.921fb544p+0;
+static const double half_pi_2 = 0x1.0b4611a6p-34;
+static const double half_pi_3 = 0x1.3198a2e037073p-69;
+static const double two_over_pi = 0.63661977236758134308;
+
+/* Bound on |x| for the reduction above: |k| <= 2^19 * 2 / pi < 2^20. */
+static const double reduction_limit = 524288.0;
+
+void sitl_sincos(double x, double *s, double *c)
+{
+    if (!(fabs(x) <= reduction_limit)) {
+        *s = sin(x);
+        *c = cos(x);
+        return;
+    }
+    /* k = x / (pi/2) rounded to the nearest integer (ties either way: the
+     * polynomials below are accurate a little beyond pi/4). */
+    const int64_t k = (int64_t)(x * two_over_pi + (x >= 0.0 ? 0.5 : -0.5));
+    const double kd = (double)k;
+    const double r = ((x - kd * half_pi_1) - kd * half_pi_2) - kd * half_pi_3;
+    const double r2 = r * r;
+
+    /* Taylor series to r^15 / r^16: for |r| <= pi/4 the first omitted term
+     * is below 5e-17, under half a unit in the last place. The tails are
+     * summed in pairs (Estrin's scheme) to shorten the dependent chain. */
+    const double r4 = r2 * r2, r8 = r4 * r4;
+    const double sin_tail = (-1.0 / 6.0 + r2 * (1.0 / 120.0)) +
+                            r4 * (-1.0 / 5040.0 + r2 * (1.0 / 362880.0)) +
+                            r8 * ((-1.0 / 39916800.0 + r2 * (1.0 / 6227020800.0)) +
+                                  r4 * (-1.0 / 1307674368000.0));
+    const double cos_tail = (1.0 / 24.0 + r2 * (-1.0 / 720.0)) +
+                            r4 * (1.0 / 40320.0 + r2 * (-1.0 / 3628800.0)) +
+                            r8 * ((1.0 / 479001600.0 + r2 * (-1.0 / 87178291200.0)) +
+                                  r4 * (1.0 / 20922789888000.0));
+    const double sin_r = r + (r * r2) * sin_tail;
+    const double cos_r = (1.0 - 0.5 * r2) + r4 * cos_tail;
+    switch (k & 3) {
+    case 0:
+        *s = sin_r;
+        *c = cos_r;
+        break;
+    case 1:
+        *s = cos_r;
+        *c = -sin_r;
+        break;
+    case 2:
+        *s = -sin_r;
+        *c = -cos_r;
+        break;
+    default:
+        *s = -cos_r;
+        *c = sin_r;
+        break;
+    }
+}

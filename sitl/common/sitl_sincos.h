@@ -1,0 +1,16 @@
+/*
+ * sin and cos of one angle together, for the simulator's per-step angles (the
+ * reference trajectory, the Box-Muller normals, the controller's yaw).
+ * libm's sincos costs ~ 150-190 x86 instructions per call (it saves and
+ * restores the floating-point control state); these ~ 45 give the same
+ * values to within 2 units in the last place (tests/sitl/test_sitl_sincos.c
+ * compares them with libm), so a flight changes only at rounding level.
+ */
+#ifndef SITL_SINCOS_H
+#define SITL_SINCOS_H
+
+/* *s = sin(x), *c = cos(x). Exact-reduction range |x| <= 2^19 (the angles
+ * here are below 1e4 rad); beyond it, and for non-finite x, libm answers. */
+void sitl_sincos(double x, double *s, double *c);
+
+#endif
