@@ -470,6 +470,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (config->disturbance_torque > (PROPID_WITH_DISTURBANCE ? 1u : 0u)) {
         PROPID_BAD("disturbance_torque");
     }
+#if PROPID_WITH_DISTURBANCE /* (compiled out: disturbance_torque 0 only, checked above) */
     if (config->disturbance_torque) {
         if (!positive_finite(config->disturbance_std0) || config->disturbance_std0 > 1.0e4f) {
             PROPID_BAD("disturbance_std0");
@@ -478,10 +479,12 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             PROPID_BAD("disturbance_walk");
         }
     }
+#endif
     if (!isfinite(config->mass) || config->mass < 0.0f || config->mass > 1.0e4f ||
         (!PROPID_WITH_ACCEL && config->mass > 0.0f)) { /* compiled out */
         PROPID_BAD("mass");
     }
+#if PROPID_WITH_ACCEL /* (compiled out: mass 0 only, checked above; then no torque scale either) */
     if (config->mass > 0.0f) {
         if (!positive_finite(config->accel_noise_std) || config->accel_noise_std > 1.0e3f) {
             PROPID_BAD("accel_noise_std");
@@ -506,6 +509,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         (!isfinite(config->torque_scale_walk) || config->torque_scale_walk < 0.0f || config->torque_scale_walk > 10.0f)) {
         PROPID_BAD("torque_scale_walk");
     }
+#else
+    if (config->torque_scale != 0u) {
+        PROPID_BAD("torque_scale"); /* only the accelerometer makes it observable */
+    }
+#endif
     if (!propid_delay_config_ok(config)) {
         PROPID_BAD("rotor_delay_us"); /* beyond 1 s or what PROPID_DELAY_SLOTS holds */
     }
@@ -534,11 +542,12 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     out.layout.disturbance = PROPID_NO_STATE;
     out.layout.accel_bias = PROPID_NO_STATE;
     out.layout.torque_scale = PROPID_NO_STATE;
-    if (config->disturbance_torque) {
+    /* (PROPID_WITH_*: a compiled-out block's code is left out, its value is 0.) */
+    if (PROPID_WITH_DISTURBANCE && config->disturbance_torque) {
         out.layout.disturbance = next;
         next = (uint8_t)(next + PROPID_DISTURBANCE_STATES);
     }
-    if (config->mass > 0.0f) {
+    if (PROPID_WITH_ACCEL && config->mass > 0.0f) {
         out.layout.accel_bias = next;
         next = (uint8_t)(next + PROPID_ACCEL_BIAS_STATES);
 #if PROPID_WITH_ACCEL
@@ -548,7 +557,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         }
 #endif
     }
-    if (config->torque_scale) {
+    if (PROPID_WITH_ACCEL && config->torque_scale) {
         out.layout.torque_scale = next;
         next = (uint8_t)(next + PROPID_TORQUE_SCALE_STATES);
     }
@@ -684,13 +693,13 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             psd = config->gyro_bias_walk * config->gyro_bias_walk;
             floor_var = 1.0e-14f;
             ceiling = config->gyro_range * config->gyro_range;
-        } else if (k == out.layout.accel_bias) {
+        } else if (PROPID_WITH_ACCEL && k == out.layout.accel_bias) {
             kind = PROPID_KIND_ACCEL_BIAS;
             prior = config->accel_bias_std0 * config->accel_bias_std0;
             psd = config->accel_bias_walk * config->accel_bias_walk;
             floor_var = 1.0e-12f;
             ceiling = config->accel_range * config->accel_range;
-        } else if (k == out.layout.torque_scale) {
+        } else if (PROPID_WITH_ACCEL && k == out.layout.torque_scale) {
             kind = PROPID_KIND_TORQUE_SCALE;
             prior = config->torque_scale_std0 * config->torque_scale_std0;
             psd = config->torque_scale_walk * config->torque_scale_walk; /* 0: geometry and inertia only */

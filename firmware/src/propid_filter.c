@@ -293,7 +293,7 @@ static __attribute__((noinline)) propid_status_t predict_step(propid_filter_t *f
  * innovation is then zero, so it is fused whatever the rate, and the bias is
  * not pulled by an unknown initial rate. Not inlined: this rare path's frame
  * stays off the usual step's. */
-static __attribute__((noinline)) propid_status_t anchor_step(propid_filter_t *filter, const float gyro_rad_s[3])
+static __attribute__((noinline)) PROPID_RARE propid_status_t anchor_step(propid_filter_t *filter, const float gyro_rad_s[3])
 {
     propid_core_t *core = &filter->core;
     float check = 0.0f;

@@ -143,7 +143,7 @@ static void reanchor_rate(propid_filter_t *filter, uint8_t axis, uint8_t bias, f
  * gate_max_consecutive gated samples in a row the re-anchor. Returns 1 when the
  * axis was gated out. Not inlined into fuse_generic: the two calls' locals stay
  * in one frame per axis (the per-axis path's stack: 32 B less). */
-static __attribute__((noinline)) uint32_t fuse_axis(propid_filter_t *filter, uint8_t axis, float measured)
+static __attribute__((noinline)) PROPID_RARE uint32_t fuse_axis(propid_filter_t *filter, uint8_t axis, float measured)
 {
     propid_core_t *core = &filter->core;
     const propid_derived_t *derived = &filter->derived;
@@ -400,7 +400,7 @@ apply_three_any(float *restrict cov, propid_core_t *restrict core,
 /* Every sample the one pass does not take (a gated axis, S < R, a non-finite
  * vector): the generic scalar update per axis. Not inlined: its callees' frames
  * stay off the one pass's stack. */
-static __attribute__((noinline)) uint32_t fuse_generic(propid_filter_t *filter, const float gyro[3])
+static __attribute__((noinline)) PROPID_RARE uint32_t fuse_generic(propid_filter_t *filter, const float gyro[3])
 {
     /* A prediction across a long gap at high rates can inflate the rate
      * variances by orders of magnitude: the ceilings first (they keep P PSD),

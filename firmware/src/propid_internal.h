@@ -169,6 +169,13 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
 #define PROPID_SCHEDULE_BARRIER() ((void)0)
 #define PROPID_RELOAD_BARRIER(object) ((void)0)
 #endif
+/* PROPID_RARE: a function the usual gyro step never runs (repairs, the per-axis
+ * path, re-anchoring): compiled for size, its calls laid out as unlikely. */
+#if defined(__GNUC__)
+#define PROPID_RARE __attribute__((cold))
+#else
+#define PROPID_RARE
+#endif
 #if defined(__GNUC__) && !defined(__clang__)
 #define PROPID_NO_EARLY_SCHEDULE __attribute__((optimize("no-schedule-insns")))
 #else
@@ -272,6 +279,9 @@ typedef enum {
  * stored triangle (the Joseph form's result for the optimal gain, with the
  * variance floors/ceilings and the repair below keeping it PSD in float32),
  * coefficient-independent: clamps are the caller's. */
+#if !PROPID_WITH_ACCEL /* (with the accelerometer it is that sensor's usual update) */
+PROPID_RARE
+#endif
 propid_scalar_result_t propid_scalar_update(propid_filter_t *filter, const propid_sparse_row_t *row,
                                             float innovation, float noise_var, float gate_sq,
                                             float *test_ratio);
@@ -286,18 +296,18 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 
 /* propid_covariance.c */
 /* State to nominal, covariance to the diagonal prior. */
-void propid_cov_set_prior(const propid_derived_t *derived, uint8_t rotor_count, propid_core_t *core);
+PROPID_RARE void propid_cov_set_prior(const propid_derived_t *derived, uint8_t rotor_count, propid_core_t *core);
 /* Zero row and column `index`, put its prior variance on the diagonal. */
-void propid_cov_reset_state(const propid_derived_t *derived, propid_core_t *core, uint8_t index);
+PROPID_RARE void propid_cov_reset_state(const propid_derived_t *derived, propid_core_t *core, uint8_t index);
 /* Floors and ceilings on every variance; returns 1 if a diagonal was bad and the
  * covariance had to be repaired. */
-int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *core);
+PROPID_RARE int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *core);
 /* Integrity of one row (finite, |Pij| <= sqrt(Pii Pjj)); repairs the whole matrix
  * and returns 1 when the row is bad. */
 int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, uint8_t row);
 /* Full repair: bad diagonals back to the prior (row/column zeroed), non-finite
  * off-diagonals to 0, correlations above 1 pulled inside. Returns 1 if anything changed. */
-int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core);
+PROPID_RARE int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core);
 
 /* propid_predict.c */
 /* The rate step (trapezoid input, Heun on the gyroscopic term: docs/math.md §2)

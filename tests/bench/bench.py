@@ -122,6 +122,12 @@ def bench_mcu(repo: pathlib.Path, work: pathlib.Path) -> dict:
     for option, counted in options.items():
         result[f"mcu_instr_per_step_quad_{option}"] = counted["quad_plus"]["median"]
     result["dense_ratio_quad"] = result["dense_instr_per_step_quad"] / result["mcu_instr_per_step_quad"]
+    # The stack the counted propid_push_gyro() calls really used (count_step.c
+    # paints below the caller's stack pointer): beside the call graph's worst case.
+    for build_name, output in (("", counts["harness_output"]), ("_full", full["harness_output"])):
+        used = [int(m.group(1)) for line in output
+                for m in [re.search(r"^quad_plus: .* stack_used_push_gyro (\d+)", line)] if m]
+        result[f"stack_bytes_push_gyro_measured{build_name}"] = used[0] if used else None
     load = {}
     for name, clock, cpi in CPU_MODELS:
         for rate in GYRO_RATES_HZ:
@@ -195,8 +201,9 @@ def linked_filter_size(repo: pathlib.Path, work: pathlib.Path, build_flag: str,
     # .text.NAME holds function NAME (-ffunction-sections; static functions are
     # "file.c:NAME" in the call graph, clones "NAME.constprop.0" in both).
     reach = {name.rsplit(":", 1)[-1] for name in per_sample}
+    # (GCC puts cold functions in .text.unlikely.NAME.)
     step_bytes = sum(size for name, size in by_symbol.items()
-                     if name.startswith(".text.") and name[len(".text."):] in reach)
+                     if name.startswith(".text.") and name[len(".text."):].removeprefix("unlikely.") in reach)
     return {"flash_bytes": filter_bytes, "flash_bytes_per_sample_path": step_bytes,
             "flash_bytes_init_and_rest": filter_bytes - step_bytes,
             "per_section": dict(sorted(by_symbol.items(), key=lambda kv: -kv[1]))}
@@ -380,6 +387,9 @@ def print_table(r: dict) -> None:
         for key, percent in mcu["cpu_percent_quad"].items():
             rows.append((f"CPU load, quad, {key} (CPI {mcu['cpu_model_cpi'][key.split(',')[0]]})",
                          f"{percent:.2f} %"))
+        rows.append(("stack used by propid_push_gyro, quad flight, measured under QEMU, quad / full build (B)",
+                     f"{fmt(mcu.get('stack_bytes_push_gyro_measured'))} / "
+                     f"{fmt(mcu.get('stack_bytes_push_gyro_measured_full'))}"))
         rows.append(("dense / propid (quad)", f"{mcu['dense_ratio_quad']:.1f}x; same estimates: "
                      f"{'yes' if mcu['dense_same_estimates'] else 'NO'} (max diff "
                      f"{mcu['dense_max_state_diff_in_std']:.1e} std)"))
@@ -465,6 +475,7 @@ def main() -> int:
                     "flash_bytes", "flash_bytes_linked_quad", "flash_bytes_full",
                     "flash_bytes_linked_quad_full", "ram_bytes_quad", "ram_bytes_quad_full",
                     "ram_bytes_hexa", "ram_bytes_octo", "stack_bytes_max", "stack_bytes_push_gyro",
+                    "stack_bytes_push_gyro_measured", "stack_bytes_push_gyro_measured_full",
                     "stack_bytes_max_full", "stack_bytes_push_gyro_full",
                     "sitl_realtime_factor", "sitl_realtime_factor_paper",
                     "sitl_realtime_factor_flight", "sitl_realtime_factor_paper_flight",

@@ -15,7 +15,11 @@
  * the dense steps are counted, and the two estimates are compared at the end.
  *
  * Output (semihosting): per variant its label and the filter's status summary,
- * so a run whose steps were gated or repaired (cheaper or dearer paths) shows.
+ * so a run whose steps were gated or repaired (cheaper or dearer paths) shows,
+ * and the deepest stack a counted propid_push_gyro() call really used (painted
+ * below the caller's stack pointer before the call, the deepest overwritten
+ * word after it): a measurement of the paths this flight takes, beside the
+ * call graph's worst case (firmware/toolchain/stack_report.py).
  */
 #include <math.h>
 #include <stdint.h>
@@ -40,6 +44,33 @@ __attribute__((noinline)) void propid_count_end(uint32_t variant);
 __attribute__((noinline)) void propid_count_variant(uint32_t variant) { __asm__ volatile("" ::"r"(variant)); }
 __attribute__((noinline)) void propid_count_begin(uint32_t variant) { __asm__ volatile("" ::"r"(variant)); }
 __attribute__((noinline)) void propid_count_end(uint32_t variant) { __asm__ volatile("" ::"r"(variant)); }
+
+/* The measured stack of a call: STACK_WINDOW bytes below the caller's stack
+ * pointer painted before it (all but the painting function's own frame and a
+ * margin, below any call chain worth measuring), scanned after it. */
+#define STACK_WINDOW 2048u
+#define STACK_PAINT 0x5AC4C0DEu
+static inline uintptr_t stack_pointer(void)
+{
+    uintptr_t sp;
+    __asm__ volatile("mov %0, sp" : "=r"(sp));
+    return sp;
+}
+static __attribute__((noinline)) void stack_paint_below(uintptr_t top)
+{
+    const uintptr_t own = stack_pointer();
+    for (volatile uint32_t *word = (volatile uint32_t *)(top - STACK_WINDOW); (uintptr_t)word + 64u < own; ++word) {
+        *word = STACK_PAINT;
+    }
+}
+static __attribute__((noinline)) uint32_t stack_used_below(uintptr_t top)
+{
+    const volatile uint32_t *word = (const volatile uint32_t *)(top - STACK_WINDOW);
+    while ((uintptr_t)word < top && *word == STACK_PAINT) {
+        ++word;
+    }
+    return (uint32_t)(top - (uintptr_t)word);
+}
 
 static uint32_t rng_state = 12345u;
 static float noise(void) /* uniform in [-1, 1] */
@@ -164,6 +195,7 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
     const float dt = (float)GYRO_DT_US * 1.0e-6f;
     uint64_t t_us = 1000u;
     int errors = 0;
+    uint32_t stack_max = 0u; /* deepest stack of a counted propid_push_gyro() [B] */
     const uint32_t warmup = with_dense ? DENSE_WARMUP_STEPS : WARMUP_STEPS;
     const uint32_t total = warmup + (with_dense ? DENSE_COUNTED_STEPS : COUNTED_STEPS);
     const float arm = 0.17f;
@@ -237,6 +269,10 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
             }
             continue;
         }
+        const uintptr_t caller_sp = stack_pointer();
+        if (counted) {
+            stack_paint_below(caller_sp);
+        }
 #ifndef COUNT_STEP_DELAY_US
         if (counted) {
             propid_count_begin(variant);
@@ -245,6 +281,8 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
         const propid_status_t status = propid_push_gyro(&filter, t_us, gyro);
         if (counted) {
             propid_count_end(variant);
+            const uint32_t used = stack_used_below(caller_sp);
+            stack_max = used > stack_max ? used : stack_max;
         }
         if (status < 0) {
             errors++;
@@ -265,6 +303,10 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
     put_uint(counters.state_clamps);
     propid_qemu_puts(" rejected ");
     put_uint((uint32_t)errors);
+    if (!with_dense) {
+        propid_qemu_puts(" stack_used_push_gyro ");
+        put_uint(stack_max);
+    }
     propid_qemu_putc('\n');
     if (with_dense) {
         /* The same estimates: every state within a small fraction of its std. */
