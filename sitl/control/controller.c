@@ -33,16 +33,17 @@ static int normalise_with_derivatives(const vec3 v, const vec3 dv, const vec3 dd
     if (!(n > 1e-12)) {
         return -1;
     }
+    const double inv_n = 1.0 / n; /* one division, not nine (rounding-level) */
     for (int i = 0; i < 3; i++) {
-        u[i] = v[i] / n;
+        u[i] = v[i] * inv_n;
     }
     double dn = sitl_vec3_dot(u, dv);
     for (int i = 0; i < 3; i++) {
-        du[i] = (dv[i] - u[i] * dn) / n;
+        du[i] = (dv[i] - u[i] * dn) * inv_n;
     }
     double ddn = sitl_vec3_dot(du, dv) + sitl_vec3_dot(u, ddv);
     for (int i = 0; i < 3; i++) {
-        ddu[i] = (ddv[i] - 2.0 * du[i] * dn - u[i] * ddn) / n;
+        ddu[i] = (ddv[i] - 2.0 * du[i] * dn - u[i] * ddn) * inv_n;
     }
     return 0;
 }
