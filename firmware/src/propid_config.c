@@ -60,6 +60,7 @@ void propid_config_default(propid_config_t *config)
     config->torque_scale_walk = 0.0f;
     config->rotor_speed_noise = 0.0f;
     config->rotor_speed_noise_time = 0.0f;
+    config->inertia_rel_std = 0.0f;
 }
 
 propid_status_t propid_config_set_symmetric(propid_config_t *config, uint8_t rotor_count,
@@ -460,6 +461,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!positive_finite(config->converged_rel_std)) {
         PROPID_BAD("converged_rel_std");
     }
+    if (!isfinite(config->inertia_rel_std) || config->inertia_rel_std < 0.0f || config->inertia_rel_std > 1.0f) {
+        PROPID_BAD("inertia_rel_std");
+    }
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const float rotor_inertia = config->rotor_inertia[i];
         if (!isfinite(rotor_inertia) || rotor_inertia < 0.0f || rotor_inertia > 1.0f ||
@@ -657,7 +661,16 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         memcpy(&high_bits, &s_max, sizeof(high_bits));
         out.innovation_range_bits = high_bits - low_bits;
     }
-    out.converged_var = config->converged_rel_std * config->converged_rel_std;
+    {
+        /* A claim bounds the error at PROPID_CLAIM_SIGMAS std of everything the
+         * error holds: the filter's variance plus the configured inertia's scale,
+         * which the data cannot see (kf's claim adds it back when the torque-scale
+         * state takes it and the accelerometer sets kf: propid_estimate.c).
+         * Negative: never claimed. */
+        const float inertia_var = config->inertia_rel_std * config->inertia_rel_std;
+        out.claim_var = config->converged_rel_std * config->converged_rel_std *
+                            (1.0f / (PROPID_CLAIM_SIGMAS * PROPID_CLAIM_SIGMAS)) - inertia_var;
+    }
 
     /* Per-state prior, process noise, floor and ceiling (reasons in docs/design.md). */
     const uint8_t first_drag = propid_first_drag(rotor_count);

@@ -6,12 +6,6 @@
 
 #include "propid_internal.h"
 
-/* A "converged" claim (docs/reliability.md "Converged claims"): the coefficient's
- * relative error is below converged_rel_std. With an honest Gaussian std that
- * holds with 99.73 % when PROPID_CLAIM_SIGMAS std < converged_rel_std (the old
- * rule, 1 std, failed 32 % of the claims it could make at the threshold). */
-#define PROPID_CLAIM_SIGMAS 3.0f
-
 static float std_of(float variance)
 {
     return variance > 0.0f ? sqrtf(variance) : 0.0f;
@@ -44,7 +38,16 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         estimate->innovation_test_ratio[a] = core->innovation_test_ratio[a];
     }
     uint16_t all_rotors = 0u;
-    const float claim_var = derived->converged_var * (1.0f / (PROPID_CLAIM_SIGMAS * PROPID_CLAIM_SIGMAS));
+    /* Claim thresholds (propid_config.c: 3 std, the inertia's uncertainty
+     * included); kf's without the inertia when the torque-scale state takes the
+     * scale error and the accelerometer sets kf. */
+    const float km_claim_var = derived->claim_var;
+    float kf_claim_var = km_claim_var;
+#if PROPID_WITH_ACCEL && PROPID_GENERAL_VEHICLES /* (the configuration kept whole) */
+    if (derived->layout.torque_scale != PROPID_NO_STATE) {
+        kf_claim_var += config->inertia_rel_std * config->inertia_rel_std;
+    }
+#endif
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const uint8_t kf = (uint8_t)(propid_first_thrust() + i);
         const uint8_t km = (uint8_t)(first_drag + i);
@@ -65,10 +68,10 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         if (km_var < 0.25f * propid_prior_var(derived, km)) {
             estimate->drag_coeff_converging |= bit;
         }
-        if (kf_var < claim_var) {
+        if (kf_var < kf_claim_var) {
             estimate->thrust_coeff_converged |= bit;
         }
-        if (km_var < claim_var) {
+        if (km_var < km_claim_var) {
             estimate->drag_coeff_converged |= bit;
         }
     }

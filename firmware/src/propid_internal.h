@@ -200,6 +200,12 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
  * P_hh (S += R_eff - R): float32 rounding treated as measurement noise. */
 #define PROPID_UPDATE_LOADING (64.0f * PROPID_VAR_LOADING)
 
+/* A "converged" claim (docs/reliability.md "Converged claims"): the coefficient's
+ * relative error is below converged_rel_std. With an honest Gaussian std that
+ * holds with 99.73 % when PROPID_CLAIM_SIGMAS std < converged_rel_std (the old
+ * rule, 1 std, failed 32 % of the claims it could make at the threshold). */
+#define PROPID_CLAIM_SIGMAS 3.0f
+
 /* Gate constant when gating is off (gate_sigma <= 0): a 1e15-sigma innovation
  * is never data; the gate test then also needs no "gating on" branch. */
 #define PROPID_GATE_OFF_SQ 1.0e30f

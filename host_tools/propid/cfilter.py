@@ -155,6 +155,7 @@ _OPTIONAL_FIELDS = [
     ("rotor_delay_us", ctypes.c_int32),
     ("rotor_speed_noise", ctypes.c_float),
     ("rotor_speed_noise_time", ctypes.c_float),
+    ("inertia_rel_std", ctypes.c_float),
 ]
 _INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int32)
 
@@ -275,6 +276,8 @@ DEFAULT_TUNING: dict[str, float | int] = {
     # Rotor-speed input error (docs/math.md §14): std [rad/s] and correlation time [s]; 0: off.
     "rotor_speed_noise": 0.0,
     "rotor_speed_noise_time": 0.0,
+    # Relative std of the configured inertia's scale: counted by converged claims (0: J exact).
+    "inertia_rel_std": 0.0,
 }
 
 
@@ -328,6 +331,7 @@ class FilterConfig:
     rotor_delay_us: int = DEFAULT_TUNING["rotor_delay_us"]
     rotor_speed_noise: float = DEFAULT_TUNING["rotor_speed_noise"]
     rotor_speed_noise_time: float = DEFAULT_TUNING["rotor_speed_noise_time"]
+    inertia_rel_std: float = DEFAULT_TUNING["inertia_rel_std"]
 
     @property
     def rotor_count(self) -> int:

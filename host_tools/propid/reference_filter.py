@@ -106,6 +106,11 @@ class ReferenceFilter:
         self.input_noise_var = 4.0 * _f32(config.rotor_speed_noise) ** 2
         self.input_noise_time = _f32(config.rotor_speed_noise_time)
         self.converged_var = c["converged_rel_std"] ** 2
+        # C (propid_config.c): a claim counts the configured inertia's scale error too, which
+        # the data cannot see (for kf not when the torque-scale state takes it).
+        inertia_var = _f32(getattr(config, "inertia_rel_std", 0.0)) ** 2
+        self.claim_var = (self.converged_var / 9.0 - (0.0 if self.torque_scale is not None else inertia_var),
+                          self.converged_var / 9.0 - inertia_var)
 
         n = self.n
         self.prior_var = np.empty(n)
@@ -639,10 +644,10 @@ class ReferenceFilter:
         def mask(condition: np.ndarray) -> int:
             return int(np.sum(bits[condition]))
 
-        # C (propid_estimate.c): converged when 3 std < converged_rel_std; the C filter
-        # also asks its consistency monitor to vouch, which this reference does not have.
-        kf_converged = mask(9.0 * var[kf] < self.converged_var)
-        km_converged = mask(9.0 * var[km] < self.converged_var)
+        # C (propid_estimate.c): converged when 3 std (inertia's included) < converged_rel_std;
+        # the C filter also asks its consistency monitor to vouch, which this reference does not have.
+        kf_converged = mask(var[kf] < self.claim_var[0])
+        km_converged = mask(var[km] < self.claim_var[1])
         health = self.health
         if not self.has_rotor_data:
             health |= HEALTH["NO_ROTOR_DATA"]

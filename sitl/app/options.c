@@ -305,6 +305,10 @@ static const opt_t options[] = {
            "rate process noise (docs/math.md §14). Default 0 (exact)"),
     NUMBER(NULL, "filter-rotor-speed-noise-time", filter_rotor_speed_noise_time, 0.0, 1.0, "S",
            "filter: correlation time of that error [s] (default 0: one step)"),
+    NUMBER(NULL, "filter-inertia-std", filter_inertia_rel_std, 0.0, 1.0, "R",
+           "filter: relative std of the vehicle file's inertia scale\n"
+           "(inertia_rel_std): the data cannot see it, converged claims\n"
+           "count it. Default 0 (the file's inertia is exact)"),
 
     NUMBER("Vehicle overrides", "motor-tau", motor_time_constant, 1e-5, 10.0, "S",
            "motor time constant [s]"),

@@ -155,5 +155,6 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
     c->rotor_delay_us = (int32_t)lround(opts->filter_esc_delay_s * 1e6);
     c->rotor_speed_noise = (float)opts->filter_rotor_speed_noise;
     c->rotor_speed_noise_time = (float)opts->filter_rotor_speed_noise_time;
+    c->inertia_rel_std = (float)opts->filter_inertia_rel_std;
     return propid_config_check(c, bad_field);
 }

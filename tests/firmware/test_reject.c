@@ -254,6 +254,9 @@ BREAK(clamp_min_zero, bad->coeff_rel_min = 0.0f)
 BREAK(clamp_min_above_one, bad->coeff_rel_min = 1.5f)
 BREAK(clamp_max_below_one, bad->coeff_rel_max = 0.5f)
 BREAK(converged_zero, bad->converged_rel_std = 0.0f)
+BREAK(inertia_std_negative, bad->inertia_rel_std = -0.1f)
+BREAK(inertia_std_nan, bad->inertia_rel_std = NAN)
+BREAK(inertia_std_above_one, bad->inertia_rel_std = 1.5f)
 #undef BREAK
 
 static void test_bad_config_rotors(void)
@@ -310,6 +313,9 @@ static void test_bad_config_guards(void)
     check_bad_config(clamp_min_above_one, "coeff_rel_min");
     check_bad_config(clamp_max_below_one, "coeff_rel_max");
     check_bad_config(converged_zero, "converged_rel_std");
+    check_bad_config(inertia_std_negative, "inertia_rel_std");
+    check_bad_config(inertia_std_nan, "inertia_rel_std");
+    check_bad_config(inertia_std_above_one, "inertia_rel_std");
     assert_still_accepts();
 }
 

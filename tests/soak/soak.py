@@ -31,7 +31,12 @@ Figures:
   are the distribution the simulator draws the truth from, without which a
   NEES is not chi-square distributed;
 - false_converged: coefficient "converged" claims (per coefficient and control
-  step) while more than 5 % off, over all mode-filter flights; with the claims;
+  step) while more than 5 % off, over all mode-filter flights; with the claims.
+  A flight with the inertia_error effect flies a vehicle file whose inertia is
+  a CAD estimate, and its configuration says so (--filter-inertia-std, the
+  effect's nominal size: the class of the error, not the drawn value): no test
+  on gyro and rotor speeds sees a scale error of J, only the configuration can
+  tell the claim about it;
 - cov_repairs: covariance repairs, summed;
 - diverged_filter / diverged_oracle: flights the simulator stopped for
   divergence (exit 3) in each mode; `filter_only_diverged`: cases where the
@@ -138,6 +143,8 @@ def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool 
         cmd += matched_filter(case["sensors"])
     for effect in case["effects"]:
         cmd += ["--effect", effect]
+    if any(effect.startswith("inertia_error=") for effect in case["effects"]):
+        cmd += ["--filter-inertia-std", f"{EFFECTS['inertia_error']}"]
     for fault in case["faults"]:
         cmd += ["--fault", fault]
     if case["damage"]:

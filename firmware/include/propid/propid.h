@@ -153,6 +153,13 @@ typedef struct {
                                          torque Jacobian (docs/math.md §14). 0: exact inputs (off) */
     float rotor_speed_noise_time;     /* correlation time of that error [s]: how long one error stays
                                          in the input (e.g. the telemetry interval); 0: one step */
+
+    /* What the data cannot tell (docs/reliability.md "Converged claims"). */
+    float inertia_rel_std;            /* relative std of the configured inertia's scale (how well the
+                                         vehicle file knows J, e.g. 0.1 from CAD): gyro and rotor speeds
+                                         see kf/J and km/J only, so a scale error of J passes 1:1 into kf
+                                         and km, invisible to every test. A converged claim counts it
+                                         (for kf not when torque_scale separates it). 0: J exact */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -276,7 +283,9 @@ typedef struct {
     /* Private (not part of the API contract): */
     float gate_sq;                                  /* gate_sigma^2, PROPID_GATE_OFF_SQ when gating is off */
     float inv_gate_sq;                              /* 1 / gate_sq (1 when gating is off) */
-    float converged_var;                            /* converged_rel_std^2 */
+    float claim_var;                                /* private: relative variance of a coefficient
+                                                       below which it is claimed converged (3 std and
+                                                       the inertia's uncertainty: propid_config.c) */
 #if PROPID_GENERAL_VEHICLES /* (the quad build: 2 config.gyro_range, propid_rate_limit) */
     float rate_limit;                               /* |predicted body rate| bound: 2 gyro_range */
 #endif
