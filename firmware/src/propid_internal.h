@@ -183,10 +183,17 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
 #endif
 
 /* Covariance health in float32 (docs/math.md §2 "Rounding loading", design.md
- * §12). Every prediction multiplies each variance by (1 + PROPID_VAR_LOADING):
- * a PSD diagonal term of one float32 epsilon of the variance per step, the size
- * of the rounding each pass makes, so P stays positive definite where the
- * exact P is nearly singular (constant coefficients: correlations -> 1).
+ * §12). The prediction multiplies a variance by (1 + PROPID_VAR_LOADING): a PSD
+ * diagonal term of one float32 epsilon of the variance, the size of one
+ * rounding, so P stays positive definite where the exact P is nearly singular
+ * (constant coefficients: correlations -> 1). Every step, but the drag
+ * coefficients (km) every second step: the yaw torque sum_i s_i km_i u_i is
+ * the best-determined combination of all (every yaw update measures it), and
+ * a loading of each km's own, far larger, variance re-opens it every step, a
+ * fading memory that holds the km above the Cramer-Rao bound on circle
+ * flights. Every second step halves that and needed no covariance repair on
+ * the design flights; every fourth did (math.md). A fraction of epsilon per
+ * step is no option: 1 + eps/2 rounds to 1 in float32.
  * PROPID_ROUNDING_TOL is the rounding of the integrity tests themselves (a
  * product or a three-term sum of float32 values): differences within it are
  * not faults. */

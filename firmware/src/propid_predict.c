@@ -1,7 +1,8 @@
 /* Prediction: the body rates' step (the rotor torques, linear in the state, with
  * the trapezoid input; Heun on the gyroscopic term; coefficients and biases are
  * random walks) and the sparse covariance propagation
- * P := F P F^T + Q dt + PROPID_VAR_LOADING diag(F P F^T).
+ * P := F P F^T + Q dt + the rounding loading (propid_internal.h: every
+ * prediction on the rate variances, every second one on the rest).
  *
  * F = I + G with G = dt A, and A is zero except for the 3 rate rows, and within
  * them only at the entries propid_config.c found structurally non-zero
@@ -251,7 +252,7 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
  * (plain loops, small code; the quad layout has its straight-line kernel below). */
 static __attribute__((noinline)) void predict_covariance_any(
                  const propid_derived_t *derived, float *cov, float dt,
-                 const float jacobian_dt[3][PROPID_JAC_ROW], const uint8_t n)
+                 const float jacobian_dt[3][PROPID_JAC_ROW], const uint8_t n, float drag_factor)
 {
     /* T = rate rows of F P = P_a + sum_p G_ap P_(column p). */
     float rows[3][PROPID_MAX_STATES];
@@ -313,7 +314,9 @@ static __attribute__((noinline)) void predict_covariance_any(
         cov[propid_cov_index(1u, j)] = t1;
         cov[propid_cov_index(2u, j)] = t2;
         float *diagonal = &cov[propid_cov_index(j, j)];
-        *diagonal += PROPID_VAR_LOADING * *diagonal + propid_process_psd(derived, j) * dt;
+        const float factor = propid_state_kind(derived, j) == PROPID_KIND_DRAG ? drag_factor
+                                                                              : 1.0f + PROPID_VAR_LOADING;
+        *diagonal = factor * *diagonal + propid_process_psd(derived, j) * dt;
     }
 }
 #endif
@@ -323,12 +326,12 @@ static __attribute__((noinline)) void predict_covariance_any(
  * same reason as predict_stage_quad: its own base registers. */
 static __attribute__((noinline)) void
 predict_covariance_quad_layout(const propid_derived_t *derived, float *restrict cov,
-                               float dt, const float jacobian_dt[3][PROPID_JAC_ROW])
+                               float dt, const float jacobian_dt[3][PROPID_JAC_ROW], float drag_factor)
 {
     propid_quad_predict_covariance(cov, jacobian_dt, derived->kind_process_psd[PROPID_KIND_RATE] * dt,
                                    derived->kind_process_psd[PROPID_KIND_THRUST] * dt,
                                    derived->kind_process_psd[PROPID_KIND_DRAG] * dt,
-                                   derived->kind_process_psd[PROPID_KIND_BIAS] * dt);
+                                   derived->kind_process_psd[PROPID_KIND_BIAS] * dt, drag_factor);
 }
 
 #if PROPID_WITH_INPUT_NOISE
@@ -427,13 +430,16 @@ static void add_input_noise(const propid_derived_t *derived, propid_core_t *core
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
                                const float jacobian_dt[3][PROPID_JAC_ROW])
 {
+    /* The rounding loading of the drag coefficients, every second step (the
+     * even rows of the integrity-check cycle; propid_internal.h). */
+    const float drag_factor = (core->check_row & 1u) == 0u ? 1.0f + PROPID_VAR_LOADING : 1.0f;
 #if PROPID_GENERAL_VEHICLES
     if (!derived->quad_layout) {
-        predict_covariance_any(derived, core->cov, dt, jacobian_dt, derived->state_count);
+        predict_covariance_any(derived, core->cov, dt, jacobian_dt, derived->state_count, drag_factor);
     } else
 #endif
     {
-        predict_covariance_quad_layout(derived, core->cov, dt, jacobian_dt);
+        predict_covariance_quad_layout(derived, core->cov, dt, jacobian_dt, drag_factor);
     }
 #if PROPID_WITH_INPUT_NOISE
     if (derived->input_noise_var > 0.0f) {

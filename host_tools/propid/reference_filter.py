@@ -454,9 +454,13 @@ class ReferenceFilter:
             f[:3, :] += jac_dt
             self.cov = f @ self.cov @ f.T
             self.cov = 0.5 * (self.cov + self.cov.T)
-            # Q dt and the rounding loading (C: PROPID_VAR_LOADING, docs/math.md §2).
+            # Q dt and the rounding loading (C: PROPID_VAR_LOADING, docs/math.md §2): on the
+            # drag coefficients every second prediction (C: even check rows), on the rest every one.
             diag = np.diag_indices(n)
-            self.cov[diag] += VAR_LOADING * self.cov[diag] + self.process_psd * dt
+            loading = np.full(n, VAR_LOADING)
+            if self.check_row % 2 != 0:
+                loading[self.first_drag:self.first_bias] = 0.0
+            self.cov[diag] += loading * self.cov[diag] + self.process_psd * dt
             if self.input_noise_var > 0.0:
                 # Rotor-speed input error (C: add_input_noise, docs/math.md §14): B Sigma_u B^T
                 # dt max(dt, time), B = d(omega_dot)/d(Omega^2) at the current coefficients.
