@@ -750,6 +750,56 @@ static void test_time_jump_resync_workflow(void)
     TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_ROTOR_STALE) == 0u);
 }
 
+/* The rounding loading's schedule (propid_internal.h, docs/math.md §2): with no
+ * process noise and a zero Jacobian the prediction only loads, so after 2m
+ * predictions every variance has been multiplied by (1 + eps) 2m times but the
+ * drag coefficients' m times (the even rows of the check cycle). Both kernels:
+ * the quad layout's and the general one (hexa). */
+static void check_loading_schedule(uint8_t rotor_count)
+{
+    propid_config_t config;
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, rotor_count, 0.17f, 0.0f, 1.0f,
+                                                                 5.57e-6f, 1.36e-7f));
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    config.thrust_coeff_rel_walk = 0.0f;
+    config.drag_coeff_rel_walk = 0.0f;
+    config.gyro_bias_walk = 0.0f;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    TEST_ASSERT_EQUAL_UINT8(rotor_count == 4u ? 1u : 0u, filter.derived.quad_layout);
+    const uint8_t n = filter.derived.state_count;
+    const uint8_t kf = propid_first_thrust();
+    const uint8_t km = (uint8_t)(kf + rotor_count);
+    const uint8_t bias = propid_first_bias(rotor_count);
+    float once = filter.core.cov[propid_cov_index(kf, kf)];
+    float twice = once;
+    float bias_twice = filter.core.cov[propid_cov_index(bias, bias)];
+    const float jacobian_dt[3][PROPID_JAC_ROW] = {{0.0f}};
+    for (uint32_t k = 0; k < 2000u; ++k) {
+        filter.core.check_row = (uint8_t)(k % n);
+        propid_predict_covariance(&filter.derived, &filter.core, 0.002f, jacobian_dt);
+        twice *= 1.0f + PROPID_VAR_LOADING;
+        bias_twice *= 1.0f + PROPID_VAR_LOADING;
+        if ((k % n) % 2u == 0u) {
+            once *= 1.0f + PROPID_VAR_LOADING;
+        }
+    }
+    TEST_ASSERT_TRUE(once < twice); /* 1000 loadings fewer are visible in float32 */
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        TEST_ASSERT_EQUAL_FLOAT(twice, filter.core.cov[propid_cov_index((uint8_t)(kf + i), (uint8_t)(kf + i))]);
+        TEST_ASSERT_EQUAL_FLOAT(once, filter.core.cov[propid_cov_index((uint8_t)(km + i), (uint8_t)(km + i))]);
+    }
+    TEST_ASSERT_EQUAL_FLOAT(bias_twice, filter.core.cov[propid_cov_index(bias, bias)]);
+}
+
+static void test_drag_coefficients_loaded_every_second_prediction(void)
+{
+    check_loading_schedule(4u);
+#if PROPID_GENERAL_VEHICLES
+    check_loading_schedule(6u);
+#endif
+}
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -762,6 +812,7 @@ int main(void)
     RUN_TEST(test_corrupted_covariance_is_repaired);
     RUN_TEST(test_non_finite_update_vector_never_reaches_state);
     RUN_TEST(test_rank_deficient_covariance_needs_no_repair);
+    RUN_TEST(test_drag_coefficients_loaded_every_second_prediction);
     RUN_TEST(test_integrity_tolerance_is_rounding_only);
     RUN_TEST(test_coefficients_are_clamped);
     RUN_TEST(test_time_jump_resync_workflow);
