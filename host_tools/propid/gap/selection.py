@@ -6,7 +6,8 @@ Rule (docs/gap.md, "Which"):
    explained fraction of the current residual on the effect's axes, one-sided paired test
    over short held-out blocks with an autocorrelation-consistent variance, significance.py);
    significant = physical sign, fit inside its physical plausibility range, Wald test
-   (one-sided for a one-parameter effect whose parameter physics keeps >= 0) rejected by
+   (one-sided where physics keeps the parameters >= 0: a one-sided t for one parameter, the
+   chi-bar-square test of the orthant for several) rejected by
    Holm's step-down over the candidates of the step (family-wise level 5 %)
    and the held-out improvement confirmed (one-sided paired test, Holm at 5 % over the
    same candidates);
@@ -55,8 +56,7 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
     frac, ci = test["value"], test["ci"]
     # one parameter that physics keeps >= 0: the physical-sign rule already makes the
     # alternative one-sided, so the test is too (docs/gap.md, Scoring)
-    one_sided = len(design.groups[effect_id]) == 1 and by_id(effect_id).nonnegative == (0,)
-    lm = significance.effect_test(gr, current, design.groups[effect_id], nonnegative=one_sided)
+    lm = significance.effect_test(gr, current, design.groups[effect_id], nonnegative=by_id(effect_id).nonnegative)
     replicated = test["p_value"] <= significance.REPLICATION_LEVEL / max(candidates, 1)
     per_axis = {a: scoring.explained(held_current, held, [k], bootstrap=False)[0] for k, a in enumerate(design.axes)}
     # size on the unwhitened rows: the effect's share of the measured signal (physical relevance)

@@ -5,7 +5,8 @@ paired test over short held-out blocks.
 Rules (docs/gap.md, "Scoring"):
 - the evidence: a Wald test (effect_test, the joint fit's residual in its covariance) of "the effect's columns add nothing
   to the current model" on all whitened rows; one-sided (one_sided_p) for a one-parameter
-  effect whose parameter physics keeps >= 0;
+  effect whose parameter physics keeps >= 0, the chi-bar-square test of the orthant
+  (chi_bar_p) for an effect with several such parameters;
 - replication: the held-out improvement must be confirmed by its own one-sided paired
   test (paired_test), Holm at REPLICATION_LEVEL = 5 % over the same candidates: the Wald
   test on a whole flight also flags fits that soak up what the model gets wrong
@@ -38,7 +39,6 @@ import numpy as np
 
 FAMILY_LEVEL = 0.05  # per selection step: chance of naming an effect that adds nothing
 REPLICATION_LEVEL = 0.05  # held-out confirmation, family-wise over a step's candidates (Holm)
-_SIMPSON_POINTS = 2001
 
 
 def block_contributions(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[int]) -> np.ndarray:
@@ -78,37 +78,64 @@ def long_run_variance(c: np.ndarray) -> tuple[float, float]:
     return max(s, 0.0) * n, bw
 
 
+def _beta_fraction(a: float, b: float, x: float) -> float:
+    """Continued fraction of the regularised incomplete beta function (the standard one,
+    terms d_2m = m (b - m) x / ((a + 2m - 1)(a + 2m)), d_2m+1 = -(a + m)(a + b + m) x /
+    ((a + 2m)(a + 2m + 1))), evaluated by the modified Lentz method; it converges fast for
+    x < (a + 1) / (a + b + 2)."""
+    tiny = 1e-300
+
+    def guard(v: float) -> float:
+        return v if abs(v) > tiny else tiny
+
+    c = 1.0
+    d = 1.0 / guard(1.0 - (a + b) * x / (a + 1.0))
+    f = d
+    for m in range(1, 2000):
+        for term in (m * (b - m) * x / ((a + 2 * m - 1) * (a + 2 * m)),
+                     -(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 2 * m + 1))):
+            d = 1.0 / guard(1.0 + term * d)
+            c = guard(1.0 + term / c)
+            f *= c * d
+        if abs(c * d - 1.0) < 1e-15:
+            break
+    return f
+
+
+def beta_cdf(a: float, b: float, x: float) -> float:
+    """Regularised incomplete beta I_x(a, b) (the continued fraction on the side where it
+    converges, the symmetry I_x(a, b) = 1 - I_1-x(b, a) on the other)."""
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    log_front = (a * math.log(x) + b * math.log1p(-x)
+                 - (math.lgamma(a) + math.lgamma(b) - math.lgamma(a + b)))
+    if x < (a + 1.0) / (a + b + 2.0):
+        return math.exp(log_front) * _beta_fraction(a, b, x) / a
+    return 1.0 - math.exp(log_front) * _beta_fraction(b, a, 1.0 - x) / b
+
+
 def t_sf(t: float, dof: float) -> float:
-    """P(T > t) for Student's t (Simpson on the substitution x = t / s of the upper tail)."""
+    """P(T > t) for Student's t: half of I_{dof/(dof + t^2)}(dof/2, 1/2) in the upper tail.
+    (Was a Simpson integral on x = t / s, which lost the mass near t = 0: it gave
+    P(T > 1e-8) ~ 1e-5 instead of 0.5, so a held-out improvement of about nothing read as
+    replicated.)"""
     if not math.isfinite(t):
         return 0.0 if t > 0 else 1.0
-    if t < 0:
-        return 1.0 - t_sf(-t, dof)
-    if t == 0:
-        return 0.5
-    log_c = math.lgamma((dof + 1) / 2) - math.lgamma(dof / 2) - 0.5 * math.log(dof * math.pi)
-    s = np.linspace(0.0, 1.0, _SIMPSON_POINTS)[1:]
-    x = t / s
-    f = np.exp(log_c - (dof + 1) / 2 * np.log1p(x * x / dof)) * t / (s * s)
-    f = np.concatenate([[0.0], f])  # the integrand vanishes at s -> 0 for dof > 1
-    h = 1.0 / (_SIMPSON_POINTS - 1)
-    return float(h / 3 * (f[0] + f[-1] + 4 * f[1:-1:2].sum() + 2 * f[2:-1:2].sum()))
+    tail = 0.5 * beta_cdf(dof / 2.0, 0.5, dof / (dof + t * t))
+    return tail if t >= 0 else 1.0 - tail
 
 
 def f_sf(x: float, d1: float, d2: float) -> float:
-    """P(F > x) for Fisher's F(d1, d2) (Simpson on the substitution u = x / s)."""
+    """P(F > x) for Fisher's F(d1, d2) = I_{d2/(d2 + d1 x)}(d2/2, d1/2). (Was a Simpson
+    integral that lost the mass near 0: P(F(2, 60) > 1e-6) came out 0.004 instead of ~1,
+    so a statistic of about nothing read as a detection.)"""
     if x <= 0:
         return 1.0
     if not math.isfinite(x):
         return 0.0
-    log_c = (0.5 * d1 * math.log(d1 / d2) + math.lgamma((d1 + d2) / 2) - math.lgamma(d1 / 2)
-             - math.lgamma(d2 / 2))
-    s = np.linspace(0.0, 1.0, _SIMPSON_POINTS)[1:]
-    u = x / s
-    f = np.exp(log_c + (d1 / 2 - 1) * np.log(u) - (d1 + d2) / 2 * np.log1p(d1 * u / d2)) * x / (s * s)
-    f = np.concatenate([[0.0], f])
-    h = 1.0 / (_SIMPSON_POINTS - 1)
-    return float(min(h / 3 * (f[0] + f[-1] + 4 * f[1:-1:2].sum() + 2 * f[2:-1:2].sum()), 1.0))
+    return float(min(max(beta_cdf(d2 / 2.0, d1 / 2.0, d2 / (d2 + d1 * x)), 0.0), 1.0))
 
 
 def variance_dof(blocks: int, bandwidth: float) -> float:
@@ -206,7 +233,81 @@ def one_sided_p(p_two_sided: float, estimate: float) -> float:
     return p_two_sided / 2.0 if estimate > 0 else 1.0 - p_two_sided / 2.0
 
 
-def effect_test(gr, current: list[int], effect_cols: list[int], nonnegative: bool = False) -> dict:
+CHI_BAR_DRAWS = 20000  # Monte-Carlo draws for the chi-bar-square weights (fixed seed: deterministic)
+
+
+def _orthant_projection(theta: np.ndarray, precision: np.ndarray, constrained: tuple[int, ...]):
+    """Projection of each row of theta (n, k) onto {c: c_i >= 0 for i in constrained} in the
+    metric `precision`: (distance^2, free components) per row. Every active set S (the
+    constrained components held at 0) is tried: the rest then follows in closed form,
+    d_f = -Q_ff^-1 Q_fS theta_S, distance^2 = theta_S' (Q_SS - Q_Sf Q_ff^-1 Q_fS) theta_S;
+    the least distance among the feasible sets is the convex problem's minimum (k <= 3: at
+    most 8 sets)."""
+    n, k = theta.shape
+    best = np.full(n, np.inf)
+    free_count = np.zeros(n, dtype=int)
+    for mask in range(1 << len(constrained)):
+        active = [constrained[j] for j in range(len(constrained)) if mask >> j & 1]
+        free = [i for i in range(k) if i not in active]
+        if free:
+            q_ff = precision[np.ix_(free, free)]
+            q_fa = precision[np.ix_(free, active)]
+            shift = -np.linalg.solve(q_ff, q_fa @ theta[:, active].T).T if active else np.zeros((n, len(free)))
+            c_free = theta[:, free] - shift
+            ok = np.ones(n, dtype=bool)
+            for j, i in enumerate(free):
+                if i in constrained:
+                    ok &= c_free[:, j] >= 0.0
+            d = np.zeros_like(theta)
+            d[:, active] = theta[:, active]
+            d[:, free] = shift
+        else:
+            ok = np.ones(n, dtype=bool)
+            d = theta.copy()
+        dist = np.einsum("np,pq,nq->n", d, precision, d)
+        take = ok & (dist < best)
+        best[take] = dist[take]
+        free_count[take] = len(free)
+    return best, free_count
+
+
+def chi_bar_weights(precision: np.ndarray, constrained: tuple[int, ...]) -> np.ndarray:
+    """Weights w_i (i = 0..k) of the chi-bar-square law of the orthant-constrained Wald
+    statistic under the null: the chance that the projection of a N(0, precision^-1) draw
+    has i free components (Monte Carlo, fixed seed)."""
+    k = precision.shape[0]
+    # draws of N(0, precision^-1) by its eigenvectors; a precision that is not positive
+    # definite in floating point (a near-singular Newey-West covariance) has no such law:
+    # LinAlgError, and the caller keeps the two-sided test
+    vals, vecs = np.linalg.eigh(0.5 * (precision + precision.T))
+    if not vals.min() > 1e-12 * max(vals.max(), 0.0):
+        raise np.linalg.LinAlgError("precision not positive definite")
+    root = vecs / np.sqrt(vals)
+    z = np.random.default_rng(20240).normal(size=(CHI_BAR_DRAWS, k)) @ root.T
+    _, free = _orthant_projection(z, precision, constrained)
+    return np.bincount(free, minlength=k + 1) / CHI_BAR_DRAWS
+
+
+def chi_bar_p(theta: np.ndarray, precision: np.ndarray, constrained: tuple[int, ...], nu: float) -> tuple[float, float]:
+    """One-sided Wald test of "theta = 0" against "theta != 0 with theta_i >= 0 for i in
+    constrained" (Kudo; Shapiro): T = theta' Q theta - min over the constrained set of
+    (theta - c)' Q (theta - c), null law sum_i w_i chi2_i (chi2_0 = 0); with Q estimated on
+    nu degrees of freedom each chi2_i is read as Hotelling's T^2 (F(i, nu - i + 1)), as the
+    two-sided test. Returns (p, T)."""
+    t0 = float(theta @ precision @ theta)
+    dist, _ = _orthant_projection(theta[None, :], precision, constrained)
+    stat = max(t0 - float(dist[0]), 0.0)
+    if stat <= 0.0:
+        return 1.0, 0.0
+    w = chi_bar_weights(precision, constrained)
+    p = 0.0
+    for i in range(1, len(w)):
+        d2 = nu - i + 1.0
+        p += w[i] * (f_sf(stat * d2 / (nu * i), i, d2) if d2 >= 1.0 else 1.0)
+    return float(min(p, 1.0)), stat
+
+
+def effect_test(gr, current: list[int], effect_cols: list[int], nonnegative: bool | tuple[int, ...] = False) -> dict:
     """Wald test of "the effect's columns add nothing to the current model" on all whitened
     rows, with a covariance that does not assume independent rows:
         theta_e = the effect's coefficients in the joint all-data fit,
@@ -222,9 +323,11 @@ def effect_test(gr, current: list[int], effect_cols: list[int], nonnegative: boo
     the covariance that judges it (a score test on the current model's residual would:
     its block scores then carry the smooth effect itself, and a Newey-West window over them
     loses power exactly when the effect is large).
-    `nonnegative`: a one-parameter effect whose parameter physics keeps >= 0 (the physical
-    sign rule names no negative fit): the alternative is one-sided, so the p-value is the
-    one-sided t-test's (one_sided_p)."""
+    `nonnegative`: the effect's parameters that physics keeps >= 0 (indices into
+    effect_cols; True = all of a one-parameter effect). The physical sign rule names no fit
+    with all of them below 0, so the alternative is one-sided: with one parameter the
+    one-sided t-test's p-value (one_sided_p); with several, all of them constrained, the
+    chi-bar-square test of the orthant (chi_bar_p)."""
     from propid.gap import scoring
 
     blocks = np.arange(gr.s.shape[0])
@@ -264,6 +367,14 @@ def effect_test(gr, current: list[int], effect_cols: list[int], nonnegative: boo
     nu = variance_dof(n, bw)
     d2 = nu - rank + 1.0
     p = f_sf(stat * d2 / (nu * rank), rank, d2) if d2 >= 1.0 else 1.0
-    if nonnegative and k == 1:
+    constrained = (0,) if nonnegative is True else tuple(nonnegative or ())
+    if constrained == (0,) and k == 1:
         p = one_sided_p(p, float(theta_e[0]))
+    elif len(constrained) == k and k > 1 and rank == k:
+        # precision of the normalised coefficients: A Omega^-1 A (W = theta' A Omega^-1 A theta)
+        try:
+            precision = a_n @ np.linalg.solve(omega, a_n)
+            p, stat = chi_bar_p(theta_e * scale, 0.5 * (precision + precision.T), constrained, nu)
+        except np.linalg.LinAlgError:
+            pass  # a singular covariance: the two-sided test stands
     return {"statistic": stat, "dof": rank, "variance_dof": nu, "p_value": p, "bandwidth": bw}
