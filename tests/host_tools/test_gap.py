@@ -319,6 +319,10 @@ def test_plausibility_ranges_follow_the_vehicle():
     assert effects.by_id("com_offset").bounds(ctx) == [(-0.1, 0.1), (-0.1, 0.1)]
     damping = effects.by_id("aero_damping").bounds(ctx)
     assert all(0 < hi < effects.INF for _, hi in damping)
+    # a gyro lag is named only above one log sample and the 5 ms sensor-chain floor
+    assert effects.by_id("gyro_lowpass").bounds(ctx) == [(0.005, effects.MAX_SENSOR_LAG_S)]
+    ctx.sample_period_s = 0.01
+    assert effects.by_id("gyro_lowpass").bounds(ctx) == [(0.01, effects.MAX_SENSOR_LAG_S)]
     ctx.inertia_known = False
     assert effects.by_id("rotor_inertia").bounds(ctx) == [effects.UNBOUNDED]
     assert effects.by_id("aero_damping").bounds(ctx) == [effects.UNBOUNDED] * 3

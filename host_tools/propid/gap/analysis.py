@@ -13,7 +13,7 @@ from propid.flightlog import FlightLog, Vehicle
 from propid.gap import alignment, basefit, scoring, selection, shrink, where, whitening
 from propid.gap.vehicle_out import corrected_vehicle
 from propid.gap.design import build_design
-from propid.gap.effects import ALL_IDS, EFFECTS, ESC_DELAY, Context, by_id
+from propid.gap.effects import ALL_IDS, EFFECTS, ESC_DELAY, MIN_REPORTED_LAG_S, Context, by_id
 from propid.gap.prep import Band, Flight, columns_present, prepare_flight
 
 NEEDS_TEXT = {"inertia": "vehicle inertia", "acc": "acc_x/y/z", "mass": "vehicle mass", "attitude": "qw/qx/qy/qz", "velocity": "vx/vy/vz",
@@ -24,7 +24,7 @@ ALIGNMENT_NUISANCE = ("rotor_gyroscopic", "rotor_drag", "com_offset", "aero_damp
 SCALE_LIKE = ("inertia_error", "gyro_scale", "thrust_nonlinearity")  # effects a regressor attenuation mimics
 # A lag up to one log sample is the logging convention (each stream's latest sample in a
 # row), not a telemetry delay; below 5 ms the sensor chain's own lags (gyro filtering) rule.
-MIN_REPORTED_DELAY_S = 0.005
+MIN_REPORTED_DELAY_S = MIN_REPORTED_LAG_S
 MIN_DELAY_EXPLAINED = 0.02  # the alignment is scored on the raw rows (not whitened): 2 % of the torque residual
 
 
@@ -115,7 +115,7 @@ def make_context(flights: list[Flight], vehicle: Vehicle, kf: np.ndarray, km: np
     speeds = np.concatenate([f.speed[np.concatenate([np.arange(a, b) for a, b in f.segs])] for f in flights])
     return Context(positions=vehicle.positions, yaw_signs=vehicle.yaw_signs, kf=kf, km=km, mass=vehicle.mass,
                    inertia=np.asarray(vehicle.inertia, dtype=float), rotor_radius=vehicle.rotor_radius,
-                   speed_ref=float(np.median(speeds)))
+                   speed_ref=float(np.median(speeds)), sample_period_s=1.0 / min(f.rate_hz for f in flights))
 
 
 def testable(present: dict, vehicle: Vehicle) -> tuple[list[str], list[dict]]:

@@ -37,6 +37,9 @@ class Context:
     inertia: np.ndarray
     rotor_radius: float | None
     speed_ref: float  # median flying rotor speed over all flights [rad/s]
+    # the longest log sample period over the flights [s]: a lag up to one sample is the
+    # logging convention, not an effect
+    sample_period_s: float = 0.0
     # False when the vehicle file has no inertia (torques are then angular accelerations and
     # the fitted torque coefficients kf/J-like ratios: bounds in absolute units do not apply)
     inertia_known: bool = True
@@ -206,6 +209,9 @@ def _com_physical(coef, c):
 INF = math.inf
 RHO_AIR = 1.225  # kg/m^3, standard sea-level air
 MAX_SENSOR_LAG_S = 0.1  # a sensor or estimator lag beyond this would be a different vehicle (100 ms)
+# below this the sensor chain's own lags (gyro filtering, the IMU decimated to the log) rule:
+# every log has them, so they are not an unmodelled effect (the same floor reports esc_delay)
+MIN_REPORTED_LAG_S = 0.005
 MAX_THRUST_EXPONENT = 0.3  # static thrust of small fixed-pitch propellers ~ Omega^(1.7..2.3)
 INERTIA_SCALE = 2.0  # the file's inertia within a factor 2 of the true one
 GYRO_SCALE_ERROR = 0.1  # MEMS sensitivity tolerance (a few %) plus mounting misalignment (~5 deg), doubled
@@ -247,7 +253,10 @@ def _gyro_scale_bounds(c: Context) -> list:
 
 
 def _lowpass_bounds(c: Context) -> list:
-    return [(-INF, MAX_SENSOR_LAG_S)]
+    """gyro_lowpass is named only above max(one log sample, MIN_REPORTED_LAG_S), the floor
+    esc_delay is reported above: a shorter lag is the logging convention or the sensor
+    chain's own filtering, which every log has."""
+    return [(max(c.sample_period_s, MIN_REPORTED_LAG_S), MAX_SENSOR_LAG_S)]
 
 
 def _com_bounds(c: Context) -> list:
