@@ -61,6 +61,7 @@ void propid_config_default(propid_config_t *config)
     config->rotor_speed_noise = 0.0f;
     config->rotor_speed_noise_time = 0.0f;
     config->inertia_rel_std = 0.0f;
+    config->motor_time_constant = 0.01f;
 }
 
 propid_status_t propid_config_set_symmetric(propid_config_t *config, uint8_t rotor_count,
@@ -437,6 +438,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!positive_finite(config->gyro_range) || config->gyro_range > 1.0e4f) {
         PROPID_BAD("gyro_range");
     }
+    /* From micro motors (a few ms) to large ones (about a second), with margin. */
+    if (!isfinite(config->motor_time_constant) || !(config->motor_time_constant >= 1.0e-4f) ||
+        config->motor_time_constant > 6.5f) {
+        PROPID_BAD("motor_time_constant");
+    }
     if (config->rotor_stale_us < 1u) {
         PROPID_BAD("rotor_stale_us");
     }
@@ -651,6 +657,8 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 #if PROPID_GENERAL_VEHICLES
     out.rate_limit = 2.0f * config->gyro_range;
 #endif
+    /* In 100 us units: a 16-bit field in the padding after the layout. */
+    out.motor_tau_100us = (uint16_t)(config->motor_time_constant * 1.0e4f + 0.5f);
     {
         /* S range of the quad's fast update path: [R, R + R / loading]; above
          * it the general path loads R (propid_internal.h). */

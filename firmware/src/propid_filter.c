@@ -121,11 +121,6 @@ propid_status_t propid_resync(propid_filter_t *filter, uint64_t time_us)
     return PROPID_OK;
 }
 
-/* Less than any motor needs to span its whole speed range: that takes 2-3 time
- * constants, 30-200 ms for hobby motors from 2-inch racers (about 15 ms) to
- * the Crazyflie (72 ms, design.md "Defaults"). */
-#define PROPID_MOTOR_MIN_SWEEP_US 10000u
-
 /* Every check of a rotor sample (nothing written unless it passes; rejections
  * counted). Not inlined, like the gyro's: the push functions' own frames stay
  * small because held IMU samples are fused under them (propid_delay.h). */
@@ -193,19 +188,28 @@ static __attribute__((noinline)) propid_status_t rotor_sample_check(propid_filte
     /* A speed no motor can reach from the previous sample in the time between
      * them (a corrupted telemetry frame within range, "ESC spike"): fused, it
      * would make the coefficients look observed through a wrong input and throw
-     * them far off without any gated innovation. No motor of these vehicles
-     * spans its whole speed range in less than PROPID_MOTOR_MIN_SWEEP_US, so a
-     * change faster than max_rotor_speed per that time is refused; the bound
-     * grows with the gap, so after PROPID_MOTOR_MIN_SWEEP_US without an accepted
-     * sample any in-range speed passes (a rejected burst never locks the stream
-     * out). */
-    if (has_previous && stamp - previous < PROPID_MOTOR_MIN_SWEEP_US) {
-        const float max_change =
-            config->max_rotor_speed * (float)(uint32_t)(stamp - previous) * (1.0f / (float)PROPID_MOTOR_MIN_SWEEP_US);
-        for (uint8_t i = 0; i < rotor_count; ++i) {
-            const float change = fabsf(rotor_speed_rad_s[i] - sqrtf(core->rotor_speed_sq[i]));
-            if (!(change <= max_change)) {
-                return reject(filter, PROPID_ERR_ROTOR_SPEED_RANGE);
+     * them far off without any gated innovation. The speed loop is a first-order
+     * lag of time constant tau towards a command in [0, max_rotor_speed]: from
+     * w0 it covers at most the fraction 1 - exp(-dt / tau) <= dt / tau of its
+     * headroom, max_rotor_speed - w0 up and w0 down (tau divided by
+     * PROPID_MOTOR_SPEEDUP for margin), plus the telemetry's resolution at the
+     * bottom of the range (PROPID_SLEW_FLOOR of max_rotor_speed: a DShot eRPM
+     * frame reads 0 below its longest period). Once dt reaches that tau the
+     * bound is the whole range: a refused burst never locks the stream out for
+     * longer. */
+    if (has_previous) {
+        const uint64_t gap = stamp - previous;
+        const float reach = (float)(uint32_t)(gap < 0xFFFFFFFFu ? gap : 0xFFFFFFFFu) *
+                            (PROPID_MOTOR_SPEEDUP / 100.0f) / (float)filter->derived.motor_tau_100us;
+        if (reach < 1.0f) {
+            const float resolution = PROPID_SLEW_FLOOR * config->max_rotor_speed;
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                const float before = sqrtf(core->rotor_speed_sq[i]);
+                const float change = rotor_speed_rad_s[i] - before;
+                const float headroom = change > 0.0f ? config->max_rotor_speed - before : before;
+                if (!(fabsf(change) <= headroom * reach + resolution)) {
+                    return reject(filter, PROPID_ERR_ROTOR_SPEED_RANGE);
+                }
             }
         }
     }

@@ -213,6 +213,15 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
  * rule, 1 std, failed 32 % of the claims it could make at the threshold). */
 #define PROPID_CLAIM_SIGMAS 3.0f
 
+/* Rotor-speed slew test (propid_filter.c): the motor is taken up to this many
+ * times faster than its configured time constant says (spread between motors
+ * and with the battery's voltage, the stamps' jitter, an ESC's own filter). */
+#define PROPID_MOTOR_SPEEDUP 2.0f
+/* Changes below this fraction of max_rotor_speed are never refused by it: the
+ * telemetry's resolution near standstill (a DShot eRPM frame reads 0 below its
+ * longest period, some ESCs report whole hundreds of rpm). */
+#define PROPID_SLEW_FLOOR 0.02f
+
 /* Gate constant when gating is off (gate_sigma <= 0): a 1e15-sigma innovation
  * is never data; the gate test then also needs no "gating on" branch. */
 #define PROPID_GATE_OFF_SQ 1.0e30f

@@ -156,6 +156,7 @@ _OPTIONAL_FIELDS = [
     ("rotor_speed_noise", ctypes.c_float),
     ("rotor_speed_noise_time", ctypes.c_float),
     ("inertia_rel_std", ctypes.c_float),
+    ("motor_time_constant", ctypes.c_float),
 ]
 _INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int32)
 
@@ -278,6 +279,8 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "rotor_speed_noise_time": 0.0,
     # Relative std of the configured inertia's scale: counted by converged claims (0: J exact).
     "inertia_rel_std": 0.0,
+    # Motor time constant [s]: bounds how fast a true rotor speed can change (slew test).
+    "motor_time_constant": 0.01,
 }
 
 
@@ -332,6 +335,7 @@ class FilterConfig:
     rotor_speed_noise: float = DEFAULT_TUNING["rotor_speed_noise"]
     rotor_speed_noise_time: float = DEFAULT_TUNING["rotor_speed_noise_time"]
     inertia_rel_std: float = DEFAULT_TUNING["inertia_rel_std"]
+    motor_time_constant: float = DEFAULT_TUNING["motor_time_constant"]
 
     @property
     def rotor_count(self) -> int:

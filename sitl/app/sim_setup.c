@@ -120,6 +120,7 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
         c->gyro_range = (float)opts->imu.gyro.range;
     }
     c->max_rotor_speed = (float)(1.5 * v->rotor_speed_max);
+    c->motor_time_constant = (float)v->motor_time_constant; /* the vehicle's motors: the slew test */
     if (opts->prior_kf_rel_std > 0.0) {
         c->thrust_coeff_rel_std0 = (float)opts->prior_kf_rel_std;
     }

@@ -147,6 +147,7 @@ static void configure(const scenario_t *sc, propid_config_t *config)
                                                       1.0f, sc->kf_nominal, sc->km_nominal));
     propid_config_set_inertia_diag(config, sc->inertia[0], sc->inertia[1], sc->inertia[2]);
     config->gyro_sample_rate_hz = sc->gyro_rate_hz;
+    config->motor_time_constant = 1.0e-4f; /* the synthetic speeds jump to each command: no motor lag */
     if (rate_noise_override > 0.0f) {
         config->rate_process_noise = rate_noise_override;
     }

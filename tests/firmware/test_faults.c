@@ -233,49 +233,74 @@ static void test_esc_stamp_far_ahead_does_not_freeze_input(void)
 /* A corrupted ESC frame decoded as a speed within range (soak: a 0.7 % rate of
  * such spikes on a Crazyflie circle threw every kf ~90 % off within 0.5 s, no
  * innovation gated, and crashed the vehicle with the damage detector on): a
- * change no motor can make in the time since the previous sample is refused
- * like an out-of-range speed, with nothing written; a motor ramping at its
- * fastest is accepted; after a refused burst any in-range speed is accepted
- * again once the gap spans a whole sweep (no lock-out). */
+ * change no motor of the configured time constant can make in the time since
+ * the previous sample is refused like an out-of-range speed, with nothing
+ * written. A first-order motor covers at most dt / tau of its headroom
+ * (max_rotor_speed - speed up, speed down), taken PROPID_MOTOR_SPEEDUP = 2
+ * times faster for margin, plus 2 % of the range (telemetry resolution near
+ * standstill): a real motor, even twice as fast as configured,
+ * passes at any speed and in both directions; once the gap spans tau / 2 any
+ * in-range speed passes (no lock-out). */
 static void test_esc_spike_within_range_refused(void)
 {
+    config.motor_time_constant = 0.03f; /* reach per 2 ms sample: 2 x 2 / 30 = 13.3 % of the headroom */
     init_filter();
     const float gyro[3] = {0.01f, -0.02f, 0.03f};
     for (uint32_t k = 0; k < 20u; ++k) {
         now_us += GYRO_PERIOD_US;
         TEST_ASSERT_EQUAL_INT(PROPID_OK, push(now_us, HOVER_SPEED, gyro));
     }
-    /* One rotor jumps by 30 % of max_rotor_speed within 2 ms: still in range. */
-    float spike[ROTORS] = {HOVER_SPEED, HOVER_SPEED * 1.01f, HOVER_SPEED * 0.99f, HOVER_SPEED * 1.02f};
-    spike[2] += 0.3f * config.max_rotor_speed;
-    TEST_ASSERT_TRUE(spike[2] < config.max_rotor_speed);
+    const float headroom_up = config.max_rotor_speed - HOVER_SPEED;
+    /* One rotor jumps by 20 % of its headroom within 2 ms (in range, and inside
+     * the former bound of max_rotor_speed per 10 ms: 20 % of the range), then
+     * one drops by half (the bound: 13.3 % of the speed + 2 % of the range). */
+    float spike[ROTORS] = {HOVER_SPEED, HOVER_SPEED, HOVER_SPEED + 0.2f * headroom_up, HOVER_SPEED};
+    TEST_ASSERT_TRUE(spike[2] - HOVER_SPEED < 0.2f * config.max_rotor_speed);
     static propid_filter_t before;
     memcpy(&before, &filter, sizeof(filter));
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_ROTOR_SPEED_RANGE,
                           propid_push_rotor_speeds(&filter, now_us + GYRO_PERIOD_US, spike, ROTORS));
     TEST_ASSERT_EQUAL_MEMORY(&before.core, &filter.core, sizeof(filter.core));
     TEST_ASSERT_EQUAL_MEMORY(&before.config, &filter.config, sizeof(filter.config));
-    /* A fast motor (time constant 15 ms) spinning up from hover to full speed:
-     * its largest step per 2 ms is (max - hover) 2 / 15 = 13 % of the range. */
+    spike[2] = 0.5f * HOVER_SPEED;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_ROTOR_SPEED_RANGE,
+                          propid_push_rotor_speeds(&filter, now_us + GYRO_PERIOD_US, spike, ROTORS));
+    TEST_ASSERT_EQUAL_MEMORY(&before.core, &filter.core, sizeof(filter.core));
+    /* A motor twice as fast as configured (15 ms) spinning up from hover
+     * towards 95 % of max_rotor_speed: exact first-order steps, accepted. */
     float speed = HOVER_SPEED;
+    const float fast_step = 1.0f - expf(-2.0f / 15.0f);
     for (uint32_t k = 0; k < 30u; ++k) {
-        speed += (config.max_rotor_speed * 0.95f - speed) * (2.0f / 15.0f);
+        speed += (config.max_rotor_speed * 0.95f - speed) * fast_step;
         const float ramp[ROTORS] = {speed, speed, speed, speed};
         now_us += GYRO_PERIOD_US;
         TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, now_us, ramp, ROTORS));
     }
-    /* Refused spikes every 2 ms, then 12 ms after the last accepted sample any
-     * in-range speed passes. */
+    /* Refused every 2 ms while the gap is below tau / 2 (a drop to 100 rad/s
+     * is 98 % of the headroom down), accepted at 15 ms. */
     const uint64_t last_accepted = now_us;
     const float low[ROTORS] = {100.0f, 100.0f, 100.0f, 100.0f};
-    for (uint32_t k = 1; k <= 4u; ++k) {
+    for (uint32_t k = 1; k <= 7u; ++k) {
         TEST_ASSERT_EQUAL_INT(PROPID_ERR_ROTOR_SPEED_RANGE,
                               propid_push_rotor_speeds(&filter, last_accepted + k * GYRO_PERIOD_US, low, ROTORS));
     }
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, last_accepted + 12000u, low, ROTORS));
+    now_us = last_accepted + 15000u;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, now_us, low, ROTORS));
+    /* The configured motor spinning down from full speed with the command at 0. */
+    const float full[ROTORS] = {0.95f * config.max_rotor_speed, 0.95f * config.max_rotor_speed,
+                                0.95f * config.max_rotor_speed, 0.95f * config.max_rotor_speed};
+    now_us += 15000u;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, now_us, full, ROTORS));
+    speed = full[0];
+    for (uint32_t k = 0; k < 30u; ++k) {
+        speed *= expf(-2.0f / 30.0f);
+        const float ramp[ROTORS] = {speed, speed, speed, speed};
+        now_us += GYRO_PERIOD_US;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, now_us, ramp, ROTORS));
+    }
     propid_counters_t counters;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
-    TEST_ASSERT_EQUAL_UINT32(5u, counters.rejected[-(int)PROPID_ERR_ROTOR_SPEED_RANGE]);
+    TEST_ASSERT_EQUAL_UINT32(9u, counters.rejected[-(int)PROPID_ERR_ROTOR_SPEED_RANGE]);
 }
 
 /* The same before the gyro clock is anchored (after init, and after resync). */

@@ -46,8 +46,8 @@ typedef enum {
     PROPID_ERR_CONFIG = -3,           /* configuration rejected (see propid_config_check) */
     PROPID_ERR_NOT_FINITE = -4,       /* NaN or Inf in an input sample */
     PROPID_ERR_ROTOR_SPEED_NEGATIVE = -5,
-    PROPID_ERR_ROTOR_SPEED_RANGE = -6, /* above config.max_rotor_speed, or changed faster than
-                                          max_rotor_speed per 10 ms since the previous sample */
+    PROPID_ERR_ROTOR_SPEED_RANGE = -6, /* above config.max_rotor_speed, or changed since the previous
+                                          sample faster than a motor of config.motor_time_constant can */
     PROPID_ERR_ROTOR_COUNT = -7,      /* sample's rotor count differs from the configuration */
     PROPID_ERR_ROTOR_INDEX = -8,      /* rotor index out of range */
     PROPID_ERR_GYRO_RANGE = -9,       /* |gyro| beyond config.gyro_range (saturated sensor) */
@@ -160,6 +160,10 @@ typedef struct {
                                          see kf/J and km/J only, so a scale error of J passes 1:1 into kf
                                          and km, invisible to every test. A converged claim counts it
                                          (for kf not when torque_scale separates it). 0: J exact */
+    float motor_time_constant;        /* the motors' time constant [s] (speed loop as a first-order lag,
+                                         its fastest response): bounds how fast a true rotor speed can
+                                         change between two samples; faster changes are refused
+                                         (ESC spikes within range, docs/reliability.md) */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -274,6 +278,9 @@ typedef struct {
     uint8_t quad_core;                              /* private: 1 for the plain quad (14 states in
                                                        the fixed order): the gyro's one-pass update */
     propid_layout_t layout;
+    uint16_t motor_tau_100us;                       /* private: motor_time_constant in 100 us (the
+                                                       rotor-speed slew test, propid_filter.c; 16 bits
+                                                       fill the padding after the layout) */
 #if PROPID_GENERAL_VEHICLES /* (the quad build needs them at initialisation only) */
     float inertia_inv[3][3];
     float thrust_torque[PROPID_MAX_ROTORS][3];      /* J^-1 (r_i x z) kf_nominal_i */
