@@ -257,6 +257,9 @@ BREAK(converged_zero, bad->converged_rel_std = 0.0f)
 BREAK(inertia_std_negative, bad->inertia_rel_std = -0.1f)
 BREAK(inertia_std_nan, bad->inertia_rel_std = NAN)
 BREAK(inertia_std_above_one, bad->inertia_rel_std = 1.5f)
+BREAK(motor_tau_zero, bad->motor_time_constant = 0.0f)
+BREAK(motor_tau_nan, bad->motor_time_constant = NAN)
+BREAK(motor_tau_above_range, bad->motor_time_constant = 7.0f)
 #undef BREAK
 
 static void test_bad_config_rotors(void)
@@ -316,6 +319,9 @@ static void test_bad_config_guards(void)
     check_bad_config(inertia_std_negative, "inertia_rel_std");
     check_bad_config(inertia_std_nan, "inertia_rel_std");
     check_bad_config(inertia_std_above_one, "inertia_rel_std");
+    check_bad_config(motor_tau_zero, "motor_time_constant");
+    check_bad_config(motor_tau_nan, "motor_time_constant");
+    check_bad_config(motor_tau_above_range, "motor_time_constant");
     assert_still_accepts();
 }
 
