@@ -130,20 +130,6 @@ propid_status_t propid_damage_init(propid_damage_t *detector, const propid_damag
     return PROPID_OK;
 }
 
-/* Start afresh after the filter's state was changed outside its own update (a
- * re-opened rotor, a clamped coefficient): statistics zeroed, the bank frozen
- * for hold_s, the running moments re-learnt and the bank armed again after 3
- * adaptation times. */
-static void restart_bank(propid_damage_t *detector, uint64_t now)
-{
-    detector->hold_until_us = now + (uint64_t)(uint32_t)(detector->config.hold_s * 1.0e6f);
-    detector->armed_s = 0.0f;
-    for (uint8_t i = 0; i < detector->rotor_count; ++i) {
-        detector->statistic[i] = 0.0f;
-        reset_moments(detector, i);
-    }
-}
-
 /* The rotor's kf and km variance back to the prior, their correlations
  * cleared; the estimates stay where they are and re-converge. The body rates
  * are re-opened too: between the loss and its detection the unexplained
@@ -189,19 +175,6 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
     }
     const float dt = (float)(uint32_t)(now - detector->last_time_us) * 1.0e-6f;
     detector->last_time_us = now;
-    /* A coefficient pushed back onto its clamp by this sample's update: the
-     * filter's state is no longer the one its covariance describes (the clamp
-     * undid part of the correction and the covariance still counts it), so
-     * its torque prediction is off by an amount it does not know, and its
-     * innovations are not N(0, S) until it has re-learnt. That breaks the
-     * premise of the derived false-alarm rate (measured: a drag coefficient
-     * at its lower clamp on a hovering plus quad, the yaw innovation ramping
-     * to 10-15 sigma within 20 ms, read as a loss on the rotor with the same
-     * yaw sign), so the bank restarts as after a detection. */
-    if ((core->health & PROPID_HEALTH_STATE_CLAMPED) != 0u) {
-        restart_bank(detector, now);
-        return PROPID_OK;
-    }
     const int holding = now < detector->hold_until_us;
 
     /* Normalised innovations z_a and 1/sqrt(S_a) from the stored innovation and
@@ -307,8 +280,14 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
     detector->damaged_mask = (uint16_t)(detector->damaged_mask | (1u << (uint8_t)best));
     detector->last_rotor = best;
     detector->last_detection_us = now;
-    /* The re-opened coefficients re-converge during the hold. */
-    restart_bank(detector, now);
+    detector->hold_until_us = now + (uint64_t)(uint32_t)(detector->config.hold_s * 1.0e6f);
+    /* Start afresh: the re-opened coefficients re-converge during the hold and
+     * the running moments are re-learnt (armed again after 3 adapt times). */
+    detector->armed_s = 0.0f;
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        detector->statistic[i] = 0.0f;
+        reset_moments(detector, i);
+    }
     *detected_rotor = best;
     return PROPID_OK;
 }
