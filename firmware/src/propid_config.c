@@ -62,6 +62,7 @@ void propid_config_default(propid_config_t *config)
     config->rotor_speed_noise_time = 0.0f;
     config->inertia_rel_std = 0.0f;
     config->motor_time_constant = 0.01f;
+    config->input_error_compensation = 0u;
 }
 
 propid_status_t propid_config_set_symmetric(propid_config_t *config, uint8_t rotor_count,
@@ -538,11 +539,18 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         config->rotor_speed_noise_time > 1.0f) {
         PROPID_BAD("rotor_speed_noise_time");
     }
+    /* The compensation removes the part of the update an error of the configured
+     * size explains: without a size there is nothing to remove. */
+    if (config->input_error_compensation > 1u ||
+        (config->input_error_compensation && !(config->rotor_speed_noise > 0.0f))) {
+        PROPID_BAD("input_error_compensation");
+    }
 
 #if PROPID_WITH_INPUT_NOISE
     /* Var(Omega^2) = (2 Omega sigma)^2 = input_noise_var Omega^2 (docs/math.md §14). */
     out.input_noise_var = 4.0f * config->rotor_speed_noise * config->rotor_speed_noise;
     out.input_noise_time = config->rotor_speed_noise_time;
+    out.input_compensation = config->input_error_compensation;
 #endif
     out.layout.rate = 0u;
     out.layout.thrust = propid_first_thrust();

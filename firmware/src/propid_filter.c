@@ -407,6 +407,19 @@ propid_status_t propid_fuse_gyro(propid_filter_t *filter, uint64_t time_us, cons
     return fuse_gyro_timed(filter, time_us, gyro_rad_s);
 }
 
+#if PROPID_WITH_INPUT_NOISE
+/* The gyro update with the errors-in-variables compensation (docs/math.md §14):
+ * the corrections are formed from the predicted P, added for the fused axes. */
+static __attribute__((noinline)) uint32_t update_gyro_compensated(propid_filter_t *filter, float dt,
+                                                                  const float gyro_rad_s[3])
+{
+    propid_input_compensation_prepare(filter, dt);
+    const uint32_t gated_mask = propid_update_gyro(filter, gyro_rad_s);
+    propid_input_compensation_apply(filter, gated_mask);
+    return gated_mask;
+}
+#endif
+
 /* propid_fuse_gyro after its time test (time_us is later than the filter's
  * clock by at most the largest gap, or anchors it). */
 static __attribute__((noinline)) propid_status_t fuse_gyro_timed(propid_filter_t *filter, uint64_t time_us,
@@ -437,7 +450,13 @@ static __attribute__((noinline)) propid_status_t fuse_gyro_timed(propid_filter_t
         return reject(filter, PROPID_ERR_NUMERIC);
     }
     /* Accepted: the filter has changed (prediction); now the measurement. */
+#if PROPID_WITH_INPUT_NOISE
+    const uint32_t gated_mask = !anchor && filter->derived.input_compensation
+                                    ? update_gyro_compensated(filter, dt, gyro_rad_s)
+                                    : propid_update_gyro(filter, gyro_rad_s);
+#else
     const uint32_t gated_mask = propid_update_gyro(filter, gyro_rad_s);
+#endif
     const int gated = gated_mask != 0u;
 #if PROPID_CONSISTENCY
     propid_consistency_observe(filter, gated_mask);

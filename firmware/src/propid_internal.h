@@ -351,6 +351,18 @@ void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *c
 /* propid_gyro.c: fuse one gyro sample, three scalar updates (x, y, z; H = e_rate +
  * e_bias each). Returns the mask of axes gated out (bit a). */
 uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3]);
+#if PROPID_WITH_INPUT_NOISE
+/* propid_input_compensation.c (config.input_error_compensation, docs/math.md §14):
+ * each axis' correction of the coefficients, formed from the predicted P before
+ * the gyro update (into core.input_*), added after it for the axes it fused. */
+void propid_input_compensation_prepare(propid_filter_t *filter, float dt);
+void propid_input_compensation_apply(propid_filter_t *filter, uint32_t gated_mask);
+#endif
+/* At most this share of the information about the coefficients' common scale may be
+ * the error's for the compensation to apply (the attenuation it removes is then at most
+ * 1 / (1 - 0.5) = 2). */
+#define PROPID_INPUT_ERROR_MAX_SHARE 0.5f
+
 /* propid_covariance.c: clamp the coefficients to [coeff_rel_min, coeff_rel_max];
  * returns how many were clamped. */
 uint32_t propid_clamp_coefficients(const propid_kept_config_t *config, propid_core_t *core);

@@ -157,6 +157,7 @@ _OPTIONAL_FIELDS = [
     ("rotor_speed_noise_time", ctypes.c_float),
     ("inertia_rel_std", ctypes.c_float),
     ("motor_time_constant", ctypes.c_float),
+    ("input_error_compensation", ctypes.c_uint8),
 ]
 _INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int32)
 
@@ -281,6 +282,8 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "inertia_rel_std": 0.0,
     # Motor time constant [s]: bounds how fast a true rotor speed can change (slew test).
     "motor_time_constant": 0.01,
+    # Errors-in-variables compensation of the coefficient update (needs rotor_speed_noise > 0).
+    "input_error_compensation": 0,
 }
 
 
@@ -336,6 +339,7 @@ class FilterConfig:
     rotor_speed_noise_time: float = DEFAULT_TUNING["rotor_speed_noise_time"]
     inertia_rel_std: float = DEFAULT_TUNING["inertia_rel_std"]
     motor_time_constant: float = DEFAULT_TUNING["motor_time_constant"]
+    input_error_compensation: int = DEFAULT_TUNING["input_error_compensation"]
 
     @property
     def rotor_count(self) -> int:

@@ -10,7 +10,10 @@ reference value (the reference kf only divides the results for display):
   torque; + accelerometer (torque scale off); + accelerometer with the thrust-torque scale;
   all combined. Every other setting is the library default. Added later: + accelerometer with the
   scale as a random walk whose rate the per-log rule of replay/scale_walk.py measures (that rule was
-  written before it was run, but after a sweep of fixed walks on these logs: docs/real-data.md);
+  written before it was run, but after a sweep of fixed walks on these logs: docs/real-data.md).
+  Added later, each rule fixed on the simulator before its first run here: gyro only, and the scale-walk
+  mode, each with the rotor-speed error of replay/input_noise.py's per-log rule and the
+  errors-in-variables compensation of the coefficient update (docs/math.md §14);
 - "square" runs are the logs whose name starts with "square", the others are the rest;
 - per run: kf = mean over rotors of the converged-part mean; rotor spread = the worst
   rotor's |kf_i / run mean - 1|; km converged = all rotors' relative std below 5 % at the end.
@@ -39,6 +42,12 @@ MODES = [
     ("accel_scale_walk", "+ accelerometer with the torque scale as a random walk (per-log rule)",
      dict(aiding="gyro+accel", rotor_inertia="off", disturbance="off", torque_scale="on",
           torque_scale_walk="auto")),
+    ("gyro_input_error", "gyro only + rotor-speed error (per-log rule) with its errors-in-variables compensation",
+     dict(aiding="gyro", rotor_inertia="off", disturbance="off", torque_scale="off", rotor_speed_noise="auto",
+          input_error_compensation=True)),
+    ("accel_scale_walk_input_error", "+ accelerometer, scale walk (rule) + rotor-speed error with its compensation",
+     dict(aiding="gyro+accel", rotor_inertia="off", disturbance="off", torque_scale="on", torque_scale_walk="auto",
+          rotor_speed_noise="auto", input_error_compensation=True)),
 ]
 ROTOR_WITHIN = 0.05
 

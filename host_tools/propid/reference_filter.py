@@ -33,6 +33,11 @@ UPDATE_LOADING = 64.0 * VAR_LOADING
 GATE_OFF_SQ = 1.0e30  # C: PROPID_GATE_OFF_SQ (gating off still refuses 1e15-sigma innovations)
 
 
+# C: PROPID_INPUT_ERROR_MAX_SHARE (propid_internal.h): the input-error compensation applies while the
+# error explains at most this share of the information about the coefficients' common scale.
+INPUT_ERROR_MAX_SHARE = 0.5
+
+
 def _f32(value: float) -> float:
     return float(np.float32(value))
 
@@ -105,6 +110,7 @@ class ReferenceFilter:
         self.rate_limit = 2.0 * c["gyro_range"]
         self.input_noise_var = 4.0 * _f32(config.rotor_speed_noise) ** 2
         self.input_noise_time = _f32(config.rotor_speed_noise_time)
+        self.input_compensation = bool(getattr(config, "input_error_compensation", 0))
         self.converged_var = c["converged_rel_std"] ** 2
         # C (propid_config.c): a claim counts the configured inertia's scale error too, which
         # the data cannot see (for kf not when the torque-scale state takes it).
@@ -183,6 +189,12 @@ class ReferenceFilter:
         self.stale_mark = self.counters_data["rejected"][-STATUS["PROPID_ERR_ROTOR_STALE"]]
         self.check_row = 0
         self.held = []
+        # The input-error compensation's memory and validity statistics (C: propid_core_t input_*).
+        self.input_error_carried = np.zeros(3)
+        self.input_error_cross = np.zeros(3)
+        self.input_information = np.zeros(3)
+        self.input_error_information = np.zeros(3)
+        self.input_information_time = 0.0
 
     def reset(self) -> int:
         self._core_to_prior()
@@ -476,14 +488,16 @@ class ReferenceFilter:
             self.state[:3] = np.array(y) - self.state[self.first_bias:self.first_bias + 3]
             rate_clamped = 0
 
+        compensation = self._input_compensation_prepare(dt) if (self.input_compensation and not anchor) else None
         # Ceilings before the update (C: the general update path does this when it
         # runs; a no-op unless a variance is out of its bounds).
         if self._enforce_bounds():
             self.health |= HEALTH["COV_REPAIRED"]
             self.counters_data["cov_repairs"] += 1
-        gated = False
-        for axis in range(3):
-            gated |= self._update_axis(axis, y[axis])
+        gated_axes = [self._update_axis(axis, y[axis]) for axis in range(3)]
+        gated = any(gated_axes)
+        if compensation is not None:
+            self._input_compensation_apply(compensation, gated_axes)
 
         self._clamp(rate_clamped)
         if self._enforce_bounds():
@@ -497,6 +511,54 @@ class ReferenceFilter:
         self.stale_mark = self.counters_data["rejected"][-STATUS["PROPID_ERR_ROTOR_STALE"]]
         self.counters_data["gyro_accepted"] += 1
         return STATUS["PROPID_OK_GATED"] if gated else STATUS["PROPID_OK"]
+
+    def _input_compensation_prepare(self, dt: float) -> dict:
+        """C: propid_input_compensation_prepare (docs/math.md §14): each axis' errors-in-variables
+        correction of the coefficients from the predicted P, and the validity statistics."""
+        n_rot = self.rotor_count
+        coeff = slice(3, 3 + 2 * n_rot)
+        rotor_of = np.concatenate([np.arange(n_rot), np.arange(n_rot)])
+        _, unit_rows = self.rate_derivative_and_jacobian(self.state, np.ones(n_rot))
+        entry = unit_rows[:, coeff]  # d(omega_dot_a)/d(u_i) per unit coefficient, thrust then drag columns
+        theta = self.state[coeff]
+        p_coeff = self.cov[coeff, coeff]
+        direction = p_coeff @ theta  # P theta: the common scale's direction
+        input_var = 0.5 * self.input_noise_var * (self.input_speed_sq + self.rotor_speed_sq)
+        tau = self.input_noise_time
+        rho = math.exp(-dt / tau) if tau > 0.0 else 0.0
+        self.input_information_time += dt
+        share = dt / self.input_information_time
+        out = {"correction": np.zeros((3, 2 * n_rot)), "rate_gain": np.zeros(3), "carried": np.zeros(3),
+               "cross": np.zeros(3), "valid": [False] * 3}
+        for a in range(3):
+            bias = self.first_bias + a
+            p_rate = self.cov[a, a] + self.cov[a, bias]
+            innovation_var = p_rate + self.cov[a, bias] + self.cov[bias, bias] + self.gyro_var
+            out["rate_gain"][a] = p_rate / innovation_var
+            out["cross"][a] = rho * self.input_error_cross[a]
+            out["carried"][a] = self.input_error_carried[a] + 2.0 * out["cross"][a] + 1.0
+            weight = out["carried"][a] * dt * dt / innovation_var
+            gain = np.bincount(rotor_of, weights=entry[a] * theta, minlength=n_rot)
+            along = np.bincount(rotor_of, weights=entry[a] * direction, minlength=n_rot)
+            cross_cov = float(theta @ (self.cov[coeff, a] + self.cov[coeff, bias]))
+            self.input_information[a] += share * (cross_cov * cross_cov / innovation_var - self.input_information[a])
+            error_information = weight * float(np.sum(input_var * along * along))
+            self.input_error_information[a] += share * (error_information - self.input_error_information[a])
+            out["valid"][a] = self.input_error_information[a] <= INPUT_ERROR_MAX_SHARE * self.input_information[a]
+            factor = weight * input_var[rotor_of] * gain[rotor_of] * entry[a]
+            out["correction"][a] = p_coeff @ factor
+        return out
+
+    def _input_compensation_apply(self, compensation: dict, gated_axes: list[bool]) -> None:
+        """C: propid_input_compensation_apply: the correction of each fused, valid axis; the memory."""
+        coeff = slice(3, 3 + 2 * self.rotor_count)
+        for a in range(3):
+            fused = not gated_axes[a]
+            kept = 1.0 - compensation["rate_gain"][a] if fused else 1.0
+            if fused and compensation["valid"][a]:
+                self.state[coeff] += compensation["correction"][a]
+            self.input_error_cross[a] = kept * (compensation["cross"][a] + 1.0)
+            self.input_error_carried[a] = kept * kept * compensation["carried"][a]
 
     def _update_axis(self, axis: int, gyro: float) -> bool:
         bias = self.first_bias + axis

@@ -309,6 +309,10 @@ static const opt_t options[] = {
            "filter: relative std of the vehicle file's inertia scale\n"
            "(inertia_rel_std): the data cannot see it, converged claims\n"
            "count it. Default 0 (the file's inertia is exact)"),
+    FLAG(NULL, "filter-input-error-compensation", filter_input_error_compensation, 1,
+         "filter: with --filter-rotor-speed-noise, remove the average part of\n"
+         "each coefficient update that error explains (errors in variables,\n"
+         "docs/math.md §14)"),
 
     NUMBER("Vehicle overrides", "motor-tau", motor_time_constant, 1e-5, 10.0, "S",
            "motor time constant [s]"),

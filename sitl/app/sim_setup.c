@@ -157,5 +157,6 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
     c->rotor_speed_noise = (float)opts->filter_rotor_speed_noise;
     c->rotor_speed_noise_time = (float)opts->filter_rotor_speed_noise_time;
     c->inertia_rel_std = (float)opts->filter_inertia_rel_std;
+    c->input_error_compensation = (uint8_t)(opts->filter_input_error_compensation != 0);
     return propid_config_check(c, bad_field);
 }

@@ -80,6 +80,7 @@ OPTION_FLAGS = (
     ("rotor_inertia", "-DCOUNT_STEP_ROTOR_INERTIA=6e-5f"),
     ("delay_4ms", "-DCOUNT_STEP_DELAY_US=4000"),
     ("input_noise", "-DCOUNT_STEP_INPUT_NOISE=2.0f"),
+    ("input_compensation", "-DCOUNT_STEP_INPUT_NOISE=2.0f -DCOUNT_STEP_INPUT_COMPENSATION"),
 )
 
 

@@ -90,6 +90,28 @@ def test_replay_sets_the_filter_fields(cfilter_available):
                                            rotor_speed_noise_time=2.0))
 
 
+def test_replay_sets_the_compensation(cfilter_available):
+    """--input-error-compensation on: the filter field is set with an error size, refused without one, and
+    switched off (with a note) when the rule finds no error."""
+    from propid.flightlog import parse_vehicle
+
+    vehicle = parse_vehicle(VEHICLE)
+    log = flight(1.0, duration=12.0)
+    noisy = ReplayOptions(progress=False, aiding="gyro", rotor_speed_noise=20.0)
+    on = replay(log, vehicle, ReplayOptions(progress=False, aiding="gyro", rotor_speed_noise=20.0,
+                                            input_error_compensation=True))
+    off = replay(log, vehicle, noisy)
+    assert on.summary["config"]["input_error_compensation"] == 1
+    assert "input_error_compensation" not in off.summary["config"]
+    assert on.summary["kf_mean"] != off.summary["kf_mean"]
+    with pytest.raises(UserError, match="needs --rotor-speed-noise"):
+        replay(log, vehicle, ReplayOptions(progress=False, aiding="gyro", input_error_compensation=True))
+    zero = replay(log, vehicle, ReplayOptions(progress=False, aiding="gyro", rotor_speed_noise=0.0,
+                                              input_error_compensation=True))
+    assert zero.summary["config"]["input_error_compensation"] == 0
+    assert "error is 0" in zero.summary["config_notes"]["input_error_compensation"]
+
+
 def test_cli_refuses_a_bad_value_in_one_line():
     proc = subprocess.run([sys.executable, "-m", "propid.cli", "replay", "--log", "x.csv", "--rotor-speed-noise", "-3"],
                           capture_output=True, text=True)

@@ -187,6 +187,26 @@ def test_c_agrees_with_reference_with_input_noise(flight, options):
     assert cov_off > 10.0 * COV_TOL_REL
 
 
+@pytest.mark.parametrize("options", ["plain", "all"])
+@pytest.mark.parametrize("noise_time", [0.0, 0.05])
+def test_c_agrees_with_reference_with_input_error_compensation(flight, options, noise_time):
+    """The errors-in-variables compensation of the coefficient update (docs/math.md §14), white and
+    correlated error: same bounds, and it moves the coefficients (the comparison would see it missing on
+    one side)."""
+    noisy = make_config(options).with_overrides(rotor_speed_noise=20.0, rotor_speed_noise_time=noise_time)
+    config = noisy.with_overrides(input_error_compensation=1)
+    trace_ref = replay(ReferenceFilter(config), flight)
+    trace_c = replay(CFilter(config), flight)
+    state_err, cov_err = disagreement(trace_c, trace_ref)
+    _, x_off, _ = replay(CFilter(noisy), flight)[-1]
+    moved = float(np.max(np.abs(trace_ref[-1][1][3:11] - x_off[3:11]) / np.sqrt(trace_ref[-1][2][3:11])))
+    print(f"C vs reference, compensation ({options}, time {noise_time}): max |dx|/std = {state_err:.3g}, "
+          f"max |dP_ii|/P_ii = {cov_err:.3g}; coefficients moved by up to {moved:.3g} std")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+    assert moved > 10.0 * STATE_TOL_SIGMA
+
+
 def arriving(events, rotor_shift_us: int, offset_us: int = 10_000):
     """The flight as it arrives when the rotor telemetry is stamped rotor_shift_us late (> 0: the
     rotor speeds lag) or early (< 0: the gyro lags), in arrival order (rotor speeds first at equal

@@ -174,6 +174,10 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
      * process noise (docs/math.md §14), correlated over 10 ms. */
     config.rotor_speed_noise = COUNT_STEP_INPUT_NOISE;
     config.rotor_speed_noise_time = 0.01f;
+#ifdef COUNT_STEP_INPUT_COMPENSATION
+    /* and -DCOUNT_STEP_INPUT_COMPENSATION: its errors-in-variables compensation. */
+    config.input_error_compensation = 1u;
+#endif
 #endif
 #ifdef COUNT_STEP_DELAY_US
     /* -DCOUNT_STEP_DELAY_US=D: the telemetry delay D held by the filter; each counted

@@ -164,6 +164,10 @@ typedef struct {
                                          its fastest response): bounds how fast a true rotor speed can
                                          change between two samples; faster changes are refused
                                          (ESC spikes within range, docs/reliability.md) */
+    uint8_t input_error_compensation; /* 1 (needs rotor_speed_noise > 0): remove from each gyro update
+                                         of the coefficients the part the rotor-speed error explains
+                                         on average (errors-in-variables bias, docs/math.md §14).
+                                         0: off */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -236,6 +240,29 @@ typedef struct {
     float accel_innovation_test_ratio;
 #endif
     uint8_t check_row;                                /* next covariance row of the round-robin integrity check */
+#if PROPID_WITH_INPUT_NOISE
+    /* Private: the input-error compensation's memory per gyro axis (propid_input_compensation.c),
+     * in units of one sample's error variance: E[x^2] and E[x e] of the error x the rate
+     * estimate still carries after the update. */
+    float input_error_carried[3];
+    float input_error_cross[3];
+    /* Since init/reset, per axis, dt-weighted means of the information each update draws
+     * about the coefficients' common scale, and of the part of it the configured error
+     * explains (the compensation's validity test). */
+    float input_information[3];
+    float input_error_information[3];
+    float input_information_time;
+    /* Private work area of one gyro step (meaningless between calls; in the filter object,
+     * not on the stack): per axis the factors f_a per coefficient column, and the products
+     * with the coefficient block, product[0] = P theta, product[1 + a] = P f_a (axis a's
+     * correction); the update's rate gain, the step's memory terms, the validity flags. */
+    float input_factor[3][2 * PROPID_MAX_ROTORS];
+    float input_product[4][2 * PROPID_MAX_ROTORS];
+    float input_rate_gain[3];
+    float input_step_carried[3];
+    float input_step_cross[3];
+    uint8_t input_valid[3];
+#endif
 } propid_core_t;
 
 typedef struct {
@@ -338,6 +365,7 @@ typedef struct {
 #if PROPID_WITH_INPUT_NOISE
     float input_noise_var;                          /* 4 rotor_speed_noise^2: Var(u_i) per unit u_i */
     float input_noise_time;                         /* rotor_speed_noise_time */
+    uint8_t input_compensation;                     /* config.input_error_compensation */
 #endif
     float quad_gyro[3];                             /* quad layout only: A_ab = quad_gyro[a] omega_c for
                                                        both other axes b, c of row a (symmetric in b, c) */

@@ -111,6 +111,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rotor-speed-noise-time", metavar="S", type=float,
                         help="correlation time of that error [s] (default: auto's median sample interval, "
                              "or one step with a given SIGMA)")
+    parser.add_argument("--input-error-compensation", choices=["on", "off"], default="off",
+                        help="with --rotor-speed-noise: remove from each coefficient update the average part "
+                             "that rotor-speed error explains (errors-in-variables bias; docs/math.md §14). "
+                             "Default off")
     parser.add_argument("--unit-inertia", action="store_true",
                         help="run with J = identity: estimates are kf/J and km/Jzz ratios (for vehicles without inertia)")
     parser.add_argument("--kf-nominal", type=float, help="prior mean of kf (overrides the vehicle file)")
@@ -276,6 +280,7 @@ def run(args: argparse.Namespace) -> int:
         torque_scale_walk=args.torque_scale_walk,
         rotor_speed_noise=args.rotor_speed_noise,
         rotor_speed_noise_time=args.rotor_speed_noise_time,
+        input_error_compensation=args.input_error_compensation == "on",
         progress=not args.no_progress and len(log_paths) == 1,
     )
     text_out = sys.stderr if args.json == "-" else sys.stdout

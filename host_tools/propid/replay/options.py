@@ -37,6 +37,8 @@ class ReplayOptions:
     # its correlation time [s] (None: the rule's with auto, one step with a given std).
     rotor_speed_noise: float | str | None = None
     rotor_speed_noise_time: float | None = None
+    # The errors-in-variables compensation of the coefficient update with that error (needs rotor_speed_noise).
+    input_error_compensation: bool = False
     record_every: int = 1  # keep every k-th estimate for the time series
     progress: bool = True
 

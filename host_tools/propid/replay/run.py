@@ -335,6 +335,9 @@ def resolve_rotor_speed_noise(log: FlightLog, mask: np.ndarray, options: ReplayO
     if noise is None:
         if time is not None:
             raise UserError("--rotor-speed-noise-time needs --rotor-speed-noise")
+        if options.input_error_compensation:
+            raise UserError("--input-error-compensation on needs --rotor-speed-noise (auto or a std): it removes the "
+                            "part of the update an error of that size explains")
         return
     if noise == "auto":
         from propid.replay.input_noise import estimate_rotor_speed_noise
@@ -343,13 +346,18 @@ def resolve_rotor_speed_noise(log: FlightLog, mask: np.ndarray, options: ReplayO
         config_fields["rotor_speed_noise"] = info["sigma"]
         config_fields["rotor_speed_noise_time"] = info["time"] if time is None else time
         notes["rotor_speed_noise"] = info
-        return
-    value = float(noise)
-    if not (0.0 <= value <= 1.0e4):
-        raise UserError(f"--rotor-speed-noise {noise!r}: choose auto or a number between 0 and 10000 [rad/s]")
-    config_fields["rotor_speed_noise"] = value
-    config_fields["rotor_speed_noise_time"] = 0.0 if time is None else time
-    notes["rotor_speed_noise"] = "given"
+    else:
+        value = float(noise)
+        if not (0.0 <= value <= 1.0e4):
+            raise UserError(f"--rotor-speed-noise {noise!r}: choose auto or a number between 0 and 10000 [rad/s]")
+        config_fields["rotor_speed_noise"] = value
+        config_fields["rotor_speed_noise_time"] = 0.0 if time is None else time
+        notes["rotor_speed_noise"] = "given"
+    if options.input_error_compensation:
+        # An error of size 0 (the rule found none) leaves nothing to compensate: the filter refuses the option then.
+        on = config_fields["rotor_speed_noise"] > 0.0
+        config_fields["input_error_compensation"] = int(on)
+        notes["input_error_compensation"] = "on" if on else "requested, but the rotor-speed error is 0: off"
 
 
 def resolve_scale_walk(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, options: ReplayOptions,
