@@ -17,43 +17,20 @@
 #include "unity.h"
 #include "../../firmware/src/propid_internal.h"
 #include "../../firmware/src/propid_model.h"
+#include "input_error_fixture.h"
 
 void setUp(void) {}
 void tearDown(void) {}
-
-static void configure(propid_config_t *config, uint8_t rotors, int full_inertia)
-{
-    propid_config_default(config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(config, rotors, 0.17f, 0.785398f, 1.0f,
-                                                                 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
-    if (full_inertia) {
-        config->inertia[0][1] = 1.0e-4f;
-        config->inertia[1][0] = 1.0e-4f;
-    }
-}
 
 #if PROPID_WITH_INPUT_NOISE
 static propid_filter_t compensated;
 static propid_filter_t plain;
 
-/* A filter off the prior: coefficients not 1, correlated coefficient block, rates
- * non-zero, rotor speeds different at the two ends of the interval. */
+/* The fixture's filter off the prior, with a correlated coefficient block. */
 static void prepare(propid_filter_t *filter, const propid_config_t *config)
 {
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(filter, config));
+    input_error_off_prior(filter, config);
     const uint8_t rotors = config->rotor_count;
-    filter->core.state[0] = 0.3f;
-    filter->core.state[1] = -0.2f;
-    filter->core.state[2] = 0.1f;
-    for (uint8_t i = 0; i < rotors; ++i) {
-        filter->core.state[PROPID_RATE_STATES + i] = 0.8f + 0.1f * (float)i;
-        filter->core.state[PROPID_RATE_STATES + rotors + i] = 1.3f - 0.1f * (float)i;
-        const float start = 500.0f + 20.0f * (float)i;
-        const float end = 520.0f - 10.0f * (float)i;
-        filter->core.input_speed_sq[i] = start * start;
-        filter->core.rotor_speed_sq[i] = end * end;
-    }
     /* Correlations within the coefficient block and with the rates. */
     for (uint8_t k = 0; k + 1u < 2u * rotors; ++k) {
         const uint8_t i = (uint8_t)(PROPID_RATE_STATES + k);
@@ -68,7 +45,7 @@ static void check_dense(uint8_t rotors, int full_inertia, float time)
     const float sigma = 30.0f;
     const float dt = 0.002f;
     propid_config_t config;
-    configure(&config, rotors, full_inertia);
+    input_error_configure(&config, rotors, full_inertia);
     config.rotor_speed_noise = sigma;
     config.rotor_speed_noise_time = time;
     config.input_error_compensation = 1u;
@@ -140,7 +117,7 @@ static void test_corrections_match_the_dense_formula(void)
 static void test_only_fused_valid_axes_are_corrected(void)
 {
     propid_config_t config;
-    configure(&config, 4u, 0);
+    input_error_configure(&config, 4u, 0);
     config.rotor_speed_noise = 10.0f;
     config.input_error_compensation = 1u;
     prepare(&compensated, &config);
@@ -196,7 +173,7 @@ static void test_the_correction_moves_the_mean_only(void)
     /* One step of each from the same state, the validity statistics set to pass:
      * the covariance and the rates are the uncompensated update's, bit for bit. */
     propid_config_t config;
-    configure(&config, 4u, 0);
+    input_error_configure(&config, 4u, 0);
     config.rotor_speed_noise = 20.0f;
     config.input_error_compensation = 1u;
     prepare(&plain, &config);
@@ -235,7 +212,7 @@ static void test_an_error_the_data_cannot_carry_is_withheld(void)
      * information, every correction is withheld and the estimates are the ones of
      * the error term alone, bit for bit. */
     propid_config_t config;
-    configure(&config, 4u, 0);
+    input_error_configure(&config, 4u, 0);
     config.rotor_speed_noise = 500.0f;
     fly(&plain, &config, 300u, 1.0f);
     config.input_error_compensation = 1u;
@@ -263,7 +240,7 @@ static void test_an_error_the_data_cannot_carry_is_withheld(void)
 static void test_compensation_config_is_checked(void)
 {
     propid_config_t config;
-    configure(&config, 4u, 0);
+    input_error_configure(&config, 4u, 0);
     const char *bad = NULL;
     config.input_error_compensation = 1u; /* no error size to compensate */
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
@@ -280,7 +257,7 @@ static void test_compensation_config_is_checked(void)
 static void test_compensation_compiled_out_refuses_the_option(void)
 {
     propid_config_t config;
-    configure(&config, 4u, 0);
+    input_error_configure(&config, 4u, 0);
     config.input_error_compensation = 1u;
     const char *bad = NULL;
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));

@@ -14,6 +14,7 @@
 #include "unity.h"
 #include "../../firmware/src/propid_internal.h"
 #include "../../firmware/src/propid_model.h"
+#include "input_error_fixture.h"
 
 void setUp(void) {}
 void tearDown(void) {}
@@ -22,47 +23,16 @@ void tearDown(void) {}
 static propid_filter_t with_noise;
 static propid_filter_t without_noise;
 
-static void configure(propid_config_t *config, uint8_t rotors, int full_inertia)
-{
-    propid_config_default(config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(config, rotors, 0.17f, 0.785398f, 1.0f,
-                                                                 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
-    if (full_inertia) {
-        config->inertia[0][1] = 1.0e-4f;
-        config->inertia[1][0] = 1.0e-4f;
-    }
-}
-
-/* Both filters in the same state, off the prior (coefficients not 1, rates
- * non-zero, rotor speeds different at the two ends of the interval). */
-static void prepare(propid_filter_t *filter, const propid_config_t *config)
-{
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(filter, config));
-    const uint8_t rotors = config->rotor_count;
-    filter->core.state[0] = 0.3f;
-    filter->core.state[1] = -0.2f;
-    filter->core.state[2] = 0.1f;
-    for (uint8_t i = 0; i < rotors; ++i) {
-        filter->core.state[PROPID_RATE_STATES + i] = 0.8f + 0.1f * (float)i;
-        filter->core.state[PROPID_RATE_STATES + rotors + i] = 1.3f - 0.1f * (float)i;
-        const float start = 500.0f + 20.0f * (float)i;
-        const float end = 520.0f - 10.0f * (float)i;
-        filter->core.input_speed_sq[i] = start * start;
-        filter->core.rotor_speed_sq[i] = end * end;
-    }
-}
-
 static void check_added_block(uint8_t rotors, int full_inertia, float time)
 {
     const float sigma = 3.0f;
     const float dt = 0.002f;
     propid_config_t config;
-    configure(&config, rotors, full_inertia);
-    prepare(&without_noise, &config);
+    input_error_configure(&config, rotors, full_inertia);
+    input_error_off_prior(&without_noise, &config);
     config.rotor_speed_noise = sigma;
     config.rotor_speed_noise_time = time;
-    prepare(&with_noise, &config);
+    input_error_off_prior(&with_noise, &config);
 
     float rate_next[3];
     float jac_dt[3][PROPID_JAC_ROW];
@@ -126,10 +96,10 @@ static void test_input_noise_adds_its_block_to_the_rate_covariance(void)
 static void test_input_noise_off_is_the_plain_prediction(void)
 {
     propid_config_t config;
-    configure(&config, 4u, 0);
-    prepare(&without_noise, &config);
+    input_error_configure(&config, 4u, 0);
+    input_error_off_prior(&without_noise, &config);
     config.rotor_speed_noise_time = 0.05f; /* a time alone switches nothing on */
-    prepare(&with_noise, &config);
+    input_error_off_prior(&with_noise, &config);
     float rate_next[3];
     float jac_dt[3][PROPID_JAC_ROW];
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_noise, 0.002f, rate_next, jac_dt));
@@ -142,7 +112,7 @@ static void test_input_noise_off_is_the_plain_prediction(void)
 static void test_input_noise_config_is_checked(void)
 {
     propid_config_t config;
-    configure(&config, 4u, 0);
+    input_error_configure(&config, 4u, 0);
     const char *bad = NULL;
     const float bad_noise[] = {-1.0f, NAN, INFINITY, 1.0e5f};
     for (uint8_t k = 0; k < 4u; ++k) {
@@ -167,7 +137,7 @@ static void test_input_noise_config_is_checked(void)
 static void test_largest_input_noise_keeps_the_filter_finite(void)
 {
     propid_config_t config;
-    configure(&config, 4u, 0);
+    input_error_configure(&config, 4u, 0);
     config.rotor_speed_noise = config.max_rotor_speed;
     config.rotor_speed_noise_time = 1.0f;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&with_noise, &config));
