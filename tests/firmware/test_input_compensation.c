@@ -26,6 +26,15 @@ void tearDown(void) {}
 static propid_filter_t compensated;
 static propid_filter_t plain;
 
+/* The fixture's vehicle with an input error of sigma over time and the compensation on. */
+static void configure_compensated(propid_config_t *config, uint8_t rotors, int full_inertia, float sigma, float time)
+{
+    input_error_configure(config, rotors, full_inertia);
+    config->rotor_speed_noise = sigma;
+    config->rotor_speed_noise_time = time;
+    config->input_error_compensation = 1u;
+}
+
 /* The fixture's filter off the prior, with a correlated coefficient block. */
 static void prepare(propid_filter_t *filter, const propid_config_t *config)
 {
@@ -45,10 +54,7 @@ static void check_dense(uint8_t rotors, int full_inertia, float time)
     const float sigma = 30.0f;
     const float dt = 0.002f;
     propid_config_t config;
-    input_error_configure(&config, rotors, full_inertia);
-    config.rotor_speed_noise = sigma;
-    config.rotor_speed_noise_time = time;
-    config.input_error_compensation = 1u;
+    configure_compensated(&config, rotors, full_inertia, sigma, time);
     prepare(&compensated, &config);
     const float carried_before[3] = {0.5f, 0.0f, 2.0f};
     const float cross_before[3] = {0.3f, 0.0f, 0.7f};
@@ -117,9 +123,7 @@ static void test_corrections_match_the_dense_formula(void)
 static void test_only_fused_valid_axes_are_corrected(void)
 {
     propid_config_t config;
-    input_error_configure(&config, 4u, 0);
-    config.rotor_speed_noise = 10.0f;
-    config.input_error_compensation = 1u;
+    configure_compensated(&config, 4u, 0, 10.0f, 0.0f);
     prepare(&compensated, &config);
     float before[PROPID_MAX_STATES];
     memcpy(before, compensated.core.state, sizeof(before));
@@ -173,9 +177,7 @@ static void test_the_correction_moves_the_mean_only(void)
     /* One step of each from the same state, the validity statistics set to pass:
      * the covariance and the rates are the uncompensated update's, bit for bit. */
     propid_config_t config;
-    input_error_configure(&config, 4u, 0);
-    config.rotor_speed_noise = 20.0f;
-    config.input_error_compensation = 1u;
+    configure_compensated(&config, 4u, 0, 20.0f, 0.0f);
     prepare(&plain, &config);
     prepare(&compensated, &config);
     for (uint8_t a = 0; a < 3u; ++a) {
