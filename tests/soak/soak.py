@@ -32,11 +32,12 @@ Figures:
   NEES is not chi-square distributed;
 - false_converged: coefficient "converged" claims (per coefficient and control
   step) while more than 5 % off, over all mode-filter flights; with the claims.
-  A flight with the inertia_error effect flies a vehicle file whose inertia is
-  a CAD estimate, and its configuration says so (--filter-inertia-std, the
-  effect's nominal size: the class of the error, not the drawn value): no test
-  on gyro and rotor speeds sees a scale error of J, only the configuration can
-  tell the claim about it;
+  No test on gyro and rotor speeds sees a scale error of the inertia J (the
+  inertia_error effect), only the configuration can tell the claim about it.
+  Every flight declares the same inertia uncertainty (--filter-inertia-std),
+  as a user configures a fleet without knowing which vehicle file is wrong:
+  the RMS of the inertia scale error over the plan's flights
+  (plan_inertia_rel_rms; --inertia-std overrides it for every flight);
 - cov_repairs: covariance repairs, summed;
 - diverged_filter / diverged_oracle: flights the simulator stopped for
   divergence (exit 3) in each mode; `filter_only_diverged`: cases where the
@@ -66,6 +67,11 @@ EFFECTS = {
     "ground_effect": 1.0, "com_offset": 0.05, "inertia_error": 0.1, "esc_delay": 0.02,
     "thrust_nonlinearity": 0.1, "gyro_scale": 0.02, "aero_damping": 1.0,
 }
+# How a case draws its effects: the share of clean cases, the number of effects
+# of a non-clean case (uniform over this tuple) and their strength (x U(low, high)).
+CLEAN_SHARE = 0.3
+EFFECT_COUNTS = (0, 0, 1, 1, 2)
+EFFECT_STRENGTH = (0.5, 1.5)
 # Fault classes with the log10 range of their rate per sample (time_jitter: std [us]).
 FAULTS = {
     "esc_dropout": (-3.0, -0.7), "esc_spike": (-4.0, -2.0), "esc_stuck": (-4.0, -2.5),
@@ -103,19 +109,31 @@ def matched_filter(sensors: str) -> list[str]:
             "--filter-coeff-walk", "0", "--filter-bias-walk", f"{walk}"]
 
 
+def plan_inertia_rel_rms() -> float:
+    """RMS relative inertia scale error over the plan's flights: the inertia
+    uncertainty a configuration of the whole fleet can honestly declare. A case
+    carries inertia_error with probability (1 - CLEAN_SHARE) E[k] / len(EFFECTS)
+    (k effects drawn without replacement), of strength nominal x U(low, high),
+    whose mean square is nominal^2 (low^2 + low high + high^2) / 3."""
+    low, high = EFFECT_STRENGTH
+    share = (1.0 - CLEAN_SHARE) * (sum(EFFECT_COUNTS) / len(EFFECT_COUNTS)) / len(EFFECTS)
+    mean_square = EFFECTS["inertia_error"] ** 2 * (low * low + low * high + high * high) / 3.0
+    return math.sqrt(share * mean_square)
+
+
 def plan_case(rng: random.Random, index: int, nees_tuning: str = "matched") -> dict:
     """One random flight configuration (flown in both modes)."""
     vehicle = rng.choices([v for v, _ in VEHICLES], weights=[w for _, w in VEHICLES])[0]
     trajectory = rng.choice(TRAJECTORIES)
     duration = round(rng.uniform(10.0, 60.0), 1)
     sensors = "paper" if rng.random() < 0.4 else "default"
-    clean = rng.random() < 0.3          # fault-free, effect-free, no rotor loss: the NEES flights
+    clean = rng.random() < CLEAN_SHARE  # fault-free, effect-free, no rotor loss: the NEES flights
     effects: list[str] = []
     faults: list[str] = []
     damage = None
     if not clean:
-        for name in rng.sample(sorted(EFFECTS), rng.choice((0, 0, 1, 1, 2))):
-            effects.append(f"{name}={EFFECTS[name] * rng.uniform(0.5, 1.5):.4g}")
+        for name in rng.sample(sorted(EFFECTS), rng.choice(EFFECT_COUNTS)):
+            effects.append(f"{name}={EFFECTS[name] * rng.uniform(*EFFECT_STRENGTH):.4g}")
         for name in rng.sample(sorted(FAULTS), rng.choice((0, 1, 2, 3, 4))):
             low, high = FAULTS[name]
             faults.append(f"{name}={10.0 ** rng.uniform(low, high):.3g}")
@@ -131,7 +149,10 @@ def plan_case(rng: random.Random, index: int, nees_tuning: str = "matched") -> d
             "effects": effects, "faults": faults, "damage": damage}
 
 
-def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool = True) -> list[str]:
+def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool = True,
+            inertia_std: float | None = None) -> list[str]:
+    """The propid_sitl command of one flight. inertia_std: the inertia
+    uncertainty every flight declares (default plan_inertia_rel_rms())."""
     cmd = [sitl, "--vehicle", case["vehicle"], "--trajectory", case["trajectory"], "--mode", mode,
            "--seed", str(case["seed"]), "--duration", str(case["duration_s"]), "--quiet",
            "--summary-json", summary]
@@ -143,8 +164,8 @@ def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool 
         cmd += matched_filter(case["sensors"])
     for effect in case["effects"]:
         cmd += ["--effect", effect]
-    if any(effect.startswith("inertia_error=") for effect in case["effects"]):
-        cmd += ["--filter-inertia-std", f"{EFFECTS['inertia_error']}"]
+    declared = plan_inertia_rel_rms() if inertia_std is None else inertia_std
+    cmd += ["--filter-inertia-std", f"{declared:.6g}"]  # the same on every flight
     for fault in case["faults"]:
         cmd += ["--fault", fault]
     if case["damage"]:
@@ -154,9 +175,10 @@ def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool 
     return cmd
 
 
-def fly(sitl: str, case: dict, mode: str, workdir: str, detect_damage: bool = True) -> dict:
+def fly(sitl: str, case: dict, mode: str, workdir: str, detect_damage: bool = True,
+        inertia_std: float | None = None) -> dict:
     summary = os.path.join(workdir, f"case{case['case']}-{mode}.json")
-    cmd = command(sitl, case, mode, summary, detect_damage)
+    cmd = command(sitl, case, mode, summary, detect_damage, inertia_std)
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
     if proc.returncode not in (0, 3) or not os.path.exists(summary):
         return {"error": f"exit {proc.returncode}: {proc.stderr.strip()[-300:]}", "command": " ".join(cmd)}
@@ -277,8 +299,11 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
     out["wall_time_s"] = round(elapsed_s, 1)
     out["jobs"] = args.jobs
     out["plan_seed"] = args.seed
+    out["inertia_rel_std_declared"] = round(plan_inertia_rel_rms() if args.inertia_std is None
+                                            else args.inertia_std, 6)
     out["command"] = (f"make soak SOAK_STEPS={args.steps:g} SOAK_SEED={args.seed} JOBS={args.jobs}"
-                      + (f" SOAK_NEES_TUNING={args.nees_tuning}" if args.nees_tuning != "matched" else ""))
+                      + (f" SOAK_NEES_TUNING={args.nees_tuning}" if args.nees_tuning != "matched" else "")
+                      + (f" SOAK_INERTIA_STD={args.inertia_std:g}" if args.inertia_std is not None else ""))
     return out
 
 
@@ -295,12 +320,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--nees-tuning", choices=("matched", "library"), default="matched",
                         help="filter tuning of the fault-free, effect-free NEES flights: matched (priors and "
                              "walks = the truth's distribution, default) or library (propid_config_default)")
+    parser.add_argument("--inertia-std", type=float, default=None,
+                        help="inertia_rel_std declared by every flight (default: the RMS inertia scale error "
+                             f"over the plan's flights, {plan_inertia_rel_rms():.4f})")
     args = parser.parse_args(argv)
     if not os.access(args.sitl, os.X_OK):
         print(f"soak: {args.sitl}: not an executable (run make host)", file=sys.stderr)
         return 2
-    if args.steps <= 0 or args.jobs < 1:
-        print("soak: --steps must be > 0 and --jobs >= 1", file=sys.stderr)
+    if args.steps <= 0 or args.jobs < 1 or (args.inertia_std is not None and not 0.0 <= args.inertia_std <= 1.0):
+        print("soak: --steps must be > 0, --jobs >= 1 and --inertia-std in [0, 1]", file=sys.stderr)
         return 2
 
     rng = random.Random(args.seed)
@@ -321,7 +349,8 @@ def main(argv: list[str] | None = None) -> int:
     start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="propid-soak-") as workdir, \
             ThreadPoolExecutor(max_workers=args.jobs) as pool:
-        futures = {pool.submit(fly, args.sitl, case, mode, workdir, not args.no_detect_damage): (case, mode)
+        futures = {pool.submit(fly, args.sitl, case, mode, workdir, not args.no_detect_damage,
+                               args.inertia_std): (case, mode)
                    for case in cases for mode in ("filter", "oracle")}
         try:
             for future in as_completed(futures):
