@@ -14,6 +14,11 @@ reference value (the reference kf only divides the results for display):
   Added later, each rule fixed on the simulator before its first run here: gyro only, and the scale-walk
   mode, each with the rotor-speed error of replay/input_noise.py's per-log rule and the
   errors-in-variables compensation of the coefficient update (docs/math.md §14);
+- added later (docs/real-data.md "Gyro only with a calibrated vehicle file"; the rules were written before their
+  first run here, but after the walk sweep of that page): gyro only with the coefficient walk by the per-log
+  torque-gain rule (--thrust-coeff-rel-walk auto); and the same with the vehicle file calibrated by
+  replay/calibration.py (--vehicle-out) on the OTHER half of the runs: logs in sorted order, odd positions
+  (1, 3, ..) calibrate the even ones and vice versa, so every run of that mode is held out;
 - "square" runs are the logs whose name starts with "square", the others are the rest;
 - per run: kf = mean over rotors of the converged-part mean; rotor spread = the worst
   rotor's |kf_i / run mean - 1|; km converged = all rotors' relative std below 5 % at the end.
@@ -48,7 +53,13 @@ MODES = [
     ("accel_scale_walk_input_error", "+ accelerometer, scale walk (rule) + rotor-speed error with its compensation",
      dict(aiding="gyro+accel", rotor_inertia="off", disturbance="off", torque_scale="on", torque_scale_walk="auto",
           rotor_speed_noise="auto", input_error_compensation=True)),
+    ("gyro_walk", "gyro only, coefficient walk by the per-log torque-gain rule",
+     dict(aiding="gyro", rotor_inertia="off", disturbance="off", torque_scale="off", thrust_coeff_walk="auto")),
+    ("gyro_walk_calibrated", "the same, vehicle file calibrated with the accelerometer on the other half of the runs",
+     dict(aiding="gyro", rotor_inertia="off", disturbance="off", torque_scale="off", thrust_coeff_walk="auto")),
 ]
+# A calibrated mode: (its gyro-only mode, the accelerometer mode), both replayed with the file as given.
+CALIBRATED = {"gyro_walk_calibrated": ("gyro_walk", "accel_scale_walk")}
 ROTOR_WITHIN = 0.05
 
 
@@ -104,6 +115,29 @@ def mode_summary(runs: dict[str, dict]) -> dict:
     }
 
 
+def halves(logs: list[Path]) -> tuple[list[Path], list[Path]]:
+    """Sorted order, 1-based odd positions and even positions."""
+    return logs[0::2], logs[1::2]
+
+
+def _cross_calibrated(name: str, logs: list[Path], vehicle, raw: dict) -> tuple[dict, dict]:
+    """Each half's runs get the vehicle file calibrated on the other half (replay/calibration.py):
+    (the vehicle per (mode, log), what each calibration found)."""
+    from propid.replay.calibration import torque_gain_correction
+
+    gyro_mode, accel_mode = CALIBRATED[name]
+    out, infos = {}, {}
+    odd, even = halves(logs)
+    for fit, held_out, label in ((odd, even, "odd"), (even, odd, "even")):
+        if not fit or not held_out:
+            raise UserError(f"{name}: needs at least two logs (one per half)")
+        fixed, info = torque_gain_correction(vehicle, [raw[(gyro_mode, p)] for p in fit],
+                                             [raw[(accel_mode, p)] for p in fit])
+        infos[f"{name}: calibrated on the {label} positions"] = dict(info, logs=[p.name for p in fit])
+        out.update({(name, p): fixed for p in held_out})
+    return out, infos
+
+
 def run_real_data(config: RealDataConfig, progress: bool = True) -> dict:
     from propid.flightlog import read_flightlog, read_vehicle
     from propid.replay import ReplayOptions, replay
@@ -112,26 +146,44 @@ def run_real_data(config: RealDataConfig, progress: bool = True) -> dict:
     if not logs:
         raise UserError(f"no *.csv logs in {config.data_dir}")
     vehicle = read_vehicle(config.vehicle)
-    modes = [mode for mode in MODES if mode[0] in config.modes]
-    jobs = [(mode, path) for mode in modes for path in logs]
+    wanted = set(config.modes)
+    for name, needs in CALIBRATED.items():
+        if name in wanted:
+            wanted.update(needs)  # a calibrated mode is built from these two replays of every log
+    modes = [mode for mode in MODES if mode[0] in wanted]
+    calibrated = [mode for mode in modes if mode[0] in CALIBRATED]
+    modes = [mode for mode in modes if mode[0] not in CALIBRATED]
+    jobs = [(mode, path) for mode in modes + calibrated for path in logs]
     iterator = jobs
     if progress:
         from tqdm import tqdm
 
         iterator = tqdm(jobs, desc="real-data", unit="replay")
     loaded: dict[Path, object] = {}
-    per_mode: dict[str, dict] = {mode[0]: {} for mode in modes}
+    per_mode: dict[str, dict] = {mode[0]: {} for mode in modes + calibrated}
+    raw: dict[tuple[str, Path], dict] = {}
+    corrected: dict[tuple[str, Path], object] = {}
+    calibrations: dict[str, dict] = {}
     for (name, _, fields), path in iterator:
         if path not in loaded:
             loaded[path] = read_flightlog(path, vehicle)
         options = ReplayOptions(segment="flying", esc_delay="default", progress=False, **fields)
-        summary = replay(loaded[path], vehicle, options).summary
+        use = vehicle
+        if name in CALIBRATED:
+            if (name, path) not in corrected:
+                vehicles, infos = _cross_calibrated(name, logs, vehicle, raw)
+                corrected.update(vehicles)
+                calibrations.update(infos)
+            use = corrected[(name, path)]
+        summary = replay(loaded[path], use, options).summary
+        raw[(name, path)] = summary
         per_mode[name][path.stem.replace("_20251017", "")] = run_summary(summary, config.reference_kf)
     result = {
         "rules": __doc__.strip(),
         "data_dir": str(config.data_dir), "vehicle": str(config.vehicle), "reference_kf": config.reference_kf,
         "modes": [{"name": name, "what": what, "options": fields, "summary": mode_summary(per_mode[name]),
-                   "runs": per_mode[name]} for name, what, fields in modes],
+                   "runs": per_mode[name]} for name, what, fields in modes + calibrated],
+        "calibrations": calibrations,
     }
     config.out_dir.mkdir(parents=True, exist_ok=True)
     (config.out_dir / "real_data.json").write_text(json.dumps(result, indent=2) + "\n")

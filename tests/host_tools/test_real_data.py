@@ -50,3 +50,28 @@ def test_one_real_log(tmp_path):
     assert run["finite"] and 0.0 < run["kf_over_reference"] < 5.0
     assert (tmp_path / "real_data.json").is_file()
     assert "| square_run1 |" in real_data.render(result)
+
+
+def test_calibrated_mode_uses_the_other_half_of_the_runs():
+    """gyro_walk_calibrated: odd positions (sorted) calibrate the even ones and vice versa (held out)."""
+    from propid.flightlog import parse_vehicle
+    from synthetic_vehicles import x_quad
+
+    vehicle = parse_vehicle(x_quad("half-x", 0.045, [2.5e-5, 2.8e-5, 4.9e-5], 0.035, 3.0e-8, 1.0e-10))
+    logs = [Path(f"run{k}.csv") for k in range(1, 6)]
+    odd, even = real_data.halves(logs)
+    assert [p.name for p in odd] == ["run1.csv", "run3.csv", "run5.csv"] and [p.name for p in even] == ["run2.csv", "run4.csv"]
+    # gyro-only reads 0.5 x kf on the odd runs and 0.8 x on the even ones; the accelerometer 3e-8 on all
+    raw = {}
+    for k, p in enumerate(logs, start=1):
+        raw[("gyro_walk", p)] = {"kf_mean": [(0.5 if k % 2 else 0.8) * 3.0e-8] * 4}
+        raw[("accel_scale_walk", p)] = {"kf_mean": [3.0e-8] * 4}
+    vehicles, infos = real_data._cross_calibrated("gyro_walk_calibrated", logs, vehicle, raw)
+    assert set(vehicles) == {("gyro_walk_calibrated", p) for p in logs}
+    for p in even:  # calibrated on the odd runs: gain 2
+        assert vehicles[("gyro_walk_calibrated", p)].inertia[0, 0] == pytest.approx(2.5e-5 * 2.0)
+    for p in odd:  # on the even runs: gain 1.25
+        assert vehicles[("gyro_walk_calibrated", p)].inertia[1, 1] == pytest.approx(2.8e-5 * 1.25)
+    assert len(infos) == 2
+    with pytest.raises(Exception, match="two logs"):
+        real_data._cross_calibrated("gyro_walk_calibrated", logs[:1], vehicle, raw)

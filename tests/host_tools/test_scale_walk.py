@@ -19,10 +19,12 @@ MASS = 0.045
 VEHICLE = x_quad("walk-x", MASS, [2.5e-5, 2.8e-5, 4.9e-5], ARM, KF, KM)
 
 
-def flight(gain_late: float, duration: float = 48.0, rate: float = 100.0, seed: int = 3) -> FlightLog:
+def flight(gain_late: float, duration: float = 48.0, rate: float = 100.0, seed: int = 3,
+           gain_early: float = 1.0, collective: float = 0.0) -> FlightLog:
     """Rotor speeds around hover with multisine roll/pitch/yaw differentials; the body rates
-    integrate the torques the rotors make, the roll/pitch ones at gain 1 for the first half
-    and gain_late after it (what the gyro sees changes, the thrust does not). Rate feedback
+    integrate the torques the rotors make, the roll/pitch ones at gain_early for the first half
+    and gain_late after it (what the gyro sees changes, the thrust does not); `collective` [rad/s] adds a
+    slow swing of every rotor's speed (climb and descent) that tells the accelerometer's bias from kf. Rate feedback
     keeps the rates bounded; the accelerometer reads the thrust over the mass."""
     rng = np.random.default_rng(seed)
     vehicle = parse_vehicle(VEHICLE)
@@ -42,9 +44,9 @@ def flight(gain_late: float, duration: float = 48.0, rate: float = 100.0, seed: 
         gyro[k] = omega
         cmd = demand[k] - 3.0 * omega
         # differential speed per rotor from the roll (y), pitch (-x) and yaw demands
-        speeds[k] = hover + 40.0 * (cmd[0] * np.sign(pos[:, 1]) - cmd[1] * np.sign(pos[:, 0]) + 0.5 * cmd[2] * signs)
+        speeds[k] = hover + collective * np.sin(2 * np.pi * 0.4 * t[k]) + 40.0 * (cmd[0] * np.sign(pos[:, 1]) - cmd[1] * np.sign(pos[:, 0]) + 0.5 * cmd[2] * signs)
         u = speeds[k] ** 2
-        gain = 1.0 if t[k] < duration / 2 else gain_late
+        gain = gain_early if t[k] < duration / 2 else gain_late
         torque = np.array([gain * np.sum(KF * u * pos[:, 1]), -gain * np.sum(KF * u * pos[:, 0]),
                            np.sum(KM * u * signs)])
         omega = omega + (torque - np.cross(omega, inertia * omega)) / inertia / rate

@@ -15,6 +15,17 @@ from propid.outputs import check_writable, write_text
 NAME = "replay"
 HELP = "replay a flight-log v1 CSV through the firmware filter: per-rotor kf/km, gyro biases, JSON + plot"
 
+
+def _noise_std(text: str):
+    return _word_or_number(text, ("auto",), float, lambda v: 0.0 <= v <= 1.0e4,
+                           "a std in rad/s or 'auto'", f"{text}: the std [rad/s] must be between 0 and 10000")
+
+
+def _walk(text: str):
+    return _word_or_number(text, ("auto",), float, lambda v: 0.0 <= v <= 10.0,
+                           "a walk in 1/sqrt(s) or 'auto'", f"{text}: the walk must be between 0 and 10 [1/sqrt(s)]")
+
+
 # propid_config_t fields a user may override from the command line (name, type, help).
 OVERRIDES = [
     ("thrust_coeff_rel_std0", float, "prior std of kf relative to nominal (library default 0.3)"),
@@ -24,7 +35,9 @@ OVERRIDES = [
     ("gyro_noise_density", float, "gyro white noise [rad/s/sqrt(Hz)] (default: measured on the log)"),
     ("gyro_sample_rate_hz", float, "gyro rate the density applies to [Hz] (default: the log's rate)"),
     ("rate_process_noise", float, "unmodelled angular acceleration [rad/s^2/sqrt(Hz)] (default: measured on the log)"),
-    ("thrust_coeff_rel_walk", float, "random walk of kf/kf_nominal [1/sqrt(s)]"),
+    ("thrust_coeff_rel_walk", _walk, "random walk of kf/kf_nominal [1/sqrt(s)], or auto (gyro only, without the "
+                                     "thrust-torque scale): sqrt(0.02^2 + q^2) with q the --torque-scale-walk auto "
+                                     "rule's change of the 2-10 Hz torque gain measured on the log"),
     ("drag_coeff_rel_walk", float, "random walk of km/km_nominal [1/sqrt(s)]"),
     ("gyro_bias_walk", float, "random walk of the gyro biases [rad/s/sqrt(s)]"),
     ("gate_sigma", float, "innovation gate [std]; <= 0 disables"),
@@ -35,16 +48,6 @@ OVERRIDES = [
     ("converged_rel_std", float, "relative error a converged claim bounds (claimed at 3 std below it); "
                               "the averaging window starts at 1 std below it"),
 ]
-
-
-def _noise_std(text: str):
-    return _word_or_number(text, ("auto",), float, lambda v: 0.0 <= v <= 1.0e4,
-                           "a std in rad/s or 'auto'", f"{text}: the std [rad/s] must be between 0 and 10000")
-
-
-def _walk(text: str):
-    return _word_or_number(text, ("auto",), float, lambda v: 0.0 <= v <= 10.0,
-                           "a walk in 1/sqrt(s) or 'auto'", f"{text}: the walk must be between 0 and 10 [1/sqrt(s)]")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -115,6 +118,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --rotor-speed-noise: remove from each coefficient update the average part "
                              "that rotor-speed error explains (errors-in-variables bias; docs/math.md §14). "
                              "Default off")
+    parser.add_argument("--vehicle-out", metavar="CORRECTED.json",
+                        help="gyro only (--aiding gyro), logs with accelerometer columns, vehicle with a mass: also "
+                             "replay every log with the accelerometer and write the vehicle file whose Jxx, Jyy are "
+                             "scaled so this gyro-only replay reads the accelerometer's fleet kf (kf_nominal = that "
+                             "kf); replay other logs of the vehicle with it and the same options (docs/real-data.md)")
     parser.add_argument("--unit-inertia", action="store_true",
                         help="run with J = identity: estimates are kf/J and km/Jzz ratios (for vehicles without inertia)")
     parser.add_argument("--kf-nominal", type=float, help="prior mean of kf (overrides the vehicle file)")
@@ -200,7 +208,10 @@ def check_arguments(args: argparse.Namespace, log_paths: list[Path]) -> None:
         raise UserError("--prefilter/--diagnostic-highpass need a rows log, not --streams events")
     if args.reference_kf is not None and not args.reference_kf > 0:
         raise UserError("--reference-kf must be positive")
+    if args.vehicle_out and args.vehicle and Path(args.vehicle_out).resolve() == Path(args.vehicle).resolve():
+        raise UserError("--vehicle-out must not overwrite the input vehicle file")
     for option, value in (("--json", args.json), ("--plot", args.plot), ("--table", args.table),
+                          ("--vehicle-out", args.vehicle_out),
                           ("--band-table", args.band_table), ("--band-plot", args.band_plot)):
         if value and value != "-":
             check_writable(value, option)
@@ -259,6 +270,7 @@ def run(args: argparse.Namespace) -> int:
     overrides = {
         name: getattr(args, f"cfg_{name}") for name, _, _ in OVERRIDES if getattr(args, f"cfg_{name}") is not None
     }
+    thrust_coeff_walk = overrides.pop("thrust_coeff_rel_walk") if overrides.get("thrust_coeff_rel_walk") == "auto" else None
     options = ReplayOptions(
         segment=args.segment,
         streams=args.streams,
@@ -278,11 +290,16 @@ def run(args: argparse.Namespace) -> int:
         rotor_inertia=args.rotor_inertia,
         torque_scale=args.torque_scale,
         torque_scale_walk=args.torque_scale_walk,
+        thrust_coeff_walk=thrust_coeff_walk,
         rotor_speed_noise=args.rotor_speed_noise,
         rotor_speed_noise_time=args.rotor_speed_noise_time,
         input_error_compensation=args.input_error_compensation == "on",
         progress=not args.no_progress and len(log_paths) == 1,
     )
+    if args.vehicle_out:
+        from propid.replay.calibration import check_calibration_inputs
+
+        check_calibration_inputs(vehicle, logs, options)
     text_out = sys.stderr if args.json == "-" else sys.stdout
     runs = logs
     if len(logs) > 1 and not args.no_progress:
@@ -315,6 +332,17 @@ def run(args: argparse.Namespace) -> int:
         if args.reference_kf:
             text += f" = {fleet['kf_fleet_over_reference']:.3f} x reference {args.reference_kf:.4g}"
         print(text + f"; km mean {fleet['km_fleet_mean']:.4g} (CV {fleet['km_run_cv']:.1%})", file=text_out)
+    if args.vehicle_out:
+        from propid.flightlog import write_vehicle
+        from propid.replay.calibration import accelerometer_options, torque_gain_correction
+
+        accel = [replay(log, vehicle, accelerometer_options(options)).summary for log in logs]
+        corrected, info = torque_gain_correction(vehicle, summaries, accel)
+        write_vehicle(args.vehicle_out, corrected)
+        output = dict(output, calibration=info)
+        print(f"calibration: gyro-only fleet kf {info['kf_gyro_only']:.4g}, with the accelerometer "
+              f"{info['kf_with_accelerometer']:.4g}: Jxx, Jyy x {info['torque_gain']:.4g}; wrote {args.vehicle_out}",
+              file=text_out)
     if args.table:
         write_text(args.table, validation_table(summaries, args.reference_kf) + "\n")
         print(f"wrote {args.table}", file=text_out)

@@ -3,7 +3,8 @@
 One module per concern: options (what is asked), run (the sample loop), session (the C
 filter behind it), config (the filter configuration and where each value came from),
 noise (noise levels: measured on the log, or tuned on the innovations), alignment
-(streams and rotor delay), prefilter (matched low-pass, diagnostic high-pass) and fleet
+(streams and rotor delay), calibration (the gyro-only torque-gain calibration with
+the accelerometer, --vehicle-out), scale_walk (the per-log torque-gain walk rule), prefilter (matched low-pass, diagnostic high-pass) and fleet
 (several runs of one vehicle). Plots live in propid.plotting, shared signal processing
 in propid.signals.
 

@@ -33,6 +33,9 @@ class ReplayOptions:
     torque_scale: str = "auto"  # "auto"/"on": estimate the thrust-torque scale when the accelerometer is fused; "off"
     # Its random walk [1/sqrt(s)]: None (the library default, a constant), a number, or "auto" (replay/scale_walk.py).
     torque_scale_walk: float | str | None = None
+    # "auto": the coefficients' relative walk (thrust_coeff_rel_walk) = sqrt(library walk^2 + q^2), q the same per-log
+    # torque-gain rule (replay/scale_walk.py): without the scale state the kf states carry the changing gain.
+    thrust_coeff_walk: str | None = None
     # Rotor-speed input error (docs/math.md §14): None (off), a std [rad/s], or "auto" (replay/input_noise.py);
     # its correlation time [s] (None: the rule's with auto, one step with a given std).
     rotor_speed_noise: float | str | None = None

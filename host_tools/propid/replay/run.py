@@ -54,6 +54,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     delay_us = int(round(esc_delay_s * US))
     config_fields["rotor_delay_us"] = delay_us  # the firmware holds the leading stream (docs/math.md §12)
     resolve_scale_walk(log, vehicle, mask, options, config_fields, notes, esc_delay_s)
+    resolve_thrust_coeff_walk(log, vehicle, mask, options, config_fields, notes, esc_delay_s)
     resolve_rotor_speed_noise(log, mask, options, config_fields, notes)
     if prefilter_info is not None:
         notes["prefilter"] = prefilter_info
@@ -86,6 +87,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     n = vehicle.rotor_count
     rec_t, rec_kf, rec_kfs, rec_km, rec_kms, rec_bg, rec_bgs, rec_conv_kf, rec_conv_km, rec_nis, rec_rate = (
         [] for _ in range(11))
+    rec_scale = []
     gate = float(config_fields.get("gate_sigma", DEFAULT_TUNING["gate_sigma"]))
     resyncs = 0
     gyro_pushes = 0
@@ -134,6 +136,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
                 rec_bg.append(est["gyro_bias"])
                 rec_bgs.append(est["gyro_bias_std"])
                 rec_rate.append(est["body_rate"])
+                rec_scale.append(est["torque_scale"])
                 # The averaging window starts where the relative std first falls below
                 # converged_rel_std (one std: the estimate has settled), whatever the
                 # filter's claim says (that asks 3 std and the consistency monitor's
@@ -155,6 +158,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "gyro_bias": np.array(rec_bg, dtype=float),
         "gyro_bias_std": np.array(rec_bgs, dtype=float),
         "body_rate": np.array(rec_rate, dtype=float),
+        "torque_scale": np.array(rec_scale, dtype=float),
         "kf_converged": np.array(rec_conv_kf, dtype=bool),
         "km_converged": np.array(rec_conv_km, dtype=bool),
         "nis": np.array(rec_nis, dtype=float) * (gate * gate if gate > 0 else np.nan),
@@ -178,6 +182,11 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         return means, starts
 
     kf_mean, kf_start = converged_mean(series["kf"], series["kf_converged"])
+    # The torque scale over the window every rotor's kf_mean covers: from the last rotor's
+    # convergence (the second half when one never converges).
+    firsts = [np.flatnonzero(series["kf_converged"][:, k]) for k in range(n)]
+    scale_from = max((int(f[0]) if f.size else series["t"].size // 2) for f in firsts)
+    torque_scale_mean = float(np.mean(series["torque_scale"][scale_from:]))
     km_mean, km_start = converged_mean(series["km"], series["km_converged"])
     # The filter's own claim at the end (withdrawn while MODEL_MISMATCH is up).
     kf_conv = [bool((final["thrust_coeff_converged"] >> k) & 1) for k in range(n)]
@@ -228,6 +237,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "accel_bias_std": float(final["accel_bias_std"]),
         "torque_scale": float(final["torque_scale"]),
         "torque_scale_std": float(final["torque_scale_std"]),
+        "torque_scale_mean": torque_scale_mean,
         "rejected": dict(sorted(status_counts.items())),
         "nis_mean": nis_mean(series),
         "counters": counters,
@@ -242,6 +252,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
             "kf_mean": "mean of the estimate from the first sample with rel std < converged_rel_std to the end; "
                        "second half of the replay if never below",
             "finite": "every recorded kf, km, their stds, gyro bias and body rate is finite",
+            "torque_scale_mean": "mean of the thrust-torque scale from the last rotor's kf convergence (the second "
+                                 "half if one never converges) to the end; 1 without the scale state",
             "converged": "the filter's converged flag at the end of the replay (none while model_mismatch)",
             "model_mismatch": "MODEL_MISMATCH health flag at the end: the innovations or the coefficients' drift "
                               "were inconsistent with the filter's covariance (docs/reliability.md)",
@@ -358,6 +370,32 @@ def resolve_rotor_speed_noise(log: FlightLog, mask: np.ndarray, options: ReplayO
         on = config_fields["rotor_speed_noise"] > 0.0
         config_fields["input_error_compensation"] = int(on)
         notes["input_error_compensation"] = "on" if on else "requested, but the rotor-speed error is 0: off"
+
+
+def resolve_thrust_coeff_walk(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, options: ReplayOptions,
+                              config_fields: dict, notes: dict, esc_delay_s: float) -> None:
+    """thrust_coeff_rel_walk from --thrust-coeff-rel-walk auto: the library's walk and the per-log torque-gain
+    walk q (replay/scale_walk.py) added in quadrature. Without the thrust-torque scale state the gyro sees the
+    product scale x kf in the kf states, whose relative walk is that of the two independent walks together."""
+    if options.thrust_coeff_walk is None:
+        return
+    if options.thrust_coeff_walk != "auto":
+        raise UserError(f"thrust_coeff_walk {options.thrust_coeff_walk!r}: only 'auto' (a number goes through the "
+                        "thrust_coeff_rel_walk override)")
+    if "thrust_coeff_rel_walk" in options.overrides:
+        raise UserError("--thrust-coeff-rel-walk: give a number or auto, not both")
+    if config_fields.get("torque_scale"):
+        raise UserError("--thrust-coeff-rel-walk auto is for the filter without the thrust-torque scale (that "
+                        "state carries the changing gain: --torque-scale-walk auto)")
+    from propid.replay.scale_walk import estimate_scale_walk
+
+    lag = int(round(-esc_delay_s / median_dt(log.t)))
+    info = estimate_scale_walk(log, vehicle, mask, lag, filter_input_rule() == "trapezoid")
+    base = float(DEFAULT_TUNING["thrust_coeff_rel_walk"])
+    walk = float(np.hypot(base, info["walk"]))
+    config_fields["thrust_coeff_rel_walk"] = walk
+    notes["thrust_coeff_rel_walk"] = dict(info, library_walk=base, torque_gain_walk=info["walk"], walk=walk,
+                                          rule="sqrt(library walk^2 + torque-gain walk^2)")
 
 
 def resolve_scale_walk(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, options: ReplayOptions,
