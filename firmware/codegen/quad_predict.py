@@ -28,6 +28,12 @@ model's arithmetic, only ordered for the Cortex-M4 (one multiply-add per term,
 the own element last so each sum starts in a fresh register; a variance's
 loading and noise, (1 + L) P_jj + q, in one).
 
+The same file holds the size-lean build's kernel (PROPID_SIZE_LEAN): the same
+sums per element as a loop over the columns over the model's column table
+(propid_quad_jac_entry and the column indices written from the structure
+above), interpreted symbolically here loop by loop and checked against the
+model the same way.
+
 --check regenerates in memory and exits 1 when the committed file differs (the
 test suite runs it: tests/host_tools/test_codegen.py).
 """
@@ -207,6 +213,128 @@ def generate() -> str:
             elif changed:
                 raise SystemExit(f"quad_predict: element ({i}, {j}) changes but is not written")
 
+    # The size-lean build's kernel: the same per-element arithmetic as loops over
+    # the model's column table; interpreted here, symbolically, loop by loop as the
+    # C below runs it, and checked against the model the same way.
+    rate_entries = [sum(1 for c in row if c < FIRST_THRUST) for row in structure]
+    if len(set(rate_entries)) != 1 or any(row[:rate_entries[0]] != sorted(c for c in row if c < FIRST_THRUST)
+                                          for row in structure):
+        raise SystemExit("quad_predict: every rate row must list its rate columns first, as many in each")
+    n_rate_entries = rate_entries[0]
+    lean: dict[tuple[int, int], sympy.Expr] = {}
+    lean_rate_col = {}
+    lean_block = {(a, b): sympy.Integer(0) for a in range(3) for b in range(a, 3)}
+    for j in range(N):
+        t = []
+        for a in range(3):
+            acc = g[a][0] * p_symbol(structure[a][0], j)
+            for p in range(1, entries):
+                acc += g[a][p] * p_symbol(structure[a][p], j)
+            t.append(acc + p_symbol(a, j))
+        if j < FIRST_THRUST:
+            for a in range(3):
+                lean_rate_col[(a, j)] = t[a]
+            continue
+        for b in range(3):
+            for p in range(n_rate_entries, entries):
+                if structure[b][p] == j:
+                    for a in range(b + 1):
+                        lean_block[(a, b)] += t[a] * g[b][p]
+        for a in range(3):
+            lean[(a, j)] = t[a]
+        factor = 1 + (drag_loading if kind(j) == "drag" else loading)
+        lean[(j, j)] = factor * p_symbol(j, j) + q[kind(j)]
+    for b in range(3):
+        for a in range(b + 1):
+            value = lean_rate_col[(a, b)]
+            for p in range(n_rate_entries):
+                value += lean_rate_col[(a, structure[b][p])] * g[b][p]
+            value += lean_block[(a, b)]
+            lean[(a, b)] = (1 + loading) * value + q["rate"] if a == b else value
+    for i in range(N):
+        for j in range(i, N):
+            changed = sympy.expand(wanted(i, j) - p_symbol(i, j)) != 0
+            if (i, j) in lean:
+                if sympy.expand(lean[(i, j)] - wanted(i, j)) != 0:
+                    raise SystemExit(f"quad_predict: lean kernel's element ({i}, {j}) differs from the model")
+            elif changed:
+                raise SystemExit(f"quad_predict: lean kernel's element ({i}, {j}) changes but is not written")
+    entry_table = ", ".join("{" + ", ".join(f"{row.index(c)}u" if c in row and c >= FIRST_THRUST else "0xFFu"
+                                            for c in range(N)) + "}" for row in structure)
+
+    # The C of the size-lean kernel: a loop over the columns j, its body written
+    # out here with the model's columns as constant indices (the loop's values
+    # stay in registers; the rows' sums in the order interpreted above).
+    lean_lines: list[str] = []
+    out = lean_lines.append
+    out("/* The size-lean build (PROPID_SIZE_LEAN): the same sums per element as a loop")
+    out(" * over the columns j, each column's body written out (its 11 loads walked")
+    out(" * through the packed triangle, the three rows' sums, the rate block's")
+    out(" * coefficient terms found through propid_quad_jac_entry); small code, more")
+    out(" * instructions. */")
+    out(f"static const uint8_t propid_quad_jac_entry[3][{N}] = {{{entry_table}}};")
+    out("")
+    out("static inline __attribute__((always_inline)) void")
+    out("propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][PROPID_JAC_ROW],")
+    out("                               float q_rate, float q_thrust, float q_drag, float q_bias,")
+    out("                               float drag_factor)")
+    out("{")
+    out("    float rate_col[3][3]; /* T_ab for the rate columns b */")
+    out("    float block00 = 0.0f, block01 = 0.0f, block02 = 0.0f; /* coefficient-column terms */")
+    out("    float block11 = 0.0f, block12 = 0.0f, block22 = 0.0f;")
+    out(f"    for (uint8_t j = 0; j < {N}u; ++j) {{")
+    out(f"        /* P_cj of the {FIRST_BIAS} non-bias rows c: down column j above the diagonal")
+    out("         * (the packed step shrinks by one per row), then along row j. */")
+    out(f"        float column_j[{FIRST_BIAS}];")
+    out("        uint32_t at = j;")
+    out(f"#pragma GCC unroll {FIRST_BIAS}")
+    out(f"        for (uint8_t c = 0; c < {FIRST_BIAS}u; ++c) {{")
+    out("            column_j[c] = cov[at];")
+    out("            at += c < j ? (uint32_t)PROPID_MAX_STATES - 1u - c : 1u;")
+    out("        }")
+    for a_ in range(3):
+        first = f"jacobian_dt[{a_}][0] * column_j[{structure[a_][0]}]"
+        rest = "".join(f" + jacobian_dt[{a_}][{p_}] * column_j[{c_}]"
+                       for p_, c_ in enumerate(structure[a_]) if p_ > 0)
+        out(f"        const float t{a_} = ({first}{rest}) + column_j[{a_}];")
+    out(f"        if (j < {FIRST_THRUST}u) {{ /* kept until the rate block: later columns overwrite rows 0..2 */")
+    for a_ in range(3):
+        out(f"            rate_col[{a_}][j] = t{a_};")
+    out("            continue;")
+    out("        }")
+    for b_ in range(3):
+        out(f"        const uint8_t p{b_} = propid_quad_jac_entry[{b_}][j];")
+        out(f"        if (p{b_} < {entries}u) {{")
+        for a_ in range(b_ + 1):
+            out(f"            block{a_}{b_} += t{a_} * jacobian_dt[{b_}][p{b_}];")
+        out("        }")
+    out("        float *diagonal = &cov[propid_cov_index(j, j)];")
+    out("        const float own = *diagonal;")
+    for a_ in range(3):
+        out(f"        cov[propid_cov_index({a_}u, j)] = t{a_};")
+    out(f"        if (j < {FIRST_DRAG}u) {{")
+    out("            *diagonal = (1.0f + PROPID_VAR_LOADING) * own + q_thrust;")
+    out(f"        }} else if (j < {FIRST_BIAS}u) {{")
+    out("            *diagonal = drag_factor * own + q_drag;")
+    out("        } else {")
+    out("            *diagonal = (1.0f + PROPID_VAR_LOADING) * own + q_bias;")
+    out("        }")
+    out("    }")
+    out("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp. */")
+    for a_ in range(3):
+        for b_ in range(a_, 3):
+            terms = [f"rate_col[{a_}][{b_}]"]
+            for p_, c_ in enumerate(structure[b_]):
+                if c_ < FIRST_THRUST:
+                    terms.append(f"rate_col[{a_}][{c_}] * jacobian_dt[{b_}][{p_}]")
+            terms.append(f"block{a_}{b_}")
+            if a_ == b_:
+                out(f"    cov[propid_cov_index({a_}u, {b_}u)] = (1.0f + PROPID_VAR_LOADING) * ({' + '.join(terms)}) + q_rate;")
+            else:
+                out(f"    cov[propid_cov_index({a_}u, {b_}u)] = {' + '.join(terms)};")
+    out("}")
+    lean_text = "\n".join(lean_lines) + "\n"
+
     g_loads = []
     for a in range(3):
         g_loads.append(f"    const float " + ", ".join(f"g{a}_{p} = jacobian_dt[{a}][{p}]"
@@ -229,6 +357,8 @@ def generate() -> str:
 
 /* jacobian_dt: entries of the rate rows of G in the quad layout; q_*: Q dt per
  * kind of state; drag_factor: 1 + this step's loading of the drag coefficients. */
+#if PROPID_SIZE_LEAN
+{lean_text}#else
 static inline __attribute__((always_inline)) void
 propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][PROPID_JAC_ROW],
                                float q_rate, float q_thrust, float q_drag, float q_bias,
@@ -240,6 +370,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
     float block11 = 0.0f, block12 = 0.0f, block22 = 0.0f;
 {chr(10).join(lines)}
 }}
+#endif
 
 #endif /* PROPID_QUAD_PREDICT_H */
 """

@@ -148,7 +148,7 @@ uint32_t propid_clamp_coefficients(const propid_kept_config_t *config, propid_co
     if (config->rotor_count == 4u) {
         /* The quad: one straight-line test of the 8 coefficients' bit patterns. */
         uint32_t outside = 0u;
-#pragma GCC unroll 8
+PROPID_UNROLL(8)
         for (uint8_t k = PROPID_QUAD_FIRST_THRUST; k < PROPID_QUAD_FIRST_BIAS; ++k) {
             outside |= propid_outside_positive_range(core->state[k], min_bits, range_bits);
         }

@@ -36,6 +36,35 @@ typedef struct {
 } pending_any_t;
 #endif
 
+#if PROPID_SIZE_LEAN
+/* The size-lean build's apply_three_quad (below): the same arithmetic per element
+ * and per state in the same order, so the same results, row by row over loops
+ * (small code, more instructions: the loop control and each element's three
+ * vector values loaded per element). */
+static __attribute__((noinline)) int
+apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *restrict pending,
+                 const propid_derived_t *restrict derived)
+{
+    float *state = core->state;
+    const float *h0 = pending->h0;
+    const float *h1 = core->update_vector[0];
+    const float *h2 = core->update_vector[1];
+    uint32_t outside = 0u;
+    float *row = cov; /* row[j] = P_ij for j >= i: packed row i, shifted back by i */
+    for (uint8_t i = 0; i < PROPID_QUAD_STATES; ++i) {
+        const float g0 = h0[i] * pending->inv_var[0];
+        const float g1 = h1[i] * pending->inv_var[1];
+        const float g2 = h2[i] * pending->inv_var[2];
+        state[i] = state[i] + g0 * core->innovation[0] + g1 * core->innovation[1] + g2 * core->innovation[2];
+        for (uint8_t j = i; j < PROPID_QUAD_STATES; ++j) {
+            row[j] = row[j] - g0 * h0[j] - g1 * h1[j] - g2 * h2[j];
+        }
+        outside |= propid_outside_positive_range(row[i], propid_floor_bits(derived, i), propid_range_bits(derived, i));
+        row += PROPID_MAX_STATES - 1u - i;
+    }
+    return outside == 0u;
+}
+#else
 /* Rows first .. first + rows - 1 of the quad's three-term pass: their gains
  * g_k,i = h_k,i / S_k and state updates, the upper triangle of their diagonal
  * block, then every column to the right, where each h_j triple is loaded once
@@ -59,7 +88,7 @@ apply_row_group(float *restrict cov, propid_core_t *restrict core,
     const float nu2 = core->innovation[2];
     float gain[5][3];
     uint32_t outside = 0u;
-#pragma GCC unroll 5
+PROPID_UNROLL(5)
     for (uint8_t r = 0; r < rows; ++r) {
         const uint8_t i = (uint8_t)(first + r);
         gain[r][0] = h0[i] * inv0;
@@ -68,10 +97,10 @@ apply_row_group(float *restrict cov, propid_core_t *restrict core,
         /* Summed from the state on: three multiply-adds. */
         state[i] = state[i] + gain[r][0] * nu0 + gain[r][1] * nu1 + gain[r][2] * nu2;
     }
-#pragma GCC unroll 5
+PROPID_UNROLL(5)
     for (uint8_t r = 0; r < rows; ++r) {
         const uint8_t i = (uint8_t)(first + r);
-#pragma GCC unroll 5
+PROPID_UNROLL(5)
         for (uint8_t c = r; c < rows; ++c) {
             const uint8_t j = (uint8_t)(first + c);
             float *p = &cov[propid_cov_index(i, j)];
@@ -86,12 +115,12 @@ apply_row_group(float *restrict cov, propid_core_t *restrict core,
         outside |= propid_outside_positive_range(cov[propid_cov_index(i, i)], derived->kind_floor_bits[kind],
                                                  derived->kind_range_bits[kind]);
     }
-#pragma GCC unroll 10
+PROPID_UNROLL(10)
     for (uint8_t j = (uint8_t)(first + rows); j < PROPID_QUAD_STATES; ++j) {
         const float hj0 = h0[j];
         const float hj1 = h1[j];
         const float hj2 = h2[j];
-#pragma GCC unroll 5
+PROPID_UNROLL(5)
         for (uint8_t r = 0; r < rows; ++r) {
             float *p = &cov[propid_cov_index((uint32_t)first + r, j)];
             *p = *p - gain[r][0] * hj0 - gain[r][1] * hj1 - gain[r][2] * hj2;
@@ -128,6 +157,7 @@ apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *r
     outside |= apply_row_group(cov, core, pending, derived, 10u, 4u);
     return outside == 0u;
 }
+#endif
 
 /* The axis' rate forgets everything and restarts from this sample: rate :=
  * measurement - bias estimate, rate variance := its prior, correlations zeroed
@@ -261,11 +291,30 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
      * loaded already: loaded again here, not kept alive through the loop
      * (spilled, that was 60 B more stack for 5 instructions fewer). */
     PROPID_SCHEDULE_BARRIER();
-#pragma GCC unroll 14
+#if PROPID_SIZE_LEAN
+    /* The loop's P_ai and P_(b_a),i walked through the packed triangle (down
+     * their columns while i is above the diagonal, then along their rows):
+     * no index arithmetic per element. */
+    uint32_t at[6] = {0u, 1u, 2u, b0, b1, b2};
+#endif
+PROPID_UNROLL(14)
     for (uint8_t i = 0; i < PROPID_QUAD_STATES; ++i) {
+#if PROPID_SIZE_LEAN
+        float p[6];
+#pragma GCC unroll 6
+        for (uint8_t k = 0; k < 6u; ++k) {
+            const uint8_t row = (uint8_t)(k < 3u ? k : PROPID_QUAD_FIRST_BIAS + k - 3u);
+            p[k] = cov[at[k]];
+            at[k] += i < row ? (uint32_t)PROPID_MAX_STATES - 1u - i : 1u;
+        }
+        const float value0 = p[0] + p[3];
+        const float value1 = p[1] + p[4] - c10 * value0;
+        const float value2 = p[2] + p[5] - c20 * value0 - c21 * value1;
+#else
         const float value0 = PROPID_P(0, i) + PROPID_P(b0, i);
         const float value1 = PROPID_P(1, i) + PROPID_P(b1, i) - c10 * value0;
         const float value2 = PROPID_P(2, i) + PROPID_P(b2, i) - c20 * value0 - c21 * value1;
+#endif
         h0[i] = value0;
         h1[i] = value1;
         h2[i] = value2;

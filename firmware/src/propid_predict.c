@@ -53,7 +53,7 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
     const float rate[3] = {state[0], state[1], state[2]};
     const float half_dt = 0.5f * dt;
     float speed_sq_dt[4];
-#pragma GCC unroll 4
+PROPID_UNROLL(4)
     for (uint8_t i = 0; i < 4u; ++i) {
         speed_sq_dt[i] = half_dt * (input_speed_sq[i] + latest_speed_sq[i]);
     }
@@ -63,7 +63,7 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
     float rotors[3];
     float gyroscopic[3];
     float predictor[3];
-#pragma GCC unroll 3
+PROPID_UNROLL(3)
     for (uint8_t a = 0; a < 3u; ++a) {
         float *g = jacobian_dt[a];
         const uint8_t other0 = a == 0u ? 1u : 0u;
@@ -76,7 +76,7 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
         const float *coefficient = state + (a < 2u ? PROPID_QUAD_FIRST_THRUST : PROPID_QUAD_FIRST_DRAG);
         const float *torque = jac_torque[a];
         float sum = 0.0f;
-#pragma GCC unroll 4
+PROPID_UNROLL(4)
         for (uint8_t i = 0; i < 4u; ++i) {
             const float entry = torque[PROPID_QUAD_TORQUE_FIRST + i] * speed_sq_dt[i];
             sum += entry * coefficient[i];
@@ -85,7 +85,7 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
         rotors[a] = sum;
         predictor[a] = rate[a] + (sum + 0.5f * gyroscopic[a]); /* the Euler step */
     }
-#pragma GCC unroll 3
+PROPID_UNROLL(3)
     for (uint8_t a = 0; a < 3u; ++a) {
         float *g = jacobian_dt[a];
         const uint8_t other0 = a == 0u ? 1u : 0u;
@@ -364,7 +364,7 @@ static __attribute__((noinline)) void add_input_noise_quad(const propid_derived_
     const float *state = core->state;
     float input_var[4];
     float gain[3][4];
-#pragma GCC unroll 4
+PROPID_UNROLL(4)
     for (uint8_t i = 0; i < 4u; ++i) {
         input_var[i] = weight * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
         gain[0][i] = derived->jac_torque[0][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_THRUST + i];
@@ -372,9 +372,9 @@ static __attribute__((noinline)) void add_input_noise_quad(const propid_derived_
         gain[2][i] = derived->jac_torque[2][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_DRAG + i];
     }
     float *cov = core->cov;
-#pragma GCC unroll 3
+PROPID_UNROLL(3)
     for (uint8_t b = 0; b < 3u; ++b) {
-#pragma GCC unroll 3
+PROPID_UNROLL(3)
         for (uint8_t a = 0; a <= b; ++a) {
             cov[propid_cov_index(a, b)] += gain[a][0] * gain[b][0] * input_var[0] +
                                            gain[a][1] * gain[b][1] * input_var[1] +

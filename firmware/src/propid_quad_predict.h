@@ -16,6 +16,78 @@
 
 /* jacobian_dt: entries of the rate rows of G in the quad layout; q_*: Q dt per
  * kind of state; drag_factor: 1 + this step's loading of the drag coefficients. */
+#if PROPID_SIZE_LEAN
+/* The size-lean build (PROPID_SIZE_LEAN): the same sums per element as a loop
+ * over the columns j, each column's body written out (its 11 loads walked
+ * through the packed triangle, the three rows' sums, the rate block's
+ * coefficient terms found through propid_quad_jac_entry); small code, more
+ * instructions. */
+static const uint8_t propid_quad_jac_entry[3][14] = {{0xFFu, 0xFFu, 0xFFu, 2u, 3u, 4u, 5u, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu}, {0xFFu, 0xFFu, 0xFFu, 2u, 3u, 4u, 5u, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu}, {0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 2u, 3u, 4u, 5u, 0xFFu, 0xFFu, 0xFFu}};
+
+static inline __attribute__((always_inline)) void
+propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][PROPID_JAC_ROW],
+                               float q_rate, float q_thrust, float q_drag, float q_bias,
+                               float drag_factor)
+{
+    float rate_col[3][3]; /* T_ab for the rate columns b */
+    float block00 = 0.0f, block01 = 0.0f, block02 = 0.0f; /* coefficient-column terms */
+    float block11 = 0.0f, block12 = 0.0f, block22 = 0.0f;
+    for (uint8_t j = 0; j < 14u; ++j) {
+        /* P_cj of the 11 non-bias rows c: down column j above the diagonal
+         * (the packed step shrinks by one per row), then along row j. */
+        float column_j[11];
+        uint32_t at = j;
+#pragma GCC unroll 11
+        for (uint8_t c = 0; c < 11u; ++c) {
+            column_j[c] = cov[at];
+            at += c < j ? (uint32_t)PROPID_MAX_STATES - 1u - c : 1u;
+        }
+        const float t0 = (jacobian_dt[0][0] * column_j[1] + jacobian_dt[0][1] * column_j[2] + jacobian_dt[0][2] * column_j[3] + jacobian_dt[0][3] * column_j[4] + jacobian_dt[0][4] * column_j[5] + jacobian_dt[0][5] * column_j[6]) + column_j[0];
+        const float t1 = (jacobian_dt[1][0] * column_j[0] + jacobian_dt[1][1] * column_j[2] + jacobian_dt[1][2] * column_j[3] + jacobian_dt[1][3] * column_j[4] + jacobian_dt[1][4] * column_j[5] + jacobian_dt[1][5] * column_j[6]) + column_j[1];
+        const float t2 = (jacobian_dt[2][0] * column_j[0] + jacobian_dt[2][1] * column_j[1] + jacobian_dt[2][2] * column_j[7] + jacobian_dt[2][3] * column_j[8] + jacobian_dt[2][4] * column_j[9] + jacobian_dt[2][5] * column_j[10]) + column_j[2];
+        if (j < 3u) { /* kept until the rate block: later columns overwrite rows 0..2 */
+            rate_col[0][j] = t0;
+            rate_col[1][j] = t1;
+            rate_col[2][j] = t2;
+            continue;
+        }
+        const uint8_t p0 = propid_quad_jac_entry[0][j];
+        if (p0 < 6u) {
+            block00 += t0 * jacobian_dt[0][p0];
+        }
+        const uint8_t p1 = propid_quad_jac_entry[1][j];
+        if (p1 < 6u) {
+            block01 += t0 * jacobian_dt[1][p1];
+            block11 += t1 * jacobian_dt[1][p1];
+        }
+        const uint8_t p2 = propid_quad_jac_entry[2][j];
+        if (p2 < 6u) {
+            block02 += t0 * jacobian_dt[2][p2];
+            block12 += t1 * jacobian_dt[2][p2];
+            block22 += t2 * jacobian_dt[2][p2];
+        }
+        float *diagonal = &cov[propid_cov_index(j, j)];
+        const float own = *diagonal;
+        cov[propid_cov_index(0u, j)] = t0;
+        cov[propid_cov_index(1u, j)] = t1;
+        cov[propid_cov_index(2u, j)] = t2;
+        if (j < 7u) {
+            *diagonal = (1.0f + PROPID_VAR_LOADING) * own + q_thrust;
+        } else if (j < 11u) {
+            *diagonal = drag_factor * own + q_drag;
+        } else {
+            *diagonal = (1.0f + PROPID_VAR_LOADING) * own + q_bias;
+        }
+    }
+    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp. */
+    cov[propid_cov_index(0u, 0u)] = (1.0f + PROPID_VAR_LOADING) * (rate_col[0][0] + rate_col[0][1] * jacobian_dt[0][0] + rate_col[0][2] * jacobian_dt[0][1] + block00) + q_rate;
+    cov[propid_cov_index(0u, 1u)] = rate_col[0][1] + rate_col[0][0] * jacobian_dt[1][0] + rate_col[0][2] * jacobian_dt[1][1] + block01;
+    cov[propid_cov_index(0u, 2u)] = rate_col[0][2] + rate_col[0][0] * jacobian_dt[2][0] + rate_col[0][1] * jacobian_dt[2][1] + block02;
+    cov[propid_cov_index(1u, 1u)] = (1.0f + PROPID_VAR_LOADING) * (rate_col[1][1] + rate_col[1][0] * jacobian_dt[1][0] + rate_col[1][2] * jacobian_dt[1][1] + block11) + q_rate;
+    cov[propid_cov_index(1u, 2u)] = rate_col[1][2] + rate_col[1][0] * jacobian_dt[2][0] + rate_col[1][1] * jacobian_dt[2][1] + block12;
+    cov[propid_cov_index(2u, 2u)] = (1.0f + PROPID_VAR_LOADING) * (rate_col[2][2] + rate_col[2][0] * jacobian_dt[2][0] + rate_col[2][1] * jacobian_dt[2][1] + block22) + q_rate;
+}
+#else
 static inline __attribute__((always_inline)) void
 propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][PROPID_JAC_ROW],
                                float q_rate, float q_thrust, float q_drag, float q_bias,
@@ -247,5 +319,6 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
     const float f22 = rate_col2[2] + rate_col2[0] * g2_0 + rate_col2[1] * g2_1 + block22;
     cov[propid_cov_index(2u, 2u)] = (1.0f + PROPID_VAR_LOADING) * f22 + q_rate;
 }
+#endif
 
 #endif /* PROPID_QUAD_PREDICT_H */

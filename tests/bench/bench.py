@@ -12,8 +12,11 @@ the figures (it fails only when a measurement cannot be made). Measurements:
              baseline (tests/qemu/dense_ekf.c) beside it, checked to give the same
              estimates; the full build for 4, 6 and 8 rotors (*_full keys), and
              with each optional model term on (disturbance torque, rotor
-             inertia, a held telemetry delay: mcu_instr_per_step_quad_<term>).
-  footprint  of the quad build (the issue's keys) and of the full build (*_full):
+             inertia, a held telemetry delay: mcu_instr_per_step_quad_<term>);
+             the size-lean quad build (PROPID_SIZE_LEAN: its kernels as loops,
+             *_lean keys).
+  footprint  of the quad build (the issue's keys), of the size-lean quad build
+             (*_lean) and of the full build (*_full):
              flash (.text + .rodata) of the filter alone, the library
              (build/target/firmware/libpropid_quad.a, libpropid.a) and linked
              into a minimal quad application with --gc-sections (step code and
@@ -84,6 +87,10 @@ OPTION_FLAGS = (
 )
 
 
+# The size-lean quad build's flags (firmware/CMakeLists.txt, propid_quad_lean).
+LEAN_FLAGS = "-DPROPID_QUAD_BUILD=1 -DPROPID_SIZE_LEAN=1"
+
+
 def count_steps(repo: pathlib.Path, work: pathlib.Path, name: str, cflags: str) -> dict:
     out = work / f"count_step_{name}.json"
     env = {**os.environ, "COUNT_STEP_CFLAGS": cflags}
@@ -97,6 +104,8 @@ def bench_mcu(repo: pathlib.Path, work: pathlib.Path) -> dict:
     counts = count_steps(repo, work, "quad", "-DPROPID_QUAD_BUILD=1")
     say("Cortex-M4 instruction counts under QEMU: full build (quad, hexa, octo)...")
     full = count_steps(repo, work, "full", "-DCOUNT_STEP_NO_DENSE")
+    say("Cortex-M4 instruction counts under QEMU: size-lean quad build (quad)...")
+    lean = count_steps(repo, work, "quad_lean", f"{LEAN_FLAGS} -DCOUNT_STEP_NO_DENSE")
     variants = counts["variants"]
     full_variants = full["variants"]
     # Every optional model term the harness can switch on, full build (the
@@ -109,6 +118,8 @@ def bench_mcu(repo: pathlib.Path, work: pathlib.Path) -> dict:
                            for k, v in variants.items()},
               "variants_full": {k: {x: v[x] for x in ("median", "min", "max", "steps")}
                                 for k, v in full_variants.items()},
+              "variants_lean": {k: {x: v[x] for x in ("median", "min", "max", "steps")}
+                                for k, v in lean["variants"].items()},
               "variants_options": {option: {k: {x: v[x] for x in ("median", "min", "max", "steps")}
                                             for k, v in counted.items()}
                                    for option, counted in options.items()},
@@ -117,6 +128,7 @@ def bench_mcu(repo: pathlib.Path, work: pathlib.Path) -> dict:
     result["mcu_instr_per_step_quad"] = variants["quad_plus"]["median"]
     result["mcu_instr_per_step_quad_x"] = variants["quad_x"]["median"]
     result["mcu_instr_per_step_quad_full"] = full_variants["quad_plus"]["median"]
+    result["mcu_instr_per_step_quad_lean"] = lean["variants"]["quad_plus"]["median"]
     result["mcu_instr_per_step_hexa"] = full_variants.get("hexa", {}).get("median")
     result["mcu_instr_per_step_octo"] = full_variants.get("octo", {}).get("median")
     result["dense_instr_per_step_quad"] = variants["dense_quad_plus"]["median"]
@@ -125,7 +137,8 @@ def bench_mcu(repo: pathlib.Path, work: pathlib.Path) -> dict:
     result["dense_ratio_quad"] = result["dense_instr_per_step_quad"] / result["mcu_instr_per_step_quad"]
     # The stack the counted propid_push_gyro() calls really used (count_step.c
     # paints below the caller's stack pointer): beside the call graph's worst case.
-    for build_name, output in (("", counts["harness_output"]), ("_full", full["harness_output"])):
+    for build_name, output in (("", counts["harness_output"]), ("_full", full["harness_output"]),
+                               ("_lean", lean["harness_output"])):
         used = [int(m.group(1)) for line in output
                 for m in [re.search(r"^quad_plus: .* stack_used_push_gyro (\d+)", line)] if m]
         result[f"stack_bytes_push_gyro_measured{build_name}"] = used[0] if used else None
@@ -165,16 +178,16 @@ def linked_filter_size(repo: pathlib.Path, work: pathlib.Path, build_flag: str,
     # The quad build's library has neither the damage detector nor the model
     # helpers (firmware/CMakeLists.txt): they need the general build's data.
     left_out = {"propid_abi.c", "propid_mavlink.c"}
-    if build_flag == "-DPROPID_QUAD_BUILD=1":
+    if "-DPROPID_QUAD_BUILD=1" in build_flag.split():
         left_out |= {"propid_damage.c", "propid_model.c"}
     sources = [p for p in sorted((repo / "firmware/src").glob("propid_*.c")) if p.name not in left_out]
-    tag = build_flag.lstrip("-D").replace("=", "_").lower()
+    tag = build_flag.replace("-D", "").replace("=", "_").replace(" ", "_").lower()
     elf = work / f"footprint_app_{tag}.elf"
     map_file = work / f"footprint_app_{tag}.map"
     qemu = repo / "tests/qemu"
     objects_dir = work / f"footprint_objects_{tag}"
     objects_dir.mkdir(exist_ok=True)
-    flags = [*TARGET_CFLAGS, build_flag, "-I", str(repo / "firmware/include"),
+    flags = [*TARGET_CFLAGS, *build_flag.split(), "-I", str(repo / "firmware/include"),
              "-I", str(qemu)]
     inputs = []
     for source in [*sources, repo / "tests/bench/footprint_app.c", qemu / "startup.c",
@@ -213,8 +226,8 @@ def linked_filter_size(repo: pathlib.Path, work: pathlib.Path, build_flag: str,
 def sizeof_filter(repo: pathlib.Path, work: pathlib.Path, build_flag: str) -> int:
     probe = work / "probe.c"
     probe.write_text('#include "propid/propid.h"\npropid_filter_t propid_footprint_probe;\n')
-    obj = work / f"probe{build_flag.lstrip('-D').replace('=', '_')}.o"
-    run(["arm-none-eabi-gcc", *CPU, "-std=c11", "-O2", build_flag,
+    obj = work / f"probe{build_flag.replace('-D', '').replace('=', '_').replace(' ', '_')}.o"
+    run(["arm-none-eabi-gcc", *CPU, "-std=c11", "-O2", *build_flag.split(),
          "-I", str(repo / "firmware/include"), "-c", str(probe), "-o", str(obj)])
     for line in run(["arm-none-eabi-nm", "-S", "--radix=d", str(obj)]).stdout.splitlines():
         parts = line.split()
@@ -270,7 +283,14 @@ def bench_footprint(repo: pathlib.Path, build: pathlib.Path, work: pathlib.Path)
     say("footprint of the target build (flash, RAM, stack), quad build and full build...")
     quad = footprint_of(repo, build, work, "propid_quad", "-DPROPID_QUAD_BUILD=1")
     full = footprint_of(repo, build, work, "propid", "-DPROPID_MAX_ROTORS=4")
-    result: dict = {"quad_build": quad, "full_build": full}
+    lean = footprint_of(repo, build, work, "propid_quad_lean", LEAN_FLAGS)
+    result: dict = {"quad_build": quad, "full_build": full, "lean_build": lean}
+    # The size-lean quad build (PROPID_SIZE_LEAN) beside the quad build.
+    result["flash_bytes_lean"] = lean["flash_bytes"]
+    result["flash_bytes_linked_quad_lean"] = lean["linked_quad"]["flash_bytes"]
+    result["ram_bytes_quad_lean"] = sizeof_filter(repo, work, LEAN_FLAGS)
+    result["stack_bytes_max_lean"] = lean["stack_bytes_max"]
+    result["stack_bytes_push_gyro_lean"] = lean["stack_bytes_push_gyro"]
     result["flash_bytes"] = quad["flash_bytes"]
     result["flash_bytes_linked_quad"] = quad["linked_quad"]["flash_bytes"]
     result["flash_bytes_full"] = full["flash_bytes"]
@@ -377,7 +397,8 @@ def print_table(r: dict) -> None:
     if mcu:
         names = {"quad_plus": "quad (plus)", "quad_x": "quad (X)",
                  "dense_quad_plus": "dense baseline, quad"}
-        for build_name, key in (("quad build", "variants"), ("full build", "variants_full")):
+        for build_name, key in (("quad build", "variants"), ("size-lean quad build", "variants_lean"),
+                                ("full build", "variants_full")):
             for label, counts in mcu.get(key, {}).items():  # every variant the harness flew
                 rows.append((f"Cortex-M4 instructions per step, {build_name}, {names.get(label, label)}",
                              f"{fmt(counts['median'])} ({fmt(counts['min'])}-{fmt(counts['max'])})"))
@@ -388,14 +409,17 @@ def print_table(r: dict) -> None:
         for key, percent in mcu["cpu_percent_quad"].items():
             rows.append((f"CPU load, quad, {key} (CPI {mcu['cpu_model_cpi'][key.split(',')[0]]})",
                          f"{percent:.2f} %"))
-        rows.append(("stack used by propid_push_gyro, quad flight, measured under QEMU, quad / full build (B)",
+        rows.append(("stack used by propid_push_gyro, quad flight, measured under QEMU, "
+                     "quad / size-lean quad / full build (B)",
                      f"{fmt(mcu.get('stack_bytes_push_gyro_measured'))} / "
+                     f"{fmt(mcu.get('stack_bytes_push_gyro_measured_lean'))} / "
                      f"{fmt(mcu.get('stack_bytes_push_gyro_measured_full'))}"))
         rows.append(("dense / propid (quad)", f"{mcu['dense_ratio_quad']:.1f}x; same estimates: "
                      f"{'yes' if mcu['dense_same_estimates'] else 'NO'} (max diff "
                      f"{mcu['dense_max_state_diff_in_std']:.1e} std)"))
     if fp:
-        for build_name, key in (("quad build", "quad_build"), ("full build", "full_build")):
+        for build_name, key in (("quad build", "quad_build"), ("size-lean quad build", "lean_build"),
+                                ("full build", "full_build")):
             b = fp[key]
             rows.append((f"filter flash, {build_name}, library .text+.rodata (B)", fmt(b["flash_bytes"]) +
                          "".join(f" (+ {name}: {fmt(size)}, optional)"
@@ -404,10 +428,12 @@ def print_table(r: dict) -> None:
             rows.append((f"filter flash, {build_name}, linked quad app, --gc-sections (B)",
                          f"{fmt(lq['flash_bytes'])} (per-sample path {fmt(lq['flash_bytes_per_sample_path'])}, "
                          f"init and rest {fmt(lq['flash_bytes_init_and_rest'])})"))
-        rows.append(("RAM sizeof(propid_filter_t), quad build (B)", fmt(fp["ram_bytes_quad"])))
+        rows.append(("RAM sizeof(propid_filter_t), quad build / size-lean quad build (B)",
+                     f"{fmt(fp['ram_bytes_quad'])} / {fmt(fp['ram_bytes_quad_lean'])}"))
         rows.append(("RAM sizeof(propid_filter_t), full build quad / hexa / octo (B)",
                      f"{fmt(fp['ram_bytes_quad_full'])} / {fmt(fp['ram_bytes_hexa'])} / {fmt(fp['ram_bytes_octo'])}"))
-        for build_name, key in (("quad build", "quad_build"), ("full build", "full_build")):
+        for build_name, key in (("quad build", "quad_build"), ("size-lean quad build", "lean_build"),
+                                ("full build", "full_build")):
             for name, st in sorted(fp[key]["stack"].items(), key=lambda kv: -kv[1]["bytes"]):
                 rows.append((f"worst stack, {build_name}, {name} (B)", fmt(st["bytes"])))
     if sitl:
@@ -478,6 +504,9 @@ def main() -> int:
                     "ram_bytes_hexa", "ram_bytes_octo", "stack_bytes_max", "stack_bytes_push_gyro",
                     "stack_bytes_push_gyro_measured", "stack_bytes_push_gyro_measured_full",
                     "stack_bytes_max_full", "stack_bytes_push_gyro_full",
+                    "mcu_instr_per_step_quad_lean", "flash_bytes_lean", "flash_bytes_linked_quad_lean",
+                    "ram_bytes_quad_lean", "stack_bytes_max_lean", "stack_bytes_push_gyro_lean",
+                    "stack_bytes_push_gyro_measured_lean",
                     "sitl_realtime_factor", "sitl_realtime_factor_paper",
                     "sitl_realtime_factor_flight", "sitl_realtime_factor_paper_flight",
                     "rotorpy_speed_ratio", "rotorpy_speed_ratio_whole_process",

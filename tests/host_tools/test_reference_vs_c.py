@@ -337,6 +337,25 @@ def test_quad_build_agrees_with_reference(flight, reference_trace):
     assert cov_err < COV_TOL_REL
 
 
+def test_size_lean_quad_build_agrees_with_reference(flight, reference_trace):
+    """The size-lean quad build (PROPID_SIZE_LEAN: the quad build's kernels as
+    loops, -Os; cmake target propid_quad_lean_shared) against the same reference."""
+    path = library_path().with_name("libpropid_quad_lean_shared.so")
+    try:
+        lib = load_library(path)
+    except UserError as exc:
+        pytest.fail(str(exc))
+    assert lib.propid_max_rotors == 4 and lib.propid_max_states == 14
+    trace_c = replay(CFilter(make_config(), library=path), flight)
+    assert len(trace_c) == len(reference_trace)
+    assert [s for s, _, _ in trace_c].count(STATUS["PROPID_OK_GATED"]) == 3
+    state_err, cov_err = disagreement(trace_c, reference_trace)
+    print(f"size-lean quad build vs reference: max |dx|/std = {state_err:.3g}, "
+          f"max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+
+
 def test_quad_build_rejects_compiled_out_options():
     _, path = quad_library()
     with pytest.raises(UserError, match="bad"):

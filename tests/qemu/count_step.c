@@ -23,6 +23,7 @@
  */
 #include <math.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "dense_ekf.h"
 #include "propid/propid.h"
@@ -119,6 +120,21 @@ static void put_sci(float x)
         exponent = -exponent;
     }
     put_uint((uint32_t)exponent);
+}
+
+/* FNV-1a hash of n floats' bit patterns: two builds that end the flight with the
+ * same state and covariance, bit for bit, print the same value. */
+static uint32_t hash_bits(const float *values, uint32_t n)
+{
+    uint32_t hash = 2166136261u;
+    for (uint32_t k = 0; k < n; ++k) {
+        uint32_t bits;
+        memcpy(&bits, &values[k], sizeof(bits));
+        for (uint32_t byte = 0; byte < 4u; ++byte) {
+            hash = (hash ^ ((bits >> (8u * byte)) & 0xFFu)) * 16777619u;
+        }
+    }
+    return hash;
 }
 
 static propid_filter_t filter;
@@ -310,6 +326,9 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
     if (!with_dense) {
         propid_qemu_puts(" stack_used_push_gyro ");
         put_uint(stack_max);
+        propid_qemu_puts(" final_state_bits ");
+        put_uint(hash_bits(filter.core.state, PROPID_MAX_STATES) ^
+                 hash_bits(filter.core.cov, PROPID_COV_SIZE));
     }
     propid_qemu_putc('\n');
     if (with_dense) {

@@ -59,6 +59,18 @@
 #error "PROPID_GENERAL_VEHICLES 0 needs PROPID_MAX_ROTORS 4 and every optional model term off"
 #endif
 
+/* The size-lean quad build (-DPROPID_QUAD_BUILD=1 -DPROPID_SIZE_LEAN=1, CMake
+ * target propid_quad_lean): the same filter, API, checks and results as the quad
+ * build, with the step's kernels as loops instead of straight-line code (less
+ * flash, more instructions per step; docs/performance.md compares the two).
+ * Needs the quad build's fixed layout (no general path). */
+#ifndef PROPID_SIZE_LEAN
+#define PROPID_SIZE_LEAN 0
+#endif
+#if PROPID_SIZE_LEAN && PROPID_GENERAL_VEHICLES
+#error "PROPID_SIZE_LEAN needs the quad build (PROPID_QUAD_BUILD=1, every optional model term off)"
+#endif
+
 /* State layout: body rate (3), thrust coefficient (N), drag coefficient (N),
  * gyro bias (3), then the optional blocks. With PROPID_MAX_ROTORS = 8 the largest
  * filter has 27 states. */
