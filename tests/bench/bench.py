@@ -311,6 +311,10 @@ def cpu_seconds(cmd: list[str], repeats: int, summary: pathlib.Path) -> tuple[fl
     loop alone as propid_sitl reports it in its --summary-json)."""
     best_process = best_flight = None
     for _ in range(repeats):
+        # Each run writes a new summary file, as every flight of a campaign does:
+        # truncating the previous one makes ext4 write it back at close (~0.1 ms
+        # of system time that is the file system's, not the simulator's).
+        summary.unlink(missing_ok=True)
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         subprocess.run([*cmd, "--summary-json", str(summary)], check=True,
                        stdout=subprocess.DEVNULL)
