@@ -313,6 +313,12 @@ static const opt_t options[] = {
          "filter: with --filter-rotor-speed-noise, remove the average part of\n"
          "each coefficient update that error explains (errors in variables,\n"
          "docs/math.md §14)"),
+    FLAG(NULL, "filter-sensor-errors", filter_sensor_errors, 1,
+         "filter: input-error terms from the sensor model (docs/sitl.md):\n"
+         "rotor-speed noise = the telemetry step at hover / sqrt(12),\n"
+         "held 1 s, with the compensation; delay = the ESC latency.\n"
+         "Replaces --filter-rotor-speed-noise(-time), --filter-esc-delay\n"
+         "and --filter-input-error-compensation"),
 
     NUMBER("Vehicle overrides", "motor-tau", motor_time_constant, 1e-5, 10.0, "S",
            "motor time constant [s]"),

@@ -97,6 +97,7 @@ typedef struct {
     double filter_rotor_speed_noise_time; /* rotor_speed_noise_time [s] */
     double filter_inertia_rel_std;      /* inertia_rel_std: the vehicle file's inertia scale std; 0: exact */
     int filter_input_error_compensation;  /* input_error_compensation (docs/math.md §14); 0: off */
+    int filter_sensor_errors;           /* input-error terms from the sensor model (sensor_errors.h) */
 
     /* Propeller damage scenario and the firmware's damage detector. */
     sitl_damage_t damage[SITL_MAX_DAMAGE];

@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "rng.h"
+#include "sensor_errors.h"
 #include "sim.h"
 
 int sitl_setup_vehicle(const sitl_options_t *opts, sitl_vehicle_t *v, char *err, int err_size)
@@ -158,5 +159,18 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
     c->rotor_speed_noise_time = (float)opts->filter_rotor_speed_noise_time;
     c->inertia_rel_std = (float)opts->filter_inertia_rel_std;
     c->input_error_compensation = (uint8_t)(opts->filter_input_error_compensation != 0);
+    if (opts->filter_sensor_errors) {
+        sitl_sensor_errors_t e;
+        if (sitl_sensor_errors(v, &opts->esc, &e) != 0) {
+            if (bad_field != NULL) {
+                *bad_field = "filter-sensor-errors (vehicle without hover)";
+            }
+            return PROPID_ERR_CONFIG;
+        }
+        c->rotor_speed_noise = (float)e.rotor_speed_noise;
+        c->rotor_speed_noise_time = (float)e.rotor_speed_noise_time;
+        c->rotor_delay_us = (int32_t)lround(e.rotor_delay_s * 1e6);
+        c->input_error_compensation = (uint8_t)(e.rotor_speed_noise > 0.0);
+    }
     return propid_config_check(c, bad_field);
 }

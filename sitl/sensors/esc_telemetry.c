@@ -129,6 +129,24 @@ double sitl_esc_quantise_dshot(double speed, int pole_pairs)
     return 2.0 * SITL_PI * 1e6 / (decoded_us * (double)pole_pairs);
 }
 
+double sitl_esc_dshot_step(double speed, int pole_pairs)
+{
+    /* The code the speed decodes to and the next longer period's: their
+     * decoded speeds differ by one quantisation step. */
+    double decoded = sitl_esc_quantise_dshot(speed, pole_pairs);
+    if (!(decoded > 0.0) || pole_pairs < 1) {
+        return 0.0;
+    }
+    double period_us = 2.0 * SITL_PI * 1e6 / (decoded * (double)pole_pairs);
+    unsigned long period = (unsigned long)lround(period_us);
+    unsigned shift = 0;
+    while ((period >> shift) > 511u) {
+        shift++;
+    }
+    double next_us = (double)(((period >> shift) + 1u) << shift);
+    return decoded - 2.0 * SITL_PI * 1e6 / (next_us * (double)pole_pairs);
+}
+
 int sitl_esc_report(sitl_esc_telemetry_t *esc, double t, double *speed_out)
 {
     /* Always draw, so the loss pattern does not depend on anything else. */

@@ -62,4 +62,8 @@ int sitl_esc_report(sitl_esc_telemetry_t *esc, double t, double *speed_out);
 /* DShot e-period round trip of one speed (exposed for tests). */
 double sitl_esc_quantise_dshot(double speed_rad_s, int pole_pairs);
 
+/* Speed step of the DShot e-period code a speed decodes to [rad/s] (the
+ * decoded speed minus the next longer period's); 0 when it decodes to 0. */
+double sitl_esc_dshot_step(double speed_rad_s, int pole_pairs);
+
 #endif /* SITL_ESC_TELEMETRY_H */

@@ -93,15 +93,19 @@ GYRO_BIAS_MAX = math.radians(1.0)
 GYRO_BIAS_WALK = {"paper": 0.0, "default": 1.0e-4}
 
 
-def matched_filter(sensors: str) -> list[str]:
+def matched_filter(sensors: str, sensor_errors: bool = True) -> list[str]:
     """The "matched" tuning of the NEES flights: the library default, with the
     priors and random walks the truth is drawn from. A NEES is chi-square only
     when the filter's prior is the distribution of the truth: a uniform
     U(-a, a) has std a / sqrt(3); the coefficients are constant (walk 0); the
     bias walks as the sensor's. Rate process noise and gyro noise stay the
-    library's and the datasheet's (design.md "Defaults")."""
+    library's and the datasheet's (design.md "Defaults"). The rotor-speed
+    input's error terms come from the sensor model by one rule for every
+    vehicle (propid_sitl --filter-sensor-errors: the telemetry step at hover,
+    the latency); sensor_errors False leaves them out (the inputs taken as
+    exact, the tuning before that rule)."""
     walk = GYRO_BIAS_WALK[sensors]
-    return ["--coeff-spread", f"{COEFF_SPREAD}", "--gyro-bias-max", f"{GYRO_BIAS_MAX:.7g}",
+    return (["--filter-sensor-errors"] if sensor_errors else []) + ["--coeff-spread", f"{COEFF_SPREAD}", "--gyro-bias-max", f"{GYRO_BIAS_MAX:.7g}",
             "--gyro-bias-walk", f"{walk}",
             "--prior-kf-std", f"{COEFF_SPREAD / math.sqrt(3.0):.6g}",
             "--prior-km-std", f"{COEFF_SPREAD / math.sqrt(3.0):.6g}",
@@ -162,6 +166,8 @@ def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool 
         cmd += CAMPAIGN_FLIGHT + CAMPAIGN_FILTER
     elif case["tuning"] == "matched":
         cmd += matched_filter(case["sensors"])
+    elif case["tuning"] == "matched-exact-inputs":
+        cmd += matched_filter(case["sensors"], sensor_errors=False)
     for effect in case["effects"]:
         cmd += ["--effect", effect]
     declared = plan_inertia_rel_rms() if inertia_std is None else inertia_std
@@ -177,7 +183,7 @@ def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool 
 
 def fly(sitl: str, case: dict, mode: str, workdir: str, detect_damage: bool = True,
         inertia_std: float | None = None) -> dict:
-    summary = os.path.join(workdir, f"case{case['case']}-{mode}.json")
+    summary = os.path.join(workdir, f"case{case['case']}-{mode}-{case['tuning']}.json")
     cmd = command(sitl, case, mode, summary, detect_damage, inertia_std)
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
     if proc.returncode not in (0, 3) or not os.path.exists(summary):
@@ -275,6 +281,23 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
                     "converged_claims": int(honesty.get("converged_claims", 0))})
         if pair.get("filter", {}).get("exit") == 3 and pair.get("oracle", {}).get("exit") == 0:
             out["filter_only_diverged"] += 1
+    # The same clean flights with the inputs taken as exact, flown in the same run.
+    exact: dict[str, list[int]] = {}
+    for case in cases:
+        data = results.get((case["case"], "exact-inputs"))
+        if not case["clean"] or data is None or "error" in data or data.get("exit") != 0:
+            continue
+        honesty = data.get("honesty", {})
+        group = exact.setdefault(f"{case['sensors']} sensors", [0, 0, 0])
+        group[0] += int(honesty.get("nees_in_bounds", 0))
+        group[1] += int(honesty.get("nees_samples", 0))
+        group[2] += 1
+    if exact:
+        inside, samples = sum(g[0] for g in exact.values()), sum(g[1] for g in exact.values())
+        out["nees_exact_inputs"] = {
+            "in_bounds_pct": round(100.0 * inside / samples, 2) if samples else None,
+            **{key: {"in_bounds_pct": round(100.0 * g[0] / g[1], 2) if g[1] else None,
+                     "samples": g[1], "flights": g[2]} for key, g in sorted(exact.items())}}
     out["nees_samples"] = nees_all
     if nees_all:
         out["nees_in_bounds_pct"] = round(100.0 * nees_in / nees_all, 2)
@@ -352,6 +375,14 @@ def main(argv: list[str] | None = None) -> int:
         futures = {pool.submit(fly, args.sitl, case, mode, workdir, not args.no_detect_damage,
                                args.inertia_std): (case, mode)
                    for case in cases for mode in ("filter", "oracle")}
+        if args.nees_tuning == "matched":
+            # Side by side: each NEES flight again with its inputs taken as exact
+            # (figures nees_exact_inputs; not counted in steps or any other figure).
+            for case in cases:
+                if case["clean"]:
+                    twin = {**case, "tuning": "matched-exact-inputs"}
+                    futures[pool.submit(fly, args.sitl, twin, "filter", workdir, not args.no_detect_damage,
+                                        args.inertia_std)] = (case, "exact-inputs")
         try:
             for future in as_completed(futures):
                 case, mode = futures[future]
@@ -359,7 +390,7 @@ def main(argv: list[str] | None = None) -> int:
                     results[(case["case"], mode)] = future.result()
                 except subprocess.TimeoutExpired:
                     results[(case["case"], mode)] = {"error": "timeout", "command": ""}
-                if bar:
+                if bar and mode != "exact-inputs":
                     bar.update(int(expected_steps(case)))
         except KeyboardInterrupt:
             for future in futures:

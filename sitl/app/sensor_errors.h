@@ -1,0 +1,29 @@
+/*
+ * The filter's input-error terms derived from the simulated sensors' and
+ * motors' own specifications (--filter-sensor-errors, docs/sitl.md "Sensor
+ * errors from the sensor model"): what an integrator can write down from the
+ * ESC telemetry protocol and the vehicle file, without any flight data.
+ */
+#ifndef SITL_SENSOR_ERRORS_H
+#define SITL_SENSOR_ERRORS_H
+
+#include "esc_telemetry.h"
+#include "vehicle.h"
+
+/* Correlation time given to the quantisation error [s]: a speed held within
+ * one telemetry step keeps its error; near hover that is longer than the
+ * filter accepts (rotor_speed_noise_time <= 1 s), so its ceiling. */
+#define SITL_HELD_STEP_TIME_S 1.0
+
+typedef struct {
+    double hover_speed;            /* nominal hover speed [rad/s] */
+    double rotor_speed_noise;      /* telemetry step at hover / sqrt(12) [rad/s]; 0: exact speeds */
+    double rotor_speed_noise_time; /* its correlation time [s] */
+    double rotor_delay_s;          /* telemetry latency [s] */
+} sitl_sensor_errors_t;
+
+/* 0 on success, -1 on a vehicle without hover (no thrust or mass) or no pole pairs. */
+int sitl_sensor_errors(const sitl_vehicle_t *v, const sitl_esc_params_t *esc,
+                       sitl_sensor_errors_t *out);
+
+#endif /* SITL_SENSOR_ERRORS_H */

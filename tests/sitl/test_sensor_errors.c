@@ -1,0 +1,97 @@
+/*
+ * The filter's input-error terms from the sensor model (sensor_errors.h):
+ * the DShot step at hover and the latency, against an independent
+ * computation.
+ */
+#include <math.h>
+
+#include "esc_telemetry.h"
+#include "sensor_errors.h"
+#include "sitl_math.h"
+#include "unity.h"
+#include "vehicle.h"
+
+void setUp(void)
+{
+}
+
+void tearDown(void)
+{
+}
+
+/* The speed a whole-microsecond electrical period decodes to (no mantissa
+ * shift: periods up to 511 us). */
+static double speed_of_period(double period_us, int pole_pairs)
+{
+    return 2.0 * SITL_PI * 1e6 / (period_us * (double)pole_pairs);
+}
+
+static void test_crazyflie_dshot_step_at_hover(void)
+{
+    sitl_vehicle_t v;
+    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset("crazyflie-x", &v));
+    sitl_esc_params_t esc;
+    sitl_esc_default_params(&esc);
+    sitl_sensor_errors_t e;
+    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, &e));
+    double hover = sqrt(0.03 * 9.81 / (4.0 * 2.3e-8));
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9 * hover, hover, e.hover_speed);
+    /* Hover period 501.9 us: truncated to 501, the next code 502. */
+    double period = floor(2.0 * SITL_PI * 1e6 / (hover * 7.0));
+    TEST_ASSERT_EQUAL_DOUBLE(501.0, period);
+    double step = speed_of_period(period, 7) - speed_of_period(period + 1.0, 7);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, step / sqrt(12.0), e.rotor_speed_noise);
+    TEST_ASSERT_DOUBLE_WITHIN(0.05, 1.03, e.rotor_speed_noise);
+    TEST_ASSERT_EQUAL_DOUBLE(SITL_HELD_STEP_TIME_S, e.rotor_speed_noise_time);
+    TEST_ASSERT_EQUAL_DOUBLE(esc.latency_s, e.rotor_delay_s);
+}
+
+static void test_hummingbird_step_with_mantissa_shift(void)
+{
+    /* Hover period 1 913 us > 511: the code keeps 9 bits, a step of 4 us. */
+    sitl_vehicle_t v;
+    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset("hummingbird-x", &v));
+    sitl_esc_params_t esc;
+    sitl_esc_default_params(&esc);
+    sitl_sensor_errors_t e;
+    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, &e));
+    double period = floor(2.0 * SITL_PI * 1e6 / (e.hover_speed * 7.0));
+    double coded = floor(period / 4.0) * 4.0;
+    double step = speed_of_period(coded, 7) - speed_of_period(coded + 4.0, 7);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, step / sqrt(12.0), e.rotor_speed_noise);
+}
+
+static void test_exact_speeds_have_no_input_noise(void)
+{
+    sitl_vehicle_t v;
+    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset("crazyflie-plus", &v));
+    sitl_esc_params_t esc;
+    sitl_esc_paper_params(&esc, 500.0);
+    sitl_sensor_errors_t e;
+    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, &e));
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, e.rotor_speed_noise);
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, e.rotor_delay_s);
+}
+
+static void test_rejects_a_vehicle_without_hover(void)
+{
+    sitl_vehicle_t v;
+    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset("crazyflie-x", &v));
+    for (int i = 0; i < v.rotor_count; i++) {
+        v.rotor[i].thrust_coeff = 0.0;
+    }
+    sitl_esc_params_t esc;
+    sitl_esc_default_params(&esc);
+    sitl_sensor_errors_t e;
+    TEST_ASSERT_EQUAL_INT(-1, sitl_sensor_errors(&v, &esc, &e));
+}
+
+int main(void)
+{
+    UNITY_BEGIN();
+    RUN_TEST(test_crazyflie_dshot_step_at_hover);
+    RUN_TEST(test_hummingbird_step_with_mantissa_shift);
+    RUN_TEST(test_exact_speeds_have_no_input_noise);
+    RUN_TEST(test_rejects_a_vehicle_without_hover);
+    return UNITY_END();
+}
