@@ -155,7 +155,7 @@ propid_status_t propid_fuse_accel(propid_filter_t *filter, uint64_t time_us, con
         filter->counters.accel_reanchored++;
     }
     core->accel_gated_run = 0u;
-    const uint32_t clamped = propid_clamp_coefficients(config, core) + propid_clamp_torque_scale(config, derived, core);
+    const uint32_t clamped = propid_clamp_coefficients(filter) + propid_clamp_torque_scale(config, derived, core);
     if (clamped != 0u) {
         core->health |= PROPID_HEALTH_STATE_CLAMPED;
         filter->counters.state_clamps += clamped;

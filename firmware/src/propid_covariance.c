@@ -134,40 +134,58 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
     return repaired;
 }
 
-uint32_t propid_clamp_coefficients(const propid_kept_config_t *config, propid_core_t *core)
+/* The coefficients found outside the range: each one's Gaussian truncated at its
+ * bound (propid_truncation.c). Apart, so the usual sample's test stays lean. */
+static __attribute__((noinline)) PROPID_RARE uint32_t truncate_outside(propid_filter_t *filter)
 {
+    const propid_kept_config_t *config = &filter->config;
+    propid_core_t *core = &filter->core;
     const uint8_t first = propid_first_thrust();
     const uint8_t end = propid_first_bias(config->rotor_count);
+    uint32_t clamped = 0u;
+    for (uint8_t k = first; k < end; ++k) {
+        if (core->state[k] < config->coeff_rel_min) {
+            (void)propid_truncate_at_bound(&filter->derived, core, k, config->coeff_rel_min);
+            clamped++;
+        } else if (core->state[k] > config->coeff_rel_max) {
+            (void)propid_truncate_at_bound(&filter->derived, core, k, config->coeff_rel_max);
+            clamped++;
+        }
+    }
+    if (clamped != 0u) {
+        /* A later truncation moves the earlier coefficients by their regression:
+         * the range holds again with the plain clamp (no further truncation). */
+        for (uint8_t k = first; k < end; ++k) {
+            core->state[k] = fminf(fmaxf(core->state[k], config->coeff_rel_min), config->coeff_rel_max);
+        }
+        (void)propid_cov_enforce_bounds(&filter->derived, core);
+    }
+    return clamped;
+}
+
+uint32_t propid_clamp_coefficients(propid_filter_t *filter)
+{
+    const propid_kept_config_t *config = &filter->config;
+    const propid_core_t *core = &filter->core;
     /* Fast test of both bounds on the bit patterns (0 < min < max, see
-     * outside_positive_range); the rare clamp then compares the values. */
+     * outside_positive_range); the rare truncation then compares the values. */
     uint32_t min_bits;
     uint32_t max_bits;
     memcpy(&min_bits, &config->coeff_rel_min, sizeof(min_bits));
     memcpy(&max_bits, &config->coeff_rel_max, sizeof(max_bits));
     const uint32_t range_bits = max_bits - min_bits;
+    uint32_t outside = 0u;
     if (config->rotor_count == 4u) {
         /* The quad: one straight-line test of the 8 coefficients' bit patterns. */
-        uint32_t outside = 0u;
 PROPID_UNROLL(8)
         for (uint8_t k = PROPID_QUAD_FIRST_THRUST; k < PROPID_QUAD_FIRST_BIAS; ++k) {
             outside |= propid_outside_positive_range(core->state[k], min_bits, range_bits);
         }
-        if (outside == 0u) {
-            return 0u;
+    } else {
+        const uint8_t end = propid_first_bias(config->rotor_count);
+        for (uint8_t k = propid_first_thrust(); k < end; ++k) {
+            outside |= propid_outside_positive_range(core->state[k], min_bits, range_bits);
         }
     }
-    uint32_t clamped = 0u;
-    for (uint8_t k = first; k < end; ++k) {
-        if (!propid_outside_positive_range(core->state[k], min_bits, range_bits)) {
-            continue;
-        }
-        if (core->state[k] < config->coeff_rel_min) {
-            core->state[k] = config->coeff_rel_min;
-            clamped++;
-        } else if (core->state[k] > config->coeff_rel_max) {
-            core->state[k] = config->coeff_rel_max;
-            clamped++;
-        }
-    }
-    return clamped;
+    return outside == 0u ? 0u : truncate_outside(filter);
 }

@@ -461,7 +461,7 @@ static __attribute__((noinline)) propid_status_t fuse_gyro_timed(propid_filter_t
 #if PROPID_CONSISTENCY
     propid_consistency_observe(filter, gated_mask);
 #endif
-    uint32_t clamped = propid_clamp_coefficients(config, core);
+    uint32_t clamped = propid_clamp_coefficients(filter);
 #if PROPID_WITH_ACCEL
     clamped += propid_clamp_torque_scale(config, &filter->derived, core);
 #endif

@@ -373,9 +373,14 @@ void propid_input_compensation_apply(propid_filter_t *filter, uint32_t gated_mas
  * 1 / (1 - 0.5) = 2). */
 #define PROPID_INPUT_ERROR_MAX_SHARE 0.5f
 
-/* propid_covariance.c: clamp the coefficients to [coeff_rel_min, coeff_rel_max];
- * returns how many were clamped. */
-uint32_t propid_clamp_coefficients(const propid_kept_config_t *config, propid_core_t *core);
+/* propid_covariance.c: keep the coefficients in [coeff_rel_min, coeff_rel_max],
+ * each one found beyond a bound by truncating the Gaussian there (P with it);
+ * returns how many were beyond. */
+uint32_t propid_clamp_coefficients(propid_filter_t *filter);
+/* propid_truncation.c: the state and P replaced by the moments of N(x, P) truncated
+ * at state k's bound (x_k beyond it); uses core.update_vector[0]. Returns 0 when P_kk
+ * was unusable and x_k was only set to the bound. */
+int propid_truncate_at_bound(const propid_derived_t *derived, propid_core_t *core, uint8_t k, float bound);
 
 #if PROPID_WITH_ACCEL
 /* The thrust-torque scale (docs/math.md §9) kept in the coefficients' range: at or

@@ -66,6 +66,26 @@ def test_scoring_detection_isolation_and_false_alarms():
     assert "| false alarms (undamaged flights) | 1 in 1 flights | 0 |" in damage_bench.render(result)
 
 
+def test_tracking_misses_are_attributed():
+    """A flight above 1.5x is put down to the Filter's gap before the damage when its
+    undamaged twin alone reaches 1.118x the damaged Oracle, to a lost yaw when the
+    Oracle's yaw RMSE after the damage exceeds 10 deg; a flight within 1.5x is not a miss."""
+    def record(f, o, intact, oracle_yaw):
+        spec = {"damages": [[1, 2.5, 0.3]], "effects": [], "index": 0}
+        return {"spec": spec, "filter": {"detections": [{"rotor": 1, "time_s": 2.505}], "stable": True,
+                                         "rmse_after_damage_m": f},
+                "oracle": {"stable": True, "rmse_after_damage_m": o, "rmse_yaw_after_damage_deg": oracle_yaw},
+                "filter_undamaged": {"rmse_after_damage_m": intact}}
+    records = [record(0.030, 0.010, 0.0112, 2.0),   # gap (1.12x >= 1.118x)
+               record(0.030, 0.010, 0.0110, 2.0),   # neither (1.10x)
+               record(0.300, 0.100, 0.0010, 40.0),  # yaw lost
+               record(0.300, 0.100, 0.2000, 40.0),  # both
+               record(0.014, 0.010, 0.0200, 40.0)]  # within 1.5x: not a miss
+    misses = damage_bench.summarise(records, config())["tracking_misses"]
+    assert misses == {"flights": 4, "filter_gap_before_damage": 2, "oracle_yaw_lost": 2, "both": 1, "neither": 1}
+    assert "| 4: 2 / 2 / 1 / 1 |" in damage_bench.render(damage_bench.summarise(records, config()))
+
+
 def test_missed_damage_counts_against_the_rate():
     spec = {"damages": [[1, 2.5, 0.12]], "effects": [], "index": 0}
     records = [{"spec": spec, "filter": {"detections": [{"rotor": 1, "time_s": 2.0}], "stable": True},
