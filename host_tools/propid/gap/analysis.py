@@ -13,7 +13,8 @@ from propid.flightlog import FlightLog, Vehicle
 from propid.gap import alignment, basefit, scoring, selection, shrink, where, whitening
 from propid.gap.vehicle_out import corrected_vehicle
 from propid.gap.design import build_design
-from propid.gap.effects import ALL_IDS, EFFECTS, ESC_DELAY, MIN_REPORTED_LAG_S, Context, by_id
+from propid.gap.effects import (ALL_IDS, CONDITIONED_ON, EFFECTS, ESC_DELAY, MIN_REPORTED_LAG_S, RESIDUAL_LAG,
+                               Context, by_id)
 from propid.gap.prep import Band, Flight, columns_present, prepare_flight
 
 NEEDS_TEXT = {"inertia": "vehicle inertia", "acc": "acc_x/y/z", "mass": "vehicle mass", "attitude": "qw/qx/qy/qz", "velocity": "vx/vy/vz",
@@ -199,13 +200,16 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     ctx = make_context(work, vehicle, kf_rotor, km_rotor)
     ctx.inertia_known = not unit_inertia
     effects = [by_id(e) for e in candidates]
-    design = build_design(work, ctx, effects, vehicle.mass, with_thrust)
+    # nuisance columns some candidates are tested on top of (selection.score); not candidates
+    nuisances = [RESIDUAL_LAG] if any(CONDITIONED_ON.get(e) == RESIDUAL_LAG.id for e in candidates) else []
+    design = build_design(work, ctx, effects + nuisances, vehicle.mass, with_thrust)
     gr = scoring.grams(design)
     gr.weight = gr0.weight
     # effects are scored on the whitened rows (generalised least squares, whitening.py)
     # the noise spectrum comes from the residual of the full model (base + every candidate), so
     # that an effect's own signature is not taken for noise and whitened away
-    all_cols = list(range(len(design.names)))
+    nuisance_cols = {c for e in nuisances for c in design.groups[e.id]}
+    all_cols = [c for c in range(len(design.names)) if c not in nuisance_cols]
     full_residual = scoring.residuals(design, all_cols, scoring.solve(gr, all_cols, np.arange(design.n_blocks)))
     design_w, _ = whitening.whiten(design, full_residual, [f.rate_hz for f in work],
                                    [(f.band.highpass_hz, f.band.lowpass_hz) for f in work])
@@ -240,7 +244,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                         **({"implausible": s["implausible"]} if "implausible" in s else {}),
                         "p_value": s["p_value"], "effect_test": s["effect_test"],
                         "held_out_p_value": s["held_out_p_value"], "physical_sign": s["physical_sign"],
-                        "significant": s["significant"], **({"step": s["step"]} if "step" in s else {})})
+                        "significant": s["significant"], **({"step": s["step"]} if "step" in s else {}),
+                        **({"conditioned_on": s["conditioned_on"]} if "conditioned_on" in s else {})})
     if delay_significant:  # the alignment is applied before any effect is scored: it ranks by its own share
         first = next((e for e in entries if e.get("step") == 1), None)
         esc_entry["step"] = 0 if first is None or esc_entry["explained_fraction"] >= first.get(
@@ -330,7 +335,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     # how far
     inertia = np.asarray(vehicle.inertia, dtype=float)
     if work_held:
-        hd = build_design(work_held, ctx, effects, vehicle.mass, with_thrust, scale=design.scale)
+        hd = build_design(work_held, ctx, effects + nuisances, vehicle.mass, with_thrust, scale=design.scale)
         theta_base = scoring.solve(gr, base_cols, np.arange(design.n_blocks))
         before = scoring.residuals(hd, base_cols, theta_base)
         after = scoring.residuals(hd, final_cols, theta_final)

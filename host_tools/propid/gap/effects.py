@@ -194,6 +194,18 @@ def _gyro_lowpass(f: Flight, c: Context) -> dict:
     return {axis: accel[:, [k]] for k, axis in enumerate(("roll", "pitch", "yaw"))}
 
 
+def _residual_lag(f: Flight, c: Context) -> dict:
+    # a rotor stream still late by d after the alignment: the true speeds are Omega(t + d), so
+    # every axis's base prediction P gains d dP/dt to first order (one d shared by all axes),
+    # dP/dt = sum_i c_ai d(Omega_i^2)/dt with c_ai the base model's per-rotor coefficients
+    rate = 2.0 * f.speed * f.speed_dot
+    thrust_rate = rate * c.kf[None, :]
+    roll, pitch = _moments_of(thrust_rate, c)
+    yaw = (rate * c.km[None, :]) @ c.yaw_signs
+    return {"roll": roll[:, None], "pitch": pitch[:, None], "yaw": yaw[:, None],
+            "thrust": thrust_rate.sum(axis=1)[:, None]}
+
+
 def _identity_physical(names):
     def physical(coef, c):
         return {n: float(v) for n, v in zip(names, coef)}
@@ -351,6 +363,18 @@ EFFECTS: list[Effect] = [
            "thrust/drag not exactly quadratic: T = kf Omega^2 (Omega/Omega_ref)^s",
            bounds=_exponent_bounds),
 ]
+
+# Not a candidate: a nuisance that one candidate is tested on top of (CONDITIONED_ON).
+RESIDUAL_LAG = Effect("residual_lag", ("delay_s",), ("s",), (), AXES, _residual_lag,
+                      _identity_physical(("delay_s",)),
+                      "rotor stream lag left after the alignment, linearised: d dP/dt on every axis")
+
+# Look-alikes that one shared physical parameter tells apart: the candidate is tested (Wald,
+# held-out replication, sign, plausibility) on top of the nuisance. On yaw a telemetry lag d is,
+# to first order, 2 d km Omega sum s_i dOmega_i/dt, the rotor-acceleration torque of a rotor
+# inertia J_r = 2 d km Omega; but a lag delays roll, pitch and thrust by the same d, which rotor
+# inertia does not touch, so those axes fix d and only the yaw torque beyond it is rotor inertia.
+CONDITIONED_ON = {"rotor_inertia": RESIDUAL_LAG.id}
 
 ESC_DELAY = "esc_delay"
 ALL_IDS = [ESC_DELAY] + [e.id for e in EFFECTS]

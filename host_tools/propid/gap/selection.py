@@ -26,7 +26,7 @@ import numpy as np
 
 from propid.gap import significance, scoring
 from propid.gap.design import Design
-from propid.gap.effects import LOOK_ALIKES, by_id
+from propid.gap.effects import CONDITIONED_ON, LOOK_ALIKES, by_id
 
 MAX_EFFECTS = 4
 SIGN_SIGMAS = 2.0
@@ -52,22 +52,44 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
     idx = _axis_idx(design, axes)
     all_idx = list(range(len(design.axes)))
     frac_all, _ = scoring.explained(held_current, held, all_idx, bootstrap=False)
-    test = significance.paired_test(held_current, held, idx, scoring.cv_cross(gr, current, cols))
+    own = design.groups[effect_id]
+    nonnegative = by_id(effect_id).nonnegative
+
+    def evidence(given, held_given, held_with):
+        test = significance.paired_test(held_given, held_with, idx, scoring.cv_cross(gr, given, given + own))
+        # one parameter that physics keeps >= 0: the physical-sign rule already makes the
+        # alternative one-sided, so the test is too (docs/gap.md, Scoring)
+        lm = significance.effect_test(gr, given, own, nonnegative=nonnegative)
+        reason = implausible(gr, given, own, design.scale[own], by_id(effect_id).params, (bounds or {}).get(effect_id))
+        return test, lm, physical_sign(gr, given, own, nonnegative), reason
+
+    test, lm, physical, reason = evidence(current, held_current, held)
+    # an effect whose signature a shared nuisance also makes (CONDITIONED_ON: rotor_inertia and a
+    # residual rotor-stream lag) must hold both alone and on top of the nuisance: the larger
+    # p-values, both signs, both ranges (either fit may stand in for the other's error)
+    nuisance = CONDITIONED_ON.get(effect_id)
+    conditioned = None
+    if nuisance in design.groups and not set(design.groups[nuisance]) & set(current):
+        given = current + design.groups[nuisance]
+        c_test, c_lm, c_physical, c_reason = evidence(given, scoring.cv_sse(gr, given), scoring.cv_sse(gr, given + own))
+        conditioned = {"on": nuisance, "p_value": c_lm["p_value"], "held_out_p_value": c_test["p_value"],
+                       "explained_fraction": c_test["value"], "physical_sign": c_physical}
+        if c_test["p_value"] > test["p_value"]:
+            test = c_test
+        if c_lm["p_value"] > lm["p_value"]:
+            lm = c_lm
+        physical = physical and c_physical
+        reason = reason or c_reason
     frac, ci = test["value"], test["ci"]
-    # one parameter that physics keeps >= 0: the physical-sign rule already makes the
-    # alternative one-sided, so the test is too (docs/gap.md, Scoring)
-    lm = significance.effect_test(gr, current, design.groups[effect_id], nonnegative=by_id(effect_id).nonnegative)
     replicated = test["p_value"] <= significance.REPLICATION_LEVEL / max(candidates, 1)
     per_axis = {a: scoring.explained(held_current, held, [k], bootstrap=False)[0] for k, a in enumerate(design.axes)}
     # size on the unwhitened rows: the effect's share of the measured signal (physical relevance)
-    size = scoring.effect_size(size_gr or gr, current, design.groups[effect_id], idx)
-    physical = physical_sign(gr, current, design.groups[effect_id], by_id(effect_id).nonnegative)
-    cols = design.groups[effect_id]
-    reason = implausible(gr, current, cols, design.scale[cols], by_id(effect_id).params,
-                         (bounds or {}).get(effect_id))
+    size = scoring.effect_size(size_gr or gr, current, own, idx)
+    cols = own
     floor = scoring.MIN_SCALE_EFFECT_SIZE if effect_id in SCALE_EFFECTS else 0.0
     return {"id": effect_id, "explained_fraction": frac, "ci": ci, "held": held, "effect_size": size,
             "explained_fraction_all_axes": frac_all,
+            **({"conditioned_on": conditioned} if conditioned else {}),
             "per_axis": per_axis,
             "axes": [a for a in axes if a in design.axes],
             "physical_sign": physical, "p_value": lm["p_value"],
