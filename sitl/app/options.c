@@ -254,6 +254,9 @@ static const opt_t options[] = {
     FLAG(NULL, "start-at-rest", start_at_rest, 1,
          "start hovering with zero velocity (default: on the\n"
          "trajectory's initial velocity)"),
+    FLAG(NULL, "start-trimmed", start_trimmed, 1,
+         "start on the trajectory's trim: the attitude, body rate\nand thrust its feed-forward asks "
+         "for at t = 0\n(default: level, hover rotor speeds)"),
     FLAG(NULL, "no-ground", ground_enabled, 0, "no ground plane"),
     NUMBER(NULL, "physics-rate", physics_rate_hz, 1.0, 1e6, "HZ", "RK4 rate (default 2000, >= control rate)"),
     NUMBER(NULL, "control-rate", control_rate_hz, 1.0, 1e5, "HZ", "controller/allocation rate (default 500)"),
@@ -554,6 +557,10 @@ int sitl_options_parse(sitl_options_t *o, int argc, char **argv)
     if (o->physics_rate_hz < o->control_rate_hz) {
         fprintf(stderr, "propid_sitl: --physics-rate (%g) must be >= --control-rate (%g)\n",
                 o->physics_rate_hz, o->control_rate_hz);
+        return SITL_EXIT_USAGE;
+    }
+    if (o->start_trimmed && o->start_on_ground) {
+        fprintf(stderr, "propid_sitl: --start-trimmed and --start-on-ground exclude each other\n");
         return SITL_EXIT_USAGE;
     }
     if (o->start_on_ground && !o->ground_enabled) {

@@ -65,6 +65,7 @@ typedef struct {
     double start_height_m;              /* trajectory origin z */
     int start_on_ground;                /* start at rest on the ground below the origin */
     int start_at_rest;                  /* start at the origin with zero velocity */
+    int start_trimmed;                  /* start on the trajectory's attitude, rate and thrust */
     int ground_enabled;
     double divergence_distance_m;       /* stop when farther than this from the reference */
     double divergence_tilt_deg;         /* stop when tilted more than this */

@@ -154,6 +154,33 @@ static int fail(sitl_result_t *r, int code, const char *msg)
     return code;
 }
 
+/* Start on the trajectory's trim instead of level: the attitude and body rate the
+ * controller's feed-forward asks for at t = 0 (no tracking error there), and the true hover
+ * rotor speeds scaled to the collective thrust it asks for (thrust ~ Omega^2). A level
+ * start on a trajectory that accelerates at once is a state no flight passes through: the
+ * first control steps then tilt the vehicle at the largest rates of the flight. */
+static void trim_on_trajectory(flight_t *f, const sitl_flat_output_t *flat0)
+{
+    for (int pass = 0; pass < 2; pass++) { /* 2nd pass: the thrust along the trimmed body z */
+        sitl_vehicle_state_t vs;
+        sitl_vec3_copy(vs.position, f->state.position);
+        sitl_vec3_copy(vs.velocity, f->state.velocity);
+        memcpy(vs.quat_wxyz, f->state.quat, sizeof(vs.quat_wxyz));
+        sitl_vec3_copy(vs.body_rate, f->state.body_rate);
+        sitl_control_output_t cmd;
+        sitl_controller_update(&f->controller, &vs, flat0, &cmd);
+        if (pass == 0) {
+            memcpy(f->state.quat, cmd.desired_quat_wxyz, sizeof(f->state.quat));
+            sitl_vec3_copy(f->state.body_rate, cmd.desired_body_rate);
+        } else if (cmd.thrust > 0.0) {
+            const double ratio = sqrt(cmd.thrust / (f->controller.mass * f->controller.gravity));
+            for (int i = 0; i < f->vehicle.rotor_count; i++) {
+                f->state.rotor_speed[i] *= ratio;
+            }
+        }
+    }
+}
+
 static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
 {
     char err[256];
@@ -224,6 +251,9 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
     }
     memcpy(f->used_kf, kf0, sizeof(f->used_kf));
     memcpy(f->used_km, km0, sizeof(f->used_km));
+    if (o->start_trimmed && !o->start_on_ground) {
+        trim_on_trajectory(f, &flat0);
+    }
     memcpy(f->command, f->state.rotor_speed, sizeof(f->command));
 
     const char *bad = NULL;
