@@ -38,7 +38,8 @@
  * The monitor also vouches for "converged" claims (propid_get_estimate): a
  * claim needs passed_windows > 0 (a full window passed since the start or the
  * last inconsistent one) and the coefficient's bit in steady_coeff (its change
- * in the last window within PROPID_CLAIM_DRIFT_Z of the explained std).
+ * in the last window within PROPID_CLAIM_DRIFT_Z of the explained std), and
+ * no gated axis sample in that window.
  *
  * Gated axes are not counted: they were not fused (faults have their own
  * counters). Cost: three adds and a compare per gyro sample; per window one
@@ -162,6 +163,12 @@ static void close_window(propid_filter_t *filter)
         }
     }
     monitor->last_drift = worst;
+    /* A gated axis sample in the window: the stream carried data the filter had
+     * to refuse, and the fault that sent it may have let others through that
+     * were not refused; claims wait for a window without one. */
+    if (monitor->nis_count < 3u * monitor->samples) {
+        steady = 0u;
+    }
     monitor->steady_coeff = steady;
 
     if (inconsistent) {
