@@ -335,9 +335,16 @@ static propid_status_t gyro_time_check(const propid_kept_config_t *config, uint6
 /* Every check of a gyro sample that does not need the rotor data: pointer,
  * finite, range, time (for a sample to be held, the rotor speeds lagging,
  * against the newest held one, else the filter's clock). Rejections counted.
- * Not inlined (see rotor_sample_check). */
-static __attribute__((noinline)) propid_status_t gyro_sample_check(propid_filter_t *filter, uint64_t time_us,
-                                                                   const float gyro_rad_s[3])
+ * Not inlined with the delay buffer (see rotor_sample_check); without it,
+ * propid_push_gyro releases its frame before the step (a tail call), so the
+ * checks are inlined there. */
+#if PROPID_DELAY_SLOTS > 0
+#define PROPID_GYRO_CHECK_LINK __attribute__((noinline))
+#else
+#define PROPID_GYRO_CHECK_LINK inline __attribute__((always_inline))
+#endif
+static PROPID_GYRO_CHECK_LINK propid_status_t gyro_sample_check(propid_filter_t *filter, uint64_t time_us,
+                                                               const float gyro_rad_s[3])
 {
     if (filter == NULL) {
         return PROPID_ERR_NULL;

@@ -485,9 +485,11 @@ static inline int rate_variances_inside(const propid_derived_t *derived, const f
 
 /* The one pass over P for the usual sample (every axis inside its gate): the
  * quad's straight-line kernels or the loops for any other vehicle. Returns 1
- * when it fused the sample, 0 with nothing written. Not inlined: `pending` lives
- * in this frame only, not under the per-axis path's. */
-static __attribute__((noinline)) int fuse_one_pass(propid_filter_t *filter, const float gyro[3])
+ * when it fused the sample, 0 with nothing written. Its frame (`pending`) is not
+ * under the per-axis path's: the full build keeps it apart; the quad build
+ * inlines it into propid_update_gyro, which releases that frame before it
+ * branches to fuse_generic (a tail call). */
+static PROPID_QUAD_INLINE int fuse_one_pass(propid_filter_t *filter, const float gyro[3])
 {
     propid_core_t *core = &filter->core;
     const propid_derived_t *derived = &filter->derived;

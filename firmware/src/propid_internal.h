@@ -179,6 +179,19 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
 #else
 #define PROPID_UNROLL(n) PROPID_PRAGMA(GCC unroll n)
 #endif
+/* PROPID_QUAD_INLINE: a quad kernel (or the one pass) that the quad build, which
+ * has no general path, inlines into its only caller, the dispatcher between it and
+ * the general path: a call, its argument passing and a frame less per step (the
+ * quad build's filter object is within the 1 KiB reach of a VFP load from its
+ * base, so its offsets cost nothing). The full build keeps it apart, with its
+ * own base registers, and so does the size-lean build (inlined there its frame
+ * put the prediction's stack chain at 264 B, over the 256 B budget, for 9
+ * instructions more). */
+#if PROPID_GENERAL_VEHICLES || PROPID_SIZE_LEAN
+#define PROPID_QUAD_INLINE __attribute__((noinline))
+#else
+#define PROPID_QUAD_INLINE inline __attribute__((always_inline))
+#endif
 /* PROPID_RARE: a function the usual gyro step never runs (repairs, the per-axis
  * path, re-anchoring): compiled for size, its calls laid out as unlikely. */
 #if defined(__GNUC__)

@@ -40,10 +40,11 @@ static propid_status_t bound_rates(float rate_next[3], float limit, float check)
 
 /* propid_predict_stage for the quad layout (propid_internal.h): the same values
  * as the general loop below over the same lists (whose other two gyroscopic
- * products are exact zeros here), straight-line. Takes the arrays it reads as separate pointers: offsets from
- * the filter's base exceed the 1 KiB reach of a VFP load, each would cost an
- * extra address computation. */
-static __attribute__((noinline)) propid_status_t
+ * products are exact zeros here), straight-line. Takes the arrays it reads as
+ * separate pointers: in the full build, offsets from the filter's base exceed
+ * the 1 KiB reach of a VFP load, each would cost an extra address computation
+ * (the quad build inlines it: PROPID_QUAD_INLINE). */
+static PROPID_QUAD_INLINE propid_status_t
 predict_stage_quad(const float *restrict state, const float *restrict input_speed_sq,
                    const float *restrict latest_speed_sq, const float *restrict quad_gyro,
                    const float (*restrict jac_torque)[PROPID_JAC_TORQUE_ROW], float dt,
@@ -322,9 +323,9 @@ static __attribute__((noinline)) void predict_covariance_any(
 #endif
 
 /* The propagation for the quad layout: the straight-line kernel generated from
- * the symbolic model (firmware/codegen/quad_predict.py). Not inlined, for the
- * same reason as predict_stage_quad: its own base registers. */
-static __attribute__((noinline)) void
+ * the symbolic model (firmware/codegen/quad_predict.py). Apart in the full build,
+ * for the same reason as predict_stage_quad: its own base registers. */
+static PROPID_QUAD_INLINE void
 predict_covariance_quad_layout(const propid_derived_t *derived, float *restrict cov,
                                float dt, const float jacobian_dt[3][PROPID_JAC_ROW], float drag_factor)
 {
