@@ -4,6 +4,7 @@
 #include <stdint.h>
 
 #include "propid/propid.h"
+#include "propid_internal.h"
 
 uint32_t propid_abi_max_rotors(void);
 uint32_t propid_abi_delay_slots(void);
@@ -50,12 +51,18 @@ void propid_abi_copy_state(const propid_filter_t *filter, float *state, float *c
     if (filter == NULL) {
         return;
     }
+    /* Per rotor, as the reference keeps them: the drag block back from its yaw basis. */
+    propid_core_t core = filter->core;
+    if (filter->config.rotor_count > 0u && filter->config.rotor_count <= PROPID_MAX_ROTORS) {
+        const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+        propid_drag_basis_flip(&basis, &core);
+    }
     for (uint32_t i = 0; i < PROPID_MAX_STATES; ++i) {
         if (state != NULL) {
-            state[i] = filter->core.state[i];
+            state[i] = core.state[i];
         }
         for (uint32_t j = 0; j < PROPID_MAX_STATES && covariance != NULL; ++j) {
-            covariance[i * PROPID_MAX_STATES + j] = filter->core.cov[propid_cov_index(i, j)];
+            covariance[i * PROPID_MAX_STATES + j] = core.cov[propid_cov_index(i, j)];
         }
     }
 }

@@ -265,6 +265,21 @@ static void derive_quad_layout(const propid_config_t *config, const geometry_t *
     }
 }
 
+#if PROPID_GENERAL_VEHICLES
+/* The drag coefficients' yaw basis (propid_internal.h): v = e_0 + s_0 s / sqrt(N),
+ * v.v = 2 + 2 / sqrt(N), H = I - (2 / v.v) v v^T maps e_0 to -s_0 s / sqrt(N). */
+static void derive_drag_basis(const propid_config_t *config, propid_derived_t *out)
+{
+    const uint8_t rotor_count = config->rotor_count;
+    const float inv_root = 1.0f / sqrtf((float)rotor_count);
+    for (uint8_t i = 0; i < PROPID_MAX_ROTORS; ++i) {
+        const float relative = i < rotor_count ? config->rotor[0].yaw_sign * config->rotor[i].yaw_sign : 0.0f;
+        out->drag_basis[i] = (i == 0u ? 1.0f : 0.0f) + relative * inv_root;
+    }
+    out->drag_basis_scale = 1.0f / (1.0f + inv_root);
+}
+#endif
+
 static void derive_gyro_jacobian(const propid_config_t *config, geometry_t *geo)
 {
     for (uint8_t b = 0; b < 3u; ++b) {
@@ -315,8 +330,14 @@ static void derive_sparsity(const propid_config_t *config, const geometry_t *geo
                 count++;
             }
         }
+        /* All of a row's drag columns or none: the yaw basis (propid_internal.h)
+         * makes any of them a combination of all. */
+        int drag_row = 0;
         for (uint8_t i = 0; i < rotor_count; ++i) {
-            if (geo->drag_torque[i][a] != 0.0f) {
+            drag_row |= geo->drag_torque[i][a] != 0.0f;
+        }
+        for (uint8_t i = 0; i < rotor_count; ++i) {
+            if (drag_row) {
                 out->jac_column[a][count] = (uint8_t)(PROPID_RATE_STATES + rotor_count + i);
                 out->jac_rotor[a][count] = i;
                 out->jac_torque[a][count] = geo->drag_torque[i][a];
@@ -618,6 +639,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 
     flush_residues(&geo.thrust_torque[0][0], 3u * PROPID_MAX_ROTORS);
     flush_residues(&geo.drag_torque[0][0], 3u * PROPID_MAX_ROTORS);
+#if PROPID_GENERAL_VEHICLES
+    derive_drag_basis(config, &out);
+#endif
     derive_gyro_jacobian(config, &geo);
 #if PROPID_GENERAL_VEHICLES
     derive_sparsity(config, &geo, &out);
@@ -814,6 +838,12 @@ void propid_config_keep(const propid_config_t *config, propid_kept_config_t *kep
 #else
     memset(kept, 0, sizeof(*kept));
     kept->rotor_count = config->rotor_count;
+    kept->yaw_sign_flips = 0u;
+    for (uint8_t i = 0; i < config->rotor_count && i < PROPID_MAX_ROTORS; ++i) {
+        if (config->rotor[i].yaw_sign != config->rotor[0].yaw_sign) {
+            kept->yaw_sign_flips = (uint8_t)(kept->yaw_sign_flips | (1u << i));
+        }
+    }
     kept->gate_max_consecutive = config->gate_max_consecutive;
 #if PROPID_DELAY_SLOTS > 0
     kept->rotor_delay_us = config->rotor_delay_us;

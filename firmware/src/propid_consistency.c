@@ -73,16 +73,32 @@ static uint8_t coefficient_count(const propid_filter_t *filter)
     return (uint8_t)(2u * filter->config.rotor_count);
 }
 
-/* The window starts now: coefficients and their variances as they are. */
-static void start_window(propid_filter_t *filter)
+/* Coefficient c (kf of every rotor, then km) and its variance, per rotor (the
+ * drag block is kept in its yaw basis: propid_internal.h). */
+static void per_rotor_coefficients(const propid_filter_t *filter, float *value, float *var)
+{
+    const propid_core_t *core = &filter->core;
+    const uint8_t rotor_count = filter->config.rotor_count;
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const uint8_t k = (uint8_t)(propid_first_thrust() + i);
+        value[i] = core->state[k];
+        var[i] = core->cov[propid_cov_index(k, k)];
+    }
+    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    propid_drag_per_rotor(&basis, core, value + rotor_count, var + rotor_count);
+}
+
+/* The window starts now: coefficients and their variances as they are (value,
+ * var: per_rotor_coefficients of this step, or NULL to form them). */
+static void start_window(propid_filter_t *filter, const float *value, const float *var)
 {
     propid_consistency_t *monitor = &filter->consistency;
     const propid_core_t *core = &filter->core;
-    const uint8_t first = filter->derived.layout.thrust;
-    for (uint8_t c = 0; c < coefficient_count(filter); ++c) {
-        const uint8_t k = (uint8_t)(first + c);
-        monitor->start_coeff[c] = core->state[k];
-        monitor->start_var[c] = core->cov[propid_cov_index(k, k)];
+    if (value == NULL || var == NULL) {
+        per_rotor_coefficients(filter, monitor->start_coeff, monitor->start_var);
+    } else {
+        memcpy(monitor->start_coeff, value, sizeof(monitor->start_coeff));
+        memcpy(monitor->start_var, var, sizeof(monitor->start_var));
     }
     monitor->start_time_us = core->time_us;
     monitor->nis_sum = 0.0f;
@@ -118,8 +134,9 @@ void propid_consistency_restart(propid_filter_t *filter)
     filter->consistency.steady_coeff = 0u;
 }
 
-/* End of a window: both tests and the flag. */
-static void close_window(propid_filter_t *filter)
+/* End of a window: both tests and the flag (value, var: per_rotor_coefficients
+ * of this step). */
+static void close_window(propid_filter_t *filter, const float *value, const float *var)
 {
     propid_consistency_t *monitor = &filter->consistency;
     const propid_derived_t *derived = &filter->derived;
@@ -142,9 +159,9 @@ static void close_window(propid_filter_t *filter)
     float worst = 0.0f;
     for (uint8_t c = 0; c < count; ++c) {
         const uint8_t k = (uint8_t)(first + c);
-        const float var_end = core->cov[propid_cov_index(k, k)];
+        const float var_end = var[c];
         const float removed = monitor->start_var[c] + propid_process_psd(derived, k) * elapsed_s - var_end;
-        const float change = core->state[k] - monitor->start_coeff[c];
+        const float change = value[c] - monitor->start_coeff[c];
         /* Steady (for a claim): within 3 explained std; down to the variance floor
          * (the resolution of P) when the window explained less: a coefficient
          * about which nothing was learnt should not move. */
@@ -193,7 +210,7 @@ void propid_consistency_observe(propid_filter_t *filter, uint32_t gated_mask)
 {
     propid_consistency_t *monitor = &filter->consistency;
     if (!monitor->started) {
-        start_window(filter);
+        start_window(filter, NULL, NULL);
         return;
     }
     const propid_core_t *core = &filter->core;
@@ -214,8 +231,12 @@ void propid_consistency_observe(propid_filter_t *filter, uint32_t gated_mask)
             return;
         }
     }
-    close_window(filter);
-    start_window(filter);
+    /* The coefficients per rotor once for both (the drag block is kept in its yaw basis). */
+    float value[2u * PROPID_MAX_ROTORS];
+    float var[2u * PROPID_MAX_ROTORS];
+    per_rotor_coefficients(filter, value, var);
+    close_window(filter, value, var);
+    start_window(filter, value, var);
 }
 
 #endif /* PROPID_CONSISTENCY */

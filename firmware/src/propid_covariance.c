@@ -8,8 +8,9 @@
 
 #include "propid_internal.h"
 
-void propid_cov_set_prior(const propid_derived_t *derived, uint8_t rotor_count, propid_core_t *core)
+void propid_cov_set_prior(const propid_derived_t *derived, const propid_drag_basis_t *basis, propid_core_t *core)
 {
+    const uint8_t rotor_count = basis->rotor_count;
     const uint8_t n = derived->state_count;
     memset(core->state, 0, sizeof(core->state));
     memset(core->cov, 0, sizeof(core->cov));
@@ -20,6 +21,9 @@ void propid_cov_set_prior(const propid_derived_t *derived, uint8_t rotor_count, 
     if (derived->layout.torque_scale != PROPID_NO_STATE) {
         core->state[derived->layout.torque_scale] = 1.0f; /* the configured J and arms */
     }
+    /* The drag block in the yaw basis (propid_internal.h): H applied to the nominal.
+     * Its prior variances are equal, so the prior P is the same in either basis. */
+    propid_drag_basis_apply(basis, &core->state[propid_first_drag(rotor_count)]);
     for (uint8_t k = 0; k < n; ++k) {
         core->cov[propid_cov_index(k, k)] = propid_prior_var(derived, k);
     }
@@ -135,13 +139,17 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
 }
 
 /* The coefficients found outside the range: each one's Gaussian truncated at its
- * bound (propid_truncation.c). Apart, so the usual sample's test stays lean. */
+ * bound (propid_truncation.c), per rotor: the drag block is flipped out of its
+ * yaw basis around the truncations (propid_internal.h; a rare path). Apart, so
+ * the usual sample's test stays lean. */
 static __attribute__((noinline)) PROPID_RARE uint32_t truncate_outside(propid_filter_t *filter)
 {
     const propid_kept_config_t *config = &filter->config;
     propid_core_t *core = &filter->core;
+    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, config);
     const uint8_t first = propid_first_thrust();
     const uint8_t end = propid_first_bias(config->rotor_count);
+    propid_drag_basis_flip(&basis, core);
     uint32_t clamped = 0u;
     for (uint8_t k = first; k < end; ++k) {
         if (core->state[k] < config->coeff_rel_min) {
@@ -158,6 +166,22 @@ static __attribute__((noinline)) PROPID_RARE uint32_t truncate_outside(propid_fi
         for (uint8_t k = first; k < end; ++k) {
             core->state[k] = fminf(fmaxf(core->state[k], config->coeff_rel_min), config->coeff_rel_max);
         }
+    }
+    /* The two reflections round the block relative to the per-rotor variances,
+     * far above the yaw combination's own: a PSD load of that size on the kept
+     * block's diagonal keeps P definite (math.md §2). */
+    const uint8_t first_drag = propid_first_drag(config->rotor_count);
+    float largest = 0.0f;
+    for (uint8_t i = 0; i < config->rotor_count; ++i) {
+        const float p = core->cov[propid_cov_index((uint8_t)(first_drag + i), (uint8_t)(first_drag + i))];
+        largest = p > largest ? p : largest;
+    }
+    propid_drag_basis_flip(&basis, core);
+    const float load = 4.0f * (float)config->rotor_count * PROPID_VAR_LOADING * largest;
+    for (uint8_t i = 0; i < config->rotor_count; ++i) {
+        core->cov[propid_cov_index((uint8_t)(first_drag + i), (uint8_t)(first_drag + i))] += load;
+    }
+    if (clamped != 0u) {
         (void)propid_cov_enforce_bounds(&filter->derived, core);
     }
     return clamped;
@@ -167,24 +191,34 @@ uint32_t propid_clamp_coefficients(propid_filter_t *filter)
 {
     const propid_kept_config_t *config = &filter->config;
     const propid_core_t *core = &filter->core;
+    const uint8_t rotor_count = config->rotor_count;
     /* Fast test of both bounds on the bit patterns (0 < min < max, see
-     * outside_positive_range); the rare truncation then compares the values. */
+     * outside_positive_range); the rare truncation then compares the values. The
+     * drag coefficients are bounded per rotor: their yaw-basis states mapped back. */
     uint32_t min_bits;
     uint32_t max_bits;
     memcpy(&min_bits, &config->coeff_rel_min, sizeof(min_bits));
     memcpy(&max_bits, &config->coeff_rel_max, sizeof(max_bits));
     const uint32_t range_bits = max_bits - min_bits;
+    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, config);
+    float km_rel[PROPID_MAX_ROTORS];
     uint32_t outside = 0u;
-    if (config->rotor_count == 4u) {
-        /* The quad: one straight-line test of the 8 coefficients' bit patterns. */
-PROPID_UNROLL(8)
-        for (uint8_t k = PROPID_QUAD_FIRST_THRUST; k < PROPID_QUAD_FIRST_BIAS; ++k) {
-            outside |= propid_outside_positive_range(core->state[k], min_bits, range_bits);
+    if (rotor_count == 4u) {
+        /* The quad: straight-line tests of the 8 coefficients' bit patterns. */
+        const float *z = &core->state[PROPID_QUAD_FIRST_DRAG];
+        const float *v = basis.vector;
+        const float along = basis.scale * (z[0] * v[0] + z[1] * v[1] + z[2] * v[2] + z[3] * v[3]);
+PROPID_UNROLL(4)
+        for (uint8_t i = 0; i < 4u; ++i) {
+            km_rel[i] = z[i] - along * v[i];
+            outside |= propid_outside_positive_range(core->state[PROPID_QUAD_FIRST_THRUST + i], min_bits, range_bits);
+            outside |= propid_outside_positive_range(km_rel[i], min_bits, range_bits);
         }
     } else {
-        const uint8_t end = propid_first_bias(config->rotor_count);
-        for (uint8_t k = propid_first_thrust(); k < end; ++k) {
-            outside |= propid_outside_positive_range(core->state[k], min_bits, range_bits);
+        propid_drag_per_rotor(&basis, core, km_rel, NULL);
+        for (uint8_t i = 0; i < rotor_count; ++i) {
+            outside |= propid_outside_positive_range(core->state[PROPID_RATE_STATES + i], min_bits, range_bits);
+            outside |= propid_outside_positive_range(km_rel[i], min_bits, range_bits);
         }
     }
     return outside == 0u ? 0u : truncate_outside(filter);

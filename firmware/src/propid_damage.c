@@ -137,7 +137,6 @@ propid_status_t propid_damage_init(propid_damage_t *detector, const propid_damag
  * error left in place would be read as a larger loss. */
 static void reopen_rotor(propid_filter_t *filter, uint8_t rotor)
 {
-    const uint8_t rotor_count = filter->config.rotor_count;
     for (uint8_t a = 0; a < PROPID_RATE_STATES; ++a) {
         propid_cov_reset_state(&filter->derived, &filter->core, a);
         /* The unexplained torque moved the rate by about the innovation: the
@@ -147,9 +146,8 @@ static void reopen_rotor(propid_filter_t *filter, uint8_t rotor)
         filter->core.cov[propid_cov_index(a, a)] += nu * nu;
         filter->core.gated_run[a] = 0u;
     }
-    propid_cov_reset_state(&filter->derived, &filter->core, (uint8_t)(propid_first_thrust() + rotor));
-    propid_cov_reset_state(&filter->derived, &filter->core,
-                           (uint8_t)(propid_first_drag(rotor_count) + rotor));
+    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    propid_cov_reset_rotor(&filter->derived, &basis, &filter->core, rotor, 0);
     filter->core.health |= PROPID_HEALTH_ROTOR_DAMAGE;
 }
 
@@ -193,7 +191,9 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
     }
 
     const uint8_t rotor_count = detector->rotor_count;
-    const uint8_t first_drag = propid_first_drag(rotor_count);
+    float km_rel[PROPID_MAX_ROTORS];
+    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    propid_drag_per_rotor(&basis, core, km_rel, NULL);
     const float adapt = detector->config.adapt_time_s;
     const float alpha = dt < adapt ? dt / adapt : 1.0f;
     detector->armed_s += dt;
@@ -202,14 +202,13 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
     float best_statistic = detector->threshold;
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const float kf_rel = core->state[propid_first_thrust() + i];
-        const float km_rel = core->state[first_drag + i];
         const float weight = dt * core->rotor_speed_sq[i];
         float g[3];
         float norm_sq = 0.0f;
         float dot = 0.0f;
         for (uint8_t a = 0; a < 3u; ++a) {
             g[a] = weight * inv_sd[a] *
-                   (filter->derived.thrust_torque[i][a] * kf_rel + filter->derived.drag_torque[i][a] * km_rel);
+                   (filter->derived.thrust_torque[i][a] * kf_rel + filter->derived.drag_torque[i][a] * km_rel[i]);
             norm_sq += g[a] * g[a];
             dot += g[a] * z[a];
         }

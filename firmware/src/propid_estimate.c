@@ -48,18 +48,23 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
         kf_claim_var += config->inertia_rel_std * config->inertia_rel_std;
     }
 #endif
+    /* The drag coefficients per rotor from their yaw basis (propid_internal.h). */
+    float km_rel[PROPID_MAX_ROTORS];
+    float km_rel_var[PROPID_MAX_ROTORS];
+    const propid_drag_basis_t basis = propid_drag_basis(derived, config);
+    propid_drag_per_rotor(&basis, core, km_rel, km_rel_var);
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const uint8_t kf = (uint8_t)(propid_first_thrust() + i);
         const uint8_t km = (uint8_t)(first_drag + i);
         const float kf_nominal = config->rotor[i].thrust_coeff_nominal;
         const float km_nominal = config->rotor[i].drag_coeff_nominal;
         const float kf_var = core->cov[propid_cov_index(kf, kf)];
-        const float km_var = core->cov[propid_cov_index(km, km)];
+        const float km_var = km_rel_var[i];
         const uint16_t bit = (uint16_t)(1u << i);
         all_rotors |= bit;
         estimate->thrust_coeff[i] = core->state[kf] * kf_nominal;
         estimate->thrust_coeff_std[i] = std_of(kf_var) * kf_nominal;
-        estimate->drag_coeff[i] = core->state[km] * km_nominal;
+        estimate->drag_coeff[i] = km_rel[i] * km_nominal;
         estimate->drag_coeff_std[i] = std_of(km_var) * km_nominal;
         /* "Converging": std below half its prior, i.e. variance below a quarter. */
         if (kf_var < 0.25f * propid_prior_var(derived, kf)) {

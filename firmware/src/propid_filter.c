@@ -24,7 +24,8 @@ static void core_to_prior(propid_filter_t *filter)
 {
     propid_core_t *core = &filter->core;
     memset(core, 0, sizeof(*core));
-    propid_cov_set_prior(&filter->derived, filter->config.rotor_count, core);
+    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    propid_cov_set_prior(&filter->derived, &basis, core);
     core->stale_mark = filter->counters.rejected[-(int)PROPID_ERR_ROTOR_STALE];
 #if PROPID_DELAY_SLOTS > 0
     propid_delay_clear(filter);
@@ -82,13 +83,8 @@ propid_status_t propid_reset_rotor(propid_filter_t *filter, uint8_t rotor)
     if (rotor >= rotor_count) {
         return reject(filter, PROPID_ERR_ROTOR_INDEX);
     }
-    propid_core_t *core = &filter->core;
-    const uint8_t thrust = (uint8_t)(propid_first_thrust() + rotor);
-    const uint8_t drag = (uint8_t)(propid_first_drag(rotor_count) + rotor);
-    core->state[thrust] = 1.0f;
-    core->state[drag] = 1.0f;
-    propid_cov_reset_state(&filter->derived, core, thrust);
-    propid_cov_reset_state(&filter->derived, core, drag);
+    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    propid_cov_reset_rotor(&filter->derived, &basis, &filter->core, rotor, 1);
 #if PROPID_CONSISTENCY
     propid_consistency_restart(filter);
 #endif

@@ -91,6 +91,14 @@ void propid_input_compensation_prepare(propid_filter_t *filter, float dt)
     for (uint8_t i = 0; i < rotor_count; ++i) {
         input_var[i] = 0.5f * derived->input_noise_var * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
     }
+    /* The coefficients per rotor (the drag block is kept in its yaw basis:
+     * propid_internal.h). */
+    float coefficient[2u * PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        coefficient[i] = state[first + i];
+    }
+    const propid_drag_basis_t basis = propid_drag_basis(derived, &filter->config);
+    propid_drag_per_rotor(&basis, core, coefficient + rotor_count, NULL);
     float innovation_var[3];
     float weight[3];
     for (uint8_t a = 0; a < 3u; ++a) {
@@ -113,7 +121,7 @@ void propid_input_compensation_prepare(propid_filter_t *filter, float dt)
         for (uint8_t p = derived->jac_rate_count[a]; p < count; ++p) {
             const uint8_t rotor = derived->jac_rotor[a][p];
             if (rotor < rotor_count) { /* not the scale's or the disturbance's entry */
-                gain[rotor] += entry_torque(derived, a, p, scale) * state[derived->jac_column[a][p]];
+                gain[rotor] += entry_torque(derived, a, p, scale) * coefficient[derived->jac_column[a][p] - first];
             }
         }
         for (uint8_t p = derived->jac_rate_count[a]; p < count; ++p) {
@@ -123,8 +131,17 @@ void propid_input_compensation_prepare(propid_filter_t *filter, float dt)
                     weight[a] * input_var[rotor] * gain[rotor] * entry_torque(derived, a, p, scale);
             }
         }
+        /* The factors per coefficient to the yaw basis of P's drag block, so that
+         * P times them is the correction of the states as kept. */
+        propid_drag_basis_apply(&basis, factor + rotor_count);
     }
     coefficient_products(core, first, coefficients);
+    /* P theta per rotor (the products are in the basis the states are kept in). */
+    float direction[2u * PROPID_MAX_ROTORS];
+    for (uint8_t k = 0; k < coefficients; ++k) {
+        direction[k] = core->input_product[0][k];
+    }
+    propid_drag_basis_apply(&basis, direction + rotor_count);
     core->input_information_time += dt;
     const float share = dt / core->input_information_time;
     for (uint8_t a = 0; a < 3u; ++a) {
@@ -140,8 +157,7 @@ void propid_input_compensation_prepare(propid_filter_t *filter, float dt)
         for (uint8_t p = derived->jac_rate_count[a]; p < count; ++p) {
             const uint8_t rotor = derived->jac_rotor[a][p];
             if (rotor < rotor_count) {
-                along[rotor] += entry_torque(derived, a, p, scale) *
-                                core->input_product[0][derived->jac_column[a][p] - first];
+                along[rotor] += entry_torque(derived, a, p, scale) * direction[derived->jac_column[a][p] - first];
             }
         }
         float error_information = 0.0f;

@@ -210,13 +210,13 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
  * diagonal term of one float32 epsilon of the variance, the size of one
  * rounding, so P stays positive definite where the exact P is nearly singular
  * (constant coefficients: correlations -> 1). Every step, but the drag
- * coefficients (km) every second step: the yaw torque sum_i s_i km_i u_i is
- * the best-determined combination of all (every yaw update measures it), and
- * a loading of each km's own, far larger, variance re-opens it every step, a
- * fading memory that holds the km above the Cramer-Rao bound on circle
- * flights. Every second step halves that and needed no covariance repair on
- * the design flights; every fourth did (math.md). A fraction of epsilon per
- * step is no option: 1 + eps/2 rounds to 1 in float32.
+ * coefficients (km) every second step (chosen when they were kept per rotor,
+ * where a loading of each km's own, far larger, variance re-opened their
+ * best-determined combination, the yaw torque, every step; every second step
+ * needed no covariance repair on the design flights, every fourth did:
+ * math.md). In the drag block's yaw basis (below) that combination is loaded
+ * by its own variance; the schedule was kept. A fraction of epsilon per step
+ * is no option: 1 + eps/2 rounds to 1 in float32.
  * PROPID_ROUNDING_TOL is the rounding of the integrity tests themselves (a
  * product or a three-term sum of float32 values): differences within it are
  * not faults. */
@@ -291,6 +291,70 @@ static inline uint8_t propid_first_bias(uint8_t rotor_count)
     return (uint8_t)(PROPID_RATE_STATES + 2u * rotor_count);
 }
 
+/* The drag coefficients' yaw basis (docs/math.md §2, "The drag coefficients'
+ * basis"). The state and P hold the km block as z = H km_rel, H the reflection
+ * I - scale v v^T (symmetric, orthogonal, its own inverse) with v = e_0 + s_0 s /
+ * sqrt(N), s the yaw signs, whose first row is -s_0 s / sqrt(N): z_0 is the
+ * yaw-torque combination every yaw update measures, an element of its own,
+ * rounded (and loaded) relative to its own variance instead of the km's far
+ * larger ones. Every reader of a per-rotor km maps at the boundary; the rate
+ * rows' drag entries are multiplied by H (a row times H is again a row over the
+ * same N columns). The general build derives v at init; the quad build (N = 4:
+ * v = (3/2, +-1/2, +-1/2, +-1/2), scale 2/3) reads it from a table in flash by
+ * the relative yaw signs (config.yaw_sign_flips). */
+typedef struct {
+    const float *vector; /* v, rotor_count entries */
+    float scale;         /* 2 / v.v */
+    uint8_t rotor_count;
+} propid_drag_basis_t;
+
+#if !PROPID_GENERAL_VEHICLES
+/* v for each pattern of rotors 1..3's yaw signs relative to rotor 0's (propid_drag_basis.c). */
+extern const float propid_quad_drag_basis[8][4];
+#endif
+
+static inline propid_drag_basis_t propid_drag_basis(const propid_derived_t *derived,
+                                                    const propid_kept_config_t *config)
+{
+    propid_drag_basis_t basis;
+#if PROPID_GENERAL_VEHICLES
+    basis.vector = derived->drag_basis;
+    basis.scale = derived->drag_basis_scale;
+#else
+    (void)derived;
+    basis.vector = propid_quad_drag_basis[(config->yaw_sign_flips >> 1) & 7u];
+    basis.scale = 2.0f / 3.0f;
+#endif
+    basis.rotor_count = config->rotor_count;
+    return basis;
+}
+
+/* x := H x for an N-vector. */
+static inline void propid_drag_basis_apply(const propid_drag_basis_t *basis, float *x)
+{
+    const float *v = basis->vector;
+    float dot = 0.0f;
+    for (uint8_t i = 0; i < basis->rotor_count; ++i) {
+        dot += v[i] * x[i];
+    }
+    dot *= basis->scale;
+    for (uint8_t i = 0; i < basis->rotor_count; ++i) {
+        x[i] -= dot * v[i];
+    }
+}
+
+/* propid_drag_basis.c. The state's and P's drag block between the yaw basis and
+ * the per-rotor one (either way: H is its own inverse). */
+PROPID_RARE void propid_drag_basis_flip(const propid_drag_basis_t *basis, propid_core_t *core);
+/* Per-rotor km_rel (H z) and, when km_var is not NULL, their variances (H P_zz H)_ii. */
+void propid_drag_per_rotor(const propid_drag_basis_t *basis, const propid_core_t *core, float *km_rel,
+                           float *km_var);
+/* Rotor `rotor`'s coefficients back to their prior variance, uncorrelated, and
+ * with to_nominal also their value to nominal (per-rotor meaning: the basis is
+ * flipped around the reset). */
+PROPID_RARE void propid_cov_reset_rotor(const propid_derived_t *derived, const propid_drag_basis_t *basis,
+                                        propid_core_t *core, uint8_t rotor, int to_nominal);
+
 /* The fixed indices of the plain quad (4 rotors, no optional state): the
  * straight-line kernels are written for this layout. */
 #define PROPID_QUAD_FIRST_THRUST PROPID_RATE_STATES
@@ -341,7 +405,8 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 
 /* propid_covariance.c */
 /* State to nominal, covariance to the diagonal prior. */
-PROPID_RARE void propid_cov_set_prior(const propid_derived_t *derived, uint8_t rotor_count, propid_core_t *core);
+PROPID_RARE void propid_cov_set_prior(const propid_derived_t *derived, const propid_drag_basis_t *basis,
+                                      propid_core_t *core);
 /* Zero row and column `index`, put its prior variance on the diagonal. */
 PROPID_RARE void propid_cov_reset_state(const propid_derived_t *derived, propid_core_t *core, uint8_t index);
 /* Floors and ceilings on every variance; returns 1 if a diagonal was bad and the

@@ -47,7 +47,8 @@ static propid_status_t bound_rates(float rate_next[3], float limit, float check)
 static PROPID_QUAD_INLINE propid_status_t
 predict_stage_quad(const float *restrict state, const float *restrict input_speed_sq,
                    const float *restrict latest_speed_sq, const float *restrict quad_gyro,
-                   const float (*restrict jac_torque)[PROPID_JAC_TORQUE_ROW], float dt,
+                   const float (*restrict jac_torque)[PROPID_JAC_TORQUE_ROW],
+                   const float *restrict drag_basis, float drag_basis_scale, float dt,
                    float rate_limit, float *restrict rate_next,
                    float (*restrict jacobian_dt)[PROPID_JAC_ROW])
 {
@@ -76,12 +77,26 @@ PROPID_UNROLL(3)
         gyroscopic[a] = entry0 * rate[other0] + entry1 * rate[other1];
         const float *coefficient = state + (a < 2u ? PROPID_QUAD_FIRST_THRUST : PROPID_QUAD_FIRST_DRAG);
         const float *torque = jac_torque[a];
+        float entry[4];
+PROPID_UNROLL(4)
+        for (uint8_t i = 0; i < 4u; ++i) {
+            entry[i] = torque[PROPID_QUAD_TORQUE_FIRST + i] * speed_sq_dt[i];
+        }
+        if (a == 2u) {
+            /* The drag entries times H: the yaw row over the yaw-basis states
+             * (propid_internal.h, propid_drag_basis_apply). */
+            const float along = drag_basis_scale * (entry[0] * drag_basis[0] + entry[1] * drag_basis[1] +
+                                                    entry[2] * drag_basis[2] + entry[3] * drag_basis[3]);
+PROPID_UNROLL(4)
+            for (uint8_t i = 0; i < 4u; ++i) {
+                entry[i] -= along * drag_basis[i];
+            }
+        }
         float sum = 0.0f;
 PROPID_UNROLL(4)
         for (uint8_t i = 0; i < 4u; ++i) {
-            const float entry = torque[PROPID_QUAD_TORQUE_FIRST + i] * speed_sq_dt[i];
-            sum += entry * coefficient[i];
-            g[2u + i] = entry;
+            sum += entry[i] * coefficient[i];
+            g[2u + i] = entry[i];
         }
         rotors[a] = sum;
         predictor[a] = rate[a] + (sum + 0.5f * gyroscopic[a]); /* the Euler step */
@@ -158,6 +173,7 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
     }
 #endif
     const uint8_t n = derived->state_count;
+    const propid_drag_basis_t basis = propid_drag_basis(derived, &filter->config);
     float check = 0.0f;
     float rotors[3];
     float gyroscopic[3];
@@ -185,6 +201,7 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
          * s torque dt u and the scale's own entry is the unscaled thrust part. */
         sum = 0.0f;
         float thrust_part = 0.0f;
+        uint8_t drag_entry = count;
         const float *torque = derived->jac_torque[a];
         const uint8_t *rotor = derived->jac_rotor[a];
         for (uint8_t p = rate_count; p < count; ++p) {
@@ -193,12 +210,25 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
                 continue;
             }
             float entry = torque[p] * speed_sq_dt[rotor[p]];
+            g[p] = entry;
             if (column[p] < derived->layout.drag) {
                 thrust_part += entry * state[column[p]];
                 entry *= torque_scale;
+                g[p] = entry;
+            } else if (column[p] < derived->layout.gyro_bias) {
+                drag_entry = drag_entry < p ? drag_entry : p; /* summed in the yaw basis below */
+                continue;
             }
             sum += entry * state[column[p]];
-            g[p] = entry;
+        }
+        /* The row's drag entries (all N, contiguous, rotor order: propid_config.c)
+         * times H: the row over the yaw-basis states z (propid_internal.h). */
+        if (drag_entry < count) {
+            propid_drag_basis_apply(&basis, &g[drag_entry]);
+            const float *z = &state[derived->layout.drag];
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                sum += g[drag_entry + i] * z[i];
+            }
         }
         rotors[a] = sum + reaction[a];
         /* The Euler step omega + dt f (the G entries already carry dt). */
@@ -242,9 +272,10 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
         return predict_stage_any(filter, dt, rate_next, jacobian_dt);
     }
 #endif
+    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
     return predict_stage_quad(filter->core.state, filter->core.input_speed_sq,
                               filter->core.rotor_speed_sq, filter->derived.quad_gyro,
-                              filter->derived.jac_torque, dt, propid_rate_limit(filter),
+                              filter->derived.jac_torque, basis.vector, basis.scale, dt, propid_rate_limit(filter),
                               rate_next, jacobian_dt);
 }
 
@@ -360,7 +391,7 @@ static void add_input_block(float *cov, const float (*gain)[PROPID_MAX_ROTORS], 
  * thrust columns in the roll and pitch rows, drag columns in the yaw row;
  * straight-line. */
 static __attribute__((noinline)) void add_input_noise_quad(const propid_derived_t *derived,
-                                                           propid_core_t *core, float weight)
+                                                           propid_core_t *core, const float *km_rel, float weight)
 {
     const float *state = core->state;
     float input_var[4];
@@ -370,7 +401,7 @@ PROPID_UNROLL(4)
         input_var[i] = weight * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
         gain[0][i] = derived->jac_torque[0][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_THRUST + i];
         gain[1][i] = derived->jac_torque[1][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_THRUST + i];
-        gain[2][i] = derived->jac_torque[2][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_DRAG + i];
+        gain[2][i] = derived->jac_torque[2][PROPID_QUAD_TORQUE_FIRST + i] * km_rel[i];
     }
     float *cov = core->cov;
 PROPID_UNROLL(3)
@@ -387,7 +418,7 @@ PROPID_UNROLL(3)
 
 /* Any vehicle, over the sparsity lists. */
 static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t *derived,
-                                                          propid_core_t *core, float weight)
+                                                          propid_core_t *core, const float *km_rel, float weight)
 {
     const float *state = core->state;
     const uint8_t rotor_count = (uint8_t)(derived->layout.drag - derived->layout.thrust);
@@ -407,8 +438,9 @@ static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t
                 continue;
             }
             const uint8_t column = derived->jac_column[a][p];
-            const float entry = derived->jac_torque[a][p] * state[column];
-            gain[a][rotor] += column < derived->layout.drag ? entry * torque_scale : entry;
+            const int thrust = column < derived->layout.drag;
+            const float entry = derived->jac_torque[a][p] * (thrust ? state[column] : km_rel[rotor]);
+            gain[a][rotor] += thrust ? entry * torque_scale : entry;
         }
     }
     add_input_block(core->cov, (const float (*)[PROPID_MAX_ROTORS])gain, input_var, rotor_count);
@@ -420,10 +452,16 @@ static void add_input_noise(const propid_derived_t *derived, propid_core_t *core
      * (the factor 0.5 of that mean folded in). */
     const float span = derived->input_noise_time > dt ? derived->input_noise_time : dt;
     const float weight = 0.5f * derived->input_noise_var * dt * span;
+    /* B at the drag coefficients per rotor (kept in their yaw basis; this term is
+     * in the general build only, whose derived data holds the basis). */
+    const propid_drag_basis_t basis = {derived->drag_basis, derived->drag_basis_scale,
+                                       (uint8_t)(derived->layout.drag - derived->layout.thrust)};
+    float km_rel[PROPID_MAX_ROTORS];
+    propid_drag_per_rotor(&basis, core, km_rel, NULL);
     if (derived->quad_layout) {
-        add_input_noise_quad(derived, core, weight);
+        add_input_noise_quad(derived, core, km_rel, weight);
     } else {
-        add_input_noise_any(derived, core, weight);
+        add_input_noise_any(derived, core, km_rel, weight);
     }
 }
 #endif

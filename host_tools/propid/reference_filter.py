@@ -1,7 +1,8 @@
 """Float64 numpy reference of the firmware filter (firmware/src/propid_*.c).
 
 The SAME algorithm, step for step: scaled state [rate(3), kf/kf_nom(N), km/km_nom(N),
-gyro bias(3)], prediction with the trapezoid input and Heun on the gyroscopic
+gyro bias(3)] (the km block kept, in the state and P, in the yaw basis of docs/math.md §2,
+mapped to per rotor at the boundary as in C), prediction with the trapezoid input and Heun on the gyroscopic
 term, P := F P F^T + Q dt, three sequential scalar gyro updates (x, y, z) with the
 symmetric rank-one form, innovation gate with re-opening, coefficient clamps,
 variance floors/ceilings, the round-robin covariance integrity check and repair,
@@ -62,6 +63,15 @@ class ReferenceFilter:
         if int(config.torque_scale):
             self.torque_scale, nxt = nxt, nxt + 1
         self.n = nxt
+        # The drag coefficients' yaw basis (C: propid_drag_basis, docs/math.md §2): the state
+        # and P keep the km block as z = H km_rel, H = I - 2 v v^T / v.v, v = e_0 + s_0 s / sqrt(N),
+        # H symmetric and its own inverse; `basis` is H on that block, identity elsewhere.
+        yaw_signs = np.array([_f32(v) for v in config.yaw_signs])
+        v = yaw_signs[0] * yaw_signs / math.sqrt(n_rot)
+        v[0] += 1.0
+        self.basis = np.eye(self.n)
+        self.basis[self.first_drag:self.first_bias, self.first_drag:self.first_bias] = (
+            np.eye(n_rot) - 2.0 * np.outer(v, v) / float(v @ v))
         c = {name: _f32(getattr(config, name)) for name in (
             "rate_std0", "thrust_coeff_rel_std0", "drag_coeff_rel_std0", "gyro_bias_std0",
             "gyro_noise_density", "gyro_sample_rate_hz", "rate_process_noise",
@@ -170,6 +180,7 @@ class ReferenceFilter:
         self.state[3:self.first_bias] = 1.0
         if self.torque_scale is not None:
             self.state[self.torque_scale] = 1.0
+        self.state = self.basis @ self.state  # (equal km priors: P's prior is the same in either basis)
         self.cov = np.diag(self.prior_var.copy())
         self.rotor_speed_sq = np.zeros(self.rotor_count)
         self.input_speed_sq = np.zeros(self.rotor_count)
@@ -208,10 +219,20 @@ class ReferenceFilter:
     def reset_rotor(self, rotor: int) -> int:
         if not 0 <= rotor < self.rotor_count:
             return self._reject("PROPID_ERR_ROTOR_INDEX")
+        self._flip_basis()  # per rotor around the reset (C: propid_cov_reset_rotor)
         for k in (3 + rotor, self.first_drag + rotor):
             self.state[k] = 1.0
             self._reset_state(k)
+        self._flip_basis()
         return STATUS["PROPID_OK"]
+
+    def _flip_basis(self) -> None:
+        """State and P between the drag block's yaw basis and per rotor (either way)."""
+        self.state = self.basis @ self.state
+        self.cov = self.basis @ self.cov @ self.basis
+
+    def _per_rotor_state(self) -> np.ndarray:
+        return self.basis @ self.state
 
     def resync(self, t_us: int) -> int:
         for a in range(3):
@@ -433,17 +454,19 @@ class ReferenceFilter:
                 start, end = np.sqrt(self.input_speed_sq), np.sqrt(self.rotor_speed_sq)
                 momentum_z = float(self.rotor_momentum @ (0.5 * (start + end)))
                 reaction = (end - start) @ self.rotor_reaction
-            rate_dot, rows = self.rate_derivative_and_jacobian(self.state, speed_sq, momentum_z)
+            # The model per rotor, its Jacobian's drag columns then times H (the kept basis).
+            model_state = self._per_rotor_state()
+            rate_dot, rows = self.rate_derivative_and_jacobian(model_state, speed_sq, momentum_z)
             # Heun (docs/math.md §2): f again at the Euler predictor, averaged. Only
             # the gyroscopic part differs between the two (the rotor part does not
             # depend on omega), so this is the C filter's "Heun on the gyroscopic
             # term"; the Jacobian is the mean of the two (the gyroscopic Jacobian at
             # the midpoint, as it is linear in omega; the rotor columns are equal).
-            predicted = self.state.copy()
+            predicted = model_state.copy()
             predicted[:3] = self.state[:3] + dt * rate_dot + reaction
             rate_dot_next, rows_next = self.rate_derivative_and_jacobian(predicted, speed_sq, momentum_z)
             rate_next = self.state[:3] + dt * 0.5 * (rate_dot + rate_dot_next) + reaction
-            jac_dt = dt * 0.5 * (rows + rows_next)
+            jac_dt = dt * 0.5 * (rows + rows_next) @ self.basis
             if not (np.all(np.isfinite(rate_next)) and np.all(np.isfinite(jac_dt))
                     and np.all(np.isfinite(self.state))):
                 return self._reject("PROPID_ERR_NUMERIC")
@@ -477,9 +500,10 @@ class ReferenceFilter:
                 # Rotor-speed input error (C: add_input_noise, docs/math.md §14): B Sigma_u B^T
                 # dt max(dt, time), B = d(omega_dot)/d(Omega^2) at the current coefficients.
                 n_rot = self.rotor_count
-                _, unit_rows = self.rate_derivative_and_jacobian(self.state, np.ones(n_rot))
-                gain = (unit_rows[:, 3:3 + n_rot] * self.state[3:3 + n_rot]
-                        + unit_rows[:, 3 + n_rot:3 + 2 * n_rot] * self.state[3 + n_rot:3 + 2 * n_rot])
+                coeffs = self._per_rotor_state()
+                _, unit_rows = self.rate_derivative_and_jacobian(coeffs, np.ones(n_rot))
+                gain = (unit_rows[:, 3:3 + n_rot] * coeffs[3:3 + n_rot]
+                        + unit_rows[:, 3 + n_rot:3 + 2 * n_rot] * coeffs[3 + n_rot:3 + 2 * n_rot])
                 input_var = self.input_noise_var * speed_sq * dt * max(dt, self.input_noise_time)
                 self.cov[:3, :3] += (gain * input_var) @ gain.T
             self.state[:3] = rate_next
@@ -518,10 +542,13 @@ class ReferenceFilter:
         n_rot = self.rotor_count
         coeff = slice(3, 3 + 2 * n_rot)
         rotor_of = np.concatenate([np.arange(n_rot), np.arange(n_rot)])
-        _, unit_rows = self.rate_derivative_and_jacobian(self.state, np.ones(n_rot))
+        # Per rotor (the kept drag block is in its yaw basis); the corrections go back below.
+        state = self._per_rotor_state()
+        cov = self.basis @ self.cov @ self.basis
+        _, unit_rows = self.rate_derivative_and_jacobian(state, np.ones(n_rot))
         entry = unit_rows[:, coeff]  # d(omega_dot_a)/d(u_i) per unit coefficient, thrust then drag columns
-        theta = self.state[coeff]
-        p_coeff = self.cov[coeff, coeff]
+        theta = state[coeff]
+        p_coeff = cov[coeff, coeff]
         direction = p_coeff @ theta  # P theta: the common scale's direction
         input_var = 0.5 * self.input_noise_var * (self.input_speed_sq + self.rotor_speed_sq)
         tau = self.input_noise_time
@@ -532,21 +559,21 @@ class ReferenceFilter:
                "cross": np.zeros(3), "valid": [False] * 3}
         for a in range(3):
             bias = self.first_bias + a
-            p_rate = self.cov[a, a] + self.cov[a, bias]
-            innovation_var = p_rate + self.cov[a, bias] + self.cov[bias, bias] + self.gyro_var
+            p_rate = cov[a, a] + cov[a, bias]
+            innovation_var = p_rate + cov[a, bias] + cov[bias, bias] + self.gyro_var
             out["rate_gain"][a] = p_rate / innovation_var
             out["cross"][a] = rho * self.input_error_cross[a]
             out["carried"][a] = self.input_error_carried[a] + 2.0 * out["cross"][a] + 1.0
             weight = out["carried"][a] * dt * dt / innovation_var
             gain = np.bincount(rotor_of, weights=entry[a] * theta, minlength=n_rot)
             along = np.bincount(rotor_of, weights=entry[a] * direction, minlength=n_rot)
-            cross_cov = float(theta @ (self.cov[coeff, a] + self.cov[coeff, bias]))
+            cross_cov = float(theta @ (cov[coeff, a] + cov[coeff, bias]))
             self.input_information[a] += share * (cross_cov * cross_cov / innovation_var - self.input_information[a])
             error_information = weight * float(np.sum(input_var * along * along))
             self.input_error_information[a] += share * (error_information - self.input_error_information[a])
             out["valid"][a] = self.input_error_information[a] <= INPUT_ERROR_MAX_SHARE * self.input_information[a]
             factor = weight * input_var[rotor_of] * gain[rotor_of] * entry[a]
-            out["correction"][a] = p_coeff @ factor
+            out["correction"][a] = self.basis[coeff, coeff] @ (p_coeff @ factor)
         return out
 
     def _input_compensation_apply(self, compensation: dict, gated_axes: list[bool]) -> None:
@@ -687,16 +714,27 @@ class ReferenceFilter:
     def _clamp(self, extra: int = 0) -> None:
         lo, hi = self.c["coeff_rel_min"], self.c["coeff_rel_max"]
         clamped = extra
-        for k in range(3, self.first_bias):  # C: propid_clamp_coefficients, in index order
-            if self.state[k] < lo:
-                self._truncate(k, lo)
-                clamped += 1
-            elif self.state[k] > hi:
-                self._truncate(k, hi)
-                clamped += 1
-        if clamped > extra:
-            self.state[3:self.first_bias] = np.clip(self.state[3:self.first_bias], lo, hi)
-            self._enforce_bounds()
+        # C: propid_clamp_coefficients, in index order, per rotor (the drag block flipped out of
+        # its yaw basis around the truncations, as in C).
+        coeffs = self._per_rotor_state()[3:self.first_bias]
+        if np.any(coeffs < lo) or np.any(coeffs > hi):
+            self._flip_basis()
+            for k in range(3, self.first_bias):
+                if self.state[k] < lo:
+                    self._truncate(k, lo)
+                    clamped += 1
+                elif self.state[k] > hi:
+                    self._truncate(k, hi)
+                    clamped += 1
+            if clamped > extra:
+                self.state[3:self.first_bias] = np.clip(self.state[3:self.first_bias], lo, hi)
+            # C: the reflections' rounding covered by a load on the kept drag block's diagonal.
+            drag = np.arange(self.first_drag, self.first_bias)
+            largest = float(np.max(np.diag(self.cov)[drag]))
+            self._flip_basis()
+            self.cov[drag, drag] += 4.0 * self.rotor_count * VAR_LOADING * largest
+            if clamped > extra:
+                self._enforce_bounds()
         if self.torque_scale is not None:  # C: propid_clamp_torque_scale
             s = self.torque_scale
             clamped += int(not lo <= self.state[s] <= hi)
@@ -736,11 +774,12 @@ class ReferenceFilter:
     # ------------------------------------------------------------------ outputs
     def estimate(self) -> Estimate:
         n_rot = self.rotor_count
-        std = np.sqrt(np.maximum(np.diag(self.cov), 0.0))
+        state, cov = self.scaled_state()  # per rotor
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
         kf = slice(3, 3 + n_rot)
         km = slice(self.first_drag, self.first_drag + n_rot)
         bias = slice(self.first_bias, self.first_bias + 3)
-        var = np.diag(self.cov)
+        var = np.diag(cov)
         bits = 1 << np.arange(n_rot)
 
         def mask(condition: np.ndarray) -> int:
@@ -760,10 +799,10 @@ class ReferenceFilter:
             health |= HEALTH["ALL_CONVERGED"]
         return Estimate(
             time_us=self.time_us,
-            body_rate=self.state[:3].copy(), body_rate_std=std[:3].copy(),
-            thrust_coeff=self.state[kf] * self.kf_nominal, thrust_coeff_std=std[kf] * self.kf_nominal,
-            drag_coeff=self.state[km] * self.km_nominal, drag_coeff_std=std[km] * self.km_nominal,
-            gyro_bias=self.state[bias].copy(), gyro_bias_std=std[bias].copy(),
+            body_rate=state[:3].copy(), body_rate_std=std[:3].copy(),
+            thrust_coeff=state[kf] * self.kf_nominal, thrust_coeff_std=std[kf] * self.kf_nominal,
+            drag_coeff=state[km] * self.km_nominal, drag_coeff_std=std[km] * self.km_nominal,
+            gyro_bias=state[bias].copy(), gyro_bias_std=std[bias].copy(),
             innovation=self.innovation.copy(), innovation_test_ratio=self.innovation_test_ratio.copy(),
             thrust_coeff_converging=mask(var[kf] < 0.25 * self.prior_var[kf]),
             thrust_coeff_converged=kf_converged,
@@ -803,7 +842,8 @@ class ReferenceFilter:
         return d
 
     def scaled_state(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.state.copy(), self.cov.copy()
+        """(state, P) per rotor (C: propid_abi_copy_state maps the drag block back too)."""
+        return self.basis @ self.state, self.basis @ self.cov @ self.basis
 
     @staticmethod
     def status_name(code: int) -> str:

@@ -4,6 +4,8 @@
 #include <math.h>
 #include <string.h>
 
+#include "../../firmware/src/propid_internal.h" /* the drag block's yaw basis */
+
 #define HONESTY_CONVERGED_TOL 0.05  /* a "converged" coefficient more than this off is a false claim */
 #define HONESTY_RECOVERED_TOL 0.10  /* recovered: every coefficient within this of the truth */
 #define HONESTY_NEES_EVERY 10      /* control steps between NEES samples (50 Hz at 500 Hz control) */
@@ -88,14 +90,18 @@ static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const dou
         index[2 * n_rotor + a] = layout->gyro_bias + a;
         truth[2 * n_rotor + a] = true_bias[a];
     }
+    /* The filter keeps its drag block in the yaw basis (propid_internal.h): per rotor here. */
+    propid_core_t core = filter->core;
+    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    propid_drag_basis_flip(&basis, &core);
     double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF];
     double e[HONESTY_MAX_DOF];
     for (int i = 0; i < n; i++) {
-        e[i] = (double)filter->core.state[index[i]] - truth[i];
+        e[i] = (double)core.state[index[i]] - truth[i];
         for (int j = 0; j <= i; j++) { /* nees_of reads the lower triangle */
             const int a = index[i] < index[j] ? index[i] : index[j];
             const int b = index[i] < index[j] ? index[j] : index[i];
-            p[i][j] = (double)filter->core.cov[propid_cov_index(a, b)]; /* the filter keeps the upper triangle */
+            p[i][j] = (double)core.cov[propid_cov_index(a, b)]; /* the filter keeps the upper triangle */
         }
     }
     const double nees = nees_of(p, e, n);

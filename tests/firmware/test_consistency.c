@@ -11,6 +11,7 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "per_rotor_view.h"
 #include "propid/propid.h"
 #include "unity.h"
 #include "test_rng.h"
@@ -218,17 +219,18 @@ static void fly(const flight_t *flight, result_t *out)
     out->final_converged = (uint16_t)(est.thrust_coeff_converged | (est.drag_coeff_converged << 8));
     out->would_have_converged = 1;
     out->std_claims = 0u;
+    const propid_core_t per_rotor = per_rotor_core(&filter);
     for (uint8_t i = 0; i < 4u; ++i) {
         const float third = config.converged_rel_std * config.converged_rel_std * (1.0f / 9.0f);
-        out->std_claims |= (uint16_t)((filter.core.cov[propid_cov_index(3u + i, 3u + i)] < third ? 1u : 0u) << i);
-        out->std_claims |= (uint16_t)((filter.core.cov[propid_cov_index(7u + i, 7u + i)] < third ? 1u : 0u) << (8u + i));
+        out->std_claims |= (uint16_t)((per_rotor.cov[propid_cov_index(3u + i, 3u + i)] < third ? 1u : 0u) << i);
+        out->std_claims |= (uint16_t)((per_rotor.cov[propid_cov_index(7u + i, 7u + i)] < third ? 1u : 0u) << (8u + i));
     }
     for (int i = 0; i < 4; ++i) {
         out->final_rel_err_max = fmaxf(out->final_rel_err_max, fabsf(est.thrust_coeff[i] / kf[i] - 1.0f));
         out->final_rel_err_max = fmaxf(out->final_rel_err_max, fabsf(est.drag_coeff[i] / km[i] - 1.0f));
     }
     for (uint8_t k = 3u; k < 11u; ++k) {
-        if (!(filter.core.cov[propid_cov_index(k, k)] < config.converged_rel_std * config.converged_rel_std)) {
+        if (!(per_rotor.cov[propid_cov_index(k, k)] < config.converged_rel_std * config.converged_rel_std)) {
             out->would_have_converged = 0;
         }
     }

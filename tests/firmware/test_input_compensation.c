@@ -16,6 +16,7 @@
 #include "propid/propid.h"
 #include "unity.h"
 #include "../../firmware/src/propid_internal.h"
+#include "per_rotor_view.h"
 #include "../../firmware/src/propid_model.h"
 #include "input_error_fixture.h"
 
@@ -71,7 +72,10 @@ static void check_dense(uint8_t rotors, int full_inertia, float time)
 
     /* Dense: E_a,col = d(omega_dot_a)/d(x_col) at unit speeds, B_ai from it. */
     const propid_filter_t *f = &compensated;
-    const float *x = f->core.state;
+    /* Per rotor (the filter keeps the drag block in its yaw basis). */
+    const propid_core_t per_rotor = per_rotor_core(f);
+    const propid_drag_basis_t basis = propid_drag_basis(&f->derived, &f->config);
+    const float *x = per_rotor.state;
     const uint8_t first = PROPID_RATE_STATES;
     const uint8_t coefficients = (uint8_t)(2u * rotors);
     float rows[3][PROPID_MAX_STATES];
@@ -83,9 +87,15 @@ static void check_dense(uint8_t rotors, int full_inertia, float time)
     const float rho = time > 0.0f ? expf(-dt / time) : 0.0f;
     for (uint8_t a = 0; a < 3u; ++a) {
         const uint8_t bias = (uint8_t)(f->derived.layout.gyro_bias + a);
-        const float s = propid_cov_at(f->core.cov, a, a) + 2.0f * propid_cov_at(f->core.cov, a, bias) +
-                        propid_cov_at(f->core.cov, bias, bias) + f->derived.gyro_var;
-        const float gain_rate = (propid_cov_at(f->core.cov, a, a) + propid_cov_at(f->core.cov, a, bias)) / s;
+        const float s = propid_cov_at(per_rotor.cov, a, a) + 2.0f * propid_cov_at(per_rotor.cov, a, bias) +
+                        propid_cov_at(per_rotor.cov, bias, bias) + f->derived.gyro_var;
+        const float gain_rate = (propid_cov_at(per_rotor.cov, a, a) + propid_cov_at(per_rotor.cov, a, bias)) / s;
+        /* The filter's correction of the kept states, per rotor. */
+        float correction[2u * PROPID_MAX_ROTORS];
+        for (uint8_t k = 0; k < 2u * rotors; ++k) {
+            correction[k] = out->input_product[1u + a][k];
+        }
+        propid_drag_basis_apply(&basis, correction + rotors);
         const float carried = carried_before[a] + 2.0f * rho * cross_before[a] + 1.0f;
         TEST_ASSERT_FLOAT_WITHIN(1.0e-5f * carried, carried, out->input_step_carried[a]);
         TEST_ASSERT_FLOAT_WITHIN(1.0e-5f, gain_rate, out->input_rate_gain[a]);
@@ -101,10 +111,10 @@ static void check_dense(uint8_t rotors, int full_inertia, float time)
                 const float var = 4.0f * sigma * sigma * 0.5f *
                                   (f->core.input_speed_sq[rotor] + f->core.rotor_speed_sq[rotor]);
                 expected += weight * var * b * rows[a][first + c] *
-                            propid_cov_at(f->core.cov, (uint8_t)(first + k), (uint8_t)(first + c));
+                            propid_cov_at(per_rotor.cov, (uint8_t)(first + k), (uint8_t)(first + c));
             }
             largest = fmaxf(largest, fabsf(expected));
-            TEST_ASSERT_FLOAT_WITHIN(2.0e-3f * fabsf(expected) + 1.0e-9f, expected, out->input_product[1u + a][k]);
+            TEST_ASSERT_FLOAT_WITHIN(2.0e-3f * fabsf(expected) + 1.0e-9f, expected, correction[k]);
         }
         if (a < 2u) {
             TEST_ASSERT_TRUE(largest > 0.0f); /* the roll and pitch rows carry thrust */

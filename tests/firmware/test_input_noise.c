@@ -13,6 +13,7 @@
 #include "propid/propid.h"
 #include "unity.h"
 #include "../../firmware/src/propid_internal.h"
+#include "per_rotor_view.h"
 #include "../../firmware/src/propid_model.h"
 #include "input_error_fixture.h"
 
@@ -47,19 +48,19 @@ static void check_added_block(uint8_t rotors, int full_inertia, float time)
     for (uint8_t i = 0; i < rotors; ++i) {
         unit_speed_sq[i] = 1.0f;
     }
-    propid_model_rate_jacobian(&with_noise.config, &with_noise.derived, with_noise.core.state, unit_speed_sq,
-                               rows);
+    /* The model per rotor (the filter keeps the drag block in its yaw basis). */
+    const propid_core_t per_rotor = per_rotor_core(&with_noise);
+    const float *x = per_rotor.state;
+    propid_model_rate_jacobian(&with_noise.config, &with_noise.derived, x, unit_speed_sq, rows);
     const float span = time > dt ? time : dt;
     for (uint8_t a = 0; a < 3u; ++a) {
         for (uint8_t b = a; b < 3u; ++b) {
             float expected = 0.0f;
             for (uint8_t i = 0; i < rotors; ++i) {
-                const float gain_a = rows[a][PROPID_RATE_STATES + i] * with_noise.core.state[PROPID_RATE_STATES + i] +
-                                     rows[a][PROPID_RATE_STATES + rotors + i] *
-                                         with_noise.core.state[PROPID_RATE_STATES + rotors + i];
-                const float gain_b = rows[b][PROPID_RATE_STATES + i] * with_noise.core.state[PROPID_RATE_STATES + i] +
-                                     rows[b][PROPID_RATE_STATES + rotors + i] *
-                                         with_noise.core.state[PROPID_RATE_STATES + rotors + i];
+                const float gain_a = rows[a][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
+                                     rows[a][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
+                const float gain_b = rows[b][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
+                                     rows[b][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
                 const float mean_u = 0.5f * (with_noise.core.input_speed_sq[i] + with_noise.core.rotor_speed_sq[i]);
                 expected += gain_a * gain_b * 4.0f * sigma * sigma * mean_u * dt * span;
             }

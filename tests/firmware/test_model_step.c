@@ -73,6 +73,24 @@ static void symmetric_view(float out[N_MAX][N_MAX])
 
 static float view[N_MAX][N_MAX];
 
+/* The filter keeps the drag block of its state and P in the yaw basis
+ * (propid_internal.h): the model's (per-rotor) state from the kept one, and the
+ * model's Jacobian rows with their drag columns times H (the rows over the kept
+ * states). */
+static void model_state(const float *kept, float *out)
+{
+    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    memcpy(out, kept, N_MAX * sizeof(float));
+    propid_drag_basis_apply(&basis, out + propid_first_drag(filter.config.rotor_count));
+}
+static void rows_to_kept_basis(float rows[3][N_MAX])
+{
+    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    for (uint8_t a = 0; a < 3u; ++a) {
+        propid_drag_basis_apply(&basis, rows[a] + propid_first_drag(filter.config.rotor_count));
+    }
+}
+
 /* A random symmetric positive definite P = L L^T + small diagonal, and a random state. */
 static void randomise(rng_t *rng)
 {
@@ -153,10 +171,11 @@ static void check_prediction_against_dense(void)
             speed_sq_mean[i] = 0.5f * (filter.core.input_speed_sq[i] + filter.core.rotor_speed_sq[i]);
         }
         float rate_dot[3];
-        propid_model_rate_derivative(&filter.config, &filter.derived, filter.core.state,
-                                     speed_sq_mean, rate_dot);
+        float state[N_MAX];
+        model_state(filter.core.state, state);
+        propid_model_rate_derivative(&filter.config, &filter.derived, state, speed_sq_mean, rate_dot);
         float predicted[N_MAX];
-        memcpy(predicted, filter.core.state, sizeof(predicted));
+        memcpy(predicted, state, sizeof(predicted));
         for (uint8_t a = 0; a < 3u; ++a) {
             predicted[a] = filter.core.state[a] + dt * rate_dot[a];
         }
@@ -180,10 +199,11 @@ static void check_prediction_against_dense(void)
         float rows_next[3][N_MAX];
         memset(rows, 0, sizeof(rows));
         memset(rows_next, 0, sizeof(rows_next));
-        propid_model_rate_jacobian(&filter.config, &filter.derived, filter.core.state,
-                                   speed_sq_mean, rows);
+        propid_model_rate_jacobian(&filter.config, &filter.derived, state, speed_sq_mean, rows);
         propid_model_rate_jacobian(&filter.config, &filter.derived, predicted, speed_sq_mean,
                                    rows_next);
+        rows_to_kept_basis(rows);
+        rows_to_kept_basis(rows_next);
         for (uint8_t a = 0; a < 3u; ++a) {
             for (uint8_t k = 0; k < n - 3u; ++k) {
                 f[a][k] += 0.5f * dt * (rows[a][k] + rows_next[a][k]);
@@ -263,13 +283,17 @@ static void check_jacobian_against_finite_differences(void)
         float rate_dot[3];
         float rows[3][N_MAX];
         float rows_next[3][N_MAX];
-        propid_model_rates(&filter.config, &filter.derived, filter.core.state, speed_sq_mean, rate_dot, rows);
+        float state[N_MAX];
+        model_state(filter.core.state, state);
+        propid_model_rates(&filter.config, &filter.derived, state, speed_sq_mean, rate_dot, rows);
         float predicted[N_MAX];
-        memcpy(predicted, filter.core.state, sizeof(predicted));
+        memcpy(predicted, state, sizeof(predicted));
         for (uint8_t a = 0; a < 3u; ++a) {
             predicted[a] = filter.core.state[a] + dt * rate_dot[a];
         }
         propid_model_rate_jacobian(&filter.config, &filter.derived, predicted, speed_sq_mean, rows_next);
+        rows_to_kept_basis(rows);
+        rows_to_kept_basis(rows_next);
         float worst_with = 0.0f;
         float worst_without = 0.0f;
         float worst_term = 0.0f;
@@ -700,10 +724,21 @@ static void test_coefficients_are_clamped(void)
     uint64_t t_us = 1000u;
     run_steps(3u, 5u, &t_us);
     filter.core.state[3] = 100.0f; /* far above coeff_rel_max */
-    filter.core.state[8] = -1.0f;  /* below coeff_rel_min */
+    /* km of rotor 1 below coeff_rel_min (per rotor: the state keeps the km in
+     * their yaw basis, propid_internal.h). */
+    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    float *km = &filter.core.state[7];
+    propid_drag_basis_apply(&basis, km);
+    km[1] = -1.0f;
+    propid_drag_basis_apply(&basis, km);
     run_steps(4u, 1u, &t_us);
     TEST_ASSERT_TRUE(filter.core.state[3] <= filter.config.coeff_rel_max);
-    TEST_ASSERT_TRUE(filter.core.state[8] >= filter.config.coeff_rel_min);
+    float km_rel[4];
+    propid_drag_per_rotor(&basis, &filter.core, km_rel, NULL);
+    for (uint8_t i = 0; i < 4u; ++i) {
+        TEST_ASSERT_TRUE(km_rel[i] >= filter.config.coeff_rel_min * (1.0f - 1.0e-6f));
+        TEST_ASSERT_TRUE(km_rel[i] <= filter.config.coeff_rel_max * (1.0f + 1.0e-6f));
+    }
     propid_estimate_t est;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
     TEST_ASSERT_TRUE((est.health & PROPID_HEALTH_STATE_CLAMPED) != 0u);
@@ -729,7 +764,12 @@ static void check_truncation(uint8_t k, float alpha, int below, float lambda, fl
     filter.core.state[k] = bound + (below ? -alpha : alpha) * s;
     symmetric_view(before);
     memcpy(x, filter.core.state, sizeof(x));
+    /* Set up and checked per rotor; the filter keeps the drag block in its yaw
+     * basis (propid_internal.h): flipped into it for the call and back. */
+    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    propid_drag_basis_flip(&basis, &filter.core);
     TEST_ASSERT_EQUAL_UINT32(1u, propid_clamp_coefficients(&filter));
+    propid_drag_basis_flip(&basis, &filter.core);
     symmetric_view(after);
     const float shift = (below ? 1.0f : -1.0f) * lambda * s;
     TEST_ASSERT_FLOAT_WITHIN(1.0e-4f * s, x[k] + shift, filter.core.state[k]);
@@ -765,11 +805,14 @@ static void test_clamp_truncates_the_gaussian(void)
      * coefficient with a rate and with another rotor's coefficient; positive
      * definite: the correlation blocks are diagonally dominant). */
     init_quad();
+    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    propid_drag_basis_flip(&basis, &filter.core); /* per rotor (check_truncation) */
     const uint8_t drag = (uint8_t)(propid_first_drag(4u) + 1u);
     correlate(0u, drag, 0.5f);
     correlate(drag, (uint8_t)(drag + 1u), -0.3f);
     check_truncation(drag, 1.0f, 1, 1.5251353f, 0.1990977f);
     init_quad();
+    propid_drag_basis_flip(&basis, &filter.core);
     const uint8_t thrust = propid_first_thrust();
     correlate(1u, thrust, 0.4f);
     correlate(thrust, (uint8_t)(thrust + 1u), 0.2f);

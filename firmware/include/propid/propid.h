@@ -211,7 +211,8 @@ typedef struct {
      * rows. First, so the update kernels reach it and the state from one base
      * register. */
     float update_vector[2][PROPID_MAX_STATES];
-    /* Scaled state: body rate [rad/s], kf/kf_nominal, km/km_nominal, gyro bias [rad/s]. */
+    /* Scaled state: body rate [rad/s], kf/kf_nominal, km/km_nominal in the yaw basis
+     * (H km/km_nominal, propid_drag_basis_apply; P's drag rows too), gyro bias [rad/s]. */
     float state[PROPID_MAX_STATES];
     float cov[PROPID_COV_SIZE];                       /* symmetric, kept in the scaled units: the
                                                          packed upper triangle (propid_cov_index) */
@@ -369,6 +370,12 @@ typedef struct {
 #endif
     float quad_gyro[3];                             /* quad layout only: A_ab = quad_gyro[a] omega_c for
                                                        both other axes b, c of row a (symmetric in b, c) */
+#if PROPID_GENERAL_VEHICLES /* (the quad build: a table in flash, propid_internal.h) */
+    /* Private: the drag coefficients' yaw basis (propid_internal.h, propid_drag_basis):
+     * the reflection H = I - drag_basis_scale v v^T with v = drag_basis. */
+    float drag_basis[PROPID_MAX_ROTORS];
+    float drag_basis_scale;
+#endif
 } propid_derived_t;
 
 #if PROPID_DELAY_SLOTS > 0
@@ -418,6 +425,8 @@ typedef struct {
 } propid_kept_rotor_t;
 typedef struct {
     uint8_t rotor_count;
+    uint8_t yaw_sign_flips;                         /* bit i: rotor i's yaw sign is rotor 0's opposite
+                                                       (the drag coefficients' yaw basis; fills padding) */
     uint16_t gate_max_consecutive;
 #if PROPID_DELAY_SLOTS > 0 /* (without the delay buffer the configuration check admits only 0) */
     int32_t rotor_delay_us;

@@ -1,0 +1,104 @@
+/* The drag coefficients' yaw basis (propid_internal.h, docs/math.md §2): the
+ * maps of the state's and P's drag block between z = H km_rel and the per-rotor
+ * km_rel. H = I - scale v v^T; for the block B = P_zz and u = B v, beta = v . u:
+ *   H B H = B - scale (v u^T + u v^T) + scale^2 beta v v^T. */
+#include "propid_internal.h"
+
+#if !PROPID_GENERAL_VEHICLES
+/* N = 4: v = e_0 + s_0 s / 2, row k for rotors 1..3 opposite to rotor 0 where bit
+ * k - 1 of the row index is set. */
+const float propid_quad_drag_basis[8][4] = {
+    {1.5f, 0.5f, 0.5f, 0.5f},  {1.5f, -0.5f, 0.5f, 0.5f},  {1.5f, 0.5f, -0.5f, 0.5f},
+    {1.5f, -0.5f, -0.5f, 0.5f}, {1.5f, 0.5f, 0.5f, -0.5f},  {1.5f, -0.5f, 0.5f, -0.5f},
+    {1.5f, 0.5f, -0.5f, -0.5f}, {1.5f, -0.5f, -0.5f, -0.5f},
+};
+#endif
+
+/* u = B v over the packed drag block, and beta = v . u. */
+static float block_times_basis(const propid_drag_basis_t *basis, const float *cov, float *u)
+{
+    const uint8_t rotor_count = basis->rotor_count;
+    const uint8_t first = propid_first_drag(rotor_count);
+    const float *v = basis->vector;
+    float beta = 0.0f;
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        float sum = 0.0f;
+        for (uint8_t j = 0; j < rotor_count; ++j) {
+            sum += propid_cov_at(cov, (uint8_t)(first + i), (uint8_t)(first + j)) * v[j];
+        }
+        u[i] = sum;
+        beta += v[i] * sum;
+    }
+    return beta;
+}
+
+void propid_drag_basis_flip(const propid_drag_basis_t *basis, propid_core_t *core)
+{
+    const uint8_t rotor_count = basis->rotor_count;
+    const uint8_t first = propid_first_drag(rotor_count);
+    const uint8_t end = (uint8_t)(first + rotor_count);
+    const float *v = basis->vector;
+    const float scale = basis->scale;
+    propid_drag_basis_apply(basis, &core->state[first]);
+    /* The cross-covariances with every other state: a column of N values each
+     * (state_count is not needed: the unused part of the triangle is zero). */
+    for (uint8_t j = 0; j < PROPID_MAX_STATES; ++j) {
+        if (j >= first && j < end) {
+            continue;
+        }
+        float column[PROPID_MAX_ROTORS];
+        for (uint8_t i = 0; i < rotor_count; ++i) {
+            column[i] = propid_cov_at(core->cov, (uint8_t)(first + i), j);
+        }
+        propid_drag_basis_apply(basis, column);
+        for (uint8_t i = 0; i < rotor_count; ++i) {
+            core->cov[propid_cov_index((uint8_t)(first + i), j)] = column[i];
+        }
+    }
+    /* The block itself, both sides. */
+    float u[PROPID_MAX_ROTORS];
+    const float beta = block_times_basis(basis, core->cov, u);
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        for (uint8_t j = i; j < rotor_count; ++j) {
+            core->cov[propid_cov_index((uint8_t)(first + i), (uint8_t)(first + j))] -=
+                scale * (v[i] * u[j] + u[i] * v[j]) - scale * scale * beta * v[i] * v[j];
+        }
+    }
+}
+
+void propid_drag_per_rotor(const propid_drag_basis_t *basis, const propid_core_t *core, float *km_rel,
+                           float *km_var)
+{
+    const uint8_t rotor_count = basis->rotor_count;
+    const uint8_t first = propid_first_drag(rotor_count);
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        km_rel[i] = core->state[first + i];
+    }
+    propid_drag_basis_apply(basis, km_rel);
+    if (km_var == NULL) {
+        return;
+    }
+    const float *v = basis->vector;
+    const float scale = basis->scale;
+    float u[PROPID_MAX_ROTORS];
+    const float beta = block_times_basis(basis, core->cov, u);
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const uint8_t k = (uint8_t)(first + i);
+        km_var[i] = propid_cov_at(core->cov, k, k) - scale * v[i] * (2.0f * u[i] - scale * beta * v[i]);
+    }
+}
+
+void propid_cov_reset_rotor(const propid_derived_t *derived, const propid_drag_basis_t *basis, propid_core_t *core,
+                            uint8_t rotor, int to_nominal)
+{
+    const uint8_t thrust = (uint8_t)(propid_first_thrust() + rotor);
+    const uint8_t drag = (uint8_t)(propid_first_drag(basis->rotor_count) + rotor);
+    propid_drag_basis_flip(basis, core);
+    if (to_nominal) {
+        core->state[thrust] = 1.0f;
+        core->state[drag] = 1.0f;
+    }
+    propid_cov_reset_state(derived, core, thrust);
+    propid_cov_reset_state(derived, core, drag);
+    propid_drag_basis_flip(basis, core);
+}
