@@ -115,6 +115,16 @@ def generate() -> str:
             value += (drag_loading if kind(i) == "drag" else loading) * value + q[kind(i)]
         return sympy.expand(value)
 
+    def check_against_model(written: dict[tuple[int, int], sympy.Expr], what: str) -> None:
+        """Every element the model changes is written, and each equals the model's."""
+        for i in range(N):
+            for j in range(i, N):
+                if (i, j) in written:
+                    if sympy.expand(written[(i, j)] - wanted(i, j)) != 0:
+                        raise SystemExit(f"quad_predict: {what} ({i}, {j}) differs from the model")
+                elif sympy.expand(wanted(i, j) - p_symbol(i, j)) != 0:
+                    raise SystemExit(f"quad_predict: {what} ({i}, {j}) changes but is not written")
+
     lines: list[str] = []
     emit = lines.append
     checked: dict[tuple[int, int], sympy.Expr] = {}
@@ -203,15 +213,7 @@ def generate() -> str:
                 emit(f"    cov[propid_cov_index({a}u, {b}u)] = {' + '.join(terms)};")
                 checked[(a, b)] = value
 
-    # Every element the model changes is written, and each equals the model's.
-    for i in range(N):
-        for j in range(i, N):
-            changed = sympy.expand(wanted(i, j) - p_symbol(i, j)) != 0
-            if (i, j) in checked:
-                if sympy.expand(checked[(i, j)] - wanted(i, j)) != 0:
-                    raise SystemExit(f"quad_predict: element ({i}, {j}) differs from the model")
-            elif changed:
-                raise SystemExit(f"quad_predict: element ({i}, {j}) changes but is not written")
+    check_against_model(checked, "element")
 
     # The size-lean build's kernel: the same per-element arithmetic as loops over
     # the model's column table; interpreted here, symbolically, loop by loop as the
@@ -251,14 +253,7 @@ def generate() -> str:
                 value += lean_rate_col[(a, structure[b][p])] * g[b][p]
             value += lean_block[(a, b)]
             lean[(a, b)] = (1 + loading) * value + q["rate"] if a == b else value
-    for i in range(N):
-        for j in range(i, N):
-            changed = sympy.expand(wanted(i, j) - p_symbol(i, j)) != 0
-            if (i, j) in lean:
-                if sympy.expand(lean[(i, j)] - wanted(i, j)) != 0:
-                    raise SystemExit(f"quad_predict: lean kernel's element ({i}, {j}) differs from the model")
-            elif changed:
-                raise SystemExit(f"quad_predict: lean kernel's element ({i}, {j}) changes but is not written")
+    check_against_model(lean, "lean kernel's element")
     entry_table = ", ".join("{" + ", ".join(f"{row.index(c)}u" if c in row and c >= FIRST_THRUST else "0xFFu"
                                             for c in range(N)) + "}" for row in structure)
 

@@ -154,6 +154,16 @@ static int fail(sitl_result_t *r, int code, const char *msg)
     return code;
 }
 
+/* The rigid body's true state as the controller reads it (the paper's controller flies on
+ * the true state). */
+static void controller_view(const flight_t *f, sitl_vehicle_state_t *vs)
+{
+    sitl_vec3_copy(vs->position, f->state.position);
+    sitl_vec3_copy(vs->velocity, f->state.velocity);
+    memcpy(vs->quat_wxyz, f->state.quat, sizeof(vs->quat_wxyz));
+    sitl_vec3_copy(vs->body_rate, f->state.body_rate);
+}
+
 /* Start on the trajectory's trim instead of level: the attitude and body rate the
  * controller's feed-forward asks for at t = 0 (no tracking error there), and the true hover
  * rotor speeds scaled to the collective thrust it asks for (thrust ~ Omega^2). A level
@@ -163,10 +173,7 @@ static void trim_on_trajectory(flight_t *f, const sitl_flat_output_t *flat0)
 {
     for (int pass = 0; pass < 2; pass++) { /* 2nd pass: the thrust along the trimmed body z */
         sitl_vehicle_state_t vs;
-        sitl_vec3_copy(vs.position, f->state.position);
-        sitl_vec3_copy(vs.velocity, f->state.velocity);
-        memcpy(vs.quat_wxyz, f->state.quat, sizeof(vs.quat_wxyz));
-        sitl_vec3_copy(vs.body_rate, f->state.body_rate);
+        controller_view(f, &vs);
         sitl_control_output_t cmd;
         sitl_controller_update(&f->controller, &vs, flat0, &cmd);
         if (pass == 0) {
@@ -596,10 +603,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
                 /* Controller on the true state (as in the paper). */
                 take_coefficients(f, o, &est, est_status);
                 sitl_vehicle_state_t vs;
-                sitl_vec3_copy(vs.position, f->state.position);
-                sitl_vec3_copy(vs.velocity, f->state.velocity);
-                memcpy(vs.quat_wxyz, f->state.quat, sizeof(vs.quat_wxyz));
-                sitl_vec3_copy(vs.body_rate, f->state.body_rate);
+                controller_view(f, &vs);
                 sitl_control_output_t cmd;
                 sitl_controller_update(&f->controller, &vs, &ref, &cmd);
                 sitl_allocation_result_t alloc;
