@@ -79,6 +79,18 @@ def rate_jacobian_structure() -> list[list[int]]:
     return rows
 
 
+def rate_terms_of_row(structure: list[list[int]], row: int) -> list[tuple[int, int]]:
+    """(entry, column) of a rate row's Jacobian entries that fall in the rate block."""
+    return [(p, column) for p, column in enumerate(structure[row]) if column < FIRST_THRUST]
+
+
+def rate_block_terms(structure: list[list[int]], a: int, b: int, rate_col, gain) -> list[str]:
+    """C terms of the rate block's (a, b) element, (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp
+    + the collected coefficient block; rate_col and gain name the kernel's variables."""
+    products = [f"{rate_col(a, column)} * {gain(b, p)}" for p, column in rate_terms_of_row(structure, b)]
+    return [rate_col(a, b)] + products + [f"block{a}{b}"]
+
+
 def p_symbol(i: int, j: int) -> sympy.Symbol:
     i, j = min(i, j), max(i, j)
     return sympy.Symbol(f"P_{i}_{j}")
@@ -196,14 +208,11 @@ def generate() -> str:
     emit("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp. */")
     for a in range(3):
         for b in range(a, 3):
-            terms = [f"rate_col{a}[{b}]"]
-            value = rate_cols[(a, b)]
-            for p, column in enumerate(structure[b]):
-                if column < FIRST_THRUST:
-                    terms.append(f"rate_col{a}[{column}] * g{b}_{p}")
-                    value += rate_cols[(a, column)] * g[b][p]
-            terms.append(f"block{a}{b}")
-            value += block[(a, b)]
+            terms = rate_block_terms(structure, a, b, lambda r, c: f"rate_col{r}[{c}]",
+                                     lambda r, p: f"g{r}_{p}")
+            value = rate_cols[(a, b)] + block[(a, b)]
+            for p, column in rate_terms_of_row(structure, b):
+                value += rate_cols[(a, column)] * g[b][p]
             if a == b:
                 emit(f"    const float f{a}{b} = {' + '.join(terms)};")
                 emit(f"    cov[propid_cov_index({a}u, {b}u)] = (1.0f + PROPID_VAR_LOADING) * f{a}{b} + "
@@ -318,11 +327,8 @@ def generate() -> str:
     out("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp. */")
     for a_ in range(3):
         for b_ in range(a_, 3):
-            terms = [f"rate_col[{a_}][{b_}]"]
-            for p_, c_ in enumerate(structure[b_]):
-                if c_ < FIRST_THRUST:
-                    terms.append(f"rate_col[{a_}][{c_}] * jacobian_dt[{b_}][{p_}]")
-            terms.append(f"block{a_}{b_}")
+            terms = rate_block_terms(structure, a_, b_, lambda r, c: f"rate_col[{r}][{c}]",
+                                     lambda r, p: f"jacobian_dt[{r}][{p}]")
             if a_ == b_:
                 out(f"    cov[propid_cov_index({a_}u, {b_}u)] = (1.0f + PROPID_VAR_LOADING) * ({' + '.join(terms)}) + q_rate;")
             else:
