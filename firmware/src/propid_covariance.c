@@ -138,11 +138,11 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
     return repaired;
 }
 
-/* The coefficients found outside the range: each one's Gaussian truncated at its
- * bound (propid_truncation.c), per rotor: the drag block is flipped out of its
- * yaw basis around the truncations (propid_internal.h; a rare path). Apart, so
- * the usual sample's test stays lean. */
-static __attribute__((noinline)) PROPID_RARE uint32_t truncate_outside(propid_filter_t *filter)
+/* The coefficients found outside the range: the estimate projected onto each
+ * one's bound (propid_bound_projection.c), per rotor: the drag block is flipped
+ * out of its yaw basis around the projections (propid_internal.h; a rare path).
+ * Apart, so the usual sample's test stays lean. */
+static __attribute__((noinline)) PROPID_RARE uint32_t project_outside(propid_filter_t *filter)
 {
     const propid_kept_config_t *config = &filter->config;
     propid_core_t *core = &filter->core;
@@ -153,16 +153,16 @@ static __attribute__((noinline)) PROPID_RARE uint32_t truncate_outside(propid_fi
     uint32_t clamped = 0u;
     for (uint8_t k = first; k < end; ++k) {
         if (core->state[k] < config->coeff_rel_min) {
-            (void)propid_truncate_at_bound(&filter->derived, core, k, config->coeff_rel_min);
+            (void)propid_project_onto_bound(&filter->derived, core, k, config->coeff_rel_min);
             clamped++;
         } else if (core->state[k] > config->coeff_rel_max) {
-            (void)propid_truncate_at_bound(&filter->derived, core, k, config->coeff_rel_max);
+            (void)propid_project_onto_bound(&filter->derived, core, k, config->coeff_rel_max);
             clamped++;
         }
     }
     if (clamped != 0u) {
-        /* A later truncation moves the earlier coefficients by their regression:
-         * the range holds again with the plain clamp (no further truncation). */
+        /* A later projection moves the earlier coefficients by their regression:
+         * the range holds again with the plain clamp (no further projection). */
         for (uint8_t k = first; k < end; ++k) {
             core->state[k] = fminf(fmaxf(core->state[k], config->coeff_rel_min), config->coeff_rel_max);
         }
@@ -193,7 +193,7 @@ uint32_t propid_clamp_coefficients(propid_filter_t *filter)
     const propid_core_t *core = &filter->core;
     const uint8_t rotor_count = config->rotor_count;
     /* Fast test of both bounds on the bit patterns (0 < min < max, see
-     * outside_positive_range); the rare truncation then compares the values. The
+     * outside_positive_range); the rare projection then compares the values. The
      * drag coefficients are bounded per rotor: their yaw-basis states mapped back. */
     uint32_t min_bits;
     uint32_t max_bits;
@@ -221,5 +221,5 @@ PROPID_UNROLL(4)
             outside |= propid_outside_positive_range(km_rel[i], min_bits, range_bits);
         }
     }
-    return outside == 0u ? 0u : truncate_outside(filter);
+    return outside == 0u ? 0u : project_outside(filter);
 }

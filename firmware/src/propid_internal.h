@@ -452,13 +452,13 @@ void propid_input_compensation_apply(propid_filter_t *filter, uint32_t gated_mas
 #define PROPID_INPUT_ERROR_MAX_SHARE 0.5f
 
 /* propid_covariance.c: keep the coefficients in [coeff_rel_min, coeff_rel_max],
- * each one found beyond a bound by truncating the Gaussian there (P with it);
+ * each one found beyond a bound by projecting the estimate onto it (P kept);
  * returns how many were beyond. */
 uint32_t propid_clamp_coefficients(propid_filter_t *filter);
-/* propid_truncation.c: the state and P replaced by the moments of N(x, P) truncated
- * at state k's bound (x_k beyond it); uses core.update_vector[0]. Returns 0 when P_kk
- * was unusable and x_k was only set to the bound. */
-int propid_truncate_at_bound(const propid_derived_t *derived, propid_core_t *core, uint8_t k, float bound);
+/* propid_bound_projection.c: the estimate moved to the mean of N(x, P) given
+ * x_k = bound (x_k beyond it), P unchanged. Returns 0 when P_kk was unusable and
+ * x_k was only set to the bound. */
+int propid_project_onto_bound(const propid_derived_t *derived, propid_core_t *core, uint8_t k, float bound);
 
 #if PROPID_WITH_ACCEL
 /* The thrust-torque scale (docs/math.md §9) kept in the coefficients' range: at or

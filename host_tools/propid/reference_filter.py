@@ -715,16 +715,16 @@ class ReferenceFilter:
         lo, hi = self.c["coeff_rel_min"], self.c["coeff_rel_max"]
         clamped = extra
         # C: propid_clamp_coefficients, in index order, per rotor (the drag block flipped out of
-        # its yaw basis around the truncations, as in C).
+        # its yaw basis around the projections, as in C).
         coeffs = self._per_rotor_state()[3:self.first_bias]
         if np.any(coeffs < lo) or np.any(coeffs > hi):
             self._flip_basis()
             for k in range(3, self.first_bias):
                 if self.state[k] < lo:
-                    self._truncate(k, lo)
+                    self._project(k, lo)
                     clamped += 1
                 elif self.state[k] > hi:
-                    self._truncate(k, hi)
+                    self._project(k, hi)
                     clamped += 1
             if clamped > extra:
                 self.state[3:self.first_bias] = np.clip(self.state[3:self.first_bias], lo, hi)
@@ -743,33 +743,16 @@ class ReferenceFilter:
             self.health |= HEALTH["STATE_CLAMPED"]
             self.counters_data["state_clamps"] += clamped
 
-    def _truncate(self, k: int, bound: float) -> None:
-        """C: propid_truncate_at_bound. N(x, P) truncated at state k's bound, replaced
-        by its mean and covariance (docs/math.md §15)."""
+    def _project(self, k: int, bound: float) -> None:
+        """C: propid_project_onto_bound. The estimate moved to the mean of N(x, P) given
+        state k = bound, P unchanged (docs/math.md §15)."""
         pkk = float(self.cov[k, k])
-        beyond = float(self.state[k]) - bound
-        if not (pkk > 0.0 and math.isfinite(pkk) and math.isfinite(beyond)):
+        shift = bound - float(self.state[k])
+        if not (pkk > 0.0 and math.isfinite(pkk) and math.isfinite(shift)):
             self.state[k] = bound
             return
-        s = math.sqrt(pkk)
-        alpha = min(abs(beyond) / s, 30.0)
-        if alpha < 5.0:
-            lam = math.exp(-0.5 * alpha * alpha) / math.sqrt(2.0 * math.pi) / (0.5 * math.erfc(alpha / math.sqrt(2.0)))
-        else:  # the C code's continued fraction
-            lam = alpha
-            for term in range(6, 0, -1):
-                lam = alpha + term / lam
-        keep = max(1.0 - lam * (lam - alpha), 0.0)
-        shift = (1.0 if beyond < 0.0 else -1.0) * lam * s
-        if abs(shift) < abs(beyond):
-            shift = -beyond
-        target = float(self.state[k]) + shift
-        column = self.cov[:, k].copy()
-        self.state += column * (shift / pkk)
-        self.cov -= np.outer(column, column) * ((1.0 - keep) / pkk)
-        self.cov = 0.5 * (self.cov + self.cov.T)
-        self.state[k] = target
-        self.cov[k, k] = keep * pkk
+        self.state += self.cov[:, k] * (shift / pkk)
+        self.state[k] = bound
 
     # ------------------------------------------------------------------ outputs
     def estimate(self) -> Estimate:

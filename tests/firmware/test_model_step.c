@@ -747,13 +747,13 @@ static void test_coefficients_are_clamped(void)
     TEST_ASSERT_TRUE(counters.state_clamps >= 2u);
 }
 
-/* A coefficient beyond its bound: N(x, P) truncated there (propid_truncation.c),
- * checked against the truncated normal's moments computed in float64 offline:
- * alpha 1 -> lambda 1.5251353, variance kept 0.1990977; alpha 7 (continued
- * fraction) -> lambda 7.1375456, kept 0.0182619. Every other state moves by its
- * regression on the coefficient and P loses the matching rank-one part; a plain
- * clamp (x_k = bound, nothing else) fails every check but the range. */
-static void check_truncation(uint8_t k, float alpha, int below, float lambda, float keep)
+/* A coefficient beyond its bound: the estimate projected onto the bound
+ * (propid_bound_projection.c): x_k lands on the bound, every other state moves
+ * by its regression on x_k, P_ij / P_jk / P_kk * (bound - x_k), and P is kept.
+ * A plain clamp (x_k = bound, nothing else) fails the regression checks; a
+ * truncation of the Gaussian (x_k inside the bound, P downdated) fails the
+ * bound and the P checks. */
+static void check_projection(uint8_t k, float alpha, int below)
 {
     const uint8_t n = filter.derived.state_count;
     static float before[N_MAX][N_MAX];
@@ -771,9 +771,8 @@ static void check_truncation(uint8_t k, float alpha, int below, float lambda, fl
     TEST_ASSERT_EQUAL_UINT32(1u, propid_clamp_coefficients(&filter));
     propid_drag_basis_flip(&basis, &filter.core);
     symmetric_view(after);
-    const float shift = (below ? 1.0f : -1.0f) * lambda * s;
-    TEST_ASSERT_FLOAT_WITHIN(1.0e-4f * s, x[k] + shift, filter.core.state[k]);
-    TEST_ASSERT_TRUE(below ? filter.core.state[k] > bound : filter.core.state[k] < bound);
+    const float shift = bound - x[k];
+    TEST_ASSERT_FLOAT_WITHIN(1.0e-5f * s, bound, filter.core.state[k]);
     const float pkk = before[k][k];
     for (uint8_t i = 0; i < n; ++i) {
         const float si = sqrtf(before[i][i]);
@@ -781,13 +780,7 @@ static void check_truncation(uint8_t k, float alpha, int below, float lambda, fl
             TEST_ASSERT_FLOAT_WITHIN(1.0e-4f * si, x[i] + before[i][k] / pkk * shift, filter.core.state[i]);
         }
         for (uint8_t j = 0; j < n; ++j) {
-            const float expected = before[i][j] - before[i][k] * before[j][k] / pkk * (1.0f - keep);
-            const float floor_i = propid_var_floor(&filter.derived, i);
-            if (i == j && expected < floor_i) {
-                TEST_ASSERT_EQUAL_FLOAT(floor_i, after[i][i]);
-                continue;
-            }
-            TEST_ASSERT_FLOAT_WITHIN(1.0e-3f * si * sqrtf(before[j][j]), expected, after[i][j]);
+            TEST_ASSERT_FLOAT_WITHIN(1.0e-4f * si * sqrtf(before[j][j]), before[i][j], after[i][j]);
         }
     }
 }
@@ -799,24 +792,24 @@ static void correlate(uint8_t i, uint8_t j, float rho)
     cov[propid_cov_index(i, j)] = rho * sqrtf(cov[propid_cov_index(i, i)] * cov[propid_cov_index(j, j)]);
 }
 
-static void test_clamp_truncates_the_gaussian(void)
+static void test_clamp_projects_the_estimate(void)
 {
     /* The prior with a few correlations of the kind an update leaves (a
      * coefficient with a rate and with another rotor's coefficient; positive
      * definite: the correlation blocks are diagonally dominant). */
     init_quad();
     const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
-    propid_drag_basis_flip(&basis, &filter.core); /* per rotor (check_truncation) */
+    propid_drag_basis_flip(&basis, &filter.core); /* per rotor (check_projection) */
     const uint8_t drag = (uint8_t)(propid_first_drag(4u) + 1u);
     correlate(0u, drag, 0.5f);
     correlate(drag, (uint8_t)(drag + 1u), -0.3f);
-    check_truncation(drag, 1.0f, 1, 1.5251353f, 0.1990977f);
+    check_projection(drag, 1.0f, 1);
     init_quad();
     propid_drag_basis_flip(&basis, &filter.core);
     const uint8_t thrust = propid_first_thrust();
     correlate(1u, thrust, 0.4f);
     correlate(thrust, (uint8_t)(thrust + 1u), 0.2f);
-    check_truncation(thrust, 7.0f, 0, 7.1375456f, 0.0182619f);
+    check_projection(thrust, 7.0f, 0);
     propid_estimate_t est;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
 }
@@ -924,7 +917,7 @@ int main(void)
     RUN_TEST(test_drag_coefficients_loaded_every_second_prediction);
     RUN_TEST(test_integrity_tolerance_is_rounding_only);
     RUN_TEST(test_coefficients_are_clamped);
-    RUN_TEST(test_clamp_truncates_the_gaussian);
+    RUN_TEST(test_clamp_projects_the_estimate);
     RUN_TEST(test_time_jump_resync_workflow);
     return UNITY_END();
 }
