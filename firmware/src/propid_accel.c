@@ -9,7 +9,11 @@
  *
  * linear in the state, H = [(kf_nominal_i / m) u_i at kf_rel_i, 1 at b_z]. It
  * measures the thrust coefficients' scale directly, independent of the inertia
- * and the arm lengths through which the gyro sees them. Fused against the
+ * and the arm lengths through which the gyro sees them. With the thrust-torque
+ * scale the thrust states carry g_i = s kf_rel_i (what the gyro sees) and the
+ * scale state r = 1/s, so kf_rel_i = r g_i and this row is the only one with r:
+ * f_z = r sum_i (kf_nominal_i / m) u_i g_i + b_z, H = [r (kf_nominal_i / m) u_i at
+ * g_i, sum_i (kf_nominal_i / m) u_i g_i at r, 1 at b_z]. Fused against the
  * current state with the latest rotor speeds (the coefficients and the bias are
  * random walks: no prediction to the sample's time is needed). */
 #include <math.h>
@@ -112,17 +116,26 @@ propid_status_t propid_fuse_accel(propid_filter_t *filter, uint64_t time_us, con
 
     const uint8_t rotor_count = config->rotor_count;
     const uint8_t bias = derived->layout.accel_bias;
+    const uint8_t scale = derived->layout.torque_scale;
+    const float inverse_scale = scale != PROPID_NO_STATE ? core->state[scale] : 1.0f; /* r */
     propid_sparse_row_t row;
     row.count = (uint8_t)(rotor_count + 1u);
-    float thrust = 0.0f; /* collective thrust over mass at the current coefficients */
+    float thrust_states = 0.0f; /* sum_i (kf_nominal_i / m) u_i x_i over the thrust states */
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const uint8_t k = (uint8_t)(derived->layout.thrust + i);
+        const float per_state = derived->thrust_per_mass[i] * core->rotor_speed_sq[i];
         row.index[i] = k;
-        row.value[i] = derived->thrust_per_mass[i] * core->rotor_speed_sq[i];
-        thrust += row.value[i] * core->state[k];
+        row.value[i] = inverse_scale * per_state;
+        thrust_states += per_state * core->state[k];
     }
     row.index[rotor_count] = bias;
     row.value[rotor_count] = 1.0f;
+    if (scale != PROPID_NO_STATE) {
+        row.index[row.count] = scale;
+        row.value[row.count] = thrust_states;
+        row.count++;
+    }
+    const float thrust = inverse_scale * thrust_states; /* collective thrust over mass */
     const float measured = specific_force[2];
     float innovation = measured - thrust - core->state[bias];
     if (!isfinite(innovation)) {

@@ -320,10 +320,8 @@ static void derive_sparsity(const propid_config_t *config, const geometry_t *geo
             }
         }
         out->jac_rate_count[a] = count;
-        uint8_t thrust_entries = 0u;
         for (uint8_t i = 0; i < rotor_count; ++i) {
             if (geo->thrust_torque[i][a] != 0.0f) {
-                thrust_entries++;
                 out->jac_column[a][count] = (uint8_t)(PROPID_RATE_STATES + i);
                 out->jac_rotor[a][count] = i;
                 out->jac_torque[a][count] = geo->thrust_torque[i][a];
@@ -343,14 +341,6 @@ static void derive_sparsity(const propid_config_t *config, const geometry_t *geo
                 out->jac_torque[a][count] = geo->drag_torque[i][a];
                 count++;
             }
-        }
-        /* The thrust-torque scale: one entry per row that has thrust entries,
-         * its value (the unscaled thrust part of the row) formed by the step. */
-        if (out->layout.torque_scale != PROPID_NO_STATE && thrust_entries > 0u) {
-            out->jac_column[a][count] = out->layout.torque_scale;
-            out->jac_rotor[a][count] = PROPID_SCALE_ENTRY;
-            out->jac_torque[a][count] = 0.0f;
-            count++;
         }
         /* The disturbance acts like one more "rotor" with torque 1 and input 1
          * (jac_rotor = rotor_count: the step's input slot holding dt). */

@@ -18,14 +18,29 @@ void propid_cov_set_prior(const propid_derived_t *derived, const propid_drag_bas
     for (uint8_t k = propid_first_thrust(); k < first_bias; ++k) {
         core->state[k] = 1.0f; /* coefficients start at their nominal */
     }
-    if (derived->layout.torque_scale != PROPID_NO_STATE) {
-        core->state[derived->layout.torque_scale] = 1.0f; /* the configured J and arms */
+    const uint8_t scale = derived->layout.torque_scale;
+    if (scale != PROPID_NO_STATE) {
+        core->state[scale] = 1.0f; /* r = 1/s: the configured J and arms */
     }
     /* The drag block in the yaw basis (propid_internal.h): H applied to the nominal.
      * Its prior variances are equal, so the prior P is the same in either basis. */
     propid_drag_basis_apply(basis, &core->state[propid_first_drag(rotor_count)]);
     for (uint8_t k = 0; k < n; ++k) {
         core->cov[propid_cov_index(k, k)] = propid_prior_var(derived, k);
+    }
+    if (scale != PROPID_NO_STATE) {
+        /* The thrust states carry g_i = s kf_i and the scale state r = 1/s
+         * (docs/math.md §9): independent priors on kf_i and s, carried to first
+         * order at the nominal, give var g_i = P_kf + P_s, cov(g_i, g_j) = P_s and
+         * cov(g_i, r) = -P_s. */
+        const float scale_var = propid_prior_var(derived, scale);
+        const uint8_t first_drag = propid_first_drag(rotor_count);
+        for (uint8_t i = propid_first_thrust(); i < first_drag; ++i) {
+            for (uint8_t j = i; j < first_drag; ++j) {
+                core->cov[propid_cov_index(i, j)] += scale_var;
+            }
+            core->cov[propid_cov_index(i, scale)] = -scale_var;
+        }
     }
 }
 

@@ -95,7 +95,9 @@ void propid_cov_reset_rotor(const propid_derived_t *derived, const propid_drag_b
     const uint8_t drag = (uint8_t)(propid_first_drag(basis->rotor_count) + rotor);
     propid_drag_basis_flip(basis, core);
     if (to_nominal) {
-        core->state[thrust] = 1.0f;
+        /* With the torque scale the state is g = s kf = kf / r (docs/math.md §9). */
+        const uint8_t scale = derived->layout.torque_scale;
+        core->state[thrust] = PROPID_WITH_ACCEL && scale != PROPID_NO_STATE ? 1.0f / core->state[scale] : 1.0f;
         core->state[drag] = 1.0f;
     }
     propid_cov_reset_state(derived, core, thrust);

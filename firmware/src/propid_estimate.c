@@ -53,16 +53,28 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     float km_rel_var[PROPID_MAX_ROTORS];
     const propid_drag_basis_t basis = propid_drag_basis(derived, config);
     propid_drag_per_rotor(&basis, core, km_rel, km_rel_var);
+    /* With the thrust-torque scale the thrust states carry g_i = s kf_rel_i and the
+     * scale state r = 1/s (docs/math.md §9): kf_rel_i = r g_i, its variance to first
+     * order r^2 P_gg + g^2 P_rr + 2 r g P_gr. */
+    const uint8_t scale = derived->layout.torque_scale;
+    const int scaled = PROPID_WITH_ACCEL && scale != PROPID_NO_STATE;
+    const float inverse_scale = scaled ? core->state[scale] : 1.0f;
+    const float inverse_scale_var = scaled ? core->cov[propid_cov_index(scale, scale)] : 0.0f;
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const uint8_t kf = (uint8_t)(propid_first_thrust() + i);
         const uint8_t km = (uint8_t)(first_drag + i);
         const float kf_nominal = config->rotor[i].thrust_coeff_nominal;
         const float km_nominal = config->rotor[i].drag_coeff_nominal;
-        const float kf_var = core->cov[propid_cov_index(kf, kf)];
+        const float gain = core->state[kf];
+        float kf_var = core->cov[propid_cov_index(kf, kf)];
+        if (scaled) {
+            kf_var = inverse_scale * inverse_scale * kf_var + gain * gain * inverse_scale_var +
+                     2.0f * inverse_scale * gain * core->cov[propid_cov_index(kf, scale)];
+        }
         const float km_var = km_rel_var[i];
         const uint16_t bit = (uint16_t)(1u << i);
         all_rotors |= bit;
-        estimate->thrust_coeff[i] = core->state[kf] * kf_nominal;
+        estimate->thrust_coeff[i] = inverse_scale * gain * kf_nominal;
         estimate->thrust_coeff_std[i] = std_of(kf_var) * kf_nominal;
         estimate->drag_coeff[i] = km_rel[i] * km_nominal;
         estimate->drag_coeff_std[i] = std_of(km_var) * km_nominal;
@@ -106,9 +118,10 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
 #endif
     }
     estimate->torque_scale = 1.0f;
-    if (PROPID_WITH_ACCEL && derived->layout.torque_scale != PROPID_NO_STATE) {
-        estimate->torque_scale = core->state[derived->layout.torque_scale];
-        estimate->torque_scale_std = std_of(core->cov[propid_cov_index(derived->layout.torque_scale, derived->layout.torque_scale)]);
+    if (scaled) {
+        /* s = 1/r (r kept positive by the clamp), std by the first-order rule. */
+        estimate->torque_scale = 1.0f / inverse_scale;
+        estimate->torque_scale_std = std_of(inverse_scale_var) / (inverse_scale * inverse_scale);
     }
     uint8_t terms = 0u;
     terms |= disturbance != PROPID_NO_STATE ? PROPID_TERM_DISTURBANCE : 0u;

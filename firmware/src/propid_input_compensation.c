@@ -35,13 +35,6 @@
 
 #if PROPID_WITH_INPUT_NOISE
 
-/* The thrust-torque scale the rotor entries carry (1 without the state). */
-static float torque_scale_of(const propid_derived_t *derived, const float *state)
-{
-    return PROPID_WITH_ACCEL && derived->layout.torque_scale != PROPID_NO_STATE ? state[derived->layout.torque_scale]
-                                                                                : 1.0f;
-}
-
 /* The coefficient block's products with theta and the three factor vectors in one
  * pass over its packed upper triangle (each P element loaded once). */
 static void coefficient_products(propid_core_t *core, uint8_t first, uint8_t coefficients)
@@ -68,12 +61,6 @@ static void coefficient_products(propid_core_t *core, uint8_t first, uint8_t coe
     }
 }
 
-/* The column's torque per unit coefficient and input (the thrust-torque scale on thrust entries). */
-static float entry_torque(const propid_derived_t *derived, uint8_t a, uint8_t p, float scale)
-{
-    return derived->jac_torque[a][p] * (derived->jac_column[a][p] < derived->layout.drag ? scale : 1.0f);
-}
-
 void propid_input_compensation_prepare(propid_filter_t *filter, float dt)
 {
     const propid_derived_t *derived = &filter->derived;
@@ -83,7 +70,6 @@ void propid_input_compensation_prepare(propid_filter_t *filter, float dt)
     const uint8_t rotor_count = filter->config.rotor_count;
     const uint8_t first = derived->layout.thrust;
     const uint8_t coefficients = (uint8_t)(2u * rotor_count);
-    const float scale = torque_scale_of(derived, state);
     const float tau = derived->input_noise_time;
     const float rho = tau > 0.0f ? expf(-dt / tau) : 0.0f;
     /* Var(u_i) at the step's input, the trapezoid mean of the interval's ends. */
@@ -120,15 +106,15 @@ void propid_input_compensation_prepare(propid_filter_t *filter, float dt)
         const uint8_t count = derived->jac_count[a];
         for (uint8_t p = derived->jac_rate_count[a]; p < count; ++p) {
             const uint8_t rotor = derived->jac_rotor[a][p];
-            if (rotor < rotor_count) { /* not the scale's or the disturbance's entry */
-                gain[rotor] += entry_torque(derived, a, p, scale) * coefficient[derived->jac_column[a][p] - first];
+            if (rotor < rotor_count) { /* not the disturbance's entry */
+                gain[rotor] += derived->jac_torque[a][p] * coefficient[derived->jac_column[a][p] - first];
             }
         }
         for (uint8_t p = derived->jac_rate_count[a]; p < count; ++p) {
             const uint8_t rotor = derived->jac_rotor[a][p];
             if (rotor < rotor_count) {
                 factor[derived->jac_column[a][p] - first] +=
-                    weight[a] * input_var[rotor] * gain[rotor] * entry_torque(derived, a, p, scale);
+                    weight[a] * input_var[rotor] * gain[rotor] * derived->jac_torque[a][p];
             }
         }
         /* The factors per coefficient to the yaw basis of P's drag block, so that
@@ -157,7 +143,7 @@ void propid_input_compensation_prepare(propid_filter_t *filter, float dt)
         for (uint8_t p = derived->jac_rate_count[a]; p < count; ++p) {
             const uint8_t rotor = derived->jac_rotor[a][p];
             if (rotor < rotor_count) {
-                along[rotor] += entry_torque(derived, a, p, scale) * direction[derived->jac_column[a][p] - first];
+                along[rotor] += derived->jac_torque[a][p] * direction[derived->jac_column[a][p] - first];
             }
         }
         float error_information = 0.0f;

@@ -361,14 +361,11 @@ PROPID_RARE void propid_cov_reset_rotor(const propid_derived_t *derived, const p
 #define PROPID_QUAD_FIRST_DRAG (PROPID_RATE_STATES + 4u)
 #define PROPID_QUAD_FIRST_BIAS (PROPID_RATE_STATES + 8u)
 
-/* jac_rotor marker of the thrust-torque scale's Jacobian entry (propid_config.c). */
-#define PROPID_SCALE_ENTRY 0xFEu
-
 /* One scalar measurement y = H x + v with a sparse H (propid_scalar_update.c):
  * H has `count` non-zero entries, value[k] in column index[k]. The longest row
- * is the accelerometer's (every thrust coefficient and its bias), else the
- * gyro's two (a rate and its bias). */
-#define PROPID_SPARSE_MAX (PROPID_WITH_ACCEL ? PROPID_MAX_ROTORS + 1u : 2u)
+ * is the accelerometer's (every thrust coefficient, the torque scale and its
+ * bias), else the gyro's two (a rate and its bias). */
+#define PROPID_SPARSE_MAX (PROPID_WITH_ACCEL ? PROPID_MAX_ROTORS + 2u : 2u)
 typedef struct {
     uint8_t count;
     uint8_t index[PROPID_SPARSE_MAX];
@@ -461,9 +458,10 @@ uint32_t propid_clamp_coefficients(propid_filter_t *filter);
 int propid_project_onto_bound(const propid_derived_t *derived, propid_core_t *core, uint8_t k, float bound);
 
 #if PROPID_WITH_ACCEL
-/* The thrust-torque scale (docs/math.md §9) kept in the coefficients' range: at or
- * below zero the thrust torques would vanish or change sign, and a walking scale
- * can be carried there by an update. Returns 1 when it clamped. */
+/* The thrust-torque scale's state r = 1/s (docs/math.md §9) kept where s is in the
+ * coefficients' range: at or below zero the thrust torques would vanish or change
+ * sign, and a walking scale can be carried there by an update. Returns 1 when it
+ * clamped. */
 static inline uint32_t propid_clamp_torque_scale(const propid_kept_config_t *config, const propid_derived_t *derived,
                                                  propid_core_t *core)
 {
@@ -472,12 +470,14 @@ static inline uint32_t propid_clamp_torque_scale(const propid_kept_config_t *con
         return 0u;
     }
     float *value = &core->state[scale];
-    if (*value < config->coeff_rel_min) {
-        *value = config->coeff_rel_min;
+    const float low = 1.0f / config->coeff_rel_max;
+    const float high = 1.0f / config->coeff_rel_min;
+    if (*value < low) {
+        *value = low;
         return 1u;
     }
-    if (*value > config->coeff_rel_max) {
-        *value = config->coeff_rel_max;
+    if (*value > high) {
+        *value = high;
         return 1u;
     }
     return 0u;

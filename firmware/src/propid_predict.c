@@ -154,9 +154,6 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
      * rotor_reaction_i (Omega_i(end) - Omega_i(start)) over the interval; the
      * rotors' angular momentum h (trapezoid mean of the speeds) makes a
      * gyroscopic torque linear in omega, A_ab += rotor_gyro[a][b] h. */
-    const float torque_scale =
-        PROPID_WITH_ACCEL && derived->layout.torque_scale != PROPID_NO_STATE
-            ? filter->core.state[derived->layout.torque_scale] : 1.0f;
     float reaction[3] = {0.0f, 0.0f, 0.0f};
     float momentum_dt = 0.0f;
 #if PROPID_WITH_ROTOR_INERTIA
@@ -197,25 +194,15 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
         }
         gyroscopic[a] = sum;
         /* Rotor torques: G = torque dt u, velocity change sum G x_coefficient.
-         * With the thrust-torque scale s (math.md §9) the thrust entries are
-         * s torque dt u and the scale's own entry is the unscaled thrust part. */
+         * (With the thrust-torque scale the thrust states carry s kf: math.md §9.) */
         sum = 0.0f;
-        float thrust_part = 0.0f;
         uint8_t drag_entry = count;
         const float *torque = derived->jac_torque[a];
         const uint8_t *rotor = derived->jac_rotor[a];
         for (uint8_t p = rate_count; p < count; ++p) {
-            if (PROPID_WITH_ACCEL && rotor[p] == PROPID_SCALE_ENTRY) {
-                g[p] = thrust_part;
-                continue;
-            }
-            float entry = torque[p] * speed_sq_dt[rotor[p]];
+            const float entry = torque[p] * speed_sq_dt[rotor[p]];
             g[p] = entry;
-            if (column[p] < derived->layout.drag) {
-                thrust_part += entry * state[column[p]];
-                entry *= torque_scale;
-                g[p] = entry;
-            } else if (column[p] < derived->layout.gyro_bias) {
+            if (column[p] >= derived->layout.drag && column[p] < derived->layout.gyro_bias) {
                 drag_entry = drag_entry < p ? drag_entry : p; /* summed in the yaw basis below */
                 continue;
             }
@@ -426,21 +413,17 @@ static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t
     for (uint8_t i = 0; i < rotor_count; ++i) {
         input_var[i] = weight * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
     }
-    const float torque_scale =
-        PROPID_WITH_ACCEL && derived->layout.torque_scale != PROPID_NO_STATE
-            ? state[derived->layout.torque_scale] : 1.0f;
     float gain[3][PROPID_MAX_ROTORS] = {{0.0f}}; /* B */
     for (uint8_t a = 0; a < 3u; ++a) {
         const uint8_t count = derived->jac_count[a];
         for (uint8_t p = derived->jac_rate_count[a]; p < count; ++p) {
             const uint8_t rotor = derived->jac_rotor[a][p];
-            if (rotor >= rotor_count) { /* the scale's and the disturbance's entries */
+            if (rotor >= rotor_count) { /* the disturbance's entries */
                 continue;
             }
             const uint8_t column = derived->jac_column[a][p];
             const int thrust = column < derived->layout.drag;
-            const float entry = derived->jac_torque[a][p] * (thrust ? state[column] : km_rel[rotor]);
-            gain[a][rotor] += thrust ? entry * torque_scale : entry;
+            gain[a][rotor] += derived->jac_torque[a][p] * (thrust ? state[column] : km_rel[rotor]);
         }
     }
     add_input_block(core->cov, (const float (*)[PROPID_MAX_ROTORS])gain, input_var, rotor_count);
@@ -466,6 +449,36 @@ static void add_input_noise(const propid_derived_t *derived, propid_core_t *core
 }
 #endif
 
+#if PROPID_WITH_ACCEL
+/* A walking thrust-torque scale (docs/math.md §9): ds = w_s moves g_i = s kf_i by
+ * kf_i ds and r = 1/s by -r^2 ds, so Q dt = q^2 dt v v^T with v = kf_i = r g_i at
+ * each g_i and -r^2 at r, at the current state (the walk keeps kf where it is). The
+ * per-state process noise already put q^2 dt on P_rr (propid_config.c). */
+static void add_scale_walk(const propid_derived_t *derived, propid_core_t *core, float dt)
+{
+    const uint8_t scale = derived->layout.torque_scale;
+    if (scale == PROPID_NO_STATE) {
+        return;
+    }
+    const float walk = propid_process_psd(derived, scale) * dt;
+    if (!(walk > 0.0f)) {
+        return;
+    }
+    const uint8_t first = derived->layout.thrust;
+    const uint8_t end = derived->layout.drag;
+    const float r = core->state[scale];
+    const float r_sq = r * r;
+    for (uint8_t i = first; i < end; ++i) {
+        const float along_i = walk * r * core->state[i];
+        for (uint8_t j = i; j < end; ++j) {
+            core->cov[propid_cov_index(i, j)] += along_i * r * core->state[j];
+        }
+        core->cov[propid_cov_index(i, scale)] -= along_i * r_sq;
+    }
+    core->cov[propid_cov_index(scale, scale)] += walk * (r_sq * r_sq - 1.0f);
+}
+#endif
+
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
                                const float jacobian_dt[3][PROPID_JAC_ROW])
 {
@@ -480,6 +493,9 @@ void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *c
     {
         predict_covariance_quad_layout(derived, core->cov, dt, jacobian_dt, drag_factor);
     }
+#if PROPID_WITH_ACCEL
+    add_scale_walk(derived, core, dt);
+#endif
 #if PROPID_WITH_INPUT_NOISE
     if (derived->input_noise_var > 0.0f) {
         add_input_noise(derived, core, dt);

@@ -179,9 +179,15 @@ class ReferenceFilter:
         self.state = np.zeros(n)
         self.state[3:self.first_bias] = 1.0
         if self.torque_scale is not None:
-            self.state[self.torque_scale] = 1.0
+            self.state[self.torque_scale] = 1.0  # r = 1/s
         self.state = self.basis @ self.state  # (equal km priors: P's prior is the same in either basis)
         self.cov = np.diag(self.prior_var.copy())
+        if self.torque_scale is not None:
+            # C (propid_cov_set_prior): g = s kf, r = 1/s from independent kf and s priors, to first order
+            r, g = self.torque_scale, slice(3, self.first_drag)
+            p_s = self.prior_var[r]
+            self.cov[g, g] += p_s
+            self.cov[g, r] = self.cov[r, g] = -p_s
         self.rotor_speed_sq = np.zeros(self.rotor_count)
         self.input_speed_sq = np.zeros(self.rotor_count)
         self.rotor_time_us = 0
@@ -223,6 +229,8 @@ class ReferenceFilter:
         for k in (3 + rotor, self.first_drag + rotor):
             self.state[k] = 1.0
             self._reset_state(k)
+        if self.torque_scale is not None:  # the nominal kf is g = 1/r
+            self.state[3 + rotor] = 1.0 / self.state[self.torque_scale]
         self._flip_basis()
         return STATUS["PROPID_OK"]
 
@@ -261,18 +269,16 @@ class ReferenceFilter:
         km_rel = state[3 + n_rot:3 + 2 * n_rot]
         momentum = self.inertia @ rate
         gyroscopic = np.cross(rate, momentum)
-        scale = state[self.torque_scale] if self.torque_scale is not None else 1.0
+        # (with the torque scale the thrust states carry g = s kf: the row stays linear)
         thrust_part = (kf_rel * speed_sq) @ self.thrust_torque
         rate_dot = (-(self.inertia_inv @ gyroscopic)
-                    + scale * thrust_part
+                    + thrust_part
                     + (km_rel * speed_sq) @ self.drag_torque)
         # d(omega x J omega)/d omega = [omega]x J - [J omega]x
         dgyro = _skew(rate) @ self.inertia - _skew(momentum)
         rows = np.zeros((3, self.n))
         rows[:, :3] = -(self.inertia_inv @ dgyro)
-        rows[:, 3:3 + n_rot] = scale * (self.thrust_torque * speed_sq[:, None]).T
-        if self.torque_scale is not None:
-            rows[:, self.torque_scale] = thrust_part
+        rows[:, 3:3 + n_rot] = (self.thrust_torque * speed_sq[:, None]).T
         rows[:, 3 + n_rot:3 + 2 * n_rot] = (self.drag_torque * speed_sq[:, None]).T
         if momentum_z != 0.0:
             rotor_gyro = np.zeros((3, 3))
@@ -496,6 +502,15 @@ class ReferenceFilter:
             if self.check_row % 2 != 0:
                 loading[self.first_drag:self.first_bias] = 0.0
             self.cov[diag] += loading * self.cov[diag] + self.process_psd * dt
+            if self.torque_scale is not None and self.process_psd[self.torque_scale] > 0.0:
+                # C: add_scale_walk, Q dt = q^2 dt v v^T, v = r g at each g and -r^2 at r (q^2 dt
+                # on P_rr is in the per-state process noise already)
+                r, g = self.torque_scale, slice(3, self.first_drag)
+                v = np.zeros(n)
+                v[g] = self.state[r] * self.state[g]
+                v[r] = -self.state[r] ** 2
+                self.cov += self.process_psd[r] * dt * np.outer(v, v)
+                self.cov[r, r] -= self.process_psd[r] * dt
             if self.input_noise_var > 0.0:
                 # Rotor-speed input error (C: add_input_noise, docs/math.md §14): B Sigma_u B^T
                 # dt max(dt, time), B = d(omega_dot)/d(Omega^2) at the current coefficients.
@@ -666,10 +681,16 @@ class ReferenceFilter:
         if rotor_clock > self.rotor_time_us and rotor_clock - self.rotor_time_us > self.rotor_stale_us:
             return self._reject("PROPID_ERR_ROTOR_STALE")
         n_rot, b = self.rotor_count, self.accel_bias
+        # C: with the torque scale r = 1/s multiplies the thrust states g = s kf here only
+        r = float(self.state[self.torque_scale]) if self.torque_scale is not None else 1.0
+        per_state = self.thrust_per_mass * self.rotor_speed_sq
         h = np.zeros(self.n)
-        h[3:3 + n_rot] = self.thrust_per_mass * self.rotor_speed_sq
+        h[3:3 + n_rot] = r * per_state
         h[b] = 1.0
-        thrust = float(h[3:3 + n_rot] @ self.state[3:3 + n_rot])
+        thrust_states = float(per_state @ self.state[3:3 + n_rot])
+        if self.torque_scale is not None:
+            h[self.torque_scale] = thrust_states
+        thrust = r * thrust_states
         innovation = f[2] - thrust - self.state[b]
         if not math.isfinite(innovation):
             return self._reject("PROPID_ERR_NUMERIC")
@@ -735,10 +756,10 @@ class ReferenceFilter:
             self.cov[drag, drag] += 4.0 * self.rotor_count * VAR_LOADING * largest
             if clamped > extra:
                 self._enforce_bounds()
-        if self.torque_scale is not None:  # C: propid_clamp_torque_scale
-            s = self.torque_scale
-            clamped += int(not lo <= self.state[s] <= hi)
-            self.state[s] = min(max(self.state[s], lo), hi)
+        if self.torque_scale is not None:  # C: propid_clamp_torque_scale (r = 1/s, s in [lo, hi])
+            s, r_lo, r_hi = self.torque_scale, _f32(1.0 / _f32(hi)), _f32(1.0 / _f32(lo))
+            clamped += int(not r_lo <= self.state[s] <= r_hi)
+            self.state[s] = min(max(self.state[s], r_lo), r_hi)
         if clamped:
             self.health |= HEALTH["STATE_CLAMPED"]
             self.counters_data["state_clamps"] += clamped
@@ -763,6 +784,16 @@ class ReferenceFilter:
         km = slice(self.first_drag, self.first_drag + n_rot)
         bias = slice(self.first_bias, self.first_bias + 3)
         var = np.diag(cov)
+        kf_value = state[kf].copy()
+        if self.torque_scale is not None:
+            # C: kf = r g, its variance to first order; s = 1/r
+            r = self.torque_scale
+            g = state[kf]
+            kf_value = state[r] * g
+            var = var.copy()
+            var[kf] = state[r] ** 2 * var[kf] + g * g * cov[r, r] + 2.0 * state[r] * g * cov[kf, r]
+            std = std.copy()
+            std[kf] = np.sqrt(np.maximum(var[kf], 0.0))
         bits = 1 << np.arange(n_rot)
 
         def mask(condition: np.ndarray) -> int:
@@ -783,7 +814,7 @@ class ReferenceFilter:
         return Estimate(
             time_us=self.time_us,
             body_rate=state[:3].copy(), body_rate_std=std[:3].copy(),
-            thrust_coeff=state[kf] * self.kf_nominal, thrust_coeff_std=std[kf] * self.kf_nominal,
+            thrust_coeff=kf_value * self.kf_nominal, thrust_coeff_std=std[kf] * self.kf_nominal,
             drag_coeff=state[km] * self.km_nominal, drag_coeff_std=std[km] * self.km_nominal,
             gyro_bias=state[bias].copy(), gyro_bias_std=std[bias].copy(),
             innovation=self.innovation.copy(), innovation_test_ratio=self.innovation_test_ratio.copy(),
@@ -801,9 +832,10 @@ class ReferenceFilter:
             d = slice(self.first_disturbance, self.first_disturbance + 3)
             out["disturbance_torque"] = self.inertia @ self.state[d]
             out["disturbance_torque_std"] = np.sqrt((self.inertia ** 2) @ (std[d] ** 2))
-        if self.torque_scale is not None:
-            out["torque_scale"] = float(self.state[self.torque_scale])
-            out["torque_scale_std"] = float(std[self.torque_scale])
+        if self.torque_scale is not None:  # s = 1/r
+            r = float(self.state[self.torque_scale])
+            out["torque_scale"] = 1.0 / r
+            out["torque_scale_std"] = float(std[self.torque_scale]) / (r * r)
         if self.accel_bias is not None:
             out["accel_bias"] = float(self.state[self.accel_bias])
             out["accel_bias_std"] = float(std[self.accel_bias])

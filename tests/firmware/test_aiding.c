@@ -352,7 +352,8 @@ static void test_torque_scale_walk_follows_a_changing_torque_gain(void)
 static void test_torque_scale_is_kept_in_the_coefficient_range(void)
 {
     /* A walking scale carried to or below zero by an update would make the thrust
-     * torques vanish or change sign: the gyro and the accelerometer paths clamp it. */
+     * torques vanish or change sign: the gyro and the accelerometer paths clamp it.
+     * The state is r = 1/s (docs/math.md §9), kept in [1/coeff_rel_max, 1/coeff_rel_min]. */
     propid_config_t config;
     quad_config(&config);
     config.mass = MASS;
@@ -367,15 +368,16 @@ static void test_torque_scale_is_kept_in_the_coefficient_range(void)
     filter.core.state[scale] = -0.5f;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 3000u, speeds, 4u));
     TEST_ASSERT_TRUE(propid_push_gyro(&filter, 3000u, zero) >= 0);
-    TEST_ASSERT_EQUAL_FLOAT(config.coeff_rel_min, filter.core.state[scale]);
+    TEST_ASSERT_EQUAL_FLOAT(1.0f / config.coeff_rel_max, filter.core.state[scale]);
     TEST_ASSERT_TRUE(filter.counters.state_clamps >= 1u);
     filter.core.state[scale] = 50.0f;
     const float force[3] = {0.0f, 0.0f, 9.81f};
     TEST_ASSERT_TRUE(propid_push_accel(&filter, 3500u, force) >= 0);
-    TEST_ASSERT_EQUAL_FLOAT(config.coeff_rel_max, filter.core.state[scale]);
+    TEST_ASSERT_EQUAL_FLOAT(1.0f / config.coeff_rel_min, filter.core.state[scale]);
     propid_estimate_t estimate;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
     TEST_ASSERT_TRUE(estimate.health & PROPID_HEALTH_STATE_CLAMPED);
+    TEST_ASSERT_FLOAT_WITHIN(1.0e-6f, config.coeff_rel_min, estimate.torque_scale);
 }
 
 /* ---- rotor inertia: the yaw reaction in one step ------------------------ */
