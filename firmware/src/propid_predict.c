@@ -488,14 +488,14 @@ void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *c
 #if PROPID_GENERAL_VEHICLES
     if (!derived->quad_layout) {
         predict_covariance_any(derived, core->cov, dt, jacobian_dt, derived->state_count, drag_factor);
+#if PROPID_WITH_ACCEL
+        add_scale_walk(derived, core, dt); /* (the quad layout has no scale state) */
+#endif
     } else
 #endif
     {
         predict_covariance_quad_layout(derived, core->cov, dt, jacobian_dt, drag_factor);
     }
-#if PROPID_WITH_ACCEL
-    add_scale_walk(derived, core, dt);
-#endif
 #if PROPID_WITH_INPUT_NOISE
     if (derived->input_noise_var > 0.0f) {
         add_input_noise(derived, core, dt);

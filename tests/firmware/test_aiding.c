@@ -380,6 +380,31 @@ static void test_torque_scale_is_kept_in_the_coefficient_range(void)
     TEST_ASSERT_FLOAT_WITHIN(1.0e-6f, config.coeff_rel_min, estimate.torque_scale);
 }
 
+static void test_torque_scale_prior_keeps_the_configured_meaning(void)
+{
+    /* The states are g = s kf and r = 1/s (docs/math.md §9); the priors are given on kf
+     * and s: at init the estimate reports exactly those, kf and s uncorrelated. */
+    propid_config_t config;
+    quad_config(&config);
+    config.mass = MASS;
+    config.torque_scale = 1u;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    propid_estimate_t estimate;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    TEST_ASSERT_FLOAT_WITHIN(1.0e-6f, 1.0f, estimate.torque_scale);
+    TEST_ASSERT_FLOAT_WITHIN(1.0e-6f, config.torque_scale_std0, estimate.torque_scale_std);
+    for (uint8_t i = 0; i < 4u; ++i) {
+        TEST_ASSERT_FLOAT_WITHIN(1.0e-6f * KF_NOMINAL, KF_NOMINAL, estimate.thrust_coeff[i]);
+        TEST_ASSERT_FLOAT_WITHIN(1.0e-4f * KF_NOMINAL, config.thrust_coeff_rel_std0 * KF_NOMINAL,
+                                 estimate.thrust_coeff_std[i]);
+    }
+    const uint8_t scale = filter.derived.layout.torque_scale;
+    const float p_s = config.torque_scale_std0 * config.torque_scale_std0;
+    TEST_ASSERT_FLOAT_WITHIN(1.0e-6f, -p_s, filter.core.cov[propid_cov_index(PROPID_RATE_STATES, scale)]);
+    TEST_ASSERT_FLOAT_WITHIN(1.0e-6f, p_s,
+                             filter.core.cov[propid_cov_index(PROPID_RATE_STATES, PROPID_RATE_STATES + 1u)]);
+}
+
 /* ---- rotor inertia: the yaw reaction in one step ------------------------ */
 static float yaw_rate_after_spin_up(float rotor_inertia)
 {
@@ -421,5 +446,6 @@ int main(void)
     RUN_TEST(test_torque_scale_frees_kf_from_an_inertia_error);
     RUN_TEST(test_torque_scale_walk_follows_a_changing_torque_gain);
     RUN_TEST(test_torque_scale_is_kept_in_the_coefficient_range);
+    RUN_TEST(test_torque_scale_prior_keeps_the_configured_meaning);
     return UNITY_END();
 }
