@@ -70,6 +70,41 @@ int sitl_mat4_solve(double a[4][4], double b[4][4], int columns, double tol)
     return 0;
 }
 
+int sitl_mat4_inverse(const double a[4][4], double inv[4][4], double tol)
+{
+    const double *r0 = a[0], *r1 = a[1], *r2 = a[2], *r3 = a[3];
+    /* 2x2 minors of rows 0-1 (top) and rows 2-3 (bottom), by column pair. */
+    const double t01 = r0[0] * r1[1] - r0[1] * r1[0], t02 = r0[0] * r1[2] - r0[2] * r1[0];
+    const double t03 = r0[0] * r1[3] - r0[3] * r1[0], t12 = r0[1] * r1[2] - r0[2] * r1[1];
+    const double t13 = r0[1] * r1[3] - r0[3] * r1[1], t23 = r0[2] * r1[3] - r0[3] * r1[2];
+    const double b01 = r2[0] * r3[1] - r2[1] * r3[0], b02 = r2[0] * r3[2] - r2[2] * r3[0];
+    const double b03 = r2[0] * r3[3] - r2[3] * r3[0], b12 = r2[1] * r3[2] - r2[2] * r3[1];
+    const double b13 = r2[1] * r3[3] - r2[3] * r3[1], b23 = r2[2] * r3[3] - r2[3] * r3[2];
+    const double det = (t01 * b23 - t02 * b13 + t03 * b12) + (t12 * b03 - t13 * b02 + t23 * b01);
+    if (!(fabs(det) > tol)) {
+        return -1;
+    }
+    const double d = 1.0 / det;
+    /* inv = adj(A) / det; the adjugate's columns 0-1 from the bottom minors, 2-3 from the top. */
+    inv[0][0] = (r1[1] * b23 - r1[2] * b13 + r1[3] * b12) * d;
+    inv[0][1] = (-r0[1] * b23 + r0[2] * b13 - r0[3] * b12) * d;
+    inv[0][2] = (r3[1] * t23 - r3[2] * t13 + r3[3] * t12) * d;
+    inv[0][3] = (-r2[1] * t23 + r2[2] * t13 - r2[3] * t12) * d;
+    inv[1][0] = (-r1[0] * b23 + r1[2] * b03 - r1[3] * b02) * d;
+    inv[1][1] = (r0[0] * b23 - r0[2] * b03 + r0[3] * b02) * d;
+    inv[1][2] = (-r3[0] * t23 + r3[2] * t03 - r3[3] * t02) * d;
+    inv[1][3] = (r2[0] * t23 - r2[2] * t03 + r2[3] * t02) * d;
+    inv[2][0] = (r1[0] * b13 - r1[1] * b03 + r1[3] * b01) * d;
+    inv[2][1] = (-r0[0] * b13 + r0[1] * b03 - r0[3] * b01) * d;
+    inv[2][2] = (r3[0] * t13 - r3[1] * t03 + r3[3] * t01) * d;
+    inv[2][3] = (-r2[0] * t13 + r2[1] * t03 - r2[3] * t01) * d;
+    inv[3][0] = (-r1[0] * b12 + r1[1] * b02 - r1[2] * b01) * d;
+    inv[3][1] = (r0[0] * b12 - r0[1] * b02 + r0[2] * b01) * d;
+    inv[3][2] = (-r3[0] * t12 + r3[1] * t02 - r3[2] * t01) * d;
+    inv[3][3] = (r2[0] * t12 - r2[1] * t02 + r2[2] * t01) * d;
+    return 0;
+}
+
 void sitl_quat_to_matrix(const double q[4], double r[3][3])
 {
     double w = q[0], x = q[1], y = q[2], z = q[3];

@@ -84,6 +84,11 @@ static inline void sitl_mat3_vee_skew(double out[3], const double m[3][3])
  * the rows to comparable norm first, so tol is relative). */
 int sitl_mat4_solve(double a[4][4], double b[4][4], int columns, double tol);
 
+/* inv = A^-1 by cofactors (2x2 minors of the top and bottom row pairs): no pivoting, no
+ * branch, for a well-conditioned A with rows of about unit length. Returns 0, or -1 (inv
+ * untouched) when |det A| is not above tol. */
+int sitl_mat4_inverse(const double a[4][4], double inv[4][4], double tol);
+
 /* Inverse of a 3x3 matrix; returns 0, or -1 if singular. */
 int sitl_mat3_inverse(const double m[3][3], double inv[3][3]);
 

@@ -67,32 +67,53 @@ set_coefficients(sitl_allocation_t *alloc, const int n, const double *thrust_coe
             scaled[k][i] = map[k][i] * scale[k];
         }
     }
-    double gram[4][4], gram_inv[4][4];
-    for (int a = 0; a < 4; a++) {
-        for (int b = a; b < 4; b++) {
-            double s = 0.0;
-            for (int i = 0; i < n; i++) {
-                s += scaled[a][i] * scaled[b][i];
-            }
-            gram[a][b] = s;
-            gram[b][a] = s; /* the same products in the same order: symmetric bit for bit */
-        }
-    }
-    for (int i = 0; i < 4; i++) {
-        for (int j = 0; j < 4; j++) {
-            gram_inv[i][j] = (i == j) ? 1.0 : 0.0;
-        }
-    }
-    if (sitl_mat4_solve(gram, gram_inv, 4, 1e-9) != 0) {
-        return -1;
-    }
-    for (int i = 0; i < n; i++) {
+    if (n == 4) {
+        /* Square map: its exact inverse directly, A^-1 = S^-1 D, by cofactors (no Gram, no
+         * product; the same result up to rounding). |det S| (rows of unit length: the
+         * volume they span) is about the product of the Gram's pivots' square roots, so
+         * the threshold is the square root of the Gram's below. */
+        double square[4][4], square_inv[4][4];
         for (int k = 0; k < 4; k++) {
-            double s = 0.0;
-            for (int a = 0; a < 4; a++) {
-                s += scaled[a][i] * gram_inv[a][k];
+            for (int i = 0; i < 4; i++) {
+                square[k][i] = scaled[k][i];
             }
-            alloc->inverse[i][k] = s * scale[k];
+        }
+        if (sitl_mat4_inverse(square, square_inv, 3.1622776601683795e-5) != 0) {
+            return -1;
+        }
+        for (int i = 0; i < 4; i++) {
+            for (int k = 0; k < 4; k++) {
+                alloc->inverse[i][k] = square_inv[i][k] * scale[k];
+            }
+        }
+    } else {
+        double gram[4][4], gram_inv[4][4];
+        for (int a = 0; a < 4; a++) {
+            for (int b = a; b < 4; b++) {
+                double s = 0.0;
+                for (int i = 0; i < n; i++) {
+                    s += scaled[a][i] * scaled[b][i];
+                }
+                gram[a][b] = s;
+                gram[b][a] = s; /* the same products in the same order: symmetric bit for bit */
+            }
+        }
+        for (int i = 0; i < 4; i++) {
+            for (int j = 0; j < 4; j++) {
+                gram_inv[i][j] = (i == j) ? 1.0 : 0.0;
+            }
+        }
+        if (sitl_mat4_solve(gram, gram_inv, 4, 1e-9) != 0) {
+            return -1;
+        }
+        for (int i = 0; i < n; i++) {
+            for (int k = 0; k < 4; k++) {
+                double s = 0.0;
+                for (int a = 0; a < 4; a++) {
+                    s += scaled[a][i] * gram_inv[a][k];
+                }
+                alloc->inverse[i][k] = s * scale[k];
+            }
         }
     }
     for (int k = 0; k < 4; k++) {

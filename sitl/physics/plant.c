@@ -209,14 +209,30 @@ SITL_INLINE void plain_derivative(const sitl_plant_t *plant, int n, int diagonal
     const double r22 = 1.0 - 2.0 * (x * x + y * y);
 
     double force_z = 0.0, torque[3] = {0.0, 0.0, 0.0};
+    double speed_sq[SITL_MAX_ROTORS];
     for (int i = 0; i < n; i++) {
         const double speed = state->rotor_speed[i];
         deriv->rotor_speed[i] = (c->clamped_command[i] - speed) * c->inv_time_constant;
-        const double speed_sq = speed * speed;
-        force_z += c->thrust[i] * speed_sq;
-        torque[0] += c->roll[i] * speed_sq;
-        torque[1] += c->pitch[i] * speed_sq;
-        torque[2] += c->yaw[i] * speed_sq;
+        speed_sq[i] = speed * speed;
+    }
+    if (n == 4) {
+        /* Sums in pairs: the loads are on the stages' dependent chain, and two
+         * levels of adds are shorter than four (rounding-level difference). */
+        force_z = (c->thrust[0] * speed_sq[0] + c->thrust[1] * speed_sq[1]) +
+                  (c->thrust[2] * speed_sq[2] + c->thrust[3] * speed_sq[3]);
+        torque[0] = (c->roll[0] * speed_sq[0] + c->roll[1] * speed_sq[1]) +
+                    (c->roll[2] * speed_sq[2] + c->roll[3] * speed_sq[3]);
+        torque[1] = (c->pitch[0] * speed_sq[0] + c->pitch[1] * speed_sq[1]) +
+                    (c->pitch[2] * speed_sq[2] + c->pitch[3] * speed_sq[3]);
+        torque[2] = (c->yaw[0] * speed_sq[0] + c->yaw[1] * speed_sq[1]) +
+                    (c->yaw[2] * speed_sq[2] + c->yaw[3] * speed_sq[3]);
+    } else {
+        for (int i = 0; i < n; i++) {
+            force_z += c->thrust[i] * speed_sq[i];
+            torque[0] += c->roll[i] * speed_sq[i];
+            torque[1] += c->pitch[i] * speed_sq[i];
+            torque[2] += c->yaw[i] * speed_sq[i];
+        }
     }
 
     /* a = R (0, 0, F) / m - g z: the x and y products are +-0 and add nothing. */
