@@ -223,6 +223,15 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
 #define PROPID_VAR_LOADING 1.1920929e-7f /* FLT_EPSILON = 2^-23 */
 #define PROPID_ROUNDING_TOL (2.0f * PROPID_VAR_LOADING)
 
+/* Rate loading (docs/math.md §2 "The rate block's loading"): the body rates'
+ * predicted variances get PROPID_RATE_LOADING instead. A gyro update cuts a rate
+ * variance by its cancellation factor f = P_pred / P_post and rounds the rate
+ * block by up to ~6 eps f relative to the result; a loading of l eps before the
+ * update leaves a gap of about l eps f in the rate block's correlation after it,
+ * so a fixed l > 6 keeps rates that the gyroscopic coupling has correlated to
+ * float32 resolution definite, whatever f. */
+#define PROPID_RATE_LOADING (8.0f * PROPID_VAR_LOADING) /* 1 + 2^-20: exact in float32 */
+
 /* Update loading: a gyro update computes the new variance of omega + b as
  * P_hh - P_hh^2 / S, exact only to ~epsilon P_hh in float32; when R is below
  * PROPID_UPDATE_LOADING P_hh that rounding is a sizable part of the result and

@@ -318,8 +318,8 @@ static __attribute__((noinline)) void predict_covariance_any(
             for (uint8_t p = 0; p < count; ++p) {
                 value += row[column[p]] * g[p];
             }
-            if (a == b) { /* Q dt and the rounding loading (propid_internal.h) */
-                value += PROPID_VAR_LOADING * value + propid_process_psd(derived, b) * dt;
+            if (a == b) { /* Q dt and the rate block's rounding loading (propid_internal.h) */
+                value += PROPID_RATE_LOADING * value + propid_process_psd(derived, b) * dt;
             }
             cov[propid_cov_index(a, b)] = value;
         }

@@ -31,6 +31,7 @@ _F32_MAX = float(np.finfo(np.float32).max)
 VAR_LOADING = float(np.finfo(np.float32).eps)
 ROUNDING_TOL = 2.0 * VAR_LOADING
 UPDATE_LOADING = 64.0 * VAR_LOADING
+RATE_LOADING = 8.0 * VAR_LOADING  # the rates' loading, above the gyro update's rounding
 GATE_OFF_SQ = 1.0e30  # C: PROPID_GATE_OFF_SQ (gating off still refuses 1e15-sigma innovations)
 
 
@@ -496,9 +497,11 @@ class ReferenceFilter:
             self.cov = f @ self.cov @ f.T
             self.cov = 0.5 * (self.cov + self.cov.T)
             # Q dt and the rounding loading (C: PROPID_VAR_LOADING, docs/math.md §2): on the
-            # drag coefficients every second prediction (C: even check rows), on the rest every one.
+            # drag coefficients every second prediction (C: even check rows), on the rest every one;
+            # the rates' own (C: PROPID_RATE_LOADING).
             diag = np.diag_indices(n)
             loading = np.full(n, VAR_LOADING)
+            loading[:3] = RATE_LOADING
             if self.check_row % 2 != 0:
                 loading[self.first_drag:self.first_bias] = 0.0
             self.cov[diag] += loading * self.cov[diag] + self.process_psd * dt

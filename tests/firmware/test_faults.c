@@ -570,6 +570,63 @@ static void test_covariance_definite_after_huge_rate_prior_and_torque(void)
 }
 #endif
 
+#if PROPID_MAX_ROTORS >= 7
+/* Fuzz finding (issue 10 (f), the 10^7-execution run): a seven-rotor vehicle,
+ * one rotor with 1000x the nominal kf alone at 3558 rad/s, no rate process
+ * noise. Its torque holds the y rate at the -68 rad/s ceiling; about the
+ * intermediate axis the gyroscopic coupling (Iyy - Izz) omega_y / Ixx and
+ * (Ixx - Iyy) omega_y / Izz stretches the x-z rate block every 5 ms, and with
+ * nothing to hold it open the x and z rates become correlated to float32
+ * resolution (smallest correlation eigenvalue 1.6e-7). The x update then cuts
+ * both variances about 90 times and rounds them by a few epsilon of their
+ * predicted size, which turned that eigenvalue to -5.7e-7. The rates' loading
+ * (PROPID_RATE_LOADING, docs/math.md §2) keeps the gap above that rounding.
+ * The exact call sequence of the fuzz input, then the same samples for a
+ * while; P tested (Cholesky in double) after every accepted gyro sample. */
+static void test_covariance_definite_with_rates_correlated_by_spin(void)
+{
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 7u, 0x1.b6835p-5f, 0.0f, 1.0f,
+                                                                 5.57e-6f, 1.36e-7f)); /* arm 0.0535 m */
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    config.rate_process_noise = 0x1.ffp-141f;             /* ~1e-42: none */
+    config.rotor[0].thrust_coeff_nominal = 0x1.6d0918p-8f; /* 5.57e-3 */
+    config.rotor[0].drag_coeff_nominal = 0x1.ep-146f;      /* ~2e-44: none */
+    init_filter();
+    const float speeds[PROPID_MAX_ROTORS] = {0x1.bcb4b6p+11f}; /* 3558 rad/s, the others still */
+    const float small = 0x1.1111p-4f;                          /* 0.0667 */
+    const float samples[][3] = {
+        {0x1.9999cp-3f, small, small},
+        {-small, -0x1.2740dcp+1f, 0x1.55556p-2f},
+        {0x1.9999cp-3f, -small, -small},
+        {-small, -0x1.2fc964p+0f, -small},
+        {-small, -0x1.b33334p+1f, -0x1.8f5c28p+0f},
+        {-small, -small, 0x1.55556p-2f},
+        {-small, -small, -0x1.47aep-5f},
+        {0x1.58bf28p+0f, -0x1.b33334p+1f, -0x1.b33334p+1f},
+    };
+    const uint64_t times[] = {1005201u, 1006762u, 1011763u, 1014124u, 1019125u, 1024126u, 1029727u, 1029728u};
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1000001u, speeds, 7u));
+    uint32_t failures = 0u;
+    for (uint32_t k = 0; k < sizeof times / sizeof times[0]; ++k) {
+        TEST_ASSERT_TRUE(propid_push_gyro(&filter, times[k], samples[k]) >= 0);
+        assert_sane();
+        failures += covariance_is_positive_definite() ? 0u : 1u;
+    }
+    TEST_ASSERT_EQUAL_FLOAT(-68.0f, filter.core.state[1]); /* the spin of the finding */
+    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite while spinning");
+    uint64_t t = times[7];
+    for (uint32_t k = 0; k < 400u; ++k) {
+        t += 5001u;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, speeds, 7u));
+        TEST_ASSERT_TRUE(propid_push_gyro(&filter, t, samples[k % 8u]) >= 0);
+        assert_sane();
+        failures += covariance_is_positive_definite() ? 0u : 1u;
+    }
+    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite while spinning on");
+}
+#endif
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -585,6 +642,9 @@ int main(void)
     RUN_TEST(test_covariance_definite_after_gyroscopic_rate_inflation);
 #if PROPID_MAX_ROTORS >= 5
     RUN_TEST(test_covariance_definite_after_huge_rate_prior_and_torque);
+#endif
+#if PROPID_MAX_ROTORS >= 7
+    RUN_TEST(test_covariance_definite_with_rates_correlated_by_spin);
 #endif
     return UNITY_END();
 }
