@@ -158,6 +158,30 @@ def test_cli_writes_json_report_and_a_corrected_vehicle_that_replays(flights, tm
     assert summary["finite"]
 
 
+def test_corrected_vehicle_leaves_a_significant_delay_to_the_per_log_rule(flights, tmp_path):
+    """A significant esc_delay says the file's delay is wrong, but a telemetry lag belongs to
+    each log: the corrected file carries no fixed esc_delay_s (replay measures it per log);
+    the fitted value is reported. A delay that is not significant leaves the file's value."""
+    from propid.flightlog import write_vehicle
+    from propid.gap.vehicle_out import corrected_vehicle
+    from propid.replay.run import resolve_esc_delay
+    from propid.replay import ReplayOptions
+
+    log_path, vehicle, _ = flights("none")
+    vehicle = replace(vehicle, esc_delay_s=0.01)
+    entry = {"id": "esc_delay", "significant": True, "params": {"delay_s": 0.02}}
+    out, carried = corrected_vehicle(vehicle, [entry])
+    assert out.esc_delay_s is None
+    assert carried["applied"]["esc_delay"]["fitted_delay_s"] == pytest.approx(0.03)
+    write_vehicle(tmp_path / "v.json", out)
+    assert "esc_delay_s" not in json.loads((tmp_path / "v.json").read_text())
+    log = read_flightlog(log_path, out)
+    _, rule = resolve_esc_delay(log, out, np.ones(len(log), dtype=bool), ReplayOptions(esc_delay="default"), "rows")
+    assert rule.startswith("auto")
+    kept, _ = corrected_vehicle(vehicle, [dict(entry, significant=False)])
+    assert kept.esc_delay_s == 0.01
+
+
 def test_corrupt_log_is_a_one_line_error(tmp_path, capsys):
     from propid.cli import main
 
@@ -607,6 +631,110 @@ def test_a_lag_fixed_by_other_axes_does_not_make_rotor_inertia(seed):
     s = selection.score(design, gr, [0, 1], "rotor_inertia", scoring.cv_sse(gr, [0, 1]))
     assert s["conditioned_on"]["p_value"] < 0.05  # what a conditional test alone would name
     assert not s["significant"]
+
+
+def _lag_on_roll_design(rng, effect, truth, n=1200, rate=100.0, strength=0.3):
+    """Roll and thrust: base columns, the effect's columns and a residual lag's (d dP/dt on both
+    axes). The effect's roll column is nearly the lag's roll column (a narrow-band motion: a
+    torque lag on a rate oscillation is a damping, and in closed loop the band-passed total
+    thrust can carry it too); its other columns (aero_damping's pitch and yaw) act on thrust
+    here as independent regressors that nothing drives. `truth`: "lag" (both axes) or the effect
+    (roll only)."""
+    from propid.gap.design import Design
+    from propid.gap.effects import by_id
+    from propid.gap.whitening import split_rows
+
+    t = np.arange(n) / rate
+
+    def smooth():
+        f = rng.uniform(0.1, 2.0, 4)
+        ph = rng.uniform(0, 2 * np.pi, 4)
+        c = np.sin(2 * np.pi * f[:, None] * t[None, :] + ph[:, None]).sum(axis=0)
+        return c / c.std()
+
+    zero = np.zeros(n)
+    lag_roll, lag_thrust = smooth(), smooth()
+    extra = len(by_id(effect).params) - 1
+    look_alike = lag_roll + 0.1 * smooth()
+    others = [rng.normal(size=n) for _ in range(extra)]  # broadband: no chance likeness to the lag
+    # columns: base roll, base thrust, the effect's (roll look-alike, then the others), residual lag
+    x = {"roll": np.column_stack([smooth(), zero, look_alike] + [zero] * extra + [lag_roll]),
+         "thrust": np.column_stack([zero, smooth(), zero] + others + [lag_thrust])}
+    y = {a: x[a][:, 0] + x[a][:, 1] + rng.normal(size=n) for a in x}
+    if truth == "lag":
+        y = {a: y[a] + strength * x[a][:, -1] for a in x}
+    else:
+        y["roll"] = y["roll"] + strength * look_alike
+    parent = (t // 1.0).astype(int)
+    block, block_flight, group = split_rows(parent, np.zeros(parent.max() + 1, dtype=int), 10)
+    k = 3 + extra
+    names = ["kf", "kf_thrust"] + [f"{effect}.{i}" for i in range(extra + 1)] + ["residual_lag.delay_s"]
+    return Design(axes=["roll", "thrust"], names=names,
+                  groups={"base": [0, 1], effect: list(range(2, k)), "residual_lag": [k]}, y=y, x=x,
+                  scale=np.ones(k + 1), block=block, flight=np.zeros(n, dtype=int), block_flight=block_flight,
+                  time=t, fold_group=group)
+
+
+@pytest.mark.parametrize("effect", ["aero_damping", "com_offset"])
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_residual_lag_is_not_named_damping_or_com_offset_but_they_still_are(effect, seed, monkeypatch):
+    """aero_damping and com_offset are tested on top of the residual lag too
+    (effects.CONDITIONED_ON): a lag on every axis whose roll share their roll column can take is
+    not named (without the rule it is); a roll-only torque of their shape still is."""
+    from propid.gap import scoring, selection
+
+    def significant(truth, rule=True):
+        if not rule:
+            monkeypatch.setattr(selection, "CONDITIONED_ON", {})
+        design = _lag_on_roll_design(np.random.default_rng(seed), effect, truth)
+        gr = scoring.grams(design)
+        s = selection.score(design, gr, [0, 1], effect, scoring.cv_sse(gr, [0, 1]))
+        monkeypatch.undo()
+        return s["significant"], s
+
+    named, s = significant("lag")
+    assert not named and s["conditioned_on"]["on"] == "residual_lag"
+    assert significant("lag", rule=False)[0]  # the look-alike the rule removes
+    assert significant(effect)[0]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_backward_check_drops_a_named_effect_that_another_explains(seed):
+    """selection.backward_check (step 5): thrust_nonlinearity's yaw column is a noisy copy of the
+    rotor-acceleration column and the data carry rotor inertia only. Named in that order, the
+    exponent is not significant on top of rotor_inertia and is dropped; rotor_inertia holds on
+    top of the exponent and stays. With a roll share of the exponent too (one exponent
+    cannot fit both axes' shares) both stay."""
+    from propid.gap import scoring, selection
+    from propid.gap.design import Design
+    from propid.gap.whitening import split_rows
+
+    def check(truth_roll):
+        rng = np.random.default_rng(seed)
+        n, rate = 1200, 100.0
+        t = np.arange(n) / rate
+        base_r, base_y, spin, roll_col = (rng.normal(size=n) for _ in range(4))
+        zero = np.zeros(n)
+        # columns: base roll, base yaw, thrust_nonlinearity (roll, yaw), rotor_inertia (yaw)
+        x = {"roll": np.column_stack([base_r, zero, roll_col, zero]),
+             "yaw": np.column_stack([zero, base_y, spin + 0.5 * rng.normal(size=n), spin])}
+        y = {"roll": base_r + truth_roll * roll_col + rng.normal(size=n),
+             "yaw": base_y + 0.6 * spin + rng.normal(size=n)}
+        parent = (t // 1.0).astype(int)
+        block, block_flight, group = split_rows(parent, np.zeros(parent.max() + 1, dtype=int), 10)
+        design = Design(axes=["roll", "yaw"], names=["kf", "km", "thrust_nonlinearity.s", "rotor_inertia.J_r"],
+                        groups={"base": [0, 1], "thrust_nonlinearity": [2], "rotor_inertia": [3]}, y=y, x=x,
+                        scale=np.ones(4), block=block, flight=np.zeros(n, dtype=int), block_flight=block_flight,
+                        time=t, fold_group=group)
+        gr = scoring.grams(design)
+        selected = [{"id": "thrust_nonlinearity"}, {"id": "rotor_inertia"}]
+        dropped = selection.backward_check(design, gr, [0, 1], selected)
+        return [s["id"] for s in selected], dropped
+
+    kept, dropped = check(0.0)
+    assert kept == ["rotor_inertia"] and set(dropped) == {"thrust_nonlinearity"}
+    kept, dropped = check(0.2)
+    assert kept == ["thrust_nonlinearity", "rotor_inertia"] and not dropped
 
 
 def test_residual_lag_regressor_has_the_sign_and_size_of_a_rotor_stream_lag(flights):

@@ -245,7 +245,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                         "p_value": s["p_value"], "effect_test": s["effect_test"],
                         "held_out_p_value": s["held_out_p_value"], "physical_sign": s["physical_sign"],
                         "significant": s["significant"], **({"step": s["step"]} if "step" in s else {}),
-                        **({"conditioned_on": s["conditioned_on"]} if "conditioned_on" in s else {})})
+                        **({"conditioned_on": s["conditioned_on"]} if "conditioned_on" in s else {}),
+                        **({"dropped": s["dropped"]} if "dropped" in s else {})})
     if delay_significant:  # the alignment is applied before any effect is scored: it ranks by its own share
         first = next((e for e in entries if e.get("step") == 1), None)
         esc_entry["step"] = 0 if first is None or esc_entry["explained_fraction"] >= first.get(

@@ -374,7 +374,12 @@ RESIDUAL_LAG = Effect("residual_lag", ("delay_s",), ("s",), (), AXES, _residual_
 # to first order, 2 d km Omega sum s_i dOmega_i/dt, the rotor-acceleration torque of a rotor
 # inertia J_r = 2 d km Omega; but a lag delays roll, pitch and thrust by the same d, which rotor
 # inertia does not touch, so those axes fix d and only the yaw torque beyond it is rotor inertia.
-CONDITIONED_ON = {"rotor_inertia": RESIDUAL_LAG.id}
+# The same holds for every candidate whose columns a lag can stand in for on a narrow-band motion:
+# aero_damping (a torque lagging by d on a rate oscillation at frequency f is, to first order,
+# a rate damping d J (2 pi f)^2) and com_offset (roll/pitch torque from the total thrust: in
+# closed loop the collective and the attitude torques move together, so the band-passed thrust
+# can carry part of a lag's d dP/dt).
+CONDITIONED_ON = {"rotor_inertia": RESIDUAL_LAG.id, "aero_damping": RESIDUAL_LAG.id, "com_offset": RESIDUAL_LAG.id}
 
 ESC_DELAY = "esc_delay"
 ALL_IDS = [ESC_DELAY] + [e.id for e in EFFECTS]
@@ -384,8 +389,12 @@ ESC_DELAY_NEEDS: tuple[str, ...] = ()
 # Look-alikes: effects whose signatures overlap; told apart by the axes/terms that differ,
 # else reported as ambiguous.
 LOOK_ALIKES = [
+    # the torque-vs-accelerometer scale group: each is, to first order about the hover speed, a
+    # roll/pitch torque gain against the accelerometer's thrust (the exponent s scales a
+    # differential torque by 1 + s/2), so all three pairs are look-alikes
     ("inertia_error", "gyro_scale"),
     ("inertia_error", "thrust_nonlinearity"),
+    ("gyro_scale", "thrust_nonlinearity"),
     ("esc_delay", "rotor_inertia"),
     ("esc_delay", "gyro_lowpass"),
     ("rotor_inertia", "aero_damping"),

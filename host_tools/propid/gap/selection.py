@@ -12,11 +12,15 @@ Rule (docs/gap.md, "Which"):
    and the held-out improvement confirmed (one-sided paired test, Holm at 5 % over the
    same candidates);
 3. among the significant ones take the one explaining most of the residual summed over
-   all axes (so one-axis and four-axis effects compete on one scale); if a look-alike of it is also
-   significant and the bootstrap CI of their score difference contains 0, the two
-   cannot be told apart: if one's columns contain the other's (nested), the one with
-   fewer parameters is kept, else the best is kept; both are listed in `ambiguous`;
-4. repeat until nothing significant is left (at most MAX_EFFECTS effects).
+   all axes (so one-axis and four-axis effects compete on one scale); the look-alikes of it
+   that are also significant and whose score difference with it has an interval containing 0
+   cannot be told apart from it: if one's columns contain the other's (nested), the one with
+   fewer parameters is kept, else the best is kept; the whole group is listed in `ambiguous`;
+4. repeat until nothing significant is left (at most MAX_EFFECTS effects);
+5. backward check: every named effect must still be significant on top of all the others
+   named (the same tests, Holm over the named effects); while one is not, the one with the
+   largest Wald p-value is dropped (an effect named first whose share a later one explains
+   with its own signature: e.g. a thrust-exponent's yaw column standing in for rotor inertia).
 An effect not selected is reported with its score added to the final model.
 """
 
@@ -134,6 +138,33 @@ def physical_sign(gr: scoring.Grams, current: list[int], effect_cols: list[int],
     return any(v > 0 for v, _ in values)
 
 
+def backward_check(design: Design, gr: scoring.Grams, base_cols: list[int], selected: list[dict],
+                   size_gr: scoring.Grams | None = None, bounds: dict | None = None) -> dict:
+    """Step 5 of the rule: drop (from `selected`, in place) the named effects that are not
+    significant on top of all the other named ones, one at a time, largest Wald p first.
+    Returns {dropped id: why}."""
+    dropped = {}
+    while len(selected) > 1:
+        checks = []
+        for s in selected:
+            given = list(base_cols) + [c for o in selected if o is not s for c in design.groups[o["id"]]]
+            checks.append(score(design, gr, given, s["id"], scoring.cv_sse(gr, given), len(selected),
+                                size_gr, bounds))
+        wald = significance.holm([c["p_value"] for c in checks], FAMILY_LEVEL)
+        held = significance.holm([c["held_out_p_value"] for c in checks], significance.REPLICATION_LEVEL)
+        failing = [(c["p_value"], k) for k, (c, w, h) in enumerate(zip(checks, wald, held))
+                   if not (c["admissible"] and w and h)]
+        if not failing:
+            break
+        _, k = max(failing)
+        gone = selected.pop(k)
+        dropped[gone["id"]] = {
+            "reason": "not significant on top of the other named effects: " + ", ".join(s["id"] for s in selected),
+            "p_value": checks[k]["p_value"], "held_out_p_value": checks[k]["held_out_p_value"],
+            "admissible": checks[k]["admissible"]}
+    return dropped
+
+
 def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], base_cols: list[int],
                    progress=None, size_gr: scoring.Grams | None = None, bounds: dict | None = None) -> dict:
     """`bounds`: effect id -> physical range per coefficient (Effect.bounds of the context)."""
@@ -155,23 +186,26 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
         if not good:
             break
         best = good[0]
+        # the whole group of significant look-alikes of the best that it cannot be told apart from
+        group, diffs = [], {}
         for other in good[1:]:
             if not _look_alike(best["id"], other["id"]):
                 continue
             idx = sorted(set(_axis_idx(design, tuple(best["axes"]))) | set(_axis_idx(design, tuple(other["axes"]))))
             diff = significance.difference_interval(held_current, best["held"], other["held"], idx)
             if diff[0] <= 0:
-                pair = (best["id"], other["id"])
-                keep = best
-                if (other["id"], best["id"]) in NESTED:
-                    keep = other  # the smaller model explains as much
-                ambiguous.append({"candidates": [keep["id"], best["id"] if keep is other else other["id"]],
-                                  "kept": keep["id"], "score_difference_ci": diff,
-                                  "reason": "look-alike effects whose held-out scores do not differ significantly"
-                                            + (" (nested: the one with fewer parameters kept)"
-                                               if (other["id"], best["id"]) in NESTED or pair in NESTED else "")})
-                best = keep
-                break
+                group.append(other)
+                diffs[other["id"]] = diff
+        if group:
+            keep = next((o for o in group if (o["id"], best["id"]) in NESTED), best)  # the smaller model
+            nested = keep is not best
+            ids = [keep["id"]] + [o["id"] for o in [best] + group if o is not keep]
+            ambiguous.append({"candidates": ids, "kept": keep["id"],
+                              "score_difference_ci": diffs[group[0]["id"]],
+                              "score_difference_cis": diffs,
+                              "reason": "look-alike effects whose held-out scores do not differ significantly"
+                                        + (" (nested: the one with fewer parameters kept)" if nested else "")})
+            best = keep
         best["step"] = len(selected) + 1
         selected.append(best)
         current = current + design.groups[best["id"]]
@@ -181,8 +215,15 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
             for cand in amb["candidates"]:
                 if cand in remaining and amb["kept"] == best["id"]:
                     remaining.remove(cand)
+    dropped = backward_check(design, gr, base_cols, selected, size_gr, bounds)
+    if dropped:
+        current = list(base_cols) + [c for s in selected for c in design.groups[s["id"]]]
+        held_current = scoring.cv_sse(gr, current)
     others = [score(design, gr, current, e, held_current, 1, size_gr, bounds) for e in candidates
               if e not in {s["id"] for s in selected}]
+    for o in others:
+        if o["id"] in dropped:
+            o["dropped"] = dropped[o["id"]]
     for o in others:
         o["significant"] = False
     return {"selected": selected, "others": others, "ambiguous": ambiguous, "columns": current,

@@ -3,7 +3,7 @@ the vehicle JSON where the model can carry them (flight-log v1 extension keys, d
 
 | effect | written as |
 |---|---|
-| esc_delay | `esc_delay_s` = file's + fitted delay (negative: the gyro lags) |
+| esc_delay | no fixed `esc_delay_s`: the key is left out, so `propid replay` measures the lag per log |
 | inertia_error | `inertia` Jxx, Jyy times the fitted scale (Jzz kept: no independent yaw reference) |
 | gyro_scale | `gyro_scale` = file's times the fitted diagonal (the off-diagonal part is reported, not carried) |
 | com_offset | rotor positions minus the fitted offset (x, y); `com_offset` = file's + offset |
@@ -11,6 +11,14 @@ the vehicle JSON where the model can carry them (flight-log v1 extension keys, d
 | rotor_inertia, rotor_gyroscopic | `rotor_inertia` = fitted J_r |
 Others (rotor_drag, translational_lift, ground_effect, thrust_nonlinearity) have no key:
 listed in `not_carried`.
+
+Why no fixed delay: a telemetry lag belongs to a log (its telemetry schedule, its buffers),
+not to the vehicle: on one vehicle's logs it differs from run to run, and the filter's delay
+buffer wants the lag in the filter's own discretisation (one Euler step per gyro sample,
+whole samples), which replay's per-log rule measures (`--esc-delay auto`, its default for a
+file without the key). A significant esc_delay says the file's value (none, or the one it
+had) is wrong, so the corrected file drops the key; a delay that is not significant leaves
+the file's value as it was.
 """
 
 from __future__ import annotations
@@ -31,9 +39,9 @@ def corrected_vehicle(vehicle: Vehicle, effects: list[dict]) -> tuple[Vehicle, d
         p = e["params"]
         eid = e["id"]
         if eid == "esc_delay":
-            total = (vehicle.esc_delay_s or 0.0) + p["delay_s"]
-            out.esc_delay_s = float(total)  # negative: the gyro lags (flight-log v1 allows -1..1 s)
-            applied[eid] = {"esc_delay_s": out.esc_delay_s}
+            out.esc_delay_s = None  # replay's per-log rule (module docstring)
+            applied[eid] = {"esc_delay_s": "per log (left out: propid replay --esc-delay auto)",
+                            "fitted_delay_s": float((vehicle.esc_delay_s or 0.0) + p["delay_s"])}
         elif eid == "inertia_error":
             j = np.array(out.inertia, dtype=float)
             j[0, 0] *= p["inertia_scale_xx"]
