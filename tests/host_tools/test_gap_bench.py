@@ -65,6 +65,23 @@ def test_ambiguous_is_wrong_but_counted_apart():
     assert not scored["right"] and scored["ambiguous_hit"]
 
 
+def test_a_wrong_member_reported_ambiguous_with_the_truth_is_not_a_false_effect():
+    """The issue lets look-alikes be reported as ambiguous with the candidates: a significant
+    wrong member of a group that holds the true effect is not a false effect (strict rate
+    apart), not right either; a group without the truth does not excuse it."""
+    a = answer("f4", "single", ["thrust_nonlinearity"])
+    group = [{"candidates": ["inertia_error", "thrust_nonlinearity"], "kept": "inertia_error"}]
+    scored = score_flight(a, result("inertia_error", ["inertia_error"], ambiguous=group))
+    assert not scored["right"] and scored["ambiguous_hit"]
+    assert not scored["false_effect"] and scored["false_effect_strict"]
+    assert scored["ambiguous_named"] == ["inertia_error"]
+    other = score_flight(answer("f5", "single", ["com_offset"]),
+                         result("inertia_error", ["inertia_error"], ambiguous=group))
+    assert other["false_effect"] and other["false_named"] == ["inertia_error"]
+    s = summarize([scored, other])
+    assert s["false_effect_rate"] == 0.5 and s["false_effect_rate_strict"] == 1.0
+
+
 def test_shrink_is_the_best_axis_reduction():
     r = result("x", shrink={"roll": {"rms_before": 2.0, "rms_after": 1.0},
                             "yaw": {"rms_before": 4.0, "rms_after": 1.0},

@@ -7,7 +7,11 @@ Rules, fixed before any run (docs/gap-bench.md):
   (in either order);
 - effect-free: right when `verdict` is `none`;
 - false effect: a flight on which some significant effect is not a true one
-  (reported as the fraction of flights);
+  (reported as the fraction of flights), except a significant effect the tool itself
+  reports as ambiguous with a true one (an `ambiguous` entry listing both among its
+  candidates): the issue lets look-alikes be "reported as ambiguous with the candidates",
+  and such a report names the group, not the wrong member; the strict rate (those counted
+  false too) is reported beside it;
 - ambiguous: when the tool lists the true effect among `ambiguous` candidates
   instead of naming it, the flight is not right but counted apart;
 - flights whose true effect is below the detection limit even at its plausible
@@ -33,19 +37,24 @@ def significant_ids(result: dict) -> list[str]:
     return [e.get("id") for e in effects if isinstance(e, dict) and e.get("significant")]
 
 
-def _ambiguous_ids(result: dict) -> set[str]:
-    found: set[str] = set()
+def _ambiguous_groups(result: dict) -> list[set[str]]:
+    """The candidate sets of OUT.json's `ambiguous` entries (a bare id is a group of one)."""
+    groups: list[set[str]] = []
     entries = result.get("ambiguous") or []
     for entry in entries if isinstance(entries, list) else []:
         if isinstance(entry, str):
-            found.add(entry)
+            groups.append({entry})
         elif isinstance(entry, dict):
             for key in ("candidates", "ids", "effects"):
                 if isinstance(entry.get(key), list):
-                    found.update(str(x) for x in entry[key])
+                    groups.append({str(x) for x in entry[key]})
         elif isinstance(entry, list):
-            found.update(str(x) for x in entry)
-    return found
+            groups.append({str(x) for x in entry})
+    return groups
+
+
+def _ambiguous_ids(result: dict) -> set[str]:
+    return set().union(*_ambiguous_groups(result))
 
 
 def shrink_of(result: dict) -> float | None:
@@ -73,7 +82,8 @@ def score_flight(answer: dict, result: dict | None) -> dict:
               "below_limit": below, "headline": not below,
               "detectability": min(indices) if indices else None}
     if not isinstance(result, dict) or "verdict" not in result:
-        record.update(failed=True, right=False, false_effect=False, verdict=None, named=[],
+        record.update(failed=True, right=False, false_effect=False, false_effect_strict=False,
+                      ambiguous_named=[], verdict=None, named=[],
                       ambiguous_hit=False, shrink=None)
         return record
     verdict = result.get("verdict")
@@ -84,10 +94,15 @@ def score_flight(answer: dict, result: dict | None) -> dict:
         right = len(named) >= 2 and set(named[:2]) == set(truth)
     else:
         right = verdict == "none"
-    false_named = [e for e in named if e not in truth]
+    groups = _ambiguous_groups(result)
+    wrong = [e for e in named if e not in truth]
+    # a wrong member the tool itself reports as ambiguous with a true effect (see the rules)
+    ambiguous_named = [e for e in wrong if any(e in g and g & set(truth) for g in groups)]
+    false_named = [e for e in wrong if e not in ambiguous_named]
     ambiguous_hit = (not right) and bool(set(truth) & _ambiguous_ids(result))
     record.update(failed=False, right=bool(right), verdict=verdict, named=named,
                   false_effect=bool(false_named), false_named=false_named,
+                  ambiguous_named=ambiguous_named, false_effect_strict=bool(wrong),
                   ambiguous_hit=ambiguous_hit, shrink=shrink_of(result))
     return record
 
@@ -127,6 +142,8 @@ def summarize(records: list[dict]) -> dict:
         "pairs": {"n": len(pairs), "accuracy": _fraction(sum(r["right"] for r in pairs), len(pairs))},
         "none": {"n": len(nones), "accuracy": _fraction(sum(r["right"] for r in nones), len(nones))},
         "false_effect_rate": _fraction(sum(r["false_effect"] for r in head), len(head)),
+        # with the wrong members of an ambiguous group that holds a true effect counted false too
+        "false_effect_rate_strict": _fraction(sum(r["false_effect_strict"] for r in head), len(head)),
         "failed": sum(r["failed"] for r in records),
         "ambiguous_hits": sum(r["ambiguous_hit"] for r in head),
         "below_limit": {"n": len(below), "accuracy": _fraction(sum(r["right"] for r in below), len(below))},

@@ -33,6 +33,11 @@ def render(result: dict) -> str:
     acc_row("all right (target >= 95 %)", lambda s: s["overall"])
     rows.append(("false-effect rate (<= 5 %)", str(base["headline_flights"]),
                  _cell(tool, lambda s: _pct(s["false_effect_rate"])), _pct(base["false_effect_rate"])))
+    rows.append(("  counting ambiguous members false", "",
+                 _cell(tool, lambda s: _pct(s.get("false_effect_rate_strict"))),
+                 _pct(base.get("false_effect_rate_strict"))))
+    rows.append(("ambiguous with the truth (not right)", "", _cell(tool, lambda s: str(s.get("ambiguous_hits"))),
+                 str(base.get("ambiguous_hits"))))
     rows.append(("shrink, median best axis", "", _cell(tool, lambda s: _pct(s["shrink_median"])),
                  _pct(base["shrink_median"])))
     for band, stats in base["by_detectability"].items():
