@@ -157,10 +157,24 @@ static void close_window(propid_filter_t *filter, const float *value, const floa
     const float steady_bound = PROPID_CLAIM_DRIFT_Z * PROPID_CLAIM_DRIFT_Z;
     uint16_t steady = 0u;
     float worst = 0.0f;
+#if PROPID_WITH_ACCEL
+    /* A walking thrust-torque scale walks the thrust states too (g = s kf: by
+     * kf ds, docs/math.md §9), at the current kf. */
+    const uint8_t scale = derived->layout.torque_scale;
+    const float scale_walk = scale != PROPID_NO_STATE
+                                 ? propid_process_psd(derived, scale) * core->state[scale] * core->state[scale]
+                                 : 0.0f;
+#endif
     for (uint8_t c = 0; c < count; ++c) {
         const uint8_t k = (uint8_t)(first + c);
         const float var_end = var[c];
-        const float removed = monitor->start_var[c] + propid_process_psd(derived, k) * elapsed_s - var_end;
+        float psd = propid_process_psd(derived, k);
+#if PROPID_WITH_ACCEL
+        if (k < derived->layout.drag) {
+            psd += scale_walk * value[c] * value[c];
+        }
+#endif
+        const float removed = monitor->start_var[c] + psd * elapsed_s - var_end;
         const float change = value[c] - monitor->start_coeff[c];
         /* Steady (for a claim): within 3 explained std; down to the variance floor
          * (the resolution of P) when the window explained less: a coefficient
