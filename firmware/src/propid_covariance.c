@@ -94,32 +94,7 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
 
 int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, uint8_t row)
 {
-    const uint8_t n = derived->state_count;
-    if (row >= n) {
-        return 0;
-    }
-    /* The diagonal and the part of the row right of it (the stored triangle):
-     * over n samples every element (i, j), i <= j, is visited once. */
-    const float pii = core->cov[propid_cov_index(row, row)];
-    int bad = !(pii > 0.0f && pii <= FLT_MAX);
-    /* |P_ij| <= sqrt(P_ii P_jj) up to the rounding of the two products (a
-     * correlation of 1 within float32 is not a fault; propid_internal.h). */
-    const float pii_tol = pii * (1.0f + PROPID_ROUNDING_TOL);
-    /* Walk P_ij along the row and P_jj down the diagonal with pointers (no index
-     * arithmetic per element: the diagonal's step shrinks by one per row). */
-    const float *pij = &core->cov[propid_cov_index(row, row)];
-    const float *pjj = pij;
-    uint32_t diagonal_step = propid_cov_diagonal_step(row);
-    for (uint32_t count = (uint32_t)(n - 1u - row); count > 0u; --count) {
-        pij += 1;
-        pjj += diagonal_step--;
-        /* A NaN fails the comparison, so it is caught too. */
-        bad |= !(*pij * *pij <= pii_tol * *pjj);
-    }
-    if (bad) {
-        return propid_cov_repair(derived, core);
-    }
-    return 0;
+    return propid_cov_check_row_inline(derived, core, row);
 }
 
 int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *core)
@@ -218,7 +193,9 @@ uint32_t propid_clamp_coefficients(propid_filter_t *filter)
     const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, config);
     float km_rel[PROPID_MAX_ROTORS];
     uint32_t outside = 0u;
-    if (rotor_count == 4u) {
+    /* The quad build has 4 rotors only (its configuration check): no other
+     * branch, so km_rel and the basis stay in registers (14 instructions less). */
+    if (!PROPID_GENERAL_VEHICLES || rotor_count == 4u) {
         /* The quad: straight-line tests of the 8 coefficients' bit patterns. */
         const float *z = &core->state[PROPID_QUAD_FIRST_DRAG];
         const float *v = basis.vector;
@@ -229,12 +206,17 @@ PROPID_UNROLL(4)
             outside |= propid_outside_positive_range(core->state[PROPID_QUAD_FIRST_THRUST + i], min_bits, range_bits);
             outside |= propid_outside_positive_range(km_rel[i], min_bits, range_bits);
         }
-    } else {
+    }
+#if PROPID_GENERAL_VEHICLES
+    else {
         propid_drag_per_rotor(&basis, core, km_rel, NULL);
         for (uint8_t i = 0; i < rotor_count; ++i) {
             outside |= propid_outside_positive_range(core->state[PROPID_RATE_STATES + i], min_bits, range_bits);
             outside |= propid_outside_positive_range(km_rel[i], min_bits, range_bits);
         }
     }
+#else
+    (void)rotor_count;
+#endif
     return outside == 0u ? 0u : project_outside(filter);
 }

@@ -239,53 +239,6 @@ propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_
     return PROPID_OK;
 }
 
-/* Round-robin integrity check: one covariance row per accepted gyro sample
- * (inlined: a call level less on every step). */
-static inline __attribute__((always_inline)) void check_next_row(propid_filter_t *filter)
-{
-    propid_core_t *core = &filter->core;
-    const propid_derived_t *derived = &filter->derived;
-    if (propid_cov_check_row(derived, core, core->check_row)) {
-        core->health |= PROPID_HEALTH_COV_REPAIRED;
-        filter->counters.cov_repairs++;
-    }
-    core->check_row = (uint8_t)(core->check_row + 1u >= derived->state_count ? 0u : core->check_row + 1u);
-}
-
-/* The accepted gyro sample's prediction over dt: the rate step (decided first:
- * a non-finite step returns PROPID_ERR_NUMERIC with nothing written), then the
- * integrity check of one covariance row and the covariance propagation. The
- * quad build's Jacobian rows (3 x 6) are in the filter's work area, which the
- * update uses only after them (off the stack: the prediction's chain); the
- * full build's longer rows are in this frame. Not inlined: this frame stays off
- * the update's chain. */
-static __attribute__((noinline)) propid_status_t predict_step(propid_filter_t *filter, float dt)
-{
-    propid_core_t *core = &filter->core;
-    float rate_next[3];
-#if PROPID_GENERAL_VEHICLES
-    float rate_jacobian_dt[3][PROPID_JAC_ROW];
-#else
-    float (*rate_jacobian_dt)[PROPID_JAC_ROW] = (float (*)[PROPID_JAC_ROW])(void *)core->update_vector;
-#endif
-    const propid_status_t staged = propid_predict_stage(filter, dt, rate_next, rate_jacobian_dt);
-    if (staged < 0) {
-        return PROPID_ERR_NUMERIC;
-    }
-    /* Accepted: from here on the filter changes (no rejection follows). */
-    core->health &= ~(PROPID_HEALTH_GATED | PROPID_HEALTH_STATE_CLAMPED);
-    if (staged != PROPID_OK) { /* the prediction was bounded */
-        core->health |= PROPID_HEALTH_STATE_CLAMPED;
-        filter->counters.state_clamps++;
-    }
-    check_next_row(filter);
-    propid_predict_covariance(&filter->derived, core, dt, rate_jacobian_dt);
-    core->state[0] = rate_next[0];
-    core->state[1] = rate_next[1];
-    core->state[2] = rate_next[2];
-    return PROPID_OK;
-}
-
 /* The first sample after init, reset or resync only anchors the clock (no
  * prediction): the state's finiteness test (a non-finite state returns
  * PROPID_ERR_NUMERIC with nothing written) and the row check, then the rates
@@ -304,7 +257,7 @@ static __attribute__((noinline)) PROPID_RARE propid_status_t anchor_step(propid_
         return PROPID_ERR_NUMERIC;
     }
     core->health &= ~(PROPID_HEALTH_GATED | PROPID_HEALTH_STATE_CLAMPED);
-    check_next_row(filter);
+    propid_check_next_row(filter, 0);
     const uint8_t first_bias = propid_first_bias(filter->config.rotor_count);
     for (uint8_t a = 0; a < 3u; ++a) {
         core->state[a] = gyro_rad_s[a] - core->state[first_bias + a];
@@ -448,7 +401,7 @@ static __attribute__((noinline)) propid_status_t fuse_gyro_timed(propid_filter_t
         return reject(filter, PROPID_ERR_ROTOR_STALE);
     }
 
-    const propid_status_t stepped = anchor ? anchor_step(filter, gyro_rad_s) : predict_step(filter, dt);
+    const propid_status_t stepped = anchor ? anchor_step(filter, gyro_rad_s) : propid_predict_step(filter, dt);
     if (stepped != PROPID_OK) {
         return reject(filter, PROPID_ERR_NUMERIC);
     }

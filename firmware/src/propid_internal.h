@@ -5,6 +5,7 @@
 #ifndef PROPID_INTERNAL_H
 #define PROPID_INTERNAL_H
 
+#include <float.h>
 #include <string.h>
 
 #include "propid/propid.h"
@@ -64,7 +65,7 @@ static inline uint32_t propid_cov_diagonal_step(uint8_t j)
 #define PROPID_JAC_ROW PROPID_QUAD_JAC_ENTRIES
 #define PROPID_JAC_TORQUE_ROW 4 /* the quad layout's rotor entries 2..5 only */
 #endif
-/* The quad build's Jacobian rows fit the filter's work area (predict_step). */
+/* The size-lean quad build's Jacobian rows fit the filter's work area (propid_predict_step). */
 #if !PROPID_GENERAL_VEHICLES
 _Static_assert(3u * PROPID_JAC_ROW <= 2u * PROPID_MAX_STATES, "Jacobian rows fit core.update_vector");
 #endif
@@ -418,12 +419,45 @@ PROPID_RARE void propid_cov_reset_state(const propid_derived_t *derived, propid_
 /* Floors and ceilings on every variance; returns 1 if a diagonal was bad and the
  * covariance had to be repaired. */
 PROPID_RARE int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *core);
-/* Integrity of one row (finite, |Pij| <= sqrt(Pii Pjj)); repairs the whole matrix
- * and returns 1 when the row is bad. */
-int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, uint8_t row);
 /* Full repair: bad diagonals back to the prior (row/column zeroed), non-finite
  * off-diagonals to 0, correlations above 1 pulled inside. Returns 1 if anything changed. */
 PROPID_RARE int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core);
+/* Integrity of one row (finite, |Pij| <= sqrt(Pii Pjj)); repairs the whole matrix
+ * and returns 1 when the row is bad. The fast quad build inlines it into the
+ * step's prediction (a call, its frame and a reload of the row index less); the
+ * anchor step and the other builds call propid_cov_check_row (their prediction
+ * chains' frames stay as small as before). */
+int propid_cov_check_row(const propid_derived_t *derived, propid_core_t *core, uint8_t row);
+static inline __attribute__((always_inline)) int
+propid_cov_check_row_inline(const propid_derived_t *derived, propid_core_t *core, uint8_t row)
+{
+    const uint8_t n = derived->state_count;
+    if (row >= n) {
+        return 0;
+    }
+    /* The diagonal and the part of the row right of it (the stored triangle):
+     * over n samples every element (i, j), i <= j, is visited once. */
+    const float pii = core->cov[propid_cov_index(row, row)];
+    int bad = !(pii > 0.0f && pii <= FLT_MAX);
+    /* |P_ij| <= sqrt(P_ii P_jj) up to the rounding of the two products (a
+     * correlation of 1 within float32 is not a fault; propid_internal.h). */
+    const float pii_tol = pii * (1.0f + PROPID_ROUNDING_TOL);
+    /* Walk P_ij along the row and P_jj down the diagonal with pointers (no index
+     * arithmetic per element: the diagonal's step shrinks by one per row). */
+    const float *pij = &core->cov[propid_cov_index(row, row)];
+    const float *pjj = pij;
+    uint32_t diagonal_step = propid_cov_diagonal_step(row);
+    for (uint32_t count = (uint32_t)(n - 1u - row); count > 0u; --count) {
+        pij += 1;
+        pjj += diagonal_step--;
+        /* A NaN fails the comparison, so it is caught too. */
+        bad |= !(*pij * *pij <= pii_tol * *pjj);
+    }
+    if (bad) {
+        return propid_cov_repair(derived, core);
+    }
+    return 0;
+}
 
 /* propid_predict.c */
 /* The rate step (trapezoid input, Heun on the gyroscopic term: docs/math.md §2)
@@ -441,6 +475,27 @@ propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, fl
  * (only the 3 rate rows differ from I). */
 void propid_predict_covariance(const propid_derived_t *derived, propid_core_t *core, float dt,
                                const float jacobian_dt[3][PROPID_JAC_ROW]);
+/* The accepted gyro sample's prediction over dt: the rate step (decided first:
+ * a non-finite step returns PROPID_ERR_NUMERIC with nothing written), then the
+ * integrity check of one covariance row (propid_check_next_row) and the
+ * covariance propagation; health and counters as for an accepted sample. */
+propid_status_t propid_predict_step(propid_filter_t *filter, float dt);
+
+/* Round-robin integrity check: one covariance row per accepted gyro sample
+ * (inlined: a call level less on every step). `inline_check`: the row test
+ * inlined too (the fast quad build's prediction; a constant at each call). */
+static inline __attribute__((always_inline)) void propid_check_next_row(propid_filter_t *filter, int inline_check)
+{
+    propid_core_t *core = &filter->core;
+    const propid_derived_t *derived = &filter->derived;
+    const int repaired = inline_check ? propid_cov_check_row_inline(derived, core, core->check_row)
+                                      : propid_cov_check_row(derived, core, core->check_row);
+    if (repaired) {
+        core->health |= PROPID_HEALTH_COV_REPAIRED;
+        filter->counters.cov_repairs++;
+    }
+    core->check_row = (uint8_t)(core->check_row + 1u >= derived->state_count ? 0u : core->check_row + 1u);
+}
 
 /* propid_gyro.c: fuse one gyro sample, three scalar updates (x, y, z; H = e_rate +
  * e_bias each). Returns the mask of axes gated out (bit a). */
