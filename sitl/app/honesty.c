@@ -9,7 +9,7 @@
 #define HONESTY_CONVERGED_TOL 0.05  /* a "converged" coefficient more than this off is a false claim */
 #define HONESTY_RECOVERED_TOL 0.10  /* recovered: every coefficient within this of the truth */
 #define HONESTY_NEES_EVERY 10      /* control steps between NEES samples (50 Hz at 500 Hz control) */
-#define HONESTY_MAX_DOF (2 * SITL_MAX_ROTORS + 3)
+#define HONESTY_MAX_DOF SITL_HONESTY_MAX_DOF
 
 /* z-quantile of chi-square(k), Wilson-Hilferty. */
 static double chi_square_quantile(double k, double z)
@@ -19,10 +19,13 @@ static double chi_square_quantile(double k, double z)
     return k * root * root * root;
 }
 
-void sitl_honesty_init(sitl_honesty_t *h, int rotor_count, const double *true_kf, const double *true_km)
+void sitl_honesty_init(sitl_honesty_t *h, const propid_filter_t *filter, const double *true_kf,
+                       const double *true_km, double true_torque_scale)
 {
+    const int rotor_count = filter->config.rotor_count;
     memset(h, 0, sizeof(*h));
-    h->nees_dof = 2 * rotor_count + 3;
+    h->nees_dof = 2 * rotor_count + 3 + (filter->derived.layout.torque_scale != PROPID_NO_STATE);
+    h->true_torque_scale = true_torque_scale;
     memcpy(h->last_true_kf, true_kf, (size_t)rotor_count * sizeof(double));
     memcpy(h->last_true_km, true_km, (size_t)rotor_count * sizeof(double));
     h->change_time_s = -1.0;
@@ -114,18 +117,18 @@ void sitl_honesty_drag_per_rotor(const propid_filter_t *filter, const uint8_t *c
     }
 }
 
-static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const double *true_kf,
-                     const double *true_km, const double true_bias[3])
+int sitl_honesty_truth(const propid_filter_t *filter, double true_torque_scale, const double *true_kf,
+                       const double *true_km, const double true_bias[3], int *index, double *truth)
 {
     const propid_config_t *config = &filter->config;
     const propid_layout_t *layout = &filter->derived.layout;
     const int n_rotor = config->rotor_count;
-    const int n = h->nees_dof;
-    int index[HONESTY_MAX_DOF];
-    double truth[HONESTY_MAX_DOF];
+    const int has_scale = layout->torque_scale != PROPID_NO_STATE;
+    /* Without the scale state the thrust states are kf / kf_nominal itself. */
+    const double gain = has_scale ? true_torque_scale : 1.0;
     for (int i = 0; i < n_rotor; i++) {
         index[i] = layout->thrust + i;
-        truth[i] = true_kf[i] / (double)config->rotor[i].thrust_coeff_nominal;
+        truth[i] = gain * (true_kf[i] / (double)config->rotor[i].thrust_coeff_nominal);
         index[n_rotor + i] = layout->drag + i;
         truth[n_rotor + i] = true_km[i] / (double)config->rotor[i].drag_coeff_nominal;
     }
@@ -133,6 +136,21 @@ static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const dou
         index[2 * n_rotor + a] = layout->gyro_bias + a;
         truth[2 * n_rotor + a] = true_bias[a];
     }
+    if (!has_scale) {
+        return 2 * n_rotor + 3;
+    }
+    index[2 * n_rotor + 3] = layout->torque_scale;
+    truth[2 * n_rotor + 3] = 1.0 / true_torque_scale;
+    return 2 * n_rotor + 4;
+}
+
+static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const double *true_kf,
+                     const double *true_km, const double true_bias[3])
+{
+    const int n_rotor = filter->config.rotor_count;
+    int index[HONESTY_MAX_DOF];
+    double truth[HONESTY_MAX_DOF];
+    const int n = sitl_honesty_truth(filter, h->true_torque_scale, true_kf, true_km, true_bias, index, truth);
     /* The filter keeps its drag block in the yaw basis (propid_internal.h): per rotor here,
      * for the entries read below only. */
     propid_core_t core = filter->core;
@@ -140,10 +158,10 @@ static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const dou
     for (int i = 0; i < n_rotor; i++) {
         columns[i] = (uint8_t)index[i];
     }
-    for (int a = 0; a < 3; a++) {
-        columns[n_rotor + a] = (uint8_t)index[2 * n_rotor + a];
+    for (int a = 2 * n_rotor; a < n; a++) { /* the biases, and the scale when there is one */
+        columns[a - n_rotor] = (uint8_t)index[a];
     }
-    sitl_honesty_drag_per_rotor(filter, columns, n_rotor + 3, &core);
+    sitl_honesty_drag_per_rotor(filter, columns, n - n_rotor, &core);
     double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF];
     double e[HONESTY_MAX_DOF];
     for (int i = 0; i < n; i++) {

@@ -18,7 +18,8 @@ typedef struct {
     long nees_samples;          /* NEES samples (every 10th step) with a usable covariance block */
     long nees_in_bounds;        /* ... whose NEES lay in the 95 % chi-square interval */
     double nees_sum;
-    int nees_dof;               /* 2 N + 3 */
+    int nees_dof;               /* 2 N + 3, 2 N + 4 with the thrust-torque scale state */
+    double true_torque_scale;   /* s_true: the torque gain the filter's scale state stands for */
     long nonfinite_estimates;   /* steps with a non-finite estimate or std */
     long converged_claims;      /* coefficient-steps flagged converged */
     long false_converged;       /* ... of them more than 5 % off */
@@ -41,7 +42,22 @@ typedef struct {
     double max_rotor_recovery_s; /* longest such recovery, -1: none */
 } sitl_honesty_t;
 
-void sitl_honesty_init(sitl_honesty_t *h, int rotor_count, const double *true_kf, const double *true_km);
+/* filter: initialised (its configuration gives the states the NEES reads); true_torque_scale:
+ * s_true of sitl_honesty_truth, used only when the filter has the scale state. */
+void sitl_honesty_init(sitl_honesty_t *h, const propid_filter_t *filter, const double *true_kf,
+                       const double *true_km, double true_torque_scale);
+
+/* The states the NEES reads (index) and their true values (truth): kf / kf_nominal,
+ * km / km_nominal, the gyro biases, in that order. With the thrust-torque scale state
+ * (docs/math.md §9) the thrust states carry g_i = s kf_i / kf_nominal_i and the scale
+ * state r = 1/s: their truth is s_true kf_true_i / kf_nominal_i and 1 / s_true, and r
+ * is read last. s_true is the gain the true thrust torques have in the filter's model:
+ * with the true inertia (1 + e) J_file (inertia_error), s_true = 1 / (1 + e).
+ * Returns the count (2 N + 3, or 2 N + 4 with the scale state); arrays of
+ * SITL_HONESTY_MAX_DOF. */
+#define SITL_HONESTY_MAX_DOF (2 * SITL_MAX_ROTORS + 4)
+int sitl_honesty_truth(const propid_filter_t *filter, double true_torque_scale, const double *true_kf,
+                       const double *true_km, const double true_bias[3], int *index, double *truth);
 
 /* One control step: estimate, the filter (for its covariance), the truth. */
 void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *estimate,

@@ -75,6 +75,12 @@ void sitl_setup_incorrect_coefficients(const sitl_options_t *opts, const sitl_ve
                                        const double *true_kf, const double *true_km,
                                        double *kf, double *km);
 
+/* s_true: the gain of the true thrust torques in the filter's model, what its thrust-torque
+ * scale state s stands for (docs/math.md §9). The gyro sees J^-1 (r_i x z) kf_i; the filter
+ * uses the file's J, inertia_error makes the true one (1 + e) J_file, so the true torques
+ * are J_file^-1 (r_i x z) kf_i / (1 + e): s_true = 1 / (1 + e), 1 without the effect. */
+double sitl_setup_true_torque_scale(const sitl_effects_t *effects);
+
 /* propid configuration from the vehicle file and the IMU model. Returns the
  * propid_config_check status (bad_field names the field). */
 propid_status_t sitl_setup_filter_config(const sitl_options_t *opts,

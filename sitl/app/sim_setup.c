@@ -94,6 +94,12 @@ void sitl_setup_incorrect_coefficients(const sitl_options_t *opts, const sitl_ve
     }
 }
 
+double sitl_setup_true_torque_scale(const sitl_effects_t *effects)
+{
+    const double e = sitl_effect_strength(effects, SITL_EFFECT_INERTIA_ERROR);
+    return e != 0.0 && 1.0 + e > 0.0 ? 1.0 / (1.0 + e) : 1.0; /* as effects_setup.c applies it */
+}
+
 propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_vehicle_t *v,
                                          propid_config_t *c, const char **bad_field)
 {

@@ -1,4 +1,11 @@
 /*
+ * The NEES's truth (sitl_honesty_truth): with the thrust-torque scale state the
+ * thrust states are g_i = s kf_i / kf_nominal_i and the scale state r = 1/s
+ * (docs/math.md §9), so their truth is s_true kf_true_i / kf_nominal_i and
+ * 1 / s_true; without it kf_true_i / kf_nominal_i. A filter sitting exactly on
+ * that truth has a NEES of zero. s_true (sitl_setup_true_torque_scale) is the
+ * file's inertia over the plant's true one.
+ *
  * The NEES's per-rotor drag entries (sitl_honesty_drag_per_rotor) against the
  * filter's own map of the whole state and covariance (propid_drag_basis_flip):
  * bit for bit on every entry the NEES reads, quad and hexa, and the columns it
@@ -9,7 +16,10 @@
 #include <string.h>
 
 #include "../../firmware/src/propid_internal.h"
+#include "effects.h"
 #include "honesty.h"
+#include "plant.h"
+#include "sim.h"
 #include "unity.h"
 
 void setUp(void)
@@ -89,9 +99,139 @@ static void test_hexa_matches_the_whole_flip(void)
     check_rotors(6);
 }
 
+/* A quad filter with the accelerometer; scale: the thrust-torque scale state. */
+static void aided_filter(propid_filter_t *filter, int scale)
+{
+    propid_config_t config;
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4, 0.17f, 0.785398f,
+                                                                 1.0f, 5.57e-6f, 1.36e-7f));
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    config.mass = 1.5f;
+    config.torque_scale = (uint8_t)scale;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(filter, &config));
+}
+
+static const double true_kf[4] = {5.3e-6, 5.9e-6, 5.6e-6, 5.1e-6};
+static const double true_km[4] = {1.30e-7, 1.41e-7, 1.36e-7, 1.33e-7};
+static const double true_bias[3] = {0.01, -0.02, 0.005};
+static const double nominal_kf = (double)5.57e-6f, nominal_km = (double)1.36e-7f; /* as configured */
+
+static void test_truth_with_the_scale_state_is_s_kf_and_1_over_s(void)
+{
+    static propid_filter_t filter;
+    aided_filter(&filter, 1);
+    const double s_true = 1.0 / 1.3; /* the true inertia 1.3 x the file's */
+    int index[SITL_HONESTY_MAX_DOF];
+    double truth[SITL_HONESTY_MAX_DOF];
+    const int n = sitl_honesty_truth(&filter, s_true, true_kf, true_km, true_bias, index, truth);
+    const propid_layout_t *layout = &filter.derived.layout;
+    TEST_ASSERT_EQUAL_INT(2 * 4 + 4, n);
+    for (int i = 0; i < 4; i++) {
+        TEST_ASSERT_EQUAL_INT(layout->thrust + i, index[i]);
+        TEST_ASSERT_DOUBLE_WITHIN(1e-12, s_true * true_kf[i] / nominal_kf, truth[i]);
+        TEST_ASSERT_EQUAL_INT(layout->drag + i, index[4 + i]);
+        TEST_ASSERT_DOUBLE_WITHIN(1e-12, true_km[i] / nominal_km, truth[4 + i]);
+    }
+    TEST_ASSERT_EQUAL_INT(layout->torque_scale, index[n - 1]);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-12, 1.3, truth[n - 1]);
+}
+
+static void test_truth_without_the_scale_state_is_kf(void)
+{
+    static propid_filter_t filter;
+    aided_filter(&filter, 0);
+    int index[SITL_HONESTY_MAX_DOF];
+    double truth[SITL_HONESTY_MAX_DOF];
+    /* s_true is ignored: the thrust states are the coefficients themselves. */
+    const int n = sitl_honesty_truth(&filter, 1.0 / 1.3, true_kf, true_km, true_bias, index, truth);
+    TEST_ASSERT_EQUAL_INT(2 * 4 + 3, n);
+    for (int i = 0; i < 4; i++) {
+        TEST_ASSERT_DOUBLE_WITHIN(1e-12, true_kf[i] / nominal_kf, truth[i]);
+    }
+    for (int a = 0; a < 3; a++) {
+        TEST_ASSERT_EQUAL_INT(filter.derived.layout.gyro_bias + a, index[8 + a]);
+        TEST_ASSERT_EQUAL_DOUBLE(true_bias[a], truth[8 + a]);
+    }
+}
+
+/* A filter whose states hold the truth of the scaled model reads a NEES near zero; read
+ * against kf_true (s_true taken as 1, what the NEES did before) the same filter is far out
+ * of its interval. */
+static void test_filter_on_the_scaled_truth_has_a_zero_nees(void)
+{
+    static propid_filter_t filter;
+    aided_filter(&filter, 1);
+    const double s_true = 1.0 / 1.3;
+    const propid_layout_t *layout = &filter.derived.layout;
+    for (int i = 0; i < 4; i++) { /* the scaled model's truth, written out here */
+        filter.core.state[layout->thrust + i] = (float)(s_true * true_kf[i] / nominal_kf);
+        filter.core.state[layout->drag + i] = (float)(true_km[i] / nominal_km);
+    }
+    for (int a = 0; a < 3; a++) {
+        filter.core.state[layout->gyro_bias + a] = (float)true_bias[a];
+    }
+    filter.core.state[layout->torque_scale] = (float)(1.0 / s_true);
+    /* A filter that has learnt: its prior's covariance shrunk (std / 30), so an error along the
+     * scale direction, which the prior allows, is far outside. */
+    for (uint32_t k = 0; k < PROPID_COV_SIZE; k++) {
+        filter.core.cov[k] *= 1e-3f;
+    }
+    /* The filter keeps the drag block in its yaw basis; the map is its own inverse. */
+    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    propid_drag_basis_apply(&basis, &filter.core.state[filter.derived.layout.drag]);
+    propid_estimate_t estimate;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    for (int i = 0; i < 4; i++) { /* the firmware reads those states as kf = r g kf_nominal = kf_true */
+        TEST_ASSERT_DOUBLE_WITHIN(1e-5 * true_kf[i], true_kf[i], (double)estimate.thrust_coeff[i]);
+    }
+    TEST_ASSERT_DOUBLE_WITHIN(1e-5, s_true, (double)estimate.torque_scale);
+    sitl_honesty_t scaled, unscaled;
+    sitl_honesty_init(&scaled, &filter, true_kf, true_km, s_true);
+    sitl_honesty_init(&unscaled, &filter, true_kf, true_km, 1.0);
+    TEST_ASSERT_EQUAL_INT(2 * 4 + 4, scaled.nees_dof);
+    sitl_honesty_add(&scaled, 0.0, &estimate, &filter, true_kf, true_km, true_bias);
+    sitl_honesty_add(&unscaled, 0.0, &estimate, &filter, true_kf, true_km, true_bias);
+    TEST_ASSERT_EQUAL_INT(1, scaled.nees_samples);
+    TEST_ASSERT_EQUAL_INT(1, unscaled.nees_samples);
+    TEST_ASSERT_TRUE(scaled.nees_sum < 1e-3);
+    TEST_ASSERT_TRUE(unscaled.nees_sum > 30.0); /* beyond the 95 % interval of 12 dof */
+}
+
+/* The gyro sees J^-1 (r x z) kf: with the file's J in the filter, the true torques carry
+ * J_file / J_true, on every axis, as the plant builds its inertia from the effect. */
+static void test_true_torque_scale_is_the_file_over_the_true_inertia(void)
+{
+    static const char *const effects[] = {NULL, "inertia_error=0.3", "inertia_error=-0.2", "com_offset"};
+    static sitl_vehicle_t vehicle;
+    static sitl_plant_t plant;
+    sitl_vehicle_preset("hummingbird-plus", &vehicle);
+    for (size_t k = 0; k < sizeof(effects) / sizeof(effects[0]); k++) {
+        sitl_effects_t fx;
+        char err[512];
+        sitl_effects_clear(&fx);
+        if (effects[k] != NULL) {
+            TEST_ASSERT_EQUAL_INT_MESSAGE(0, sitl_effects_parse(&fx, effects[k], err, 512), err);
+        }
+        TEST_ASSERT_EQUAL_INT_MESSAGE(0, sitl_plant_init(&plant, &vehicle, NULL, NULL, &fx, err, 512), err);
+        const double s_true = sitl_setup_true_torque_scale(&fx);
+        for (int a = 0; a < 3; a++) {
+            TEST_ASSERT_DOUBLE_WITHIN(1e-12, vehicle.inertia[a][a] / plant.inertia[a][a], s_true);
+        }
+    }
+    sitl_effects_t fx;
+    sitl_effects_clear(&fx);
+    TEST_ASSERT_EQUAL_INT(0, sitl_effects_parse(&fx, "inertia_error=0.3", NULL, 0));
+    TEST_ASSERT_DOUBLE_WITHIN(1e-12, 1.0 / 1.3, sitl_setup_true_torque_scale(&fx)); /* not 1 */
+}
+
 int main(void)
 {
     UNITY_BEGIN();
+    RUN_TEST(test_true_torque_scale_is_the_file_over_the_true_inertia);
+    RUN_TEST(test_truth_with_the_scale_state_is_s_kf_and_1_over_s);
+    RUN_TEST(test_truth_without_the_scale_state_is_kf);
+    RUN_TEST(test_filter_on_the_scaled_truth_has_a_zero_nees);
     RUN_TEST(test_quad_matches_the_whole_flip);
     RUN_TEST(test_hexa_matches_the_whole_flip);
     return UNITY_END();

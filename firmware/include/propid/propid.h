@@ -289,12 +289,13 @@ typedef struct {
 #define PROPID_NO_STATE 0xFFu
 typedef struct {
     uint8_t rate;                                   /* body rate (3) */
-    uint8_t thrust;                                 /* kf / kf_nominal (rotor_count) */
+    uint8_t thrust;                                 /* kf / kf_nominal (rotor_count); s kf / kf_nominal
+                                                       with the torque scale (docs/math.md §9) */
     uint8_t drag;                                   /* km / km_nominal (rotor_count) */
     uint8_t gyro_bias;                              /* gyro bias (3) */
     uint8_t disturbance;                            /* disturbance angular acceleration (3) or none */
     uint8_t accel_bias;                             /* accelerometer z bias (1) or none */
-    uint8_t torque_scale;                           /* thrust-torque scale (1) or none */
+    uint8_t torque_scale;                           /* r = 1/s of the thrust-torque scale (1) or none */
 } propid_layout_t;
 
 /* Quantities derived once from the configuration (so the step does no divisions). */
