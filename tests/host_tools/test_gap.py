@@ -556,6 +556,14 @@ def test_holm_step_down():
     assert holm([0.3, 0.2]) == [False, False]
 
 
+def _smooth_signal(rng, t):
+    """A unit-variance sum of four sines at 0.1-2 Hz: a slow flight-like regressor."""
+    f = rng.uniform(0.1, 2.0, 4)
+    ph = rng.uniform(0, 2 * np.pi, 4)
+    c = np.sin(2 * np.pi * f[:, None] * t[None, :] + ph[:, None]).sum(axis=0)
+    return c / c.std()
+
+
 def _lag_look_alike_design(rng, truth, n=1200, rate=100.0, strength=0.3):
     """Roll and yaw: base columns, rotor_inertia's yaw column (sum s_i dOmega_i/dt) and a
     residual lag's columns (d dP/dt on both axes; on yaw nearly the rotor_inertia column:
@@ -567,10 +575,7 @@ def _lag_look_alike_design(rng, truth, n=1200, rate=100.0, strength=0.3):
     t = np.arange(n) / rate
 
     def smooth():
-        f = rng.uniform(0.1, 2.0, 4)
-        ph = rng.uniform(0, 2 * np.pi, 4)
-        c = np.sin(2 * np.pi * f[:, None] * t[None, :] + ph[:, None]).sum(axis=0)
-        return c / c.std()
+        return _smooth_signal(rng, t)
 
     zero = np.zeros(n)
     spin_accel = smooth()
@@ -647,10 +652,7 @@ def _lag_on_roll_design(rng, effect, truth, n=1200, rate=100.0, strength=0.3):
     t = np.arange(n) / rate
 
     def smooth():
-        f = rng.uniform(0.1, 2.0, 4)
-        ph = rng.uniform(0, 2 * np.pi, 4)
-        c = np.sin(2 * np.pi * f[:, None] * t[None, :] + ph[:, None]).sum(axis=0)
-        return c / c.std()
+        return _smooth_signal(rng, t)
 
     zero = np.zeros(n)
     lag_roll, lag_thrust = smooth(), smooth()
