@@ -32,30 +32,26 @@ static float block_times_basis(const propid_drag_basis_t *basis, const float *co
     return beta;
 }
 
-void propid_drag_basis_flip(const propid_drag_basis_t *basis, propid_core_t *core)
+void propid_drag_basis_flip_column(const propid_drag_basis_t *basis, propid_core_t *core, uint8_t column_index)
 {
     const uint8_t rotor_count = basis->rotor_count;
     const uint8_t first = propid_first_drag(rotor_count);
-    const uint8_t end = (uint8_t)(first + rotor_count);
+    float column[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        column[i] = propid_cov_at(core->cov, (uint8_t)(first + i), column_index);
+    }
+    propid_drag_basis_apply(basis, column);
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        core->cov[propid_cov_index((uint8_t)(first + i), column_index)] = column[i];
+    }
+}
+
+void propid_drag_basis_flip_block(const propid_drag_basis_t *basis, propid_core_t *core)
+{
+    const uint8_t rotor_count = basis->rotor_count;
+    const uint8_t first = propid_first_drag(rotor_count);
     const float *v = basis->vector;
     const float scale = basis->scale;
-    propid_drag_basis_apply(basis, &core->state[first]);
-    /* The cross-covariances with every other state: a column of N values each
-     * (state_count is not needed: the unused part of the triangle is zero). */
-    for (uint8_t j = 0; j < PROPID_MAX_STATES; ++j) {
-        if (j >= first && j < end) {
-            continue;
-        }
-        float column[PROPID_MAX_ROTORS];
-        for (uint8_t i = 0; i < rotor_count; ++i) {
-            column[i] = propid_cov_at(core->cov, (uint8_t)(first + i), j);
-        }
-        propid_drag_basis_apply(basis, column);
-        for (uint8_t i = 0; i < rotor_count; ++i) {
-            core->cov[propid_cov_index((uint8_t)(first + i), j)] = column[i];
-        }
-    }
-    /* The block itself, both sides. */
     float u[PROPID_MAX_ROTORS];
     const float beta = block_times_basis(basis, core->cov, u);
     for (uint8_t i = 0; i < rotor_count; ++i) {
@@ -64,6 +60,21 @@ void propid_drag_basis_flip(const propid_drag_basis_t *basis, propid_core_t *cor
                 scale * (v[i] * u[j] + u[i] * v[j]) - scale * scale * beta * v[i] * v[j];
         }
     }
+}
+
+void propid_drag_basis_flip(const propid_drag_basis_t *basis, propid_core_t *core)
+{
+    const uint8_t first = propid_first_drag(basis->rotor_count);
+    const uint8_t end = (uint8_t)(first + basis->rotor_count);
+    propid_drag_basis_apply(basis, &core->state[first]);
+    /* The cross-covariances with every other state: a column of N values each
+     * (state_count is not needed: the unused part of the triangle is zero). */
+    for (uint8_t j = 0; j < PROPID_MAX_STATES; ++j) {
+        if (j < first || j >= end) {
+            propid_drag_basis_flip_column(basis, core, j);
+        }
+    }
+    propid_drag_basis_flip_block(basis, core);
 }
 
 void propid_drag_per_rotor(const propid_drag_basis_t *basis, const propid_core_t *core, float *km_rel,

@@ -356,6 +356,11 @@ static inline void propid_drag_basis_apply(const propid_drag_basis_t *basis, flo
 /* propid_drag_basis.c. The state's and P's drag block between the yaw basis and
  * the per-rotor one (either way: H is its own inverse). */
 PROPID_RARE void propid_drag_basis_flip(const propid_drag_basis_t *basis, propid_core_t *core);
+/* Its two parts: one cross-covariance column j (a state outside the drag block), and the
+ * drag block itself, both sides (H B H). The SITL's NEES maps only the columns it reads. */
+PROPID_RARE void propid_drag_basis_flip_column(const propid_drag_basis_t *basis, propid_core_t *core,
+                                               uint8_t column_index);
+PROPID_RARE void propid_drag_basis_flip_block(const propid_drag_basis_t *basis, propid_core_t *core);
 /* Per-rotor km_rel (H z) and, when km_var is not NULL, their variances (H P_zz H)_ii. */
 void propid_drag_per_rotor(const propid_drag_basis_t *basis, const propid_core_t *core, float *km_rel,
                            float *km_var);

@@ -79,42 +79,12 @@ static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const do
 void sitl_honesty_drag_per_rotor(const propid_filter_t *filter, const uint8_t *columns,
                                  int column_count, propid_core_t *core)
 {
-    const propid_drag_basis_t basis_value = propid_drag_basis(&filter->derived, &filter->config);
-    const propid_drag_basis_t *basis = &basis_value;
-    const uint8_t rotor_count = basis->rotor_count;
-    const uint8_t first = propid_first_drag(rotor_count);
-    const float *v = basis->vector;
-    const float scale = basis->scale;
-    propid_drag_basis_apply(basis, &core->state[first]);
+    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    propid_drag_basis_apply(&basis, &core->state[propid_first_drag(basis.rotor_count)]);
     for (int c = 0; c < column_count; c++) {
-        const uint8_t j = columns[c];
-        float column[PROPID_MAX_ROTORS];
-        for (uint8_t i = 0; i < rotor_count; ++i) {
-            column[i] = propid_cov_at(core->cov, (uint8_t)(first + i), j);
-        }
-        propid_drag_basis_apply(basis, column);
-        for (uint8_t i = 0; i < rotor_count; ++i) {
-            core->cov[propid_cov_index((uint8_t)(first + i), j)] = column[i];
-        }
+        propid_drag_basis_flip_column(&basis, core, columns[c]);
     }
-    /* The block, both sides: H B H = B - scale (v u^T + u v^T) + scale^2 beta v v^T with
-     * u = B v, beta = v . u. */
-    float u[PROPID_MAX_ROTORS];
-    float beta = 0.0f;
-    for (uint8_t i = 0; i < rotor_count; ++i) {
-        float sum = 0.0f;
-        for (uint8_t j = 0; j < rotor_count; ++j) {
-            sum += propid_cov_at(core->cov, (uint8_t)(first + i), (uint8_t)(first + j)) * v[j];
-        }
-        u[i] = sum;
-        beta += v[i] * sum;
-    }
-    for (uint8_t i = 0; i < rotor_count; ++i) {
-        for (uint8_t j = i; j < rotor_count; ++j) {
-            core->cov[propid_cov_index((uint8_t)(first + i), (uint8_t)(first + j))] -=
-                scale * (v[i] * u[j] + u[i] * v[j]) - scale * scale * beta * v[i] * v[j];
-        }
-    }
+    propid_drag_basis_flip_block(&basis, core);
 }
 
 int sitl_honesty_truth(const propid_filter_t *filter, double true_torque_scale, const double *true_kf,
