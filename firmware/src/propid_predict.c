@@ -259,9 +259,11 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
 }
 #endif
 
-#if !PROPID_FAST_QUAD_PREDICT
 /* Not inlined into propid_predict_step (same file): the dispatcher's tail call
- * keeps the kernels' frames apart from the step's (the size-lean build's chain). */
+ * keeps the kernels' frames apart from the step's (the size-lean build's chain).
+ * The fast quad build's step inlines the stage itself and never calls this; it is
+ * still compiled there for the dense baseline of make bench (tests/qemu/dense_ekf.c)
+ * and the model tests, and --gc-sections drops it from a linked application. */
 __attribute__((noinline)) propid_status_t propid_predict_stage(const propid_filter_t *filter, float dt, float rate_next[3],
                                      float jacobian_dt[3][PROPID_JAC_ROW])
 {
@@ -276,7 +278,6 @@ __attribute__((noinline)) propid_status_t propid_predict_stage(const propid_filt
                               filter->derived.jac_torque, basis.vector, basis.scale, dt, propid_rate_limit(filter),
                               rate_next, jacobian_dt);
 }
-#endif
 
 #if PROPID_GENERAL_VEHICLES
 /* The propagation for any vehicle and state count over the sparsity lists
