@@ -21,8 +21,8 @@
 #include "propid_quad_predict.h"
 
 /* The fast quad build (no general path, straight-line kernels inlined): its
- * step's prediction runs both kernels in one frame (propid_predict_step), and
- * the two stage functions below are not compiled. */
+ * step's prediction runs both kernels in one frame (propid_predict_step); the
+ * covariance dispatcher below is not compiled there. */
 #define PROPID_FAST_QUAD_PREDICT (!PROPID_GENERAL_VEHICLES && !PROPID_SIZE_LEAN)
 #if PROPID_FAST_QUAD_PREDICT && PROPID_WITH_INPUT_NOISE
 #error "the fast quad build's prediction has no input-noise term"
@@ -31,7 +31,14 @@
 /* Rare path of the prediction's finiteness and bound test: PROPID_ERR_NUMERIC
  * when a rate or `check` is not finite, else every rate bounded to +-limit and
  * PROPID_PREDICT_CLAMPED (or PROPID_OK when none was beyond it). */
-static propid_status_t bound_rates(float rate_next[3], float limit, float check)
+#if PROPID_FAST_QUAD_PREDICT
+/* Two callers there (the step and propid_predict_stage): kept inline in the step
+ * as when it was the only one (a call and 20 instructions per step otherwise). */
+#define PROPID_BOUND_RATES_INLINE inline __attribute__((always_inline))
+#else
+#define PROPID_BOUND_RATES_INLINE
+#endif
+static PROPID_BOUND_RATES_INLINE propid_status_t bound_rates(float rate_next[3], float limit, float check)
 {
     if (!isfinite(rate_next[0] + rate_next[1] + rate_next[2] + check)) {
         return PROPID_ERR_NUMERIC;
