@@ -335,7 +335,8 @@ def render(result: dict) -> str:
         ("median / p95 isolation delay", f"{fmt(result['median_isolate_ms'])} / {fmt(result['p95_isolate_ms'])} ms",
          "median <= 100 ms"),
         ("isolation accuracy", f"{fmt(100 * result['isolation_accuracy'], '.1f')} %", ""),
-        ("false alarms (undamaged flights)", f"{result['false_alarms']} in {result['false_alarm_flights']} flights",
+        ("false alarms (undamaged flights)", (f"{result['false_alarms']} in {result['false_alarm_flights']} of "
+                                              f"{result['undamaged_flights']} flights"),
          "0"),
         ("detections before the damage", str(result["detections_before_damage"]), "0"),
         ("tracking RMSE after damage, Filter / Oracle",

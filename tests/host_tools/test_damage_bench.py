@@ -63,7 +63,7 @@ def test_scoring_detection_isolation_and_false_alarms():
     assert result["false_alarms"] == 1 and result["false_alarm_flights"] == 1
     assert result["tracking_ratio_median"] == pytest.approx(1.5)
     assert result["stable_pct"] == pytest.approx(200.0 / 3.0)
-    assert "| false alarms (undamaged flights) | 1 in 1 flights | 0 |" in damage_bench.render(result)
+    assert "| false alarms (undamaged flights) | 1 in 1 of 2 flights | 0 |" in damage_bench.render(result)
 
 
 def test_tracking_misses_are_attributed():
