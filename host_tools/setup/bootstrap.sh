@@ -25,7 +25,7 @@ deps="$repo/build/_deps"
 unity_pin="vyperling==0.0.4"
 unity_sha256="028f4419cf4f49cfaed51256290718753a78cc035923fbf43acc8bcd62d205cb"
 
-apt_packages=(cmake gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm
+apt_packages=(cmake gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm libcjson-dev
               clang libclang-rt-dev cppcheck)
 
 say() { printf 'bootstrap: %s\n' "$*"; }

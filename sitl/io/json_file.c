@@ -1,13 +1,13 @@
-/* JSON document -> file (see json_file.h). */
+/* cJSON document -> file (see json_file.h). */
 #include "json_file.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 
-int sitl_write_json_file(const char *path, sitl_json_t *root)
+int sitl_write_json_file(const char *path, cJSON *root)
 {
-    char *text = sitl_json_print(root);
-    sitl_json_free(root);
+    char *text = root != NULL ? cJSON_Print(root) : NULL;
+    cJSON_Delete(root);
     if (text == NULL) {
         return -1;
     }

@@ -1,5 +1,5 @@
-/* Flight-log v1 vehicle file (docs/flightlog.md) reader and writer on the simulator's JSON tree (json.h). */
-#include "json.h"
+/* Flight-log v1 vehicle file (docs/flightlog.md) reader and writer on cJSON. */
+#include <cjson/cJSON.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -21,41 +21,41 @@ static int set_err(char *err, int err_size, const char *fmt, ...)
     return -1;
 }
 
-static int is_number(const sitl_json_t *n)
+static int is_number(const cJSON *n)
 {
-    return sitl_json_is(n, SITL_JSON_NUMBER) && isfinite(n->number);
+    return cJSON_IsNumber(n) && isfinite(n->valuedouble);
 }
 
-static const sitl_json_t *member(const sitl_json_t *object, const char *key)
+static const cJSON *member(const cJSON *object, const char *key)
 {
-    return sitl_json_member(object, key);
+    return cJSON_GetObjectItemCaseSensitive(object, key);
 }
 
-static int is_array_of(const sitl_json_t *n, int count)
+static int is_array_of(const cJSON *n, int count)
 {
-    return sitl_json_is(n, SITL_JSON_ARRAY) && sitl_json_size(n) == count;
+    return cJSON_IsArray(n) && cJSON_GetArraySize(n) == count;
 }
 
 /* A required positive number (or one per rotor). */
-static int read_coeff(const sitl_json_t *root, const char *key, int rotor_count, double *out,
+static int read_coeff(const cJSON *root, const char *key, int rotor_count, double *out,
                       const char *path, char *err, int err_size)
 {
-    const sitl_json_t *n = member(root, key);
-    if (n == NULL || sitl_json_is(n, SITL_JSON_NULL)) {
+    const cJSON *n = member(root, key);
+    if (n == NULL || cJSON_IsNull(n)) {
         return set_err(err, err_size, "%s: '%s' is missing or null; propid_sitl needs it", path,
                        key);
     }
     if (is_number(n)) {
         for (int i = 0; i < rotor_count; i++) {
-            out[i] = n->number;
+            out[i] = n->valuedouble;
         }
     } else if (is_array_of(n, rotor_count)) {
         for (int i = 0; i < rotor_count; i++) {
-            const sitl_json_t *item = sitl_json_item(n, i);
+            const cJSON *item = cJSON_GetArrayItem(n, i);
             if (!is_number(item)) {
                 return set_err(err, err_size, "%s: '%s'[%d] is not a number", path, key, i);
             }
-            out[i] = item->number;
+            out[i] = item->valuedouble;
         }
     } else {
         return set_err(err, err_size, "%s: '%s' must be a number or a list of %d numbers", path,
@@ -70,29 +70,29 @@ static int read_coeff(const sitl_json_t *root, const char *key, int rotor_count,
 }
 
 /* Three finite numbers into out; 0, or -1 if n is not such a list. */
-static int read_vec3(const sitl_json_t *n, double out[3])
+static int read_vec3(const cJSON *n, double out[3])
 {
     if (!is_array_of(n, 3)) {
         return -1;
     }
     for (int k = 0; k < 3; k++) {
-        const sitl_json_t *item = sitl_json_item(n, k);
+        const cJSON *item = cJSON_GetArrayItem(n, k);
         if (!is_number(item)) {
             return -1;
         }
-        out[k] = item->number;
+        out[k] = item->valuedouble;
     }
     return 0;
 }
 
-static int read_inertia(const sitl_json_t *inertia, const char *path, sitl_vehicle_t *v, char *err,
+static int read_inertia(const cJSON *inertia, const char *path, sitl_vehicle_t *v, char *err,
                         int err_size)
 {
     memset(v->inertia, 0, sizeof(v->inertia));
     if (!is_array_of(inertia, 3)) {
         return set_err(err, err_size, "%s: 'inertia' must be [Jxx,Jyy,Jzz] or a 3x3 list", path);
     }
-    if (is_number(sitl_json_item(inertia, 0))) {
+    if (is_number(cJSON_GetArrayItem(inertia, 0))) {
         double diagonal[3];
         if (read_vec3(inertia, diagonal) != 0) {
             return set_err(err, err_size, "%s: 'inertia' diagonal must be 3 numbers", path);
@@ -103,46 +103,46 @@ static int read_inertia(const sitl_json_t *inertia, const char *path, sitl_vehic
         return 0;
     }
     for (int i = 0; i < 3; i++) {
-        const sitl_json_t *row = sitl_json_item(inertia, i);
+        const cJSON *row = cJSON_GetArrayItem(inertia, i);
         if (!is_array_of(row, 3)) {
             return set_err(err, err_size, "%s: 'inertia' must be [Jxx,Jyy,Jzz] or 3x3", path);
         }
         for (int j = 0; j < 3; j++) {
-            const sitl_json_t *item = sitl_json_item(row, j);
+            const cJSON *item = cJSON_GetArrayItem(row, j);
             if (!is_number(item)) {
                 return set_err(err, err_size, "%s: 'inertia'[%d][%d] is not a number", path, i,
                                j);
             }
-            v->inertia[i][j] = item->number;
+            v->inertia[i][j] = item->valuedouble;
         }
     }
     return 0;
 }
 
-static int load_tree(const sitl_json_t *root, const char *path, sitl_vehicle_t *v, char *err,
+static int load_tree(const cJSON *root, const char *path, sitl_vehicle_t *v, char *err,
                      int err_size)
 {
-    if (!sitl_json_is(root, SITL_JSON_OBJECT)) {
+    if (!cJSON_IsObject(root)) {
         return set_err(err, err_size, "%s: the vehicle file must be a JSON object", path);
     }
-    const sitl_json_t *name = member(root, "name");
-    if (sitl_json_is(name, SITL_JSON_STRING)) {
-        snprintf(v->name, sizeof(v->name), "%s", name->text);
+    const cJSON *name = member(root, "name");
+    if (cJSON_IsString(name)) {
+        snprintf(v->name, sizeof(v->name), "%s", name->valuestring);
     } else {
         snprintf(v->name, sizeof(v->name), "%s", path);
     }
 
-    const sitl_json_t *mass = member(root, "mass");
-    if (mass == NULL || sitl_json_is(mass, SITL_JSON_NULL)) {
+    const cJSON *mass = member(root, "mass");
+    if (mass == NULL || cJSON_IsNull(mass)) {
         return set_err(err, err_size, "%s: 'mass' is missing or null; propid_sitl needs it", path);
     }
-    if (!is_number(mass) || mass->number <= 0.0) {
+    if (!is_number(mass) || mass->valuedouble <= 0.0) {
         return set_err(err, err_size, "%s: 'mass' must be a positive number", path);
     }
-    v->mass = mass->number;
+    v->mass = mass->valuedouble;
 
-    const sitl_json_t *inertia = member(root, "inertia");
-    if (inertia == NULL || sitl_json_is(inertia, SITL_JSON_NULL)) {
+    const cJSON *inertia = member(root, "inertia");
+    if (inertia == NULL || cJSON_IsNull(inertia)) {
         return set_err(err, err_size, "%s: 'inertia' is missing or null; propid_sitl needs it",
                        path);
     }
@@ -150,8 +150,8 @@ static int load_tree(const sitl_json_t *root, const char *path, sitl_vehicle_t *
         return -1;
     }
 
-    const sitl_json_t *rotors = member(root, "rotors");
-    int rotor_count = sitl_json_is(rotors, SITL_JSON_ARRAY) ? sitl_json_size(rotors) : 0;
+    const cJSON *rotors = member(root, "rotors");
+    int rotor_count = cJSON_IsArray(rotors) ? cJSON_GetArraySize(rotors) : 0;
     if (rotor_count < 1 || rotor_count > SITL_MAX_ROTORS) {
         return set_err(err, err_size, "%s: 'rotors' must be a list of 1..%d rotors", path,
                        SITL_MAX_ROTORS);
@@ -159,15 +159,15 @@ static int load_tree(const sitl_json_t *root, const char *path, sitl_vehicle_t *
     v->rotor_count = rotor_count;
     double arm_sum = 0.0;
     for (int i = 0; i < v->rotor_count; i++) {
-        const sitl_json_t *r = sitl_json_item(rotors, i);
-        const sitl_json_t *sign = member(r, "yaw_sign");
+        const cJSON *r = cJSON_GetArrayItem(rotors, i);
+        const cJSON *sign = member(r, "yaw_sign");
         if (read_vec3(member(r, "position"), v->rotor[i].position) != 0) {
             return set_err(err, err_size, "%s: rotor %d needs 'position' [x, y, z]", path, i + 1);
         }
-        if (!is_number(sign) || fabs(fabs(sign->number) - 1.0) > 0.0) {
+        if (!is_number(sign) || fabs(fabs(sign->valuedouble) - 1.0) > 0.0) {
             return set_err(err, err_size, "%s: rotor %d 'yaw_sign' must be 1 or -1", path, i + 1);
         }
-        v->rotor[i].yaw_sign = sign->number;
+        v->rotor[i].yaw_sign = sign->valuedouble;
         arm_sum += hypot(v->rotor[i].position[0], v->rotor[i].position[1]);
     }
     v->arm_length = arm_sum / (double)v->rotor_count;
@@ -183,13 +183,13 @@ static int load_tree(const sitl_json_t *root, const char *path, sitl_vehicle_t *
     }
 
     /* Optional: a present number overrides the caller's default. */
-    const sitl_json_t *radius = member(root, "rotor_radius");
-    if (is_number(radius) && radius->number > 0.0) {
-        v->rotor_radius = radius->number;
+    const cJSON *radius = member(root, "rotor_radius");
+    if (is_number(radius) && radius->valuedouble > 0.0) {
+        v->rotor_radius = radius->valuedouble;
     }
-    const sitl_json_t *rotor_inertia = member(root, "rotor_inertia");
-    if (is_number(rotor_inertia) && rotor_inertia->number >= 0.0) {
-        v->rotor_inertia = rotor_inertia->number;
+    const cJSON *rotor_inertia = member(root, "rotor_inertia");
+    if (is_number(rotor_inertia) && rotor_inertia->valuedouble >= 0.0) {
+        v->rotor_inertia = rotor_inertia->valuedouble;
     }
     return 0;
 }
@@ -211,7 +211,7 @@ int sitl_vehicle_load_json(const char *path, sitl_vehicle_t *v, char *err, int e
         return set_err(err, err_size, "%s: cannot read the vehicle file", path);
     }
     const char *error_at = NULL;
-    sitl_json_t *root = sitl_json_parse(text, &error_at);
+    cJSON *root = cJSON_ParseWithOpts(text, &error_at, 1);
     if (root == NULL) {
         int line = error_at != NULL ? line_of(text, error_at) : 1;
         free(text);
@@ -219,7 +219,7 @@ int sitl_vehicle_load_json(const char *path, sitl_vehicle_t *v, char *err, int e
     }
     free(text);
     int rc = load_tree(root, path, v, err, err_size);
-    sitl_json_free(root);
+    cJSON_Delete(root);
     if (rc == 0) {
         return sitl_vehicle_check(v, err, err_size);
     }
@@ -238,30 +238,30 @@ static const char *num(char *buf, double x)
     return buf;
 }
 
-/* A number member written with the shortest round-trip digits (sitl_json_t's own
+/* A number member written with the shortest round-trip digits (cJSON's own
  * printer rounds to 15 digits when that is within an epsilon). */
-static sitl_json_t *exact_number(double x)
+static cJSON *exact_number(double x)
 {
     char buf[32];
-    return sitl_json_raw(num(buf, x));
+    return cJSON_CreateRaw(num(buf, x));
 }
 
-static sitl_json_t *exact_array(const double *x, int count, int stride)
+static cJSON *exact_array(const double *x, int count, int stride)
 {
-    sitl_json_t *array = sitl_json_array();
+    cJSON *array = cJSON_CreateArray();
     for (int i = 0; array != NULL && i < count; i++) {
-        sitl_json_append(array, exact_number(x[i * stride]));
+        cJSON_AddItemToArray(array, exact_number(x[i * stride]));
     }
     return array;
 }
 
-static sitl_json_t *positive_or_null(double x)
+static cJSON *positive_or_null(double x)
 {
-    return x > 0.0 ? exact_number(x) : sitl_json_null();
+    return x > 0.0 ? exact_number(x) : cJSON_CreateNull();
 }
 
 /* One number when every rotor has the same value, else one per rotor. */
-static sitl_json_t *per_rotor(const sitl_vehicle_t *v, int drag)
+static cJSON *per_rotor(const sitl_vehicle_t *v, int drag)
 {
     double values[SITL_MAX_ROTORS] = {0};
     int same = 1;
@@ -282,30 +282,30 @@ int sitl_vehicle_write_json(const char *path, const sitl_vehicle_t *v, const cha
             }
         }
     }
-    sitl_json_t *root = sitl_json_object();
-    sitl_json_add(root, "name", sitl_json_string(v->name));
-    sitl_json_add(root, "mass", exact_number(v->mass));
+    cJSON *root = cJSON_CreateObject();
+    cJSON_AddItemToObject(root, "name", cJSON_CreateString(v->name));
+    cJSON_AddItemToObject(root, "mass", exact_number(v->mass));
     if (diagonal) {
-        sitl_json_add(root, "inertia", exact_array(&v->inertia[0][0], 3, 4));
+        cJSON_AddItemToObject(root, "inertia", exact_array(&v->inertia[0][0], 3, 4));
     } else {
-        sitl_json_t *rows = sitl_json_array();
+        cJSON *rows = cJSON_CreateArray();
         for (int i = 0; i < 3; i++) {
-            sitl_json_append(rows, exact_array(v->inertia[i], 3, 1));
+            cJSON_AddItemToArray(rows, exact_array(v->inertia[i], 3, 1));
         }
-        sitl_json_add(root, "inertia", rows);
+        cJSON_AddItemToObject(root, "inertia", rows);
     }
-    sitl_json_t *rotors = sitl_json_array();
+    cJSON *rotors = cJSON_CreateArray();
     for (int i = 0; i < v->rotor_count; i++) {
-        sitl_json_t *rotor = sitl_json_object();
-        sitl_json_add(rotor, "position", exact_array(v->rotor[i].position, 3, 1));
-        sitl_json_add(rotor, "yaw_sign", sitl_json_number(v->rotor[i].yaw_sign > 0 ? 1 : -1));
-        sitl_json_append(rotors, rotor);
+        cJSON *rotor = cJSON_CreateObject();
+        cJSON_AddItemToObject(rotor, "position", exact_array(v->rotor[i].position, 3, 1));
+        cJSON_AddItemToObject(rotor, "yaw_sign", cJSON_CreateNumber(v->rotor[i].yaw_sign > 0 ? 1 : -1));
+        cJSON_AddItemToArray(rotors, rotor);
     }
-    sitl_json_add(root, "rotors", rotors);
-    sitl_json_add(root, "kf_nominal", per_rotor(v, 0));
-    sitl_json_add(root, "km_nominal", per_rotor(v, 1));
-    sitl_json_add(root, "rotor_radius", positive_or_null(v->rotor_radius));
-    sitl_json_add(root, "rotor_inertia", positive_or_null(v->rotor_inertia));
-    sitl_json_add(root, "notes", sitl_json_string(notes != NULL ? notes : ""));
+    cJSON_AddItemToObject(root, "rotors", rotors);
+    cJSON_AddItemToObject(root, "kf_nominal", per_rotor(v, 0));
+    cJSON_AddItemToObject(root, "km_nominal", per_rotor(v, 1));
+    cJSON_AddItemToObject(root, "rotor_radius", positive_or_null(v->rotor_radius));
+    cJSON_AddItemToObject(root, "rotor_inertia", positive_or_null(v->rotor_inertia));
+    cJSON_AddItemToObject(root, "notes", cJSON_CreateString(notes != NULL ? notes : ""));
     return sitl_write_json_file(path, root);
 }
