@@ -18,7 +18,8 @@ support, so the filter's real-data numbers can be judged against something.
 and search a lag of the response behind the rotor speeds. Steady trim torques and
 slow drifts are removed by the band-pass; sensor noise still attenuates the slope
 towards zero (least squares with a noisy regressor), so band numbers are lower bounds
-more than unbiased values.
+more than unbiased values. The roll/pitch fits are repeated with the samples grouped by
+excitation (grouped_fit), which an additive regressor-side term does not attenuate.
 """
 
 from __future__ import annotations
@@ -190,6 +191,80 @@ def lagged_fit(
     return best if best is not None else Fit([float("nan")] * regressors.shape[1], float("nan"), 0, 0)
 
 
+# Excitation groups for grouped_fit: quintiles of the slow (EXCITATION_WINDOW_S mean) body-rate magnitude.
+EXCITATION_GROUPS = 5
+EXCITATION_WINDOW_S = 1.0
+# Below this ratio of the largest to the smallest group's regressor power the groups do not differ
+# enough in excitation for the slope to mean anything (grouped_fit returns NaN).
+MIN_EXCITATION_RATIO = 2.0
+
+
+def grouped_fit(
+    response: np.ndarray,
+    regressor: np.ndarray,
+    excitation: np.ndarray,
+    segs: list[tuple[int, int]],
+    rate_hz: float,
+    band: tuple[float, float],
+    lag: int,
+    groups: int = EXCITATION_GROUPS,
+) -> dict:
+    """Through-origin slope that an ADDITIVE term on the regressor side does not attenuate
+    (Wald's grouping estimator; docs/real-data.md "What the torque gain is").
+
+    Model: regressor x = x_true + n, response y = k x_true + e, with n's power the same in every
+    group (rotor-speed noise, or the rotors' answer to a torque the controller cancels and the
+    gyro therefore does not see) and e independent. The samples are grouped by `excitation`
+    (one value per row, e.g. the slow body-rate magnitude: it sets the size of x_true, not of n);
+    per group the mean products are c_g = <y x>/N = k v_g - k s2 and v_g = <x x>/N, so k is the
+    slope of the straight line through (v_g, c_g) and s2 = -intercept / k. Plain least squares
+    gives sum c_g / sum v_g instead, attenuated by the share of n in x. A gain error of the
+    model itself (inertia, arm, gyro scale) multiplies every group alike and stays in k.
+
+    Returns k, the additive term's rms in the response's units (k sqrt(s2)), the plain slope,
+    and the per-group slopes c_g / v_g; k is NaN when the groups' v_g span less than
+    MIN_EXCITATION_RATIO."""
+    ys, xs, ss = [], [], []
+    for a, b in segs:
+        yy = bandpass(response[a:b, None], rate_hz, *band)[:, 0]
+        xx = bandpass(regressor[a:b, None], rate_hz, *band)[:, 0]
+        n = yy.shape[0]
+        lo, hi = max(0, -lag), min(n, n - lag)
+        if hi - lo < 10:
+            continue
+        ys.append(yy[lo + lag : hi + lag])
+        xs.append(xx[lo:hi])
+        ss.append(excitation[a:b][lo:hi])
+    nan = {"kf": float("nan"), "additive_rms": float("nan"), "plain": float("nan"), "group_slopes": []}
+    if not ys:
+        return nan
+    y, x, s = np.concatenate(ys), np.concatenate(xs), np.concatenate(ss)
+    if y.size < 10 * groups:
+        return nan
+    order = np.argsort(s, kind="stable")
+    c, v = [], []
+    for part in np.array_split(order, groups):  # equal-count groups by excitation
+        c.append(float(y[part] @ x[part]) / part.size)
+        v.append(float(x[part] @ x[part]) / part.size)
+    c, v = np.array(c), np.array(v)
+    plain = float(c.sum() / v.sum()) if v.sum() > 0 else float("nan")
+    out = dict(nan, plain=plain, group_slopes=[float(cg / vg) if vg > 0 else float("nan") for cg, vg in zip(c, v)])
+    if v.min() <= 0 or v.max() < MIN_EXCITATION_RATIO * v.min():
+        return out
+    slope, intercept = np.polyfit(v, c, 1)
+    out["kf"] = float(slope)
+    if slope > 0:
+        out["additive_rms"] = float(slope * np.sqrt(max(-intercept / slope, 0.0)))
+    return out
+
+
+def slow_rate_magnitude(gyro: np.ndarray, rate_hz: float, window_s: float = EXCITATION_WINDOW_S) -> np.ndarray:
+    """Running mean of the roll/pitch rate magnitude over window_s: how hard the vehicle is manoeuvring."""
+    width = max(1, int(round(window_s * rate_hz)))
+    magnitude = np.hypot(gyro[:, 0], gyro[:, 1])
+    return np.convolve(magnitude, np.ones(width) / width, mode="same")
+
+
 DEFAULT_BANDS = {
     "raw": (None, None),
     "0.5-2Hz": (0.5, 2.0),
@@ -283,6 +358,7 @@ def check_log(
     acc = log.acc
     thrust_ok = acc is not None and vehicle.mass is not None and np.isfinite(acc[:, 2]).any()
     lags = range(-max_lag, max_lag + 1)
+    excitation = slow_rate_magnitude(gyro, rate)
     for name, band in bands.items():
         entry = {}
         if thrust_ok:
@@ -296,6 +372,12 @@ def check_log(
         entry["yaw_km_rotor_inertia"] = lagged_fit(torque[:, 2], reg_yaw_rotor, segs, rate, band, band_lags).as_dict(
             ["km", "rotor_inertia"], rate
         )
+        if band != (None, None):
+            # the same torque fits with the samples grouped by excitation (grouped_fit), at the plain fits' lags
+            for key, axis, reg, fit_key in (("roll_kf_grouped", 0, reg_roll, "roll_kf"),
+                                            ("pitch_kf_grouped", 1, reg_pitch, "pitch_kf")):
+                entry[key] = grouped_fit(torque[:, axis], reg[:, 0], excitation, segs, rate, band,
+                                         entry[fit_key]["lag_samples"])
         if body_velocity is not None:
             # same torque fits with a moment linear in body velocity (rotor drag / blade flapping)
             for key, axis, reg in (("roll_kf_with_velocity", 0, reg_roll), ("pitch_kf_with_velocity", 1, reg_pitch)):
@@ -329,9 +411,18 @@ def format_checks(result: dict) -> str:
         if "roll_kf_with_velocity" in entry:
             r, p = entry["roll_kf_with_velocity"], entry["pitch_kf_with_velocity"]
             velocity_lines.append(f"{band:>9} roll kf {r['kf']:.3e} (R2 {r['r2']:.2f}), pitch kf {p['kf']:.3e} (R2 {p['r2']:.2f})")
+    grouped_lines = []
+    for band, entry in result.get("bands", {}).items():
+        if "roll_kf_grouped" in entry:
+            r, p = entry["roll_kf_grouped"], entry["pitch_kf_grouped"]
+            grouped_lines.append(f"{band:>9} roll kf {r['kf']:.3e} (additive {r['additive_rms']:.1e} N m), "
+                                  f"pitch kf {p['kf']:.3e} (additive {p['additive_rms']:.1e} N m)")
     if velocity_lines:
         lines.append("torque fits with a body-velocity moment term (rotor drag / flapping):")
         lines.extend(velocity_lines)
+    if grouped_lines:
+        lines.append("torque fits grouped by excitation (not attenuated by an additive regressor-side term):")
+        lines.extend(grouped_lines)
     return "\n".join(lines)
 
 
@@ -339,14 +430,17 @@ def band_evidence_table(checks: list[dict], names: list[str], reference_kf: floa
     """Markdown: per run and band, the gyro-torque roll/pitch kf (ratio to the reference, or
     to the run's own accelerometer thrust kf without one) with R^2, and the yaw km without
     and with the rotor-acceleration term, beside the accelerometer thrust kf (raw); last
-    column the 2-10 Hz torque kf divided by R^2 (the reverse regression: an upper bound if
-    all the unexplained variance were noise on the rotor-speed regressor)."""
+    columns the 2-10 Hz torque kf divided by R^2 (the reverse regression: an upper bound if
+    all the unexplained variance were noise on the rotor-speed regressor) and the 2-10 Hz torque
+    kf grouped by excitation (grouped_fit: not attenuated by an additive regressor-side term)
+    with that term's rms."""
     head = "| run | acc thrust kf (raw) |" + "".join(
         f" {b.replace('Hz', ' Hz')} roll / pitch kf (R^2) | {b.replace('Hz', ' Hz')} km / km+J_r [1e-10] |"
-        for b in EVIDENCE_BANDS) + " 2-10 Hz roll / pitch kf / R^2 (errors-in-variables bound) |"
+        for b in EVIDENCE_BANDS) + " 2-10 Hz roll / pitch kf / R^2 (errors-in-variables bound) |" \
+        " 2-10 Hz roll / pitch kf grouped by excitation (additive torque rms [1e-5 N m]) |"
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     pooled = {b: [] for b in EVIDENCE_BANDS}
-    eiv = []
+    eiv, grouped = [], []
     for name, c in zip(names, checks):
         bands = c.get("bands", {})
         thrust = bands.get("raw", {}).get("thrust_kf", {}).get("kf", float("nan"))
@@ -368,11 +462,19 @@ def band_evidence_table(checks: list[dict], names: list[str], reference_kf: floa
             eiv.append(0.5 * (e["roll_kf"]["kf"] / e["roll_kf"]["r2"] + e["pitch_kf"]["kf"] / e["pitch_kf"]["r2"]) / ref)
         cells.append(f"{e['roll_kf']['kf'] / e['roll_kf']['r2'] / ref:.2f} / {e['pitch_kf']['kf'] / e['pitch_kf']['r2'] / ref:.2f}"
                      if e and e["roll_kf"]["r2"] > 0 and e["pitch_kf"]["r2"] > 0 else "n/a")
+        g = (e or {}).get("roll_kf_grouped"), (e or {}).get("pitch_kf_grouped")
+        if g[0] and g[1] and np.isfinite(g[0]["kf"]) and np.isfinite(g[1]["kf"]):
+            grouped.append(0.5 * (g[0]["kf"] + g[1]["kf"]) / ref)
+            cells.append(f"{g[0]['kf'] / ref:.2f} / {g[1]['kf'] / ref:.2f} "
+                         f"({g[0]['additive_rms'] * 1e5:.1f} / {g[1]['additive_rms'] * 1e5:.1f})")
+        else:
+            cells.append("n/a")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     mean_cells = ["**mean (roll+pitch)/2**", ""]
     for b in EVIDENCE_BANDS:
         mean_cells += [f"**{np.mean(pooled[b]):.2f}**" if pooled[b] else "n/a", ""]
     mean_cells.append(f"**{np.mean(eiv):.2f}**" if eiv else "n/a")
+    mean_cells.append(f"**{np.mean(grouped):.2f}**" if grouped else "n/a")
     lines.append("| " + " | ".join(mean_cells) + " |")
     return "\n".join(lines)
 
