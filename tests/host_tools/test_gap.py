@@ -73,6 +73,27 @@ def test_esc_delay_is_the_fitted_stream_lag(flights):
     assert result["verdict"] == "esc_delay"
 
 
+
+def test_each_log_is_aligned_by_its_own_stream_lag(tmp_path, sitl_binary):
+    """Two logs of one vehicle whose rotor streams lag by 5 and 20 ms (a telemetry lag
+    belongs to a log): each log, fitted or held out, gets its own lag (the sensor chain's
+    own few ms on top, as in the single-log test), not one pooled value for both."""
+    from propid.gap import analysis
+    from propid.gap.prep import Band
+
+    logs = []
+    for seed, lag in ((5, "0.005"), (6, "0.02")):
+        path = tmp_path / f"lag_{seed}.csv"
+        subprocess.run([str(sitl_binary), "--quiet", "--duration", DURATION, "--seed", str(seed), "--log", str(path),
+                        "--effect", f"esc_delay={lag}"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                       timeout=120, check=True)
+        vehicle = read_vehicle(path.with_name(path.stem + ".vehicle.json"))
+        logs.append(read_flightlog(path, vehicle))
+    result = analysis.run([logs[0]], vehicle, [logs[1]], analysis.Options(Band(), progress=False))
+    per_log = _entry(result, "esc_delay")["params"]["per_log_delay_s"]
+    assert per_log["lag_5"] == pytest.approx(0.007, abs=0.004)
+    assert per_log["lag_6"] == pytest.approx(0.022, abs=0.004)
+
 def test_inertia_error_gives_the_true_to_file_inertia_ratio(flights):
     """SITL: J_true = 1.1 J_file; the accelerometer's zero-g offset (up to 2 %) limits it."""
     _, _, result = flights("inertia_error", "0.1")

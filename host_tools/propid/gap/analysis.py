@@ -130,6 +130,34 @@ def testable(present: dict, vehicle: Vehicle) -> tuple[list[str], list[dict]]:
     return ok, missing
 
 
+
+def _alignment_nuisance(f: Flight, ctx: Context, candidates: list[str]) -> dict:
+    """Roll/pitch columns of the effects that do not depend on the rotor stream's timing
+    (alignment.py fits them with every lag)."""
+    cols = {"roll": [], "pitch": []}
+    for eid in ALIGNMENT_NUISANCE:
+        if eid not in candidates:
+            continue
+        built = by_id(eid).build(f, ctx)
+        for a in cols:
+            cols[a].append(built[a] if a in built else np.zeros((len(f.t), len(by_id(eid).params))))
+    return {a: np.column_stack(v) if v else np.zeros((len(f.t), 0)) for a, v in cols.items()}
+
+
+def per_log_delays(flights: list[Flight], held: list[Flight], vehicle: Vehicle, candidates: list[str]) -> list[float]:
+    """Each log's own rotor-stream lag (the same search as the pooled one, on that log
+    alone): the lag belongs to a log's telemetry schedule, not to the vehicle. A held-out
+    log's lag is measured on its own stream, as the filter's per-log delay rule does; the
+    model coefficients evaluated on it still come from the fitted logs only."""
+    out = []
+    for f in flights + held:
+        ctx = make_context([f], vehicle, np.ones(vehicle.rotor_count), np.ones(vehicle.rotor_count))
+        one = alignment.search([f], vehicle.positions, vehicle.yaw_signs,
+                               nuisance=[_alignment_nuisance(f, ctx, candidates)])
+        out.append(float(one["delay_s"]))
+    return out
+
+
 def _physical(design, theta_scaled, effect_id, ctx):
     cols = design.groups[effect_id]
     coef = np.asarray(theta_scaled) / design.scale[cols]
@@ -159,19 +187,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
 
     # 1. stream alignment (esc_delay)
     ctx_align = make_context(flights, vehicle, np.ones(vehicle.rotor_count), np.ones(vehicle.rotor_count))
-    nuisance = []
-    for f in flights:
-        cols = {"roll": [], "pitch": []}
-        for eid in ALIGNMENT_NUISANCE:
-            if eid not in candidates:
-                continue
-            built = by_id(eid).build(f, ctx_align)
-            for a in cols:
-                if a in built:
-                    cols[a].append(built[a])
-                else:
-                    cols[a].append(np.zeros((len(f.t), len(by_id(eid).params))))
-        nuisance.append({a: np.column_stack(v) if v else np.zeros((len(f.t), 0)) for a, v in cols.items()})
+    nuisance = [_alignment_nuisance(f, ctx_align, candidates) for f in flights]
     align = alignment.search(flights, vehicle.positions, vehicle.yaw_signs, progress=lambda: progress(0), nuisance=nuisance)
     progress(20)
     # the alignment is always applied (stream misalignment is part of the base fit); it is
@@ -180,8 +196,13 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     delay_significant = bool(align["ci"][0] > 0 and align["explained_fraction"] >= MIN_DELAY_EXPLAINED
                              and abs(align["delay_s"]) > max(sample_period, MIN_REPORTED_DELAY_S))
     delay = align["delay_s"] if align["ci"][0] > 0 else 0.0
-    work = [shifted_flight(f, delay) for f in flights]
-    work_held = [shifted_flight(f, delay) for f in held_flights]
+    # several logs: each log aligned by its own lag when the pooled one is applied
+    delays = [delay] * (len(flights) + len(held_flights))
+    if delay and len(flights) + len(held_flights) > 1:
+        delays = per_log_delays(flights, held_flights, vehicle, candidates)
+        align["per_log_delay_s"] = {f.name: d for f, d in zip(flights + held_flights, delays)}
+    work = [shifted_flight(f, d) for f, d in zip(flights, delays)]
+    work_held = [shifted_flight(f, d) for f, d in zip(held_flights, delays[len(flights):])]
 
     # 2. base model: per-rotor kf (shared by thrust and torques), per-rotor km
     count = vehicle.rotor_count
@@ -226,7 +247,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
 
     entries = []
     esc_entry = {"id": ESC_DELAY, "explained_fraction": align["explained_fraction"], "ci": align["ci"],
-                 "axes": ["roll", "pitch", "yaw"], "params": {"delay_s": align["delay_s"]},
+                 "axes": ["roll", "pitch", "yaw"], "params": {"delay_s": align["delay_s"],
+                            **({"per_log_delay_s": align["per_log_delay_s"]} if "per_log_delay_s" in align else {})},
                  "significant": delay_significant}
     entries.append(esc_entry)
     for s in sel["selected"] + sel["others"]:
