@@ -19,7 +19,10 @@ and search a lag of the response behind the rotor speeds. Steady trim torques an
 slow drifts are removed by the band-pass; sensor noise still attenuates the slope
 towards zero (least squares with a noisy regressor), so band numbers are lower bounds
 more than unbiased values. The roll/pitch fits are repeated with the samples grouped by
-excitation (grouped_fit), which an additive regressor-side term does not attenuate.
+excitation (grouped_fit), which an additive regressor-side term does not attenuate, and
+with the logged motor commands as instruments (instrument_fit), which share neither the
+telemetry's errors nor, as far as it decorrelates within their lags, a torque the
+controller cancels.
 """
 
 from __future__ import annotations
@@ -258,6 +261,70 @@ def grouped_fit(
     return out
 
 
+# Instrument lags [samples] for instrument_fit: the commands this many samples before the response.
+INSTRUMENT_LAGS = (2, 3, 5, 8, 13)
+
+
+def difference_response(x: np.ndarray, rate_hz: float) -> np.ndarray:
+    """x given the response of the central difference against d/dt, sin(wT)/(wT) with T the sample
+    interval (0.94 at 10 Hz, 0.76 at 20 Hz at 100 Hz): the measured angular acceleration is a central
+    difference of the gyro, so a regressor with the same response is compared like with like."""
+    n = x.shape[0]
+    xp = np.concatenate([x[::-1], x, x[::-1]])
+    w = 2.0 * np.pi * np.fft.rfftfreq(xp.shape[0], d=1.0 / rate_hz) / rate_hz
+    gain = np.ones_like(w)
+    gain[1:] = np.sin(w[1:]) / w[1:]
+    return np.fft.irfft(np.fft.rfft(xp) * gain, n=xp.shape[0])[n : 2 * n]
+
+
+def instrument_fit(
+    response: np.ndarray,
+    regressor: np.ndarray,
+    instruments: np.ndarray,
+    segs: list[tuple[int, int]],
+    rate_hz: float,
+    band: tuple[float, float],
+    lag: int,
+) -> dict:
+    """Two-stage least squares of response[n + lag] on regressor[n] with `instruments` (columns, same
+    rows and clock as the response; each used at INSTRUMENT_LAGS samples before the response's row), all
+    band-passed per segment, the regressor given the central difference's response (difference_response).
+    Instruments that do
+    not share the regressor's errors (the motor commands: not the rotor-speed telemetry's noise, and,
+    for a cancelled torque that decorrelates within the lags, not the rotors' answer to it) remove the
+    attenuation those errors cause. Returns the slope, the plain slope with the same response, and the
+    first stage's R^2 (instrument strength; a weak first stage, below ~0.1, makes the slope noisy)."""
+    nan = {"kf": float("nan"), "plain": float("nan"), "first_stage_r2": float("nan")}
+    ys, xs, zs = [], [], []
+    max_lag = max(INSTRUMENT_LAGS)
+    for a, b in segs:
+        if b - a < 4 * max_lag:
+            continue
+        yy = bandpass(response[a:b, None], rate_hz, *band)[:, 0]
+        xx = bandpass(difference_response(regressor[a:b], rate_hz)[:, None], rate_hz, *band)[:, 0]
+        zz = bandpass(instruments[a:b], rate_hz, *band)
+        n = yy.shape[0]
+        lo, hi = max(0, -lag, max_lag - lag), min(n, n - lag)
+        if hi - lo < 10:
+            continue
+        rows = np.arange(lo, hi)
+        ys.append(yy[rows + lag])
+        xs.append(xx[rows])
+        # the commands are on the response's (the gyro's) clock: k samples before the response
+        zs.append(np.column_stack([zz[rows + lag - k] for k in INSTRUMENT_LAGS]))
+    if not ys:
+        return nan
+    y, x, z = np.concatenate(ys), np.concatenate(xs), np.concatenate(zs)
+    if y.size < 10 * z.shape[1] or not np.any(x):
+        return nan
+    coeffs, *_ = np.linalg.lstsq(z, x, rcond=None)
+    fitted = z @ coeffs
+    first = 1.0 - float(np.sum((x - fitted) ** 2)) / float(np.sum(x**2))
+    denominator = float(fitted @ x)
+    return {"kf": float(fitted @ y) / denominator if denominator != 0 else float("nan"),
+            "plain": float(x @ y) / float(x @ x), "first_stage_r2": first}
+
+
 def slow_rate_magnitude(gyro: np.ndarray, rate_hz: float, window_s: float = EXCITATION_WINDOW_S) -> np.ndarray:
     """Running mean of the roll/pitch rate magnitude over window_s: how hard the vehicle is manoeuvring."""
     width = max(1, int(round(window_s * rate_hz)))
@@ -272,6 +339,7 @@ DEFAULT_BANDS = {
     "5-10Hz": (5.0, 10.0),
     "10-20Hz": (10.0, 20.0),
     "2-10Hz": (2.0, 10.0),
+    "5-20Hz": (5.0, 20.0),
 }
 EVIDENCE_BANDS = ("0.5-2Hz", "2-5Hz", "5-10Hz", "10-20Hz")  # the per-band evidence table (docs/real-data.md)
 
@@ -290,6 +358,23 @@ def _body_velocity(log: FlightLog) -> np.ndarray | None:
     ], axis=1)  # body -> world
     body = np.einsum("nji,nj->ni", rot, velocity)
     return np.nan_to_num(body, nan=0.0)
+
+
+def _commands(log: FlightLog, rotors: int) -> np.ndarray | None:
+    """The logged motor commands cmd_1..cmd_N (flight-log v1 optional columns), gaps held; None
+    when any is missing or never finite."""
+    columns = []
+    for i in range(rotors):
+        col = log.extra.get(f"cmd_{i + 1}")
+        if col is None or not np.isfinite(col).any():
+            return None
+        col = np.asarray(col, dtype=float).copy()
+        bad = ~np.isfinite(col)
+        if bad.any():
+            idx = np.arange(col.size)
+            col[bad] = np.interp(idx[bad], idx[~bad], col[~bad])
+        columns.append(col)
+    return np.column_stack(columns)
 
 
 def check_log(
@@ -359,6 +444,7 @@ def check_log(
     thrust_ok = acc is not None and vehicle.mass is not None and np.isfinite(acc[:, 2]).any()
     lags = range(-max_lag, max_lag + 1)
     excitation = slow_rate_magnitude(gyro, rate)
+    commands = _commands(log, speeds.shape[1])
     for name, band in bands.items():
         entry = {}
         if thrust_ok:
@@ -378,6 +464,14 @@ def check_log(
                                             ("pitch_kf_grouped", 1, reg_pitch, "pitch_kf")):
                 entry[key] = grouped_fit(torque[:, axis], reg[:, 0], excitation, segs, rate, band,
                                          entry[fit_key]["lag_samples"])
+            if commands is not None:
+                # the motor commands, in the same per-axis combination and squared, as instruments
+                for key, axis, reg, weights, fit_key in (
+                        ("roll_kf_instrumented", 0, reg_roll, pos[:, 1], "roll_kf"),
+                        ("pitch_kf_instrumented", 1, reg_pitch, -pos[:, 0], "pitch_kf")):
+                    instruments = np.column_stack([commands @ weights, commands**2 @ weights])
+                    entry[key] = instrument_fit(torque[:, axis], reg[:, 0], instruments, segs, rate, band,
+                                                entry[fit_key]["lag_samples"])
         if body_velocity is not None:
             # same torque fits with a moment linear in body velocity (rotor drag / blade flapping)
             for key, axis, reg in (("roll_kf_with_velocity", 0, reg_roll), ("pitch_kf_with_velocity", 1, reg_pitch)):
@@ -417,11 +511,17 @@ def format_checks(result: dict) -> str:
             r, p = entry["roll_kf_grouped"], entry["pitch_kf_grouped"]
             grouped_lines.append(f"{band:>9} roll kf {r['kf']:.3e} (additive {r['additive_rms']:.1e} N m), "
                                   f"pitch kf {p['kf']:.3e} (additive {p['additive_rms']:.1e} N m)")
+    for band, entry in result.get("bands", {}).items():
+        if "roll_kf_instrumented" in entry:
+            r, p = entry["roll_kf_instrumented"], entry["pitch_kf_instrumented"]
+            grouped_lines.append(f"{band:>9} commands as instruments: roll kf {r['kf']:.3e} (first stage R2 "
+                                 f"{r['first_stage_r2']:.2f}), pitch kf {p['kf']:.3e} ({p['first_stage_r2']:.2f})")
     if velocity_lines:
         lines.append("torque fits with a body-velocity moment term (rotor drag / flapping):")
         lines.extend(velocity_lines)
     if grouped_lines:
-        lines.append("torque fits grouped by excitation (not attenuated by an additive regressor-side term):")
+        lines.append("torque fits grouped by excitation (not attenuated by an additive regressor-side term) "
+                     "and with the motor commands as instruments:")
         lines.extend(grouped_lines)
     return "\n".join(lines)
 
@@ -433,14 +533,16 @@ def band_evidence_table(checks: list[dict], names: list[str], reference_kf: floa
     columns the 2-10 Hz torque kf divided by R^2 (the reverse regression: an upper bound if
     all the unexplained variance were noise on the rotor-speed regressor) and the 2-10 Hz torque
     kf grouped by excitation (grouped_fit: not attenuated by an additive regressor-side term)
-    with that term's rms."""
+    with that term's rms, and the 5-20 Hz torque kf with the motor commands as instruments
+    (instrument_fit; needs cmd_* columns) with the first stage's R^2."""
     head = "| run | acc thrust kf (raw) |" + "".join(
         f" {b.replace('Hz', ' Hz')} roll / pitch kf (R^2) | {b.replace('Hz', ' Hz')} km / km+J_r [1e-10] |"
         for b in EVIDENCE_BANDS) + " 2-10 Hz roll / pitch kf / R^2 (errors-in-variables bound) |" \
-        " 2-10 Hz roll / pitch kf grouped by excitation (additive torque rms [1e-5 N m]) |"
+        " 2-10 Hz roll / pitch kf grouped by excitation (additive torque rms [1e-5 N m]) |" \
+        " 5-20 Hz roll / pitch kf, motor commands as instruments (first-stage R^2) |"
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     pooled = {b: [] for b in EVIDENCE_BANDS}
-    eiv, grouped = [], []
+    eiv, grouped, instrumented = [], [], []
     for name, c in zip(names, checks):
         bands = c.get("bands", {})
         thrust = bands.get("raw", {}).get("thrust_kf", {}).get("kf", float("nan"))
@@ -469,12 +571,21 @@ def band_evidence_table(checks: list[dict], names: list[str], reference_kf: floa
                          f"({g[0]['additive_rms'] * 1e5:.1f} / {g[1]['additive_rms'] * 1e5:.1f})")
         else:
             cells.append("n/a")
+        e = bands.get("5-20Hz") or {}
+        iv = e.get("roll_kf_instrumented"), e.get("pitch_kf_instrumented")
+        if iv[0] and iv[1] and np.isfinite(iv[0]["kf"]) and np.isfinite(iv[1]["kf"]):
+            instrumented.append(0.5 * (iv[0]["kf"] + iv[1]["kf"]) / ref)
+            cells.append(f"{iv[0]['kf'] / ref:.2f} / {iv[1]['kf'] / ref:.2f} "
+                         f"({iv[0]['first_stage_r2']:.2f} / {iv[1]['first_stage_r2']:.2f})")
+        else:
+            cells.append("n/a")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     mean_cells = ["**mean (roll+pitch)/2**", ""]
     for b in EVIDENCE_BANDS:
         mean_cells += [f"**{np.mean(pooled[b]):.2f}**" if pooled[b] else "n/a", ""]
     mean_cells.append(f"**{np.mean(eiv):.2f}**" if eiv else "n/a")
     mean_cells.append(f"**{np.mean(grouped):.2f}**" if grouped else "n/a")
+    mean_cells.append(f"**{np.mean(instrumented):.2f}**" if instrumented else "n/a")
     lines.append("| " + " | ".join(mean_cells) + " |")
     return "\n".join(lines)
 

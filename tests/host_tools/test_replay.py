@@ -399,7 +399,7 @@ def test_band_evidence_table_and_plot(tmp_path):
     lines = table.splitlines()
     assert len(lines) == 4 and lines[2].startswith("| synthetic |")
     assert all(band.replace("Hz", " Hz") in lines[0] for band in EVIDENCE_BANDS)
-    assert "errors-in-variables" in lines[0] and "grouped by excitation" in lines[0]
+    assert "errors-in-variables" in lines[0] and "grouped by excitation" in lines[0] and "instruments" in lines[0]
     assert all(line.count("|") == lines[0].count("|") for line in lines)
     # the model holds exactly here: the 2-5 Hz torque fits recover the mean kf
     ratios = checks["bands"]["2-5Hz"]
