@@ -318,8 +318,9 @@ static const opt_t options[] = {
          "docs/math.md §14)"),
     FLAG(NULL, "filter-sensor-errors", filter_sensor_errors, 1,
          "filter: input-error terms from the sensor model (docs/sitl.md):\n"
-         "rotor-speed noise = the telemetry step at hover / sqrt(12),\n"
-         "held 1 s, with the compensation; delay = the ESC latency.\n"
+         "rotor-speed noise = the telemetry step at the hover speed the\n"
+         "rotors fly / sqrt(3) (RMS of a truncation), held 1 s, no\n"
+         "compensation; delay = the ESC latency.\n"
          "Replaces --filter-rotor-speed-noise(-time), --filter-esc-delay\n"
          "and --filter-input-error-compensation"),
 

@@ -17,13 +17,19 @@
 
 typedef struct {
     double hover_speed;            /* nominal hover speed [rad/s] */
-    double rotor_speed_noise;      /* telemetry step at hover / sqrt(12) [rad/s]; 0: exact speeds */
+    double rotor_speed_noise;      /* telemetry step at hover / sqrt(3) [rad/s]; 0: exact speeds */
     double rotor_speed_noise_time; /* its correlation time [s] */
     double rotor_delay_s;          /* telemetry latency [s] */
 } sitl_sensor_errors_t;
 
-/* 0 on success, -1 on a vehicle without hover (no thrust or mass) or no pole pairs. */
-int sitl_sensor_errors(const sitl_vehicle_t *v, const sitl_esc_params_t *esc,
+/* The step is taken at the hover speed the telemetry shows, sqrt(m g / sum kf) of the
+ * coefficients the rotors fly with (flown_kf; NULL: the vehicle file's): a user reads it
+ * off the stream in a hover, as `propid replay --rotor-speed-noise auto` reads the step
+ * near the stream's median speed. The file's nominal hover speed is not enough: the
+ * DShot step doubles where the period crosses 511 us (the Crazyflie hovers at 502 us),
+ * so a vehicle a few per cent off its nominal kf has twice the step.
+ * 0 on success, -1 on a vehicle without hover (no thrust or mass) or no pole pairs. */
+int sitl_sensor_errors(const sitl_vehicle_t *v, const sitl_esc_params_t *esc, const double *flown_kf,
                        sitl_sensor_errors_t *out);
 
 #endif /* SITL_SENSOR_ERRORS_H */

@@ -264,7 +264,7 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
     memcpy(f->command, f->state.rotor_speed, sizeof(f->command));
 
     const char *bad = NULL;
-    if (sitl_setup_filter_config(o, &f->vehicle, &f->filter_config, &bad) != PROPID_OK) {
+    if (sitl_setup_filter_config(o, &f->vehicle, f->true_kf, &f->filter_config, &bad) != PROPID_OK) {
         snprintf(err, sizeof(err), "filter configuration rejected: field '%s'",
                  bad != NULL ? bad : "?");
         return fail(r, SITL_EXIT_ERROR, err);

@@ -81,10 +81,13 @@ void sitl_setup_incorrect_coefficients(const sitl_options_t *opts, const sitl_ve
  * are J_file^-1 (r_i x z) kf_i / (1 + e): s_true = 1 / (1 + e), 1 without the effect. */
 double sitl_setup_true_torque_scale(const sitl_effects_t *effects);
 
-/* propid configuration from the vehicle file and the IMU model. Returns the
- * propid_config_check status (bad_field names the field). */
+/* propid configuration from the vehicle file and the IMU model; flown_kf: the thrust
+ * coefficients the rotors fly with (--filter-sensor-errors reads the telemetry step at
+ * their hover speed; NULL: the file's). Returns the propid_config_check status
+ * (bad_field names the field). */
 propid_status_t sitl_setup_filter_config(const sitl_options_t *opts,
-                                         const sitl_vehicle_t *vehicle, propid_config_t *config,
+                                         const sitl_vehicle_t *vehicle, const double *flown_kf,
+                                         propid_config_t *config,
                                          const char **bad_field);
 
 /* Ask a running sitl_run() to stop at its next control step (async-signal-safe:

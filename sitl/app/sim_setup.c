@@ -101,7 +101,7 @@ double sitl_setup_true_torque_scale(const sitl_effects_t *effects)
 }
 
 propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_vehicle_t *v,
-                                         propid_config_t *c, const char **bad_field)
+                                         const double *flown_kf, propid_config_t *c, const char **bad_field)
 {
     propid_config_default(c);
     c->rotor_count = (uint8_t)v->rotor_count;
@@ -167,7 +167,7 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
     c->input_error_compensation = (uint8_t)(opts->filter_input_error_compensation != 0);
     if (opts->filter_sensor_errors) {
         sitl_sensor_errors_t e;
-        if (sitl_sensor_errors(v, &opts->esc, &e) != 0) {
+        if (sitl_sensor_errors(v, &opts->esc, flown_kf, &e) != 0) {
             if (bad_field != NULL) {
                 *bad_field = "filter-sensor-errors (vehicle without hover)";
             }
@@ -176,7 +176,7 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
         c->rotor_speed_noise = (float)e.rotor_speed_noise;
         c->rotor_speed_noise_time = (float)e.rotor_speed_noise_time;
         c->rotor_delay_us = (int32_t)lround(e.rotor_delay_s * 1e6);
-        c->input_error_compensation = (uint8_t)(e.rotor_speed_noise > 0.0);
+        c->input_error_compensation = 0u; /* the truncation's error is not classical (sensor_errors.c) */
     }
     return propid_config_check(c, bad_field);
 }

@@ -1,7 +1,7 @@
 /*
  * The filter's input-error terms from the sensor model (sensor_errors.h):
- * the DShot step at hover and the latency, against an independent
- * computation.
+ * the DShot step at the flown hover speed and the latency, against an
+ * independent computation.
  */
 #include <math.h>
 
@@ -33,15 +33,16 @@ static void test_crazyflie_dshot_step_at_hover(void)
     sitl_esc_params_t esc;
     sitl_esc_default_params(&esc);
     sitl_sensor_errors_t e;
-    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, &e));
+    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, NULL, &e));
     double hover = sqrt(0.03 * 9.81 / (4.0 * 2.3e-8));
     TEST_ASSERT_DOUBLE_WITHIN(1e-9 * hover, hover, e.hover_speed);
     /* Hover period 501.9 us: truncated to 501, the next code 502. */
     double period = floor(2.0 * SITL_PI * 1e6 / (hover * 7.0));
     TEST_ASSERT_EQUAL_DOUBLE(501.0, period);
     double step = speed_of_period(period, 7) - speed_of_period(period + 1.0, 7);
-    TEST_ASSERT_DOUBLE_WITHIN(1e-9, step / sqrt(12.0), e.rotor_speed_noise);
-    TEST_ASSERT_DOUBLE_WITHIN(0.05, 1.03, e.rotor_speed_noise);
+    /* The truncation's error is uniform over [0, step): RMS about 0 step / sqrt(3). */
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, step / sqrt(3.0), e.rotor_speed_noise);
+    TEST_ASSERT_DOUBLE_WITHIN(0.05, 2.06, e.rotor_speed_noise);
     TEST_ASSERT_EQUAL_DOUBLE(SITL_HELD_STEP_TIME_S, e.rotor_speed_noise_time);
     TEST_ASSERT_EQUAL_DOUBLE(esc.latency_s, e.rotor_delay_s);
 }
@@ -54,11 +55,37 @@ static void test_hummingbird_step_with_mantissa_shift(void)
     sitl_esc_params_t esc;
     sitl_esc_default_params(&esc);
     sitl_sensor_errors_t e;
-    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, &e));
+    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, NULL, &e));
     double period = floor(2.0 * SITL_PI * 1e6 / (e.hover_speed * 7.0));
     double coded = floor(period / 4.0) * 4.0;
     double step = speed_of_period(coded, 7) - speed_of_period(coded + 4.0, 7);
-    TEST_ASSERT_DOUBLE_WITHIN(1e-9, step / sqrt(12.0), e.rotor_speed_noise);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, step / sqrt(3.0), e.rotor_speed_noise);
+}
+
+/* The step at the hover speed the rotors fly: a Crazyflie whose rotors make 6 % more
+ * thrust than the file's hovers 3 % slower, at a period above 511 us, where the code
+ * keeps 9 bits of a 2 us count: twice the step of the file's hover speed. */
+static void test_step_at_the_flown_hover_speed(void)
+{
+    sitl_vehicle_t v;
+    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset("crazyflie-x", &v));
+    sitl_esc_params_t esc;
+    sitl_esc_default_params(&esc);
+    sitl_sensor_errors_t nominal;
+    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, NULL, &nominal));
+    double flown_kf[SITL_MAX_ROTORS];
+    for (int i = 0; i < v.rotor_count; i++) {
+        flown_kf[i] = 1.06 * v.rotor[i].thrust_coeff;
+    }
+    sitl_sensor_errors_t e;
+    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, flown_kf, &e));
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9 * e.hover_speed, nominal.hover_speed / sqrt(1.06), e.hover_speed);
+    double period = floor(2.0 * SITL_PI * 1e6 / (e.hover_speed * 7.0));
+    TEST_ASSERT_TRUE(period > 511.0);
+    double coded = floor(period / 2.0) * 2.0;
+    double step = speed_of_period(coded, 7) - speed_of_period(coded + 2.0, 7);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, step / sqrt(3.0), e.rotor_speed_noise);
+    TEST_ASSERT_TRUE(e.rotor_speed_noise > 1.8 * nominal.rotor_speed_noise);
 }
 
 static void test_exact_speeds_have_no_input_noise(void)
@@ -68,7 +95,7 @@ static void test_exact_speeds_have_no_input_noise(void)
     sitl_esc_params_t esc;
     sitl_esc_paper_params(&esc, 500.0);
     sitl_sensor_errors_t e;
-    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, &e));
+    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, NULL, &e));
     TEST_ASSERT_EQUAL_DOUBLE(0.0, e.rotor_speed_noise);
     TEST_ASSERT_EQUAL_DOUBLE(0.0, e.rotor_delay_s);
 }
@@ -83,7 +110,7 @@ static void test_rejects_a_vehicle_without_hover(void)
     sitl_esc_params_t esc;
     sitl_esc_default_params(&esc);
     sitl_sensor_errors_t e;
-    TEST_ASSERT_EQUAL_INT(-1, sitl_sensor_errors(&v, &esc, &e));
+    TEST_ASSERT_EQUAL_INT(-1, sitl_sensor_errors(&v, &esc, NULL, &e));
 }
 
 int main(void)
@@ -91,6 +118,7 @@ int main(void)
     UNITY_BEGIN();
     RUN_TEST(test_crazyflie_dshot_step_at_hover);
     RUN_TEST(test_hummingbird_step_with_mantissa_shift);
+    RUN_TEST(test_step_at_the_flown_hover_speed);
     RUN_TEST(test_exact_speeds_have_no_input_noise);
     RUN_TEST(test_rejects_a_vehicle_without_hover);
     return UNITY_END();

@@ -101,8 +101,9 @@ def matched_filter(sensors: str, sensor_errors: bool = True) -> list[str]:
     bias walks as the sensor's. Rate process noise and gyro noise stay the
     library's and the datasheet's (design.md "Defaults"). The rotor-speed
     input's error terms come from the sensor model by one rule for every
-    vehicle (propid_sitl --filter-sensor-errors: the telemetry step at hover,
-    the latency); sensor_errors False leaves them out (the inputs taken as
+    vehicle (propid_sitl --filter-sensor-errors: the telemetry's truncation
+    error at the hover speed the rotors fly, the latency); sensor_errors False
+    leaves them out (the inputs taken as
     exact, the tuning before that rule)."""
     walk = GYRO_BIAS_WALK[sensors]
     return (["--filter-sensor-errors"] if sensor_errors else []) + ["--coeff-spread", f"{COEFF_SPREAD}", "--gyro-bias-max", f"{GYRO_BIAS_MAX:.7g}",
