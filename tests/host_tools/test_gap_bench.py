@@ -101,8 +101,13 @@ def test_summary_counts_and_keeps_sub_limit_flights_out_of_the_headline():
     ]
     s = summarize(records)
     assert s["flights"] == 5 and s["headline_flights"] == 4
-    assert s["per_effect"]["esc_delay"] == {"n": 2, "right": 1, "accuracy": 0.5,
-                                            "false_named_elsewhere": 0}
+    esc = dict(s["per_effect"]["esc_delay"])
+    bands = esc.pop("by_detectability")
+    assert esc == {"n": 2, "right": 1, "accuracy": 0.5, "false_named_elsewhere": 0}
+    assert bands["10-20"] == {"n": 2, "right": 1} and bands["5-10"] == {"n": 0, "right": 0}
+    # the power curve counts below-limit flights too, in their own band
+    assert s["per_effect"]["ground_effect"]["by_detectability"]["0-5"] == {"n": 1, "right": 0}
+    assert s["per_effect"]["ground_effect"]["n"] == 0
     assert s["per_effect"]["gyro_scale"]["false_named_elsewhere"] == 1
     assert s["singles"]["accuracy"] == 0.5
     assert s["pairs"]["accuracy"] == 1.0
@@ -172,3 +177,4 @@ def test_three_flights_end_to_end_blind_and_scored(tmp_path, sitl_binary):
         for effect in key["effects"]:
             assert effect["strength"] != 0 and effect["detectability"] > 0
     assert "least squares" in render(out)
+    assert "single effects right / flown, by D" in render(out)

@@ -119,16 +119,28 @@ def _median(values: list[float]) -> float | None:
     return values[mid] if len(values) % 2 else 0.5 * (values[mid - 1] + values[mid])
 
 
+def power_by_band(records: list[dict]) -> dict:
+    """{band: {"n", "right"}} over DETECTABILITY_BANDS (flights with a measured D)."""
+    out = {}
+    for lo, hi in DETECTABILITY_BANDS:
+        rows = [r for r in records if r["detectability"] is not None and lo <= r["detectability"] < hi]
+        out[f"{lo:g}-{hi:g}"] = {"n": len(rows), "right": sum(r["right"] for r in rows)}
+    return out
+
+
 def summarize(records: list[dict]) -> dict:
     """Headline figures over the flights above the detection limit, plus per effect."""
     head = [r for r in records if r["headline"]]
     per_effect = {}
     for effect in EFFECTS:
         rows = [r for r in head if r["kind"] == "single" and r["truth"] == [effect]]
+        alone = [r for r in records if r["kind"] == "single" and r["truth"] == [effect]]
         per_effect[effect] = {"n": len(rows), "right": sum(r["right"] for r in rows),
                               "accuracy": _fraction(sum(r["right"] for r in rows), len(rows)),
                               "false_named_elsewhere": sum(effect in r.get("false_named", [])
-                                                           for r in records)}
+                                                           for r in records),
+                              # the power curve: named right per band of D, below the limit too
+                              "by_detectability": power_by_band(alone)}
     singles = [r for r in head if r["kind"] == "single"]
     pairs = [r for r in head if r["kind"] == "pair"]
     nones = [r for r in head if r["kind"] == "none"]

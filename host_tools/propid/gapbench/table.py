@@ -56,4 +56,21 @@ def render(result: dict) -> str:
                                for i, c in enumerate(row)))
     if tool is None:
         lines.append(f"propid gap not run: {result.get('tool_unavailable_reason')}")
+    else:
+        lines += ["", power_curves(tool)]
     return "\n".join(lines)
+
+
+def power_curves(summary: dict) -> str:
+    """Single effects named right / flown per band of the detectability index D (`propid gap`):
+    where each effect's detection limit lies, next to the oracle's D = 5."""
+    bands = list(next(iter(summary["per_effect"].values())).get("by_detectability", {}))
+    header = ["single effects right / flown, by D"] + bands
+    rows = []
+    for effect in EFFECTS:
+        cells = summary["per_effect"][effect].get("by_detectability", {})
+        rows.append([effect] + [f"{cells[b]['right']}/{cells[b]['n']}" if cells.get(b, {}).get("n") else "-"
+                                for b in bands])
+    widths = [max(len(r[i]) for r in rows + [header]) for i in range(len(header))]
+    fmt = lambda r: "  ".join(c.ljust(widths[i]) if i == 0 else c.rjust(widths[i]) for i, c in enumerate(r))
+    return "\n".join([fmt(header), "  ".join("-" * w for w in widths)] + [fmt(r) for r in rows])
