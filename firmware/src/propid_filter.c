@@ -59,6 +59,28 @@ propid_status_t propid_init(propid_filter_t *filter, const propid_config_t *conf
     return PROPID_OK;
 }
 
+propid_status_t propid_init_prepared(propid_filter_t *filter, const propid_setup_t *setup)
+{
+    if (filter == NULL || setup == NULL) {
+        if (filter != NULL && initialised(filter)) {
+            return reject(filter, PROPID_ERR_NULL);
+        }
+        return PROPID_ERR_NULL;
+    }
+    if (!propid_setup_usable(setup)) {
+        if (initialised(filter)) {
+            return reject(filter, PROPID_ERR_CONFIG);
+        }
+        return PROPID_ERR_CONFIG;
+    }
+    memset(filter, 0, sizeof(*filter));
+    filter->derived = setup->derived;
+    filter->config = setup->config;
+    core_to_prior(filter);
+    filter->magic = PROPID_MAGIC;
+    return PROPID_OK;
+}
+
 propid_status_t propid_reset(propid_filter_t *filter)
 {
     if (filter == NULL) {

@@ -409,6 +409,10 @@ propid_scalar_result_t propid_scalar_update(propid_filter_t *filter, const propi
 
 /* propid_config.c: the configuration the filter keeps (propid.h, propid_kept_config_t). */
 void propid_config_keep(const propid_config_t *config, propid_kept_config_t *kept);
+/* Prepared setup (propid_setup.c): the CRC-32 its checksum field holds, and
+ * 1 when format, size, checksum and the indices the step uses are this build's. */
+uint32_t propid_setup_checksum(const propid_setup_t *setup);
+int propid_setup_usable(const propid_setup_t *setup);
 
 /* propid_config.c: validate a configuration and compute its derived quantities.
  * Writes *derived only when the configuration is valid. */

@@ -56,7 +56,7 @@ CPU = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard"]
 TARGET_CFLAGS = CPU + ["-std=c11", "-O2", "-DNDEBUG", "-fno-math-errno", "-ffp-contract=fast",
                        "-ffunction-sections", "-fdata-sections"]
 # Init-only sources compiled for size, as firmware/CMakeLists.txt does on the target.
-INIT_ONLY_CFLAGS = {"propid_config.c": ["-Os"]}
+INIT_ONLY_CFLAGS = {"propid_config.c": ["-Os"], "propid_setup.c": ["-Os"]}
 PER_SAMPLE_CALLS = ("propid_push_gyro", "propid_push_rotor_speeds", "propid_get_estimate")
 # Cycles-per-instruction assumptions for the CPU-load estimate (docs/performance.md):
 # Cortex-M4F at 168 MHz from flash with the ART/prefetch (FPU multiply-add 3 cycles,
@@ -172,25 +172,35 @@ def section_sizes(size_tool: str, path: pathlib.Path) -> dict[str, int]:
 
 
 def linked_filter_size(repo: pathlib.Path, work: pathlib.Path, build_flag: str,
-                       per_sample: set[str]) -> dict:
+                       per_sample: set[str], prepared: bool = False) -> dict:
     """Flash of the filter linked into a minimal application (--gc-sections),
-    split into what the per-sample calls reach and the rest (init-only)."""
+    split into what the per-sample calls reach and the rest (init-only).
+    prepared: the application starts the filter from the vehicle's prepared
+    setup (propid_init_prepared), which the host generator writes; the setup's
+    bytes count as the filter's."""
     # The quad build's library has neither the damage detector nor the model
     # helpers (firmware/CMakeLists.txt): they need the general build's data.
     left_out = {"propid_abi.c", "propid_mavlink.c"}
     if "-DPROPID_QUAD_BUILD=1" in build_flag.split():
         left_out |= {"propid_damage.c", "propid_model.c"}
     sources = [p for p in sorted((repo / "firmware/src").glob("propid_*.c")) if p.name not in left_out]
-    tag = build_flag.replace("-D", "").replace("=", "_").replace(" ", "_").lower()
+    tag = build_flag.replace("-D", "").replace("=", "_").replace(" ", "_").lower() + ("_prepared" if prepared else "")
+    extra = []
+    if prepared:
+        setup_c = work / f"propid_vehicle_setup_{tag}.c"
+        run([sys.executable, str(repo / "firmware/codegen/setup_blob.py"),
+             str(repo / "tests/bench/footprint_vehicle.json"), "--out", str(setup_c),
+             *(f"-D{d.removeprefix('-D')}" for d in build_flag.split())])
+        extra = [setup_c]
     elf = work / f"footprint_app_{tag}.elf"
     map_file = work / f"footprint_app_{tag}.map"
     qemu = repo / "tests/qemu"
     objects_dir = work / f"footprint_objects_{tag}"
     objects_dir.mkdir(exist_ok=True)
     flags = [*TARGET_CFLAGS, *build_flag.split(), "-I", str(repo / "firmware/include"),
-             "-I", str(qemu)]
+             "-I", str(qemu), *(["-DFOOTPRINT_PREPARED=1"] if prepared else [])]
     inputs = []
-    for source in [*sources, repo / "tests/bench/footprint_app.c", qemu / "startup.c",
+    for source in [*sources, *extra, repo / "tests/bench/footprint_app.c", qemu / "startup.c",
                    qemu / "semihosting.c", qemu / "stack_watermark.c"]:
         obj = objects_dir / (source.stem + ".o")
         run(["arm-none-eabi-gcc", *flags, *INIT_ONLY_CFLAGS.get(source.name, []),
@@ -202,7 +212,7 @@ def linked_filter_size(repo: pathlib.Path, work: pathlib.Path, build_flag: str,
     # Symbol sizes of the filter's own functions and constants in the linked ELF.
     filter_bytes = 0
     by_symbol: dict[str, int] = {}
-    objects = {p.stem for p in sources}
+    objects = {p.stem for p in [*sources, *extra]}
     text = map_file.read_text().split("Linker script and memory map", 1)[-1]
     # Map lines: " .text.name  0xADDR  0xSIZE  path/propid_x.o" (name may wrap).
     for m in re.finditer(r"^ (\.(?:text|rodata)\S*)\s*\n?\s+0x[0-9a-f]+\s+0x([0-9a-f]+)\s+(\S+)",
@@ -274,6 +284,8 @@ def footprint_of(repo: pathlib.Path, build: pathlib.Path, work: pathlib.Path, ta
             per_sample.add(function)
             todo.extend(calls.get(function, ()))
     result["linked_quad"] = linked_filter_size(repo, work, build_flag, per_sample)
+    if "-DPROPID_QUAD_BUILD=1" in build_flag.split():
+        result["linked_quad_prepared"] = linked_filter_size(repo, work, build_flag, per_sample, prepared=True)
     result["stack_bytes_max"] = max(v["bytes"] for v in stacks.values())
     result["stack_bytes_push_gyro"] = stacks.get("propid_push_gyro", {}).get("bytes")
     return result
@@ -288,11 +300,13 @@ def bench_footprint(repo: pathlib.Path, build: pathlib.Path, work: pathlib.Path)
     # The size-lean quad build (PROPID_SIZE_LEAN) beside the quad build.
     result["flash_bytes_lean"] = lean["flash_bytes"]
     result["flash_bytes_linked_quad_lean"] = lean["linked_quad"]["flash_bytes"]
+    result["flash_bytes_linked_quad_lean_prepared"] = lean["linked_quad_prepared"]["flash_bytes"]
     result["ram_bytes_quad_lean"] = sizeof_filter(repo, work, LEAN_FLAGS)
     result["stack_bytes_max_lean"] = lean["stack_bytes_max"]
     result["stack_bytes_push_gyro_lean"] = lean["stack_bytes_push_gyro"]
     result["flash_bytes"] = quad["flash_bytes"]
     result["flash_bytes_linked_quad"] = quad["linked_quad"]["flash_bytes"]
+    result["flash_bytes_linked_quad_prepared"] = quad["linked_quad_prepared"]["flash_bytes"]
     result["flash_bytes_full"] = full["flash_bytes"]
     result["flash_bytes_linked_quad_full"] = full["linked_quad"]["flash_bytes"]
     result["ram_bytes_quad"] = sizeof_filter(repo, work, "-DPROPID_QUAD_BUILD=1")
@@ -432,6 +446,11 @@ def print_table(r: dict) -> None:
             rows.append((f"filter flash, {build_name}, linked quad app, --gc-sections (B)",
                          f"{fmt(lq['flash_bytes'])} (per-sample path {fmt(lq['flash_bytes_per_sample_path'])}, "
                          f"init and rest {fmt(lq['flash_bytes_init_and_rest'])})"))
+            if "linked_quad_prepared" in b:
+                lp = b["linked_quad_prepared"]
+                rows.append((f"filter flash, {build_name}, linked quad app started from a prepared setup (B)",
+                             f"{fmt(lp['flash_bytes'])} (per-sample path {fmt(lp['flash_bytes_per_sample_path'])}, "
+                             f"init, setup and rest {fmt(lp['flash_bytes_init_and_rest'])})"))
         rows.append(("RAM sizeof(propid_filter_t), quad build / size-lean quad build (B)",
                      f"{fmt(fp['ram_bytes_quad'])} / {fmt(fp['ram_bytes_quad_lean'])}"))
         rows.append(("RAM sizeof(propid_filter_t), full build quad / hexa / octo (B)",
@@ -509,6 +528,7 @@ def main() -> int:
                     "stack_bytes_push_gyro_measured", "stack_bytes_push_gyro_measured_full",
                     "stack_bytes_max_full", "stack_bytes_push_gyro_full",
                     "mcu_instr_per_step_quad_lean", "flash_bytes_lean", "flash_bytes_linked_quad_lean",
+                    "flash_bytes_linked_quad_prepared", "flash_bytes_linked_quad_lean_prepared",
                     "ram_bytes_quad_lean", "stack_bytes_max_lean", "stack_bytes_push_gyro_lean",
                     "stack_bytes_push_gyro_measured_lean",
                     "sitl_realtime_factor", "sitl_realtime_factor_paper",

@@ -2,15 +2,27 @@
  * The smallest application that uses the filter the way an autopilot does
  * (benchmark only): configure and initialise once, then push rotor speeds and
  * gyro samples and read the estimate. bench.py links it with --gc-sections to
- * measure the flash the filter costs such an application.
+ * measure the flash the filter costs such an application. Built with
+ * -DFOOTPRINT_PREPARED=1 it starts the filter from the vehicle's prepared setup
+ * (propid_init_prepared: firmware/codegen/setup_blob.py wrote it from
+ * footprint_vehicle.json, the same vehicle) and links no configuration code.
  */
 #include "propid/propid.h"
 #include "semihosting.h"
 
 static propid_filter_t filter;
 
+#if FOOTPRINT_PREPARED
+extern const propid_setup_t *const propid_vehicle_setup;
+#endif
+
 int main(void)
 {
+#if FOOTPRINT_PREPARED
+    if (propid_init_prepared(&filter, propid_vehicle_setup) != PROPID_OK) {
+        return 1;
+    }
+#else
     propid_config_t config;
     propid_config_default(&config);
     if (propid_config_set_symmetric(&config, 4u, 0.17f, 0.0f, 1.0f, 5.57e-6f, 1.36e-7f) != PROPID_OK) {
@@ -20,6 +32,7 @@ int main(void)
     if (propid_init(&filter, &config) != PROPID_OK) {
         return 1;
     }
+#endif
     const float speed[4] = {900.0f, 910.0f, 890.0f, 905.0f};
     const float gyro[3] = {0.01f, -0.02f, 0.0f};
     propid_estimate_t estimate;

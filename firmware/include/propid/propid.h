@@ -461,6 +461,35 @@ typedef struct {
 /* ------------------------------------------------------------------------ */
 propid_status_t propid_init(propid_filter_t *filter, const propid_config_t *config);
 
+/* A prepared setup: the configuration's checks and derivation done once, off the
+ * step's board or before flight, so that a flight controller that flies one vehicle
+ * links neither (docs/design.md, "Prepared setup"). firmware/codegen/setup_blob.py
+ * writes one for a vehicle file as a C constant; propid_setup_prepare makes one on
+ * the board. A setup holds this build's layout: format and size tell a setup of
+ * another build or version, the checksum (CRC-32 of every byte before it, the
+ * zlib one) a damaged or hand-edited one. */
+#define PROPID_SETUP_VERSION 1u
+#define PROPID_SETUP_FORMAT                                                                        \
+    (0x50530000u | (PROPID_SETUP_VERSION << 8) | ((uint32_t)PROPID_MAX_ROTORS & 0xFu) |           \
+     ((uint32_t)PROPID_GENERAL_VEHICLES << 4) | ((uint32_t)PROPID_WITH_ACCEL << 5) |              \
+     ((uint32_t)PROPID_WITH_DISTURBANCE << 6) | ((uint32_t)PROPID_WITH_ROTOR_INERTIA << 7))
+typedef struct {
+    uint32_t format;                                /* PROPID_SETUP_FORMAT of the build that made it */
+    uint32_t size;                                  /* sizeof(propid_setup_t) of that build */
+    propid_kept_config_t config;
+    propid_derived_t derived;
+    uint32_t checksum;                              /* CRC-32 of the bytes before it */
+} propid_setup_t;
+
+/* Checks and derives config into setup (PROPID_ERR_CONFIG on a bad config: see
+ * propid_config_check; setup then untouched). */
+propid_status_t propid_setup_prepare(const propid_config_t *config, propid_setup_t *setup);
+
+/* propid_init from a prepared setup: PROPID_ERR_CONFIG (filter untouched) when its
+ * format, size or checksum is not this build's or it fails the structure checks
+ * the step relies on. The same filter as propid_init with the config it came from. */
+propid_status_t propid_init_prepared(propid_filter_t *filter, const propid_setup_t *setup);
+
 /* Back to the prior (nominal coefficients, prior covariance, no rotor data, no time);
  * counters are kept. */
 propid_status_t propid_reset(propid_filter_t *filter);
