@@ -34,6 +34,7 @@ void sitl_honesty_init(sitl_honesty_t *h, const propid_filter_t *filter, const d
     h->rotor_inside_since_s = -1.0;
     h->max_rotor_recovery_s = -1.0;
     h->last_inside = 1;
+    h->last_rotor_inside = ~0u;
     h->first_all_claimed_s = -1.0;
 }
 
@@ -163,6 +164,7 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
     int rotors_inside = 1;
     int all_claimed = n > 0;
     unsigned changed = 0u;
+    unsigned rotor_inside_bits = 0u;
     for (int i = 0; i < n; i++) {
         finite &= isfinite(estimate->thrust_coeff[i]) && isfinite(estimate->thrust_coeff_std[i]) &&
                   isfinite(estimate->drag_coeff[i]) && isfinite(estimate->drag_coeff_std[i]);
@@ -180,6 +182,7 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
         const int rotor_inside = kf_err <= HONESTY_RECOVERED_TOL && km_err <= HONESTY_RECOVERED_TOL;
         inside &= rotor_inside;
         const unsigned bit = 1u << i;
+        rotor_inside_bits |= rotor_inside ? bit : 0u;
         if (true_kf[i] != h->last_true_kf[i] || true_km[i] != h->last_true_km[i]) {
             changed |= bit;
         }
@@ -207,9 +210,12 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
         h->inside_since_s = -1.0;
         h->rotor_inside_since_s = -1.0;
         h->change_from_inside = h->last_inside;
+        /* Against the estimate of the step before, and the truth before the change. */
+        h->change_rotor_from_inside = (h->last_rotor_inside & changed) == changed;
         h->changed_rotors = changed;
     }
     h->last_inside = inside;
+    h->last_rotor_inside = rotor_inside_bits;
     if (h->change_time_s >= 0.0) {
         if (!inside) {
             h->inside_since_s = -1.0;
@@ -249,6 +255,10 @@ void sitl_honesty_finish(sitl_honesty_t *h)
         const double recovery = h->rotor_inside_since_s - h->change_time_s;
         h->max_rotor_recovery_s = recovery > h->max_rotor_recovery_s ? recovery : h->max_rotor_recovery_s;
         h->rotor_recovered++;
+    }
+    if (h->change_rotor_from_inside) {
+        h->rotor_changes_from_inside++;
+        h->rotor_recovered_from_inside += h->rotor_inside_since_s >= 0.0;
     }
     h->change_time_s = -1.0;
     h->inside_since_s = -1.0;

@@ -39,6 +39,10 @@ typedef struct {
     unsigned changed_rotors;    /* bit i: rotor i's truth changed at the latest change */
     double rotor_inside_since_s; /* the changed rotors' kf, km within 10 % since then, -1: outside */
     int rotor_recovered;        /* changes whose changed rotors came back within 10 % and stayed */
+    unsigned last_rotor_inside; /* bit i: rotor i's kf and km within 10 % at the latest step */
+    int change_rotor_from_inside; /* the changed rotors were within 10 % just before the latest change */
+    int rotor_changes_from_inside; /* changes whose changed rotors were within 10 % just before */
+    int rotor_recovered_from_inside; /* ... of them: the changed rotors came back within 10 % and stayed */
     double max_rotor_recovery_s; /* longest such recovery, -1: none */
 } sitl_honesty_t;
 

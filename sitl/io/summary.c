@@ -168,6 +168,8 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
     cJSON_AddNumberToObject(honesty, "changes_from_inside", h->changes_from_inside);
     cJSON_AddNumberToObject(honesty, "recovered_from_inside", h->recovered_from_inside);
     cJSON_AddNumberToObject(honesty, "changed_rotor_recovered", h->rotor_recovered);
+    cJSON_AddNumberToObject(honesty, "changed_rotor_from_inside", h->rotor_changes_from_inside);
+    cJSON_AddNumberToObject(honesty, "changed_rotor_recovered_from_inside", h->rotor_recovered_from_inside);
     add_time(honesty, "max_changed_rotor_recovery_s", h->max_rotor_recovery_s);
     snprintf(text, sizeof(text), "%.6g", r->wall_time_s);
     cJSON_AddRawToObject(root, "wall_time_s", text);

@@ -10,6 +10,10 @@
  * filter's own map of the whole state and covariance (propid_drag_basis_flip):
  * bit for bit on every entry the NEES reads, quad and hexa, and the columns it
  * is not asked for left in the yaw basis.
+ *
+ * The lost rotor's recovery (sitl_honesty_add / _finish): asked of a loss whose
+ * rotor was within 10 % just before it (changed_rotor_from_inside), and counted
+ * recovered when that rotor's kf and km came back within 10 % and stayed.
  */
 #include <math.h>
 #include <stdint.h>
@@ -225,6 +229,62 @@ static void test_true_torque_scale_is_the_file_over_the_true_inertia(void)
     TEST_ASSERT_DOUBLE_WITHIN(1e-12, 1.0 / 1.3, sitl_setup_true_torque_scale(&fx)); /* not 1 */
 }
 
+/* One step of a quad whose estimate is the truth times (1 + off) on rotor `rotor`'s kf and km. */
+static void step_with(sitl_honesty_t *h, const propid_filter_t *filter, double t, const double *kf,
+                      const double *km, int rotor, double off)
+{
+    propid_estimate_t est;
+    memset(&est, 0, sizeof(est));
+    est.rotor_count = 4u;
+    for (int i = 0; i < 4; i++) {
+        const double scale = i == rotor ? 1.0 + off : 1.0;
+        est.thrust_coeff[i] = (float)(kf[i] * scale);
+        est.drag_coeff[i] = (float)(km[i] * scale);
+    }
+    const double bias[3] = {0.0, 0.0, 0.0};
+    sitl_honesty_add(h, t, &est, filter, kf, km, bias);
+}
+
+static void test_lost_rotor_recovery_is_asked_of_an_accurate_rotor(void)
+{
+    static propid_filter_t filter;
+    filter_with_pattern(&filter, 4u);
+    const double kf0[4] = {5.57e-6, 5.57e-6, 5.57e-6, 5.57e-6};
+    const double km0[4] = {1.36e-7, 1.36e-7, 1.36e-7, 1.36e-7};
+    double kf[4], km[4];
+    /* pre: rotor 2's error before the loss; post: after it, against the lost truth. */
+    const struct {
+        double pre, post;
+        int from_inside, recovered;
+    } cases[] = {
+        {0.0, 0.0, 1, 1},   /* accurate before, follows the loss: recovered */
+        {0.0, -0.3, 1, 0},  /* accurate before, 30 % off after: not recovered */
+        {0.2, 0.0, 0, 1},   /* 20 % off before: comes back, but was never asked */
+        {0.2, 0.2, 0, 0},   /* 20 % off before and after */
+    };
+    for (size_t c = 0; c < sizeof(cases) / sizeof(cases[0]); c++) {
+        memcpy(kf, kf0, sizeof(kf));
+        memcpy(km, km0, sizeof(km));
+        sitl_honesty_t h;
+        sitl_honesty_init(&h, &filter, kf, km, 1.0);
+        for (int k = 0; k < 20; k++) {
+            step_with(&h, &filter, 0.002 * k, kf, km, 2, cases[c].pre);
+        }
+        kf[2] *= 0.7; /* the loss */
+        km[2] *= 0.7;
+        for (int k = 20; k < 40; k++) {
+            /* the step of the loss itself still carries the old estimate */
+            const double post = k == 20 ? (1.0 + cases[c].pre) / 0.7 - 1.0 : cases[c].post;
+            step_with(&h, &filter, 0.002 * k, kf, km, 2, post);
+        }
+        sitl_honesty_finish(&h);
+        TEST_ASSERT_EQUAL_INT(1, h.changes);
+        TEST_ASSERT_EQUAL_INT(cases[c].recovered, h.rotor_recovered);
+        TEST_ASSERT_EQUAL_INT(cases[c].from_inside, h.rotor_changes_from_inside);
+        TEST_ASSERT_EQUAL_INT(cases[c].from_inside && cases[c].recovered, h.rotor_recovered_from_inside);
+    }
+}
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -234,5 +294,6 @@ int main(void)
     RUN_TEST(test_filter_on_the_scaled_truth_has_a_zero_nees);
     RUN_TEST(test_quad_matches_the_whole_flip);
     RUN_TEST(test_hexa_matches_the_whole_flip);
+    RUN_TEST(test_lost_rotor_recovery_is_asked_of_an_accurate_rotor);
     return UNITY_END();
 }

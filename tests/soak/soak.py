@@ -22,7 +22,10 @@ Figures:
   coefficient was within 10 % just before, and how many of them recovered;
   `lost_rotor_recovered` / `max_lost_rotor_recovery_s`: losses whose own
   rotor's kf and km came back within 10 % and stayed (other rotors may be off
-  through an effect);
+  through an effect); `lost_rotor_from_accurate` / `lost_rotor_recovered_from_accurate`:
+  losses whose rotor's kf and km were within 10 % just before, and how many of
+  them came back (a return within 10 % is asked only of a filter that was
+  there before the loss);
 - nees_in_bounds_pct: over fault-free, effect-free flights without a rotor loss
   (mode filter), the share of control steps whose NEES of coefficients and gyro
   biases (full covariance block) lies inside its 95 % chi-square interval; also
@@ -206,7 +209,8 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
     out = {"steps": 0, "flights": 0, "cases": len(cases), "flown_s": 0.0,
            "faults_injected": {}, "nan_count": 0, "max_recovery_s": None, "rotor_losses": 0,
            "unrecovered": 0, "losses_from_accurate": 0, "recovered_from_accurate": 0,
-           "lost_rotor_recovered": 0, "max_lost_rotor_recovery_s": None, "nees_in_bounds_pct": None, "nees_samples": 0, "nees_by_group": {},
+           "lost_rotor_recovered": 0, "max_lost_rotor_recovery_s": None,
+           "lost_rotor_from_accurate": 0, "lost_rotor_recovered_from_accurate": 0, "nees_in_bounds_pct": None, "nees_samples": 0, "nees_by_group": {},
            "false_converged": 0, "converged_claims": 0, "false_converged_pct": None,
            "false_converged_by_group": {}, "false_converged_flights": [], "nees_flights": [],
            "cov_repairs": 0, "model_mismatch_windows": 0, "diverged_filter": 0, "diverged_oracle": 0,
@@ -259,6 +263,8 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
             out["losses_from_accurate"] += int(honesty.get("changes_from_inside", 0))
             out["recovered_from_accurate"] += int(honesty.get("recovered_from_inside", 0))
             out["lost_rotor_recovered"] += int(honesty.get("changed_rotor_recovered", 0))
+            out["lost_rotor_from_accurate"] += int(honesty.get("changed_rotor_from_inside", 0))
+            out["lost_rotor_recovered_from_accurate"] += int(honesty.get("changed_rotor_recovered_from_inside", 0))
             recovery = honesty.get("max_changed_rotor_recovery_s")
             if recovery is not None:
                 out["max_lost_rotor_recovery_s"] = max(out["max_lost_rotor_recovery_s"] or 0.0, float(recovery))
