@@ -14,25 +14,28 @@
  * is not a measurement. Counting it as one (truncating the Gaussian) shrinks
  * P_kk at every sample a coefficient rides the bound, and the coefficient then
  * sticks there (docs/damage.md). Only on a sample whose update left a
- * coefficient outside its range: not on the usual step. */
+ * coefficient outside its range: not on the usual step.
+ *
+ * The bounds are per rotor while the filter keeps the drag block in its yaw
+ * basis: the caller passes the state per rotor and P's column k per rotor
+ * (propid_drag_per_rotor_column), so P itself is neither flipped nor touched. */
+#include <float.h>
 #include <math.h>
 
 #include "propid_internal.h"
 
-int propid_project_onto_bound(const propid_derived_t *derived, propid_core_t *core, uint8_t k, float bound)
+int propid_project_onto_bound(uint8_t state_count, const float *column, float *state, uint8_t k, float bound)
 {
-    const uint8_t n = derived->state_count;
-    const float *cov = core->cov;
-    const float pkk = cov[propid_cov_index(k, k)];
-    const float shift = bound - core->state[k];
-    if (!(pkk > 0.0f) || !isfinite(pkk) || !isfinite(shift)) {
-        core->state[k] = bound; /* no usable P_kk: the plain clamp */
+    const float pkk = column[k];
+    const float shift = bound - state[k];
+    if (!(pkk > 0.0f && pkk <= FLT_MAX) || !(fabsf(shift) <= FLT_MAX)) { /* NaN fails both */
+        state[k] = bound; /* no usable P_kk: the plain clamp */
         return 0;
     }
     const float step = shift / pkk;
-    for (uint8_t i = 0; i < n; ++i) {
-        core->state[i] += propid_cov_at(cov, i, k) * step;
+    for (uint8_t i = 0; i < state_count; ++i) {
+        state[i] += column[i] * step;
     }
-    core->state[k] = bound; /* exactly (the loop's x_k += P_kk shift / P_kk rounds) */
+    state[k] = bound; /* exactly (the loop's x_k += P_kk shift / P_kk rounds) */
     return 1;
 }

@@ -129,24 +129,39 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
 }
 
 /* The coefficients found outside the range: the estimate projected onto each
- * one's bound (propid_bound_projection.c), per rotor: the drag block is flipped
- * out of its yaw basis around the projections (propid_internal.h; a rare path).
- * Apart, so the usual sample's test stays lean. */
+ * one's bound (propid_bound_projection.c), per rotor. Only the state is mapped
+ * out of the yaw basis and back (N values); P stays in it and each projection
+ * reads its column per rotor (propid_drag_per_rotor_column; P's drag columns
+ * times the basis vector once, N x n products), so a coefficient riding its bound costs little per sample and P is
+ * not rounded through the reflections. Apart, so the usual sample's test stays
+ * lean. */
 static __attribute__((noinline)) PROPID_RARE uint32_t project_outside(propid_filter_t *filter)
 {
     const propid_kept_config_t *config = &filter->config;
     propid_core_t *core = &filter->core;
     const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, config);
+    const uint8_t n = filter->derived.state_count;
     const uint8_t first = propid_first_thrust();
     const uint8_t end = propid_first_bias(config->rotor_count);
-    propid_drag_basis_flip(&basis, core);
+    const uint8_t first_drag = propid_first_drag(config->rotor_count);
+    float *per_rotor = &core->state[first_drag];
+    /* The step's work area, free after the update: P's column, and P's drag
+     * columns times the basis vector (computed at the first drag coefficient). */
+    float *column = core->update_vector[0];
+    float *along = core->update_vector[1];
+    int have_along = 0;
+    propid_drag_basis_apply(&basis, per_rotor);
     uint32_t clamped = 0u;
     for (uint8_t k = first; k < end; ++k) {
-        if (core->state[k] < config->coeff_rel_min) {
-            (void)propid_project_onto_bound(&filter->derived, core, k, config->coeff_rel_min);
-            clamped++;
-        } else if (core->state[k] > config->coeff_rel_max) {
-            (void)propid_project_onto_bound(&filter->derived, core, k, config->coeff_rel_max);
+        const float x = core->state[k];
+        if (x < config->coeff_rel_min || x > config->coeff_rel_max) {
+            const float bound = x < config->coeff_rel_min ? config->coeff_rel_min : config->coeff_rel_max;
+            if (k >= first_drag && !have_along) {
+                propid_drag_along_basis(&basis, core, n, along);
+                have_along = 1;
+            }
+            propid_drag_per_rotor_column(&basis, core, n, k, along, column);
+            (void)propid_project_onto_bound(n, column, core->state, k, bound);
             clamped++;
         }
     }
@@ -154,26 +169,13 @@ static __attribute__((noinline)) PROPID_RARE uint32_t project_outside(propid_fil
         /* A later projection moves the earlier coefficients by their regression:
          * the range holds again with the plain clamp (no further projection). */
         for (uint8_t k = first; k < end; ++k) {
-            core->state[k] = fminf(fmaxf(core->state[k], config->coeff_rel_min), config->coeff_rel_max);
+            const float x = core->state[k];
+            core->state[k] = x < config->coeff_rel_min   ? config->coeff_rel_min
+                             : x > config->coeff_rel_max ? config->coeff_rel_max
+                                                         : x;
         }
     }
-    /* The two reflections round the block relative to the per-rotor variances,
-     * far above the yaw combination's own: a PSD load of that size on the kept
-     * block's diagonal keeps P definite (math.md §2). */
-    const uint8_t first_drag = propid_first_drag(config->rotor_count);
-    float largest = 0.0f;
-    for (uint8_t i = 0; i < config->rotor_count; ++i) {
-        const float p = core->cov[propid_cov_index((uint8_t)(first_drag + i), (uint8_t)(first_drag + i))];
-        largest = p > largest ? p : largest;
-    }
-    propid_drag_basis_flip(&basis, core);
-    const float load = 4.0f * (float)config->rotor_count * PROPID_VAR_LOADING * largest;
-    for (uint8_t i = 0; i < config->rotor_count; ++i) {
-        core->cov[propid_cov_index((uint8_t)(first_drag + i), (uint8_t)(first_drag + i))] += load;
-    }
-    if (clamped != 0u) {
-        (void)propid_cov_enforce_bounds(&filter->derived, core);
-    }
+    propid_drag_basis_apply(&basis, per_rotor);
     return clamped;
 }
 

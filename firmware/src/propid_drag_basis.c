@@ -99,6 +99,62 @@ void propid_drag_per_rotor(const propid_drag_basis_t *basis, const propid_core_t
     }
 }
 
+/* P_jk for every j < state_count: down column k to the diagonal, then along row k. */
+static void cov_column(const float *cov, uint8_t state_count, uint8_t k, float *column)
+{
+    const float *p = cov + k; /* P_0k; row j's start moves by PROPID_MAX_STATES - 1 - j */
+    for (uint8_t j = 0; j < k; ++j) {
+        column[j] = *p;
+        p += PROPID_MAX_STATES - 1u - j;
+    }
+    const float *row = propid_cov_row_const(cov, k);
+    for (uint8_t j = k; j < state_count; ++j) {
+        column[j] = row[j];
+    }
+}
+
+void propid_drag_along_basis(const propid_drag_basis_t *basis, const propid_core_t *core, uint8_t state_count,
+                             float *along)
+{
+    const uint8_t rotor_count = basis->rotor_count;
+    const uint8_t first = propid_first_drag(rotor_count);
+    const float *v = basis->vector;
+    for (uint8_t j = 0; j < state_count; ++j) {
+        along[j] = 0.0f;
+    }
+    /* Per drag column c: down the column to the diagonal (row j's start moves by
+     * PROPID_MAX_STATES - 1 - j), then along row c; long plain loops. */
+    for (uint8_t d = 0; d < rotor_count; ++d) {
+        const uint8_t c = (uint8_t)(first + d);
+        const float vd = v[d];
+        const float *p = core->cov + c; /* P_0c */
+        for (uint8_t j = 0; j < c; ++j) {
+            along[j] += *p * vd;
+            p += PROPID_MAX_STATES - 1u - j;
+        }
+        const float *row = propid_cov_row_const(core->cov, c);
+        for (uint8_t j = c; j < state_count; ++j) {
+            along[j] += row[j] * vd;
+        }
+    }
+}
+
+void propid_drag_per_rotor_column(const propid_drag_basis_t *basis, const propid_core_t *core,
+                                  uint8_t state_count, uint8_t k, const float *along, float *column)
+{
+    const uint8_t rotor_count = basis->rotor_count;
+    const uint8_t first = propid_first_drag(rotor_count);
+    cov_column(core->cov, state_count, k, column);
+    if (k >= first && k < first + rotor_count) {
+        /* T e_k = H e_i = e_k - scale v_i v (within the drag block). */
+        const float scaled = basis->scale * basis->vector[k - first];
+        for (uint8_t j = 0; j < state_count; ++j) {
+            column[j] -= scaled * along[j];
+        }
+    } /* else T e_k = e_k: P's column as stored */
+    propid_drag_basis_apply(basis, &column[first]); /* T on the left */
+}
+
 void propid_cov_reset_rotor(const propid_derived_t *derived, const propid_drag_basis_t *basis, propid_core_t *core,
                             uint8_t rotor, int to_nominal)
 {

@@ -364,6 +364,16 @@ PROPID_RARE void propid_drag_basis_flip_block(const propid_drag_basis_t *basis, 
 /* Per-rotor km_rel (H z) and, when km_var is not NULL, their variances (H P_zz H)_ii. */
 void propid_drag_per_rotor(const propid_drag_basis_t *basis, const propid_core_t *core, float *km_rel,
                            float *km_var);
+/* Column k of P as the per-rotor state's (T P T e_k, T = H on the drag block and
+ * the identity elsewhere; state_count entries), P left in the yaw basis; `along`
+ * is propid_drag_along_basis's (read for a drag coefficient only). */
+PROPID_RARE void propid_drag_per_rotor_column(const propid_drag_basis_t *basis, const propid_core_t *core,
+                                              uint8_t state_count, uint8_t k, const float *along,
+                                              float *column);
+/* along_j = sum_d P_j,(first drag + d) v_d for every state j (P's drag columns times
+ * the basis vector), shared by the drag coefficients' columns. */
+PROPID_RARE void propid_drag_along_basis(const propid_drag_basis_t *basis, const propid_core_t *core,
+                                         uint8_t state_count, float *along);
 /* Rotor `rotor`'s coefficients back to their prior variance, uncorrelated, and
  * with to_nominal also their value to nominal (per-rotor meaning: the basis is
  * flipped around the reset). */
@@ -526,9 +536,9 @@ void propid_input_compensation_apply(propid_filter_t *filter, uint32_t gated_mas
  * returns how many were beyond. */
 uint32_t propid_clamp_coefficients(propid_filter_t *filter);
 /* propid_bound_projection.c: the estimate moved to the mean of N(x, P) given
- * x_k = bound (x_k beyond it), P unchanged. Returns 0 when P_kk was unusable and
- * x_k was only set to the bound. */
-int propid_project_onto_bound(const propid_derived_t *derived, propid_core_t *core, uint8_t k, float bound);
+ * x_k = bound (x_k beyond it), P unchanged; `state` and P's column k (`column`)
+ * in one basis. Returns 0 when P_kk was unusable and x_k was only set to the bound. */
+int propid_project_onto_bound(uint8_t state_count, const float *column, float *state, uint8_t k, float bound);
 
 #if PROPID_WITH_ACCEL
 /* The thrust-torque scale's state r = 1/s (docs/math.md §9) kept where s is in the

@@ -738,27 +738,22 @@ class ReferenceFilter:
     def _clamp(self, extra: int = 0) -> None:
         lo, hi = self.c["coeff_rel_min"], self.c["coeff_rel_max"]
         clamped = extra
-        # C: propid_clamp_coefficients, in index order, per rotor (the drag block flipped out of
-        # its yaw basis around the projections, as in C).
+        # C: propid_clamp_coefficients, in index order, per rotor: the state mapped out of the
+        # drag block's yaw basis and back, each projection with P's column per rotor (P kept).
         coeffs = self._per_rotor_state()[3:self.first_bias]
         if np.any(coeffs < lo) or np.any(coeffs > hi):
-            self._flip_basis()
+            state = self._per_rotor_state()
+            cov = self.basis @ self.cov @ self.basis
             for k in range(3, self.first_bias):
-                if self.state[k] < lo:
-                    self._project(k, lo)
+                if state[k] < lo:
+                    self._project(state, cov[:, k], k, lo)
                     clamped += 1
-                elif self.state[k] > hi:
-                    self._project(k, hi)
+                elif state[k] > hi:
+                    self._project(state, cov[:, k], k, hi)
                     clamped += 1
             if clamped > extra:
-                self.state[3:self.first_bias] = np.clip(self.state[3:self.first_bias], lo, hi)
-            # C: the reflections' rounding covered by a load on the kept drag block's diagonal.
-            drag = np.arange(self.first_drag, self.first_bias)
-            largest = float(np.max(np.diag(self.cov)[drag]))
-            self._flip_basis()
-            self.cov[drag, drag] += 4.0 * self.rotor_count * VAR_LOADING * largest
-            if clamped > extra:
-                self._enforce_bounds()
+                state[3:self.first_bias] = np.clip(state[3:self.first_bias], lo, hi)
+            self.state = self.basis @ state
         if self.torque_scale is not None:  # C: propid_clamp_torque_scale (r = 1/s, s in [lo, hi])
             s, r_lo, r_hi = self.torque_scale, _f32(1.0 / _f32(hi)), _f32(1.0 / _f32(lo))
             clamped += int(not r_lo <= self.state[s] <= r_hi)
@@ -767,16 +762,18 @@ class ReferenceFilter:
             self.health |= HEALTH["STATE_CLAMPED"]
             self.counters_data["state_clamps"] += clamped
 
-    def _project(self, k: int, bound: float) -> None:
-        """C: propid_project_onto_bound. The estimate moved to the mean of N(x, P) given
-        state k = bound, P unchanged (docs/math.md §15)."""
-        pkk = float(self.cov[k, k])
-        shift = bound - float(self.state[k])
+    @staticmethod
+    def _project(state: np.ndarray, column: np.ndarray, k: int, bound: float) -> None:
+        """C: propid_project_onto_bound. The estimate (in place) moved to the mean of N(x, P)
+        given state k = bound, P unchanged (docs/math.md §15); `column` is P's column k in
+        the state's basis."""
+        pkk = float(column[k])
+        shift = bound - float(state[k])
         if not (pkk > 0.0 and math.isfinite(pkk) and math.isfinite(shift)):
-            self.state[k] = bound
+            state[k] = bound
             return
-        self.state += self.cov[:, k] * (shift / pkk)
-        self.state[k] = bound
+        state += column * (shift / pkk)
+        state[k] = bound
 
     # ------------------------------------------------------------------ outputs
     def estimate(self) -> Estimate:

@@ -383,3 +383,22 @@ def test_reference_converges(flight, reference_trace):
     assert np.all(np.abs(est.thrust_coeff / kf_true - 1.0) < 0.03)
     assert np.all(np.abs(est.drag_coeff / km_true - 1.0) < 0.06)
     assert np.all(np.abs(est.thrust_coeff - kf_true) < 4.0 * est.thrust_coeff_std)
+
+
+@pytest.mark.parametrize("options", ["plain", "all"])
+def test_c_agrees_with_reference_on_the_bounds(flight, options):
+    """Coefficients riding their bounds (docs/math.md §15): the range narrowed to +-10 % of
+    nominal on a flight whose coefficients are off by up to 20 %, so thrust and drag coefficients
+    are projected onto a bound at many samples; same bounds, the same number of clamps."""
+    config = make_config(options).with_overrides(coeff_rel_min=0.9, coeff_rel_max=1.1)
+    ref, c_filter = ReferenceFilter(config), CFilter(config)
+    trace_ref, trace_c = replay(ref, flight), replay(c_filter, flight)
+    clamps = c_filter.counters()["state_clamps"]
+    state_err, cov_err = disagreement(trace_c, trace_ref)
+    print(f"C vs reference on the bounds ({options}): {clamps} clamps, max |dx|/std = {state_err:.3g}, "
+          f"max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert clamps > 100
+    # The C filter also counts crossings by its float32 reflections' rounding.
+    assert abs(clamps - ref.counters()["state_clamps"]) <= 0.02 * clamps
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
