@@ -42,6 +42,12 @@ PRESETS = ("crazyflie-plus", "crazyflie-x")
 #   it up and the vehicle spins; the outcome is then chaotic in both modes).
 MISS_GAP_FACTOR = math.sqrt(1.5 ** 2 - 1.0)
 MISS_YAW_LOST_DEG = 10.0
+# The DShot telemetry's latency [s] (propid_sitl's sensor default, set explicitly) and
+# the filter holding it as its delay (docs/math.md §12): a datasheet figure the
+# integrator knows, not fitted. Without it the filter reads speeds 1 ms late as
+# current and its kf drift before any damage is the bench's largest tracking
+# miss (docs/damage.md, "The filter holding the telemetry latency").
+TELEMETRY_LATENCY_S = 0.001
 MILD_EFFECTS = ("rotor_inertia", "rotor_gyroscopic", "rotor_drag", "translational_lift",
                 "thrust_nonlinearity", "aero_damping", "gyro_scale", "com_offset")
 
@@ -97,7 +103,8 @@ def _command(config: BenchConfig, spec: FlightSpec, mode: str, log: Path, summar
     campaign = CampaignConfig(out_dir=config.out_dir, sitl=config.sitl, duration_s=config.duration_s,
                               vehicle=spec.preset, paper_sensors=False)
     cmd = sitl_command(campaign, Job(spec.trajectory, mode, spec.index, spec.seed), log)
-    cmd += ["--detect-damage", "--summary-json", str(summary)]
+    cmd += ["--detect-damage", "--summary-json", str(summary),
+            "--esc-latency", repr(TELEMETRY_LATENCY_S), "--filter-esc-delay", repr(TELEMETRY_LATENCY_S)]
     if config.false_alarms_per_hour:
         cmd += ["--damage-false-alarm-rate", repr(config.false_alarms_per_hour)]
     for rotor, time_s, fraction in spec.damages:
@@ -275,6 +282,8 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
                        "loss_range": [0.1, 0.5], "first_damage_s": [2.0, 3.0],
                        "second_damage_after_s": [2.0, 2.5], "mild_effects": list(MILD_EFFECTS),
                        "sensors": "propid_sitl defaults (BMI088 1 kHz, DShot telemetry)",
+                       "telemetry_latency_s": TELEMETRY_LATENCY_S,
+                       "filter_delay_s": TELEMETRY_LATENCY_S,
                        "false_alarms_per_hour": config.false_alarms_per_hour or 1e-3,
                        "sitl_args": list(config.sitl_args)},
         "per_flight": records,

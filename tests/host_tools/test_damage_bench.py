@@ -41,6 +41,18 @@ def test_extra_sitl_arguments_reach_every_flight_command(tmp_path):
             assert cmd.index("--filter-rate-noise") < len(cmd) - 2
 
 
+def test_the_filter_holds_the_telemetry_latency_in_every_flight(tmp_path):
+    """Both the telemetry's latency and the filter's delay are set, to the same value, in the
+    Filter and the Oracle flights (docs/damage.md, "The filter holding the telemetry latency")."""
+    cfg = config(damaged=2, undamaged=1)
+    for spec in damage_bench.flight_specs(cfg):
+        for mode in ("filter", "oracle"):
+            cmd = damage_bench._command(cfg, spec, mode, tmp_path / "f.csv", tmp_path / "f.json")
+            latency = cmd[cmd.index("--esc-latency") + 1]
+            delay = cmd[cmd.index("--filter-esc-delay") + 1]
+            assert float(latency) == float(delay) == damage_bench.TELEMETRY_LATENCY_S > 0.0
+
+
 def test_scoring_detection_isolation_and_false_alarms():
     spec = {"damages": [[2, 3.0, 0.3], [4, 5.5, 0.15]], "effects": [], "index": 0}
     flight = {"detections": [{"rotor": 1, "time_s": 3.004}, {"rotor": 2, "time_s": 3.6},
