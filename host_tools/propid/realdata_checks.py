@@ -202,6 +202,23 @@ EXCITATION_WINDOW_S = 1.0
 MIN_EXCITATION_RATIO = 2.0
 
 
+def _band_aligned(response, regressor, segs, rate_hz, band, lag, history=0, regressor_response=None):
+    """Per flying segment (a, b): response and regressor band-passed (the regressor first given
+    `regressor_response`, if any) and paired as response[n + lag] with regressor[n], over the rows n
+    of the segment where response[n + lag] and response[n + lag - history] both exist. Yields
+    ((a, b), rows, paired response, paired regressor); segments with fewer than 10 rows are skipped."""
+    for a, b in segs:
+        yy = bandpass(response[a:b, None], rate_hz, *band)[:, 0]
+        x_seg = regressor[a:b] if regressor_response is None else regressor_response(regressor[a:b])
+        xx = bandpass(x_seg[:, None], rate_hz, *band)[:, 0]
+        n = yy.shape[0]
+        lo, hi = max(0, -lag, history - lag), min(n, n - lag)
+        if hi - lo < 10:
+            continue
+        rows = np.arange(lo, hi)
+        yield (a, b), rows, yy[rows + lag], xx[rows]
+
+
 def grouped_fit(
     response: np.ndarray,
     regressor: np.ndarray,
@@ -228,16 +245,10 @@ def grouped_fit(
     and the per-group slopes c_g / v_g; k is NaN when the groups' v_g span less than
     MIN_EXCITATION_RATIO."""
     ys, xs, ss = [], [], []
-    for a, b in segs:
-        yy = bandpass(response[a:b, None], rate_hz, *band)[:, 0]
-        xx = bandpass(regressor[a:b, None], rate_hz, *band)[:, 0]
-        n = yy.shape[0]
-        lo, hi = max(0, -lag), min(n, n - lag)
-        if hi - lo < 10:
-            continue
-        ys.append(yy[lo + lag : hi + lag])
-        xs.append(xx[lo:hi])
-        ss.append(excitation[a:b][lo:hi])
+    for (a, _), rows, y_seg, x_seg in _band_aligned(response, regressor, segs, rate_hz, band, lag):
+        ys.append(y_seg)
+        xs.append(x_seg)
+        ss.append(excitation[a + rows])
     nan = {"kf": float("nan"), "additive_rms": float("nan"), "plain": float("nan"), "group_slopes": []}
     if not ys:
         return nan
@@ -297,19 +308,13 @@ def instrument_fit(
     nan = {"kf": float("nan"), "plain": float("nan"), "first_stage_r2": float("nan")}
     ys, xs, zs = [], [], []
     max_lag = max(INSTRUMENT_LAGS)
-    for a, b in segs:
-        if b - a < 4 * max_lag:
-            continue
-        yy = bandpass(response[a:b, None], rate_hz, *band)[:, 0]
-        xx = bandpass(difference_response(regressor[a:b], rate_hz)[:, None], rate_hz, *band)[:, 0]
+    long_segs = [(a, b) for a, b in segs if b - a >= 4 * max_lag]
+    aligned = _band_aligned(response, regressor, long_segs, rate_hz, band, lag, history=max_lag,
+                            regressor_response=lambda x: difference_response(x, rate_hz))
+    for (a, b), rows, y_seg, x_seg in aligned:
         zz = bandpass(instruments[a:b], rate_hz, *band)
-        n = yy.shape[0]
-        lo, hi = max(0, -lag, max_lag - lag), min(n, n - lag)
-        if hi - lo < 10:
-            continue
-        rows = np.arange(lo, hi)
-        ys.append(yy[rows + lag])
-        xs.append(xx[rows])
+        ys.append(y_seg)
+        xs.append(x_seg)
         # the commands are on the response's (the gyro's) clock: k samples before the response
         zs.append(np.column_stack([zz[rows + lag - k] for k in INSTRUMENT_LAGS]))
     if not ys:
