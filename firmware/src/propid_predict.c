@@ -295,6 +295,20 @@ static __attribute__((noinline)) void predict_covariance_any(
 {
     /* T = rate rows of F P = P_a + sum_p G_ap P_(column p). */
     float rows[3][PROPID_MAX_STATES];
+    /* Each rate variance's scale (sum_k |F_ak| sigma_k)^2 >= (|F| |P| |F|^T)_aa,
+     * what its rounding is relative to (docs/math.md §2, "The rate block's
+     * loading"): loaded by PROPID_RATE_LOADING of it, not of the result. */
+    float scale[3];
+    for (uint8_t a = 0; a < 3u; ++a) {
+        float s = sqrtf(cov[propid_cov_index(a, a)]);
+        for (uint8_t p = 0; p < derived->jac_count[a]; ++p) {
+            const uint8_t c = derived->jac_column[a][p];
+            if (c < n) { /* always (propid_config.c) */
+                s += fabsf(jacobian_dt[a][p]) * sqrtf(cov[propid_cov_index(c, c)]);
+            }
+        }
+        scale[a] = s * s;
+    }
     for (uint8_t a = 0; a < 3u; ++a) {
         float *acc = rows[a];
         /* Row `a` of the stored triangle: column a above the diagonal, then the row. */
@@ -339,7 +353,7 @@ static __attribute__((noinline)) void predict_covariance_any(
                 value += row[column[p]] * g[p];
             }
             if (a == b) { /* Q dt and the rate block's rounding loading (propid_internal.h) */
-                value += PROPID_RATE_LOADING * value + propid_process_psd(derived, b) * dt;
+                value += PROPID_RATE_LOADING * scale[b] + propid_process_psd(derived, b) * dt;
             }
             cov[propid_cov_index(a, b)] = value;
         }

@@ -494,6 +494,9 @@ class ReferenceFilter:
             n = self.n
             f = np.eye(n)
             f[:3, :] += jac_dt
+            # the rates' rounding scale (sum_k |F_ak| sigma_k)^2 (C: the general path's scale)
+            sigma = np.sqrt(np.diag(self.cov))
+            rate_scale = (sigma[:3] + np.abs(jac_dt) @ sigma) ** 2
             self.cov = f @ self.cov @ f.T
             self.cov = 0.5 * (self.cov + self.cov.T)
             # Q dt and the rounding loading (C: PROPID_VAR_LOADING, docs/math.md §2): on the
@@ -504,7 +507,9 @@ class ReferenceFilter:
             loading[:3] = RATE_LOADING
             if self.check_row % 2 != 0:
                 loading[self.first_drag:self.first_bias] = 0.0
-            self.cov[diag] += loading * self.cov[diag] + self.process_psd * dt
+            scaled = self.cov[diag].copy()
+            scaled[:3] = rate_scale
+            self.cov[diag] += loading * scaled + self.process_psd * dt
             if self.torque_scale is not None and self.process_psd[self.torque_scale] > 0.0:
                 # C: add_scale_walk, Q dt = q^2 dt v v^T, v = r g at each g and -r^2 at r (q^2 dt
                 # on P_rr is in the per-state process noise already)

@@ -627,6 +627,86 @@ static void test_covariance_definite_with_rates_correlated_by_spin(void)
 }
 #endif
 
+#if PROPID_GENERAL_VEHICLES
+/* Fuzz findings of the 10^7-execution run on the general path (two rotors):
+ * the prediction forms each rate variance as a sum of terms (|F| |P| |F|^T)_aa
+ * far larger than the result when the rotor coefficients' block is nearly
+ * singular, and its rounding is relative to those terms. */
+static uint32_t push_and_count(uint64_t time_us, const float gyro[3])
+{
+    TEST_ASSERT_TRUE(propid_push_gyro(&filter, time_us, gyro) >= 0);
+    assert_sane();
+    return covariance_is_positive_definite() ? 0u : 1u;
+}
+
+/* Two rotors on a diagonal, gyro_sample_rate_hz 0.5 with samples every 7 ms (a
+ * gyro noise variance 1000x below the default): the roll torque measures
+ * kf0 - kf1, the rate variance is predicted as 0.013 from terms of 41 (dt G =
+ * +-15 per unit kf_rel), whose rounding (~eps 41) exceeds the rate's conditional
+ * variance given the bias: smallest correlation eigenvalue -3.6e-5 before the
+ * rates were loaded relative to their terms. */
+static void test_covariance_definite_with_rate_predicted_from_cancelling_terms(void)
+{
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 2u, 0.05f + 0.3f * 131.0f / 255.0f,
+                                                                 0.7853982f, 1.0f, 5.57e-6f, 1.36e-7f));
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    config.gyro_sample_rate_hz = 0.5f;
+    config.rate_process_noise = 0x1.a36e3p-13f; /* 2e-4 */
+    config.gate_max_consecutive = 33667u;
+    config.rotor_stale_us = 2206416519u;
+    init_filter();
+    const float slow[PROPID_MAX_ROTORS] = {0x1.303e5ep+11f, 0x1.303e5ep+11f}; /* 2434 rad/s */
+    const float fast[PROPID_MAX_ROTORS] = {0x1.c7337p+11f, 0x1.c7337p+11f};   /* 3642 rad/s */
+    const float steady[3] = {0x1.5f92c8p+0f, 0x1.5f92c8p+0f, 0x1.5f92c8p+0f};  /* 1.373 rad/s */
+    const float jump[3] = {0x1.206d3cp+1f, 0x1.206d3cp+1f, 0x1.206d3cp+1f};    /* 2.253 rad/s */
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1000081u, slow, 2u));
+    uint32_t failures = push_and_count(1007162u, steady);
+    failures += push_and_count(1007203u, steady);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1007242u, fast, 2u));
+    failures += push_and_count(1014364u, jump);
+    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite after the prediction");
+    uint64_t t = 1014364u;
+    for (uint32_t k = 0; k < 400u; ++k) {
+        t += 7161u;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, fast, 2u));
+        failures += push_and_count(t, (k % 5u) == 4u ? jump : steady);
+    }
+    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite later");
+}
+
+/* Two rotors, rotor 0's km 1000x its nominal, no drag coefficient walk: rotor
+ * 0 alone at 3558 rad/s makes the yaw update measure km_0 (not the yaw basis'
+ * z_0: z_0 - z_1), cutting it from 2e-5 to ~1e-10 against drag-block elements
+ * of 0.045 (rounding ~eps 0.045): smallest correlation eigenvalue -3.6e-9.
+ * The yaw rate's loading relative to its terms (dt G_z,km sigma_km, not the
+ * cut combination's) keeps that cut above the rounding. */
+static void test_covariance_definite_with_one_drag_coefficient_measured_alone(void)
+{
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 2u, 0.05f + 0.3f * 3.0f / 255.0f, 0.0f,
+                                                                 1.0f, 5.57e-6f, 1.36e-7f));
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    config.rate_process_noise = 0x1.99999ap-3f;      /* 0.2 */
+    config.drag_coeff_rel_walk = 0x1p-149f;          /* none */
+    config.gyro_range *= 0.1f;
+    config.rotor[0].drag_coeff_nominal = 0x1.1d3672p-13f; /* 1.36e-4 */
+    init_filter();
+    const float still[PROPID_MAX_ROTORS] = {0.0f};
+    const float one[PROPID_MAX_ROTORS] = {0x1.bcb4b6p+11f}; /* 3558 rad/s, rotor 1 still */
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1006481u, still, 2u));
+    const float g0[3] = {0x1.78d5p-4f, 0x1.78d5p-4f, 0x1.78d5p-4f};
+    uint32_t failures = push_and_count(1000001u, g0);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1011522u, one, 2u));
+    const float g1[3] = {0x1.47ae2p-6f, -0x1.b4e8p-8f, -0x1.b4e8p-8f};
+    failures += push_and_count(1000042u, g1);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1018763u, still, 2u));
+    const float g2[3] = {-0x1.0625p-8f, 0x1.11112p-5f, -0x1.5c28f6p-2f};
+    failures += push_and_count(1007163u, g2);
+    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite after the yaw update");
+}
+#endif
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -645,6 +725,10 @@ int main(void)
 #endif
 #if PROPID_MAX_ROTORS >= 7
     RUN_TEST(test_covariance_definite_with_rates_correlated_by_spin);
+#endif
+#if PROPID_GENERAL_VEHICLES
+    RUN_TEST(test_covariance_definite_with_rate_predicted_from_cancelling_terms);
+    RUN_TEST(test_covariance_definite_with_one_drag_coefficient_measured_alone);
 #endif
     return UNITY_END();
 }
