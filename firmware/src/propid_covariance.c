@@ -157,7 +157,7 @@ static __attribute__((noinline)) PROPID_RARE uint32_t project_outside(propid_fil
         if (x < config->coeff_rel_min || x > config->coeff_rel_max) {
             const float bound = x < config->coeff_rel_min ? config->coeff_rel_min : config->coeff_rel_max;
             if (k >= first_drag && !have_along) {
-                propid_drag_along_basis(&basis, core, n, along);
+                propid_drag_along_basis(&basis, core, n, column, along);
                 have_along = 1;
             }
             propid_drag_per_rotor_column(&basis, core, n, k, along, column);

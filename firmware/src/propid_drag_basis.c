@@ -114,27 +114,18 @@ static void cov_column(const float *cov, uint8_t state_count, uint8_t k, float *
 }
 
 void propid_drag_along_basis(const propid_drag_basis_t *basis, const propid_core_t *core, uint8_t state_count,
-                             float *along)
+                             float *scratch, float *along)
 {
     const uint8_t rotor_count = basis->rotor_count;
     const uint8_t first = propid_first_drag(rotor_count);
-    const float *v = basis->vector;
     for (uint8_t j = 0; j < state_count; ++j) {
         along[j] = 0.0f;
     }
-    /* Per drag column c: down the column to the diagonal (row j's start moves by
-     * PROPID_MAX_STATES - 1 - j), then along row c; long plain loops. */
     for (uint8_t d = 0; d < rotor_count; ++d) {
-        const uint8_t c = (uint8_t)(first + d);
-        const float vd = v[d];
-        const float *p = core->cov + c; /* P_0c */
-        for (uint8_t j = 0; j < c; ++j) {
-            along[j] += *p * vd;
-            p += PROPID_MAX_STATES - 1u - j;
-        }
-        const float *row = propid_cov_row_const(core->cov, c);
-        for (uint8_t j = c; j < state_count; ++j) {
-            along[j] += row[j] * vd;
+        const float vd = basis->vector[d];
+        cov_column(core->cov, state_count, (uint8_t)(first + d), scratch);
+        for (uint8_t j = 0; j < state_count; ++j) {
+            along[j] += scratch[j] * vd;
         }
     }
 }

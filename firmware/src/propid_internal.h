@@ -371,9 +371,10 @@ PROPID_RARE void propid_drag_per_rotor_column(const propid_drag_basis_t *basis, 
                                               uint8_t state_count, uint8_t k, const float *along,
                                               float *column);
 /* along_j = sum_d P_j,(first drag + d) v_d for every state j (P's drag columns times
- * the basis vector), shared by the drag coefficients' columns. */
+ * the basis vector), shared by the drag coefficients' columns; `scratch` holds
+ * one column at a time (state_count entries). */
 PROPID_RARE void propid_drag_along_basis(const propid_drag_basis_t *basis, const propid_core_t *core,
-                                         uint8_t state_count, float *along);
+                                         uint8_t state_count, float *scratch, float *along);
 /* Rotor `rotor`'s coefficients back to their prior variance, uncorrelated, and
  * with to_nominal also their value to nominal (per-rotor meaning: the basis is
  * flipped around the reset). */
