@@ -24,7 +24,7 @@ void propid_cov_set_prior(const propid_derived_t *derived, const propid_drag_bas
     }
     /* The drag block in the yaw basis (propid_internal.h): H applied to the nominal.
      * Its prior variances are equal, so the prior P is the same in either basis. */
-    propid_drag_basis_apply(basis, &core->state[propid_first_drag(rotor_count)]);
+    propid_drag_basis_transform(basis, &core->state[propid_first_drag(rotor_count)]);
     for (uint8_t k = 0; k < n; ++k) {
         core->cov[propid_cov_index(k, k)] = propid_prior_var(derived, k);
     }
@@ -150,7 +150,7 @@ static __attribute__((noinline)) PROPID_RARE uint32_t project_outside(propid_fil
     float *column = core->update_vector[0];
     float *along = core->update_vector[1];
     int have_along = 0;
-    propid_drag_basis_apply(&basis, per_rotor);
+    propid_drag_basis_transform(&basis, per_rotor);
     uint32_t clamped = 0u;
     for (uint8_t k = first; k < end; ++k) {
         const float x = core->state[k];
@@ -175,7 +175,7 @@ static __attribute__((noinline)) PROPID_RARE uint32_t project_outside(propid_fil
                                                          : x;
         }
     }
-    propid_drag_basis_apply(&basis, per_rotor);
+    propid_drag_basis_transform(&basis, per_rotor);
     return clamped;
 }
 

@@ -14,6 +14,11 @@ const float propid_quad_drag_basis[8][4] = {
 };
 #endif
 
+__attribute__((noinline)) void propid_drag_basis_transform(const propid_drag_basis_t *basis, float *x)
+{
+    propid_drag_basis_apply(basis, x);
+}
+
 /* u = B v over the packed drag block, and beta = v . u. */
 static float block_times_basis(const propid_drag_basis_t *basis, const float *cov, float *u)
 {
@@ -40,7 +45,7 @@ void propid_drag_basis_flip_column(const propid_drag_basis_t *basis, propid_core
     for (uint8_t i = 0; i < rotor_count; ++i) {
         column[i] = propid_cov_at(core->cov, (uint8_t)(first + i), column_index);
     }
-    propid_drag_basis_apply(basis, column);
+    propid_drag_basis_transform(basis, column);
     for (uint8_t i = 0; i < rotor_count; ++i) {
         core->cov[propid_cov_index((uint8_t)(first + i), column_index)] = column[i];
     }
@@ -66,7 +71,7 @@ void propid_drag_basis_flip(const propid_drag_basis_t *basis, propid_core_t *cor
 {
     const uint8_t first = propid_first_drag(basis->rotor_count);
     const uint8_t end = (uint8_t)(first + basis->rotor_count);
-    propid_drag_basis_apply(basis, &core->state[first]);
+    propid_drag_basis_transform(basis, &core->state[first]);
     /* The cross-covariances with every other state: a column of N values each
      * (state_count is not needed: the unused part of the triangle is zero). */
     for (uint8_t j = 0; j < PROPID_MAX_STATES; ++j) {
@@ -85,7 +90,7 @@ void propid_drag_per_rotor(const propid_drag_basis_t *basis, const propid_core_t
     for (uint8_t i = 0; i < rotor_count; ++i) {
         km_rel[i] = core->state[first + i];
     }
-    propid_drag_basis_apply(basis, km_rel);
+    propid_drag_basis_transform(basis, km_rel);
     if (km_var == NULL) {
         return;
     }
@@ -143,7 +148,7 @@ void propid_drag_per_rotor_column(const propid_drag_basis_t *basis, const propid
             column[j] -= scaled * along[j];
         }
     } /* else T e_k = e_k: P's column as stored */
-    propid_drag_basis_apply(basis, &column[first]); /* T on the left */
+    propid_drag_basis_transform(basis, &column[first]); /* T on the left */
 }
 
 void propid_cov_reset_rotor(const propid_derived_t *derived, const propid_drag_basis_t *basis, propid_core_t *core,

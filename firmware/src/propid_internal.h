@@ -352,6 +352,10 @@ static inline void propid_drag_basis_apply(const propid_drag_basis_t *basis, flo
         x[i] -= dot * v[i];
     }
 }
+/* The same, as one out-of-line function (propid_drag_basis.c) for the callers
+ * outside the prediction's loops: the files that call it from several places
+ * share this copy instead of each keeping its own (80 B of flash each). */
+void propid_drag_basis_transform(const propid_drag_basis_t *basis, float *x);
 
 /* propid_drag_basis.c. The state's and P's drag block between the yaw basis and
  * the per-rotor one (either way: H is its own inverse). */
