@@ -57,6 +57,8 @@ TARGET_CFLAGS = CPU + ["-std=c11", "-O2", "-DNDEBUG", "-fno-math-errno", "-ffp-c
                        "-ffunction-sections", "-fdata-sections"]
 # Init-only sources compiled for size, as firmware/CMakeLists.txt does on the target.
 INIT_ONLY_CFLAGS = {"propid_config.c": ["-Os"], "propid_setup.c": ["-Os"]}
+# And in the size-lean quad build (firmware/CMakeLists.txt, PROPID_SIZE_LEAN_OS_SOURCES).
+SIZE_LEAN_OS_SOURCES = ("propid_predict.c", "propid_filter.c", "propid_estimate.c", "propid_drag_basis.c")
 PER_SAMPLE_CALLS = ("propid_push_gyro", "propid_push_rotor_speeds", "propid_get_estimate")
 # Cycles-per-instruction assumptions for the CPU-load estimate (docs/performance.md):
 # Cortex-M4F at 168 MHz from flash with the ART/prefetch (FPU multiply-add 3 cycles,
@@ -200,10 +202,12 @@ def linked_filter_size(repo: pathlib.Path, work: pathlib.Path, build_flag: str,
     flags = [*TARGET_CFLAGS, *build_flag.split(), "-I", str(repo / "firmware/include"),
              "-I", str(qemu), *(["-DFOOTPRINT_PREPARED=1"] if prepared else [])]
     inputs = []
+    lean = "-DPROPID_SIZE_LEAN=1" in build_flag.split()
     for source in [*sources, *extra, repo / "tests/bench/footprint_app.c", qemu / "startup.c",
                    qemu / "semihosting.c", qemu / "stack_watermark.c"]:
         obj = objects_dir / (source.stem + ".o")
-        run(["arm-none-eabi-gcc", *flags, *INIT_ONLY_CFLAGS.get(source.name, []),
+        lean_os = ["-Os"] if lean and source.name in SIZE_LEAN_OS_SOURCES else []
+        run(["arm-none-eabi-gcc", *flags, *INIT_ONLY_CFLAGS.get(source.name, []), *lean_os,
              "-c", str(source), "-o", str(obj)])
         inputs.append(str(obj))
     run(["arm-none-eabi-gcc", *CPU, *inputs, "-nostartfiles", "--specs=nano.specs",

@@ -54,9 +54,28 @@ for f in "$src"/firmware/src/propid_*.c; do
     esac
 done
 
+# The size-lean quad build compiles these for size on the target
+# (firmware/CMakeLists.txt, PROPID_SIZE_LEAN_OS_SOURCES): counted as built.
+lean_objects=()
+case " ${extra[*]:-} " in
+    *" -DPROPID_SIZE_LEAN=1 "*)
+        kept=()
+        for f in "${sources[@]}"; do
+            case "$(basename "$f")" in
+                propid_predict.c|propid_filter.c|propid_estimate.c|propid_drag_basis.c)
+                    object="$out/$(basename "$f" .c).os.o"
+                    "$gcc" "${cflags[@]}" -Os -I "$src/firmware/include" -I "$src/firmware/src" -I "$here" \
+                        -c "$f" -o "$object"
+                    lean_objects+=("$object") ;;
+                *) kept+=("$f") ;;
+            esac
+        done
+        sources=("${kept[@]}") ;;
+esac
+
 elf="$out/count_step.elf"
 "$gcc" "${cflags[@]}" -I "$src/firmware/include" -I "$src/firmware/src" -I "$here" \
-    "${sources[@]}" "$here/count_step.c" "$here/dense_ekf.c" "$here/startup.c" \
+    "${sources[@]}" ${lean_objects[@]+"${lean_objects[@]}"} "$here/count_step.c" "$here/dense_ekf.c" "$here/startup.c" \
     "$here/semihosting.c" "$here/stack_watermark.c" \
     -nostartfiles --specs=nano.specs --specs=nosys.specs -L "$here" -T "$here/mps2_an386.ld" \
     -Wl,--gc-sections -lm -o "$elf"
