@@ -50,6 +50,7 @@ void propid_config_default(propid_config_t *config)
     config->disturbance_torque = 0u;
     config->disturbance_std0 = 20.0f;
     config->disturbance_walk = 0.2f;
+    config->disturbance_bandwidth = 0.0f;
     config->mass = 0.0f;
     config->accel_noise_std = 0.5f;
     config->accel_bias_std0 = 0.5f;
@@ -355,6 +356,21 @@ static void derive_sparsity(const propid_config_t *config, const geometry_t *geo
 }
 #endif
 
+/* The field whose process noise state k's check found too large (k past the rates and coefficients). */
+static const char *process_noise_name(const propid_layout_t *layout, const propid_config_t *config, uint8_t k)
+{
+    if (k == layout->accel_bias) {
+        return "accel_bias_walk";
+    }
+    if (k == layout->torque_scale) {
+        return "torque_scale_walk";
+    }
+    if (layout->disturbance != PROPID_NO_STATE && k >= layout->disturbance && k < layout->disturbance + 3u) {
+        return config->disturbance_bandwidth > 0.0f ? "disturbance_bandwidth" : "disturbance_walk";
+    }
+    return "gyro_bias_walk";
+}
+
 #define PROPID_BAD(name)                                                                           \
     do {                                                                                           \
         if (bad_field != NULL) {                                                                   \
@@ -499,6 +515,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         }
         if (!isfinite(config->disturbance_walk) || config->disturbance_walk < 0.0f) {
             PROPID_BAD("disturbance_walk");
+        }
+        /* Below the gyro's Nyquist frequency: above it the states would take every sample. */
+        if (!isfinite(config->disturbance_bandwidth) || config->disturbance_bandwidth < 0.0f ||
+            config->disturbance_bandwidth >= 0.5f * config->gyro_sample_rate_hz) {
+            PROPID_BAD("disturbance_bandwidth");
         }
     }
 #endif
@@ -752,6 +773,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             kind = PROPID_KIND_DISTURBANCE;
             prior = config->disturbance_std0 * config->disturbance_std0;
             psd = config->disturbance_walk * config->disturbance_walk;
+            if (config->disturbance_bandwidth > 0.0f) {
+                /* Equal to the unmodelled acceleration's density at the bandwidth (§7). */
+                const float walk = PROPID_TWO_PI * config->disturbance_bandwidth * config->rate_process_noise;
+                psd = walk * walk;
+            }
             floor_var = 1.0e-12f;
             ceiling = 100.0f * prior;
         }
@@ -766,7 +792,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             PROPID_BAD(k < PROPID_RATE_STATES ? "rate_process_noise"
                                               : (k < first_drag ? "thrust_coeff_rel_walk"
                                                                 : (k < first_bias ? "drag_coeff_rel_walk"
-                                                                                  : "gyro_bias_walk")));
+                                                                                  : process_noise_name(&out.layout, config, k))));
         }
         if (k < PROPID_RATE_STATES) {
             /* An update computes the new variance as P - P^2 / S, exact only to

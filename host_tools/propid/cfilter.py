@@ -144,6 +144,7 @@ _OPTIONAL_FIELDS = [
     ("disturbance_torque", ctypes.c_uint8),
     ("disturbance_std0", ctypes.c_float),
     ("disturbance_walk", ctypes.c_float),
+    ("disturbance_bandwidth", ctypes.c_float),
     ("mass", ctypes.c_float),
     ("accel_noise_std", ctypes.c_float),
     ("accel_bias_std0", ctypes.c_float),
@@ -265,6 +266,7 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "disturbance_torque": 0,
     "disturbance_std0": 20.0,
     "disturbance_walk": 0.2,
+    "disturbance_bandwidth": 0.0,
     "mass": 0.0,
     "accel_noise_std": 0.5,
     "accel_bias_std0": 0.5,
@@ -326,6 +328,7 @@ class FilterConfig:
     disturbance_torque: int = DEFAULT_TUNING["disturbance_torque"]
     disturbance_std0: float = DEFAULT_TUNING["disturbance_std0"]
     disturbance_walk: float = DEFAULT_TUNING["disturbance_walk"]
+    disturbance_bandwidth: float = DEFAULT_TUNING["disturbance_bandwidth"]
     mass: float = DEFAULT_TUNING["mass"]
     accel_noise_std: float = DEFAULT_TUNING["accel_noise_std"]
     accel_bias_std0: float = DEFAULT_TUNING["accel_bias_std0"]

@@ -78,8 +78,8 @@ class ReferenceFilter:
             "gyro_noise_density", "gyro_sample_rate_hz", "rate_process_noise",
             "thrust_coeff_rel_walk", "drag_coeff_rel_walk", "gyro_bias_walk", "gate_sigma",
             "max_rotor_speed", "gyro_range", "coeff_rel_min", "coeff_rel_max", "converged_rel_std",
-            "disturbance_std0", "disturbance_walk", "mass", "accel_noise_std", "accel_bias_std0",
-            "accel_bias_walk", "accel_range", "torque_scale_std0", "torque_scale_walk")}
+            "disturbance_std0", "disturbance_walk", "disturbance_bandwidth", "mass", "accel_noise_std",
+            "accel_bias_std0", "accel_bias_walk", "accel_range", "torque_scale_std0", "torque_scale_walk")}
         self.c = c
         self.gate_max_consecutive = int(config.gate_max_consecutive)
         self.rotor_stale_us = int(config.rotor_stale_us)
@@ -156,6 +156,9 @@ class ReferenceFilter:
                                               coeff_ceiling)
             else:  # disturbance
                 prior, psd, floor = c["disturbance_std0"] ** 2, c["disturbance_walk"] ** 2, 1e-12
+                if c["disturbance_bandwidth"] > 0.0:  # C: the walk from the bandwidth (math.md §7)
+                    walk = _f32(_f32(_f32(2.0 * np.pi) * c["disturbance_bandwidth"]) * c["rate_process_noise"])
+                    psd = walk * walk
                 ceiling = 100.0 * prior
             if k < 3:
                 # C: the rate variance is kept below R / (64 epsilon) (float32 rounding),

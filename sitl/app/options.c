@@ -291,6 +291,10 @@ static const opt_t options[] = {
            "filter gyro-bias random walk [rad/s/sqrt(s)] (default: library)"),
     FLAG(NULL, "filter-disturbance", filter_disturbance, 1,
          "filter: disturbance-torque states (docs/math.md §7)"),
+    NUMBER(NULL, "filter-disturbance-bandwidth", filter_disturbance_bandwidth, 0.0, 1e3, "HZ",
+           "filter: with --filter-disturbance, the states' bandwidth: they\n"
+           "take the torque residual below it (what the controller cancels)\n"
+           "and kf/km learn above it (docs/math.md §7). Default 0: slow walk"),
     FLAG(NULL, "filter-accel", filter_accel, 1,
          "filter: fuse the accelerometer's z specific force with the\n"
          "vehicle's mass (docs/math.md §9)"),

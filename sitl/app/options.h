@@ -90,6 +90,7 @@ typedef struct {
     double filter_bias_walk;            /* gyro_bias_walk [rad/s/sqrt(s)] */
     /* The filter's optional model terms and sensors (docs/math.md §7-9, §12). */
     int filter_disturbance;             /* 1: disturbance-torque states */
+    double filter_disturbance_bandwidth; /* their bandwidth [Hz] (docs/math.md §7); 0: the library's walk */
     int filter_accel;                   /* 1: accelerometer aiding with the vehicle's mass */
     int filter_torque_scale;            /* 1: with filter_accel, the thrust-torque scale state */
     int filter_rotor_inertia;           /* 1: the vehicle's rotor inertia in the filter's model */

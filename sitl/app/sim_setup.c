@@ -151,6 +151,7 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
         c->gyro_bias_walk = (float)opts->filter_bias_walk;
     }
     c->disturbance_torque = opts->filter_disturbance ? 1u : 0u;
+    c->disturbance_bandwidth = (float)opts->filter_disturbance_bandwidth; /* checked by propid_init */
     if (opts->filter_accel) {
         c->mass = (float)v->mass;
     }

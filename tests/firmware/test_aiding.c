@@ -122,6 +122,26 @@ static void test_optional_configuration_is_validated(void)
     config.disturbance_torque = 2u;
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
     TEST_ASSERT_EQUAL_STRING("disturbance_torque", bad);
+    /* The bandwidth: finite, >= 0, below the gyro's Nyquist frequency, and the walk it makes
+     * within the states' variance ceiling over the longest gyro gap. */
+    const float bad_bandwidths[3] = {NAN, -1.0f, 250.0f};
+    for (uint8_t i = 0; i < 3u; ++i) {
+        quad_config(&config);
+        config.disturbance_torque = 1u;
+        config.disturbance_bandwidth = bad_bandwidths[i];
+        TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+        TEST_ASSERT_EQUAL_STRING("disturbance_bandwidth", bad);
+    }
+    config.disturbance_bandwidth = 100.0f;
+    config.rate_process_noise = 10.0f; /* walk 6,283 rad/s^2/sqrt(s): 2e6 over 50 ms, above 100 x 20^2 */
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("disturbance_bandwidth", bad);
+    config.disturbance_bandwidth = 5.0f;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
+    config.disturbance_walk = 7000.0f; /* the same check names the walk when no bandwidth is given */
+    config.disturbance_bandwidth = 0.0f;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("disturbance_walk", bad);
     quad_config(&config);
     config.rotor_inertia[2] = -1e-6f;
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
@@ -150,7 +170,12 @@ typedef struct {
     float scale_walk;        /* filter option torque_scale_walk */
     float torque_gain_end;   /* the thrust torques' gain falls linearly from 1 to this (0: 1) */
     int constant_coeffs;     /* filter: kf and km constant (walks 0) */
+    float random_torque;     /* a random body torque (first-order Gauss-Markov, correlation time
+                                RANDOM_TORQUE_TIME_S) of this std [N m] on every axis, which the loop cancels */
+    float disturbance_bandwidth; /* filter option (with disturbance_states) */
 } flight_t;
+
+#define RANDOM_TORQUE_TIME_S 0.5f
 
 /* Mean over rotors of kf_est / kf_true at the end. */
 static float fly(const flight_t *flight, float *worst_rotor)
@@ -163,6 +188,7 @@ static float fly(const flight_t *flight, float *worst_rotor)
         config.accel_noise_std = flight->accel_noise > 0.0f ? flight->accel_noise : 0.2f;
     }
     config.disturbance_torque = (uint8_t)flight->disturbance_states;
+    config.disturbance_bandwidth = flight->disturbance_bandwidth;
     config.torque_scale = (uint8_t)flight->torque_scale;
     config.torque_scale_walk = flight->scale_walk;
     if (flight->constant_coeffs) {
@@ -189,6 +215,10 @@ static float fly(const flight_t *flight, float *worst_rotor)
     const float dt = 0.002f;
     const uint32_t steps = (uint32_t)(flight->duration_s / dt);
     float speed[4];
+    float random_torque[3] = {0.0f, 0.0f, 0.0f};
+    rng_t torque_rng = {777u}; /* its own stream: the sensor noise is the same with and without it */
+    const float torque_pole = expf(-dt / RANDOM_TORQUE_TIME_S);
+    const float torque_drive = flight->random_torque * sqrtf(1.0f - torque_pole * torque_pole);
     thrust_claimed_reads = 0u;
     mismatch_reads = 0u;
     for (uint32_t step = 0; step < steps; ++step) {
@@ -219,6 +249,12 @@ static float fly(const flight_t *flight, float *worst_rotor)
         }
         /* Plant over dt (explicit Euler at 2 ms; the filter's model is the same). */
         float torque[3] = {flight->disturbance[0], flight->disturbance[1], flight->disturbance[2]};
+        if (flight->random_torque > 0.0f) {
+            for (uint8_t a = 0; a < 3u; ++a) {
+                random_torque[a] = torque_pole * random_torque[a] + torque_drive * rng_normal(&torque_rng);
+                torque[a] += random_torque[a];
+            }
+        }
         float thrust = 0.0f;
         float gain = flight->torque_gain_late > 0.0f && t > 0.5f * flight->duration_s ? flight->torque_gain_late
                                                                                      : 1.0f;
@@ -279,7 +315,7 @@ static float fly(const flight_t *flight, float *worst_rotor)
 
 static void test_accelerometer_pins_the_thrust_scale(void)
 {
-    flight_t flight = {1.25f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f, 0.0f, 0, 0.0f, 0.0f, 0.0f, 0.0f, 0};
+    flight_t flight = {1.25f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f, 0.0f, 0, 0.0f, 0.0f, 0.0f, 0.0f, 0, 0.0f, 0.0f};
     float worst = 0.0f;
     const float with_accel = fly(&flight, &worst);
     TEST_ASSERT_FLOAT_WITHIN(0.02f, 1.0f, with_accel);
@@ -292,7 +328,7 @@ static void test_accelerometer_pins_the_thrust_scale(void)
 static void test_disturbance_states_remove_the_closed_loop_bias(void)
 {
     /* A 1 cm centre-of-mass offset along x at 1 kg: 0.098 N m about y. */
-    flight_t flight = {1.0f, {0.0f, 0.098f, 0.0f}, 0, 0, 20.0f, 0.0f, 0, 0.0f, 0.0f, 0.0f, 0.0f, 0};
+    flight_t flight = {1.0f, {0.0f, 0.098f, 0.0f}, 0, 0, 20.0f, 0.0f, 0, 0.0f, 0.0f, 0.0f, 0.0f, 0, 0.0f, 0.0f};
     float worst_off = 0.0f;
     float worst_on = 0.0f;
     const float off = fly(&flight, &worst_off);
@@ -307,6 +343,31 @@ static void test_disturbance_states_remove_the_closed_loop_bias(void)
     (void)off;
 }
 
+static void test_disturbance_bandwidth_removes_the_cancellation_bias(void)
+{
+    /* A random body torque of 5 mN m std (1.4 rad/s^2 on roll, correlation time 0.5 s) inside the rate loop's
+     * bandwidth (about 1.3 Hz): the loop answers it with the rotors, whose torque the gyro then does not see
+     * as acceleration, so a fit of the rate increments on the rotor torques reads kf low. Slow disturbance
+     * states (the default walk) cannot follow it; states of 5 Hz bandwidth take it (math.md §7). */
+    flight_t flight = {1.0f, {0.0f, 0.0f, 0.0f}, 0, 0, 40.0f, 0.0f, 0, 0.0f, 0.0f, 0.0f, 0.0f, 1, 5.0e-3f, 0.0f};
+    float worst_off = 0.0f;
+    float worst_slow = 0.0f;
+    float worst_band = 0.0f;
+    const float off = fly(&flight, &worst_off);
+    flight.disturbance_states = 1;
+    const float slow = fly(&flight, &worst_slow);
+    flight.disturbance_bandwidth = 5.0f;
+    const float band = fly(&flight, &worst_band);
+#ifdef PROPID_TEST_VERBOSE
+    printf("cancellation: off %.4f (%.4f) slow %.4f (%.4f) band %.4f (%.4f)\n", (double)off, (double)worst_off,
+           (double)slow, (double)worst_slow, (double)band, (double)worst_band);
+#endif
+    TEST_ASSERT_TRUE(off < 0.95f && worst_off > 0.05f);   /* 0.917, worst rotor 9 % */
+    TEST_ASSERT_TRUE(slow < 0.95f && worst_slow > 0.05f); /* 0.927, 8 % */
+    TEST_ASSERT_FLOAT_WITHIN(0.01f, 1.0f, band);          /* 0.996 */
+    TEST_ASSERT_TRUE(worst_band < 0.02f);                 /* 0.5 % */
+}
+
 static void test_torque_scale_frees_kf_from_an_inertia_error(void)
 {
     /* The filter's J is 30 % too large: the gyro alone would read kf 30 % high;
@@ -317,7 +378,7 @@ static void test_torque_scale_frees_kf_from_an_inertia_error(void)
      * it are asserted.) */
     /* A vibrating accelerometer (1 m/s^2 per sample, as on a small quad): the
      * gyro's information on the scale then dominates without the state. */
-    flight_t flight = {1.0f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f, 1.3f, 0, 1.0f, 0.0f, 0.0f, 0.0f, 0};
+    flight_t flight = {1.0f, {0.0f, 0.0f, 0.0f}, 1, 0, 20.0f, 1.3f, 0, 1.0f, 0.0f, 0.0f, 0.0f, 0, 0.0f, 0.0f};
     float worst_with = 0.0f;
     flight.torque_scale = 1;
     const float with = fly(&flight, &worst_with);
@@ -343,7 +404,7 @@ static void test_torque_scale_walk_follows_a_changing_torque_gain(void)
      * two gains. With the scale's random walk it follows the change, and kf
      * stays with the accelerometer either way in this flight (its thrust swing
      * gives the accelerometer enough information). */
-    flight_t flight = {1.0f, {0.0f, 0.0f, 0.0f}, 1, 0, 40.0f, 0.0f, 1, 1.0f, 0.6f, 0.0f, 0.0f, 0};
+    flight_t flight = {1.0f, {0.0f, 0.0f, 0.0f}, 1, 0, 40.0f, 0.0f, 1, 1.0f, 0.6f, 0.0f, 0.0f, 0, 0.0f, 0.0f};
     float worst = 0.0f;
     const float constant = fly(&flight, &worst);
     propid_estimate_t estimate;
@@ -383,7 +444,7 @@ static void test_torque_scale_walk_follows_a_changing_torque_gain(void)
  * flagged, every kf claimed throughout the second half. */
 static void test_scale_walk_is_not_read_as_coefficient_drift(void)
 {
-    flight_t flight = {1.0f, {0.0f, 0.0f, 0.0f}, 1, 0, 40.0f, 0.0f, 1, 0.0f, 0.0f, 0.1f, 0.7f, 1};
+    flight_t flight = {1.0f, {0.0f, 0.0f, 0.0f}, 1, 0, 40.0f, 0.0f, 1, 0.0f, 0.0f, 0.1f, 0.7f, 1, 0.0f, 0.0f};
     float worst = 0.0f;
     const float kf_ratio = fly(&flight, &worst);
     propid_estimate_t estimate;
@@ -498,6 +559,7 @@ int main(void)
     RUN_TEST(test_rotor_inertia_yaw_reaction);
     RUN_TEST(test_accelerometer_pins_the_thrust_scale);
     RUN_TEST(test_disturbance_states_remove_the_closed_loop_bias);
+    RUN_TEST(test_disturbance_bandwidth_removes_the_cancellation_bias);
     RUN_TEST(test_torque_scale_frees_kf_from_an_inertia_error);
     RUN_TEST(test_torque_scale_walk_follows_a_changing_torque_gain);
     RUN_TEST(test_scale_walk_is_not_read_as_coefficient_drift);

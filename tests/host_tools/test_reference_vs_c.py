@@ -171,6 +171,25 @@ def test_c_agrees_with_reference_with_every_option(flight):
     assert cov_err < COV_TOL_REL
 
 
+def test_c_agrees_with_reference_with_a_disturbance_bandwidth(flight):
+    """Every option with the disturbance states given a 5 Hz bandwidth (their walk 2 pi f x the rate process
+    noise, docs/math.md §7): same bounds, and the states then move with the residual torque (their walk is
+    31 rad/s^2/sqrt(s) here against 0.2 by default)."""
+    slow = make_config("all")
+    config = slow.with_overrides(disturbance_bandwidth=5.0, rate_process_noise=1.0)
+    trace_ref = replay(ReferenceFilter(config), flight)
+    trace_c = replay(CFilter(config), flight)
+    assert len(trace_c) == len(trace_ref) > 3000
+    state_err, cov_err = disagreement(trace_c, trace_ref)
+    print(f"C vs reference, disturbance bandwidth: max |dx|/std = {state_err:.3g}, max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+    # The bandwidth changed the filter: the disturbance variances at the end are far above the slow walk's.
+    slow_c = replay(CFilter(slow.with_overrides(rate_process_noise=1.0)), flight)
+    disturbance = slice(14, 17)
+    assert np.all(trace_c[-1][2][disturbance] > 10.0 * slow_c[-1][2][disturbance])
+
+
 @pytest.mark.parametrize("options", ["plain", "all"])
 def test_c_agrees_with_reference_with_input_noise(flight, options):
     """Rotor-speed input error in the rate process noise (docs/math.md §14): same bounds, and the

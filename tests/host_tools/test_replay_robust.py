@@ -78,3 +78,20 @@ def test_finite_looks_at_the_body_rate():
     assert estimates_finite(series)
     series["body_rate"][1, 2] = np.inf
     assert not estimates_finite(series)
+
+
+def test_disturbance_bandwidth_reaches_the_filter_and_is_checked():
+    """--disturbance-bandwidth HZ sets the states' bandwidth (docs/math.md §7); it needs the states and a
+    positive frequency, each refused with a one-line error."""
+    from propid.errors import UserError
+
+    vehicle = parse_vehicle(VEHICLE)
+    log = synthetic_log()
+    config = build_config(vehicle, log, ReplayOptions(disturbance="on", disturbance_bandwidth=5.0))[0]
+    assert config["disturbance_torque"] == 1 and config["disturbance_bandwidth"] == 5.0
+    assert "disturbance_bandwidth" not in build_config(vehicle, log, ReplayOptions(disturbance="on"))[0]
+    with pytest.raises(UserError, match="needs --disturbance on"):
+        build_config(vehicle, log, ReplayOptions(disturbance_bandwidth=5.0))
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(UserError, match="positive frequency"):
+            build_config(vehicle, log, ReplayOptions(disturbance="on", disturbance_bandwidth=bad))

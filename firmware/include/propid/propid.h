@@ -130,6 +130,9 @@ typedef struct {
     uint8_t disturbance_torque;       /* 1: estimate a slowly varying body torque (3 more states) */
     float disturbance_std0;           /* its prior std, as angular acceleration J^-1 tau [rad/s^2] */
     float disturbance_walk;           /* its random walk [rad/s^2/sqrt(s)] */
+    float disturbance_bandwidth;      /* > 0 [Hz]: the walk is 2 pi f rate_process_noise instead, so the
+                                         states take the torque residual below f (what a controller of
+                                         that bandwidth cancels) and kf/km learn above it (math.md §7) */
     float mass;                       /* vehicle mass [kg]; > 0 enables propid_push_accel()
                                          (1 more state: the accelerometer's z bias) */
     float accel_noise_std;            /* per-sample noise of the z specific force [m/s^2] */

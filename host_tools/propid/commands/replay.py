@@ -96,6 +96,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--disturbance", choices=["on", "off"], default="off",
                         help="the filter's disturbance-torque states (a slowly varying body torque: CoM offset, "
                              "aerodynamic moments); default off")
+    parser.add_argument("--disturbance-bandwidth", type=float, default=None, metavar="HZ",
+                        help="with --disturbance on: the states' bandwidth; they then take the torque residual "
+                             "below it (what the vehicle's attitude controller cancels) and kf/km learn above it "
+                             "(docs/math.md §7); default: the library's slow walk")
     parser.add_argument("--rotor-inertia", choices=["auto", "on", "off"], default="auto",
                         help="model the rotors' yaw reaction and gyroscopic torque with the vehicle file's "
                              "rotor_inertia (auto: when it is given)")
@@ -287,6 +291,7 @@ def run(args: argparse.Namespace) -> int:
         diagnostic_highpass_hz=args.diagnostic_highpass,
         aiding=args.aiding,
         disturbance=args.disturbance,
+        disturbance_bandwidth=args.disturbance_bandwidth,
         rotor_inertia=args.rotor_inertia,
         torque_scale=args.torque_scale,
         torque_scale_walk=args.torque_scale_walk,

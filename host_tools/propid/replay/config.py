@@ -147,6 +147,14 @@ def _optional_terms(vehicle: Vehicle, log: FlightLog, options: ReplayOptions, co
     if options.disturbance == "on":
         config["disturbance_torque"] = 1
     notes["disturbance"] = options.disturbance
+    if options.disturbance_bandwidth is not None:
+        bandwidth = options.disturbance_bandwidth
+        if options.disturbance != "on":
+            raise UserError("--disturbance-bandwidth needs --disturbance on")
+        if not np.isfinite(bandwidth) or bandwidth <= 0.0:
+            raise UserError(f"--disturbance-bandwidth {bandwidth!r}: give a positive frequency in Hz")
+        config["disturbance_bandwidth"] = float(bandwidth)
+        notes["disturbance"] = f"on, bandwidth {bandwidth:g} Hz (walk = 2 pi f x the rate process noise)"
     if options.rotor_inertia not in ("auto", "on", "off"):
         raise UserError(f"--rotor-inertia {options.rotor_inertia!r}: choose auto, on or off")
     inertias = vehicle.rotor_inertias

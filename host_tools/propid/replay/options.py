@@ -29,6 +29,9 @@ class ReplayOptions:
     diagnostic_highpass_hz: float | None = None  # diagnostic only: emulate removing slow content (docs/real-data.md)
     aiding: str = "auto"  # "gyro", "gyro+accel", or "auto": gyro+accel when the log has acc_* and the vehicle a mass
     disturbance: str = "off"  # "on": the filter's disturbance-torque states
+    # Their bandwidth [Hz] (docs/math.md §7): the states take the torque residual below it (what the vehicle's
+    # controller cancels) and the coefficients learn above it; None: the library's slow walk.
+    disturbance_bandwidth: float | None = None
     rotor_inertia: str = "auto"  # "auto"/"on": the vehicle's rotor_inertia enters the model; "off"
     torque_scale: str = "auto"  # "auto"/"on": estimate the thrust-torque scale when the accelerometer is fused; "off"
     # Its random walk [1/sqrt(s)]: None (the library default, a constant), a number, or "auto" (replay/scale_walk.py).
