@@ -49,14 +49,14 @@ def delay_designs(flights: list[Flight], positions: np.ndarray, signs: np.ndarra
     (shifted with the rotor stream), rate damping on all three axes, and the nuisance
     effect columns on roll/pitch (not shifted)."""
     rows = [segment_rows(f) for f in flights]
-    filtered_u = [f.filtered(f.speed**2) for f in flights]
+    filtered_u = [f.filtered(f.speed**2, response=True) for f in flights]
     filtered_spin = [f.filtered((f.speed_dot @ signs)[:, None]) for f in flights]
-    damping = np.concatenate([f.filtered(-f.gyro)[r] for f, r in zip(flights, rows)])
+    damping = np.concatenate([f.filtered(-f.gyro, response=True)[r] for f, r in zip(flights, rows)])
     n_extra = 0
     extra = {}
     if nuisance:
         for a in ("roll", "pitch"):
-            extra[a] = np.concatenate([f.filtered(n[a])[r] for f, n, r in zip(flights, nuisance, rows)])
+            extra[a] = np.concatenate([f.filtered(n[a], response=True)[r] for f, n, r in zip(flights, nuisance, rows)])
         n_extra = extra["roll"].shape[1]
     resp = [responses(f, None) for f in flights]
     ys = {a: np.concatenate([f.filtered(rr[a])[r] for f, rr, r in zip(flights, resp, rows)])

@@ -12,10 +12,11 @@ from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.gap import alignment, basefit, scoring, selection, shrink, where, whitening
 from propid.gap.vehicle_out import corrected_vehicle
-from propid.gap.design import build_design
+from propid.gap.design import base_columns, build_design, responses
 from propid.gap.effects import (ALL_IDS, CONDITIONED_ON, EFFECTS, ESC_DELAY, MIN_REPORTED_LAG_S, RESIDUAL_LAG,
                                Context, by_id)
-from propid.gap.prep import Band, Flight, columns_present, prepare_flight
+from propid.gap.prep import Band, Flight, columns_present, difference_response, prepare_flight
+from propid.realdata_checks import bandpass
 
 NEEDS_TEXT = {"inertia": "vehicle inertia", "acc": "acc_x/y/z", "mass": "vehicle mass", "attitude": "qw/qx/qy/qz", "velocity": "vx/vy/vz",
               "height": "pz", "rotor_radius": "vehicle rotor_radius", "cmd": "cmd_i", "vbat": "vbat"}
@@ -36,8 +37,15 @@ class Options:
     auto_highpass: bool = False
 
 
-HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0)
+HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0, 5.0)
 BAND_STABILITY = 0.10
+MIN_BAND_OCTAVES = 2.0  # a candidate high-pass leaves at least two octaves below the low-pass
+CLOSED_LOOP = "closed_loop_cancellation"
+
+
+def highpass_candidates(flights: list[Flight], band: Band) -> tuple[float, ...]:
+    top = min(band.for_rate(f.rate_hz).lowpass_hz for f in flights)
+    return tuple(h for h in HIGHPASS_CANDIDATES_HZ if h * 2.0**MIN_BAND_OCTAVES <= top) or HIGHPASS_CANDIDATES_HZ[:1]
 
 
 def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band) -> tuple[Band, dict]:
@@ -50,8 +58,9 @@ def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band) -> tupl
     below 1 - BAND_STABILITY (a noisy short log must not lose its slow content to scatter,
     and a low band reading MORE than a high one is not the closed-loop signature: a narrow
     high band is the attenuated one then); the highest candidate otherwise."""
+    candidates = highpass_candidates(flights, band)
     values, boots = {}, {}
-    for hp in HIGHPASS_CANDIDATES_HZ:
+    for hp in candidates:
         trial = [replace(f, band=Band(hp, band.lowpass_hz).for_rate(f.rate_hz)) for f in flights]
         kf, boot = [], []
         for axis in ("roll", "pitch"):
@@ -62,8 +71,8 @@ def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band) -> tupl
         values[hp] = float(np.mean(kf))
         boots[hp] = np.mean(boot, axis=0)
     intervals = {}
-    for k, hp in enumerate(HIGHPASS_CANDIDATES_HZ):
-        for h in HIGHPASS_CANDIDATES_HZ[k + 1:]:
+    for k, hp in enumerate(candidates):
+        for h in candidates[k + 1:]:
             ratio = boots[hp] / np.where(boots[h] != 0, boots[h], np.nan)
             ratio = ratio[np.isfinite(ratio)]
             intervals[(hp, h)] = ([float(np.percentile(ratio, 2.5)), float(np.percentile(ratio, 97.5))]
@@ -75,18 +84,20 @@ def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band) -> tupl
             return True
         return hi < 1.0 - BAND_STABILITY
 
-    chosen = HIGHPASS_CANDIDATES_HZ[-1]
-    for k, hp in enumerate(HIGHPASS_CANDIDATES_HZ):
-        if not any(differs(hp, h) for h in HIGHPASS_CANDIDATES_HZ[k + 1:]):
+    chosen = candidates[-1]
+    for k, hp in enumerate(candidates):
+        if not any(differs(hp, h) for h in candidates[k + 1:]):
             chosen = hp
             break
     return Band(chosen, band.lowpass_hz), {
-        "candidates_hz": list(HIGHPASS_CANDIDATES_HZ),
-        "roll_pitch_kf": [values[h] for h in HIGHPASS_CANDIDATES_HZ],
+        "candidates_hz": list(candidates),
+        "roll_pitch_kf": [values[h] for h in candidates],
+        "ratio_boot": {h: boots[h] / np.where(boots[chosen] != 0, boots[chosen], np.nan) for h in candidates},
         "ratio_ci_to_higher": {f"{a:g}/{b:g}": v for (a, b), v in intervals.items()},
         "chosen_hz": chosen,
         "rule": "lowest high-pass whose roll/pitch kf is not shown (95 % paired block bootstrap of the "
-                "ratio) to be more than 10 % below the kf at a higher candidate"}
+                "ratio) to be more than 10 % below the kf at a higher candidate; run on the aligned logs; "
+                "candidates leave two octaves below the low-pass"}
 
 
 class Progress:
@@ -174,10 +185,6 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     progress = Progress(options.progress, total=60 + 12 * 6)
     flights = [prepare_flight(log, vehicle, options.band) for log in logs]
     band_rule = None
-    if options.auto_highpass:
-        band, band_rule = choose_highpass(flights, vehicle, options.band)
-        options = Options(band, options.progress, False)
-        flights = [replace(f, band=band.for_rate(f.rate_hz)) for f in flights]
     held_flights = [prepare_flight(log, vehicle, options.band) for log in holdout]
     progress(5)
     present = columns_present(logs + holdout, vehicle)
@@ -203,6 +210,14 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         align["per_log_delay_s"] = {f.name: d for f, d in zip(flights + held_flights, delays)}
     work = [shifted_flight(f, d) for f, d in zip(flights, delays)]
     work_held = [shifted_flight(f, d) for f, d in zip(held_flights, delays[len(flights):])]
+    # the band rule judges aligned logs: a misaligned rotor stream reads a torque fit that
+    # falls with frequency, which would hide the closed loop's rise above its bandwidth
+    requested_band = options.band
+    if options.auto_highpass:
+        band, band_rule = choose_highpass(work, vehicle, options.band)
+        options = Options(band, options.progress, False)
+        flights, held_flights, work, work_held = ([replace(f, band=band.for_rate(f.rate_hz)) for f in group]
+                                                  for group in (flights, held_flights, work, work_held))
 
     # 2. base model: per-rotor kf (shared by thrust and torques), per-rotor km
     count = vehicle.rotor_count
@@ -269,6 +284,9 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                         "significant": s["significant"], **({"step": s["step"]} if "step" in s else {}),
                         **({"conditioned_on": s["conditioned_on"]} if "conditioned_on" in s else {}),
                         **({"dropped": s["dropped"]} if "dropped" in s else {})})
+    loop_entry = closed_loop_entry(work_held or work, band_rule, requested_band, vehicle, kf_rotor, km_rotor)
+    if loop_entry is not None:
+        entries.append(loop_entry)
     if delay_significant:  # the alignment is applied before any effect is scored: it ranks by its own share
         first = next((e for e in entries if e.get("step") == 1), None)
         esc_entry["step"] = 0 if first is None or esc_entry["explained_fraction"] >= first.get(
@@ -290,7 +308,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         "inputs": {"logs": [str(l.path) for l in logs], "holdout": [str(l.path) for l in holdout],
                    "vehicle": str(vehicle.path) if vehicle.path else vehicle.name, "columns_present": present,
                    "band_hz": [options.band.highpass_hz, options.band.lowpass_hz],
-                   "highpass_rule": band_rule,
+                   "highpass_rule": None if band_rule is None else
+                   {k: v for k, v in band_rule.items() if k != "ratio_boot"},
                    "rows": int(sum(f.rows for f in flights)), "blocks": int(design.n_blocks),
                    "rate_hz": [f.rate_hz for f in flights],
                    "inertia": ("unit: the vehicle file has no inertia, so torque coefficients (kf_roll, kf_pitch, "
@@ -307,10 +326,14 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
              "km": (km_rotor / np.mean(km_rotor)).tolist() if np.mean(km_rotor) > 0 else None}
     if shape["kf"] is None or shape["km"] is None or min(shape["kf"] + shape["km"]) <= 0:
         shape = None  # a non-physical per-rotor split: plain fleet regressors
-    base_shape, base_details = basefit.base_fit(work, vehicle.positions, vehicle.yaw_signs, vehicle.mass,
+    # before: the requested band; a significant closed-loop cancellation is "in" after: the
+    # band above the loop's bandwidth (the other effects are fitted there anyway)
+    loop_in = CLOSED_LOOP in significant
+    before_work = [replace(f, band=requested_band.for_rate(f.rate_hz)) for f in work] if loop_in else work
+    base_shape, base_details = basefit.base_fit(before_work, vehicle.positions, vehicle.yaw_signs, vehicle.mass,
                                                 shape=shape)
     extras, scales = {}, {}
-    selected_ids = [e for e in significant if e != ESC_DELAY]
+    selected_ids = [e for e in significant if e not in (ESC_DELAY, CLOSED_LOOP)]
     by_entry = {e["id"]: e for e in entries}
     for eid in selected_ids:
         if eid == "inertia_error":
@@ -327,6 +350,12 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                                 for old, c in zip(extras[axis], per_flight)]
     after_shape, after_details = basefit.base_fit(work, vehicle.positions, vehicle.yaw_signs, vehicle.mass,
                                                   extras, scales, shape=shape)
+    roll_fit = base_details.get("kf_roll") or {}
+    result["base_fit_method"] = (
+        "torque coefficients by instrumental variables: the motor commands (cmd_i) predict the rotor speeds"
+        if roll_fit.get("method", "").startswith("instrumental") else
+        "torque coefficients by least squares: the logs have no motor commands (cmd_i) to use as instruments, "
+        "so rotor-speed noise attenuates them (a lower bound)")
     result["base_fit"] = base_shape
     result["base_fit_after"] = after_shape
     result["base_fit_details"] = {"before": base_details, "after": after_details,
@@ -372,6 +401,74 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     result["_internal"] = {"corrected": corrected, "design": design, "base_res": base_res, "final_res": final_res,
                            "progress": progress}
     return result
+
+
+def closed_loop_entry(flights: list[Flight], band_rule: dict | None, requested: Band, vehicle: Vehicle,
+                      kf: np.ndarray, km: np.ndarray) -> dict | None:
+    """The controller cancelling a slow unmodelled torque with its rotors: the rotors then
+    carry a torque the gyro never sees, so a torque fit over a band reaching down to it
+    reads low (closed-loop identification bias). Its signature is the band rule's: the
+    roll/pitch kf rises with the band's lower edge. Significant when the rule gave up the
+    requested lower edge (the kf there shown more than BAND_STABILITY below the chosen
+    band's). Physical parameters: the band edge above which the fits agree (the loop's
+    disturbance-rejection bandwidth, to the candidates' resolution), the torque gain of
+    the requested band against it, and the rms of the roll/pitch torque the base model
+    (fitted above the loop) leaves below that edge: the disturbance torque the controller
+    cancels. explained_fraction: the share of the base model's roll/pitch residual power
+    (lowest candidate edge to the low-pass; held-out logs when given) that lies below the
+    chosen edge, with a 95 % block-bootstrap interval."""
+    if band_rule is None:
+        return None
+    chosen = band_rule["chosen_hz"]
+    cands = band_rule["candidates_hz"]
+    req = requested.highpass_hz
+    ref = min(cands, key=lambda h: abs(h - req))
+    ratio = np.asarray(band_rule["ratio_boot"][ref], dtype=float)
+    ratio = ratio[np.isfinite(ratio)]
+    gain = band_rule["roll_pitch_kf"][cands.index(ref)] / band_rule["roll_pitch_kf"][cands.index(chosen)] \
+        if band_rule["roll_pitch_kf"][cands.index(chosen)] else float("nan")
+    theta = np.concatenate([kf, km])
+    lowest = cands[0]
+    below, total = [], []  # per 2 s block: residual power below the edge, over the whole band
+    rms_sq, rows = 0.0, 0
+    for f in flights:
+        cols = base_columns(f, vehicle.positions, vehicle.yaw_signs)
+        resp = responses(f, vehicle.mass)
+        top = f.band.lowpass_hz
+        for a in ("roll", "pitch"):
+            res = resp[a] - difference_response(cols[a] @ theta, f.rate_hz)
+            for s0, e0 in f.segs:
+                lo_part = bandpass(res[s0:e0, None], f.rate_hz, lowest, chosen)[:, 0] if chosen > lowest \
+                    else np.zeros(e0 - s0)
+                whole = bandpass(res[s0:e0, None], f.rate_hz, lowest, top)[:, 0]
+                rms_sq += float(np.sum(lo_part**2))
+                rows += e0 - s0
+                for b0, b1 in f.blocks:
+                    if s0 <= b0 < e0:
+                        below.append(float(np.sum(lo_part[b0 - s0:b1 - s0] ** 2)))
+                        total.append(float(np.sum(whole[b0 - s0:b1 - s0] ** 2)))
+    below, total = np.asarray(below), np.asarray(total)
+    frac = float(below.sum() / total.sum()) if total.sum() > 0 else float("nan")
+    rng = np.random.default_rng(11)
+    boot = []
+    for _ in range(scoring.BOOTSTRAP):
+        pick = rng.integers(0, len(total), len(total)) if len(total) else np.zeros(0, dtype=int)
+        t = total[pick].sum()
+        boot.append(below[pick].sum() / t if t > 0 else np.nan)
+    boot = np.asarray(boot)
+    boot = boot[np.isfinite(boot)]
+    ci = [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))] if boot.size else [float("nan")] * 2
+    significant = bool(chosen > req and ratio.size and np.percentile(ratio, 97.5) < 1.0 - BAND_STABILITY)
+    return {"id": CLOSED_LOOP, "explained_fraction": frac, "ci": ci, "axes": ["roll", "pitch"],
+            "params": {"loop_bandwidth_hz": chosen, "torque_gain_below": float(gain),
+                       "torque_gain_below_ci": ([float(np.percentile(ratio, 2.5)), float(np.percentile(ratio, 97.5))]
+                                                if ratio.size else [float("nan")] * 2),
+                       "requested_highpass_hz": req,
+                       "disturbance_torque_rms": float(np.sqrt(rms_sq / rows)) if rows else float("nan")},
+            "significant": significant,
+            "evidence": "the roll/pitch torque kf of the band from the requested edge against the band above "
+                        "the chosen edge (highpass_rule); the base model, coefficients and every other effect "
+                        "are scored above the chosen edge"}
 
 
 def _agreement(shape: dict) -> dict:

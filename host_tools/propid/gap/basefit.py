@@ -60,14 +60,14 @@ def predicted_u(f: Flight, lowpass_only: bool) -> np.ndarray | None:
     if f.cmd is None:
         return None
     rows = segment_rows(f)
-    u_f = f.filtered(f.speed**2, lowpass_only)
+    u_f = f.filtered(f.speed**2, lowpass_only, response=not lowpass_only)
     out = np.zeros_like(u_f)
     for i in range(f.speed.shape[1]):
         feats = []
         for lag in INSTRUMENT_LAGS:
             c = _delayed(f.cmd[:, i], lag)
             feats += [c, c * c]
-        feats = f.filtered(np.column_stack(feats), lowpass_only)
+        feats = f.filtered(np.column_stack(feats), lowpass_only, response=not lowpass_only)
         coef, *_ = np.linalg.lstsq(feats[rows], u_f[rows, i], rcond=None)
         out[:, i] = feats @ coef
     return out
@@ -89,7 +89,7 @@ def fleet_fit(flights: list[Flight], axis: str, positions: np.ndarray, signs: np
         rows = segment_rows(f)
         main = main_regressor(axis, f.speed**2, positions, signs, shape)
         cols = [main[:, None]] + ([extra[fi]] if extra is not None and extra[fi] is not None else [])
-        x = f.filtered(np.column_stack(cols), lowpass_only)
+        x = f.filtered(np.column_stack(cols), lowpass_only, response=not lowpass_only)
         y = f.filtered(resp[axis] * response_scale, lowpass_only)
         z = x.copy()
         if instrumented:

@@ -92,9 +92,12 @@ def build_design(flights: list[Flight], ctx: Context, effects: list[Effect], mas
             parts = [cols[a]]
             for e, built in zip(effects, per_effect):
                 parts.append(built.get(a, np.zeros((len(f.t), len(e.params)))))
-            raw = np.column_stack(parts)
             lowpass_only = a == "thrust"
-            xs[a].append(f.filtered(raw, lowpass_only)[rows])
+            # torque axes: every column not itself a central difference gets the measured
+            # torque's difference response (prep.difference_response)
+            given = [not lowpass_only] + [not lowpass_only and not e.differenced for e in effects]
+            xs[a].append(np.column_stack([f.filtered(part, lowpass_only, response=g)
+                                          for part, g in zip(parts, given)])[rows])
             ys[a].append(f.filtered(resp[a], lowpass_only)[rows])
         block_of_row = np.full(len(f.t), -1)
         for k, (s, e) in enumerate(f.blocks):

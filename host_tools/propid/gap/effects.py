@@ -62,6 +62,9 @@ class Effect:
     # physical plausibility range of each fitted coefficient (raw column units), from the
     # vehicle's geometry (docs/gap.md "Plausibility ranges"); None where a bound is unknown
     bounds: Callable[[Context], list[tuple[float, float]]] | None = None
+    # its columns are central differences of logged signals themselves (a rotor or gyro
+    # acceleration), so they already carry the measured torque's difference response
+    differenced: bool = False
 
 
 def _thrusts(f: Flight, c: Context) -> np.ndarray:
@@ -322,7 +325,7 @@ EFFECTS: list[Effect] = [
     Effect("rotor_inertia", ("rotor_inertia",), ("kg m^2",), (), ("yaw",), _rotor_inertia,
            _identity_physical(("rotor_inertia",)),
            "yaw reaction of spinning rotors up/down: J_r sum s_i dOmega_i/dt", nonnegative=(0,),
-           bounds=_rotor_inertia_bounds),
+           bounds=_rotor_inertia_bounds, differenced=True),
     Effect("rotor_gyroscopic", ("rotor_inertia",), ("kg m^2",), (), ("roll", "pitch"), _rotor_gyroscopic,
            _identity_physical(("rotor_inertia",)),
            "gyroscopic torque of the rotors' angular momentum: J_r sum s_i Omega_i (w x z)", nonnegative=(0,),
@@ -338,7 +341,7 @@ EFFECTS: list[Effect] = [
     Effect("gyro_lowpass", ("time_constant_s",), ("s",), (), ("roll", "pitch", "yaw"), _gyro_lowpass,
            _identity_physical(("time_constant_s",)),
            "the logged rate is low-pass filtered (sensor filter, on-board estimator): first-order lag tau", nonnegative=(0,),
-           bounds=_lowpass_bounds),
+           bounds=_lowpass_bounds, differenced=True),
     Effect("com_offset", ("com_offset_x", "com_offset_y"), ("m", "m"), (), ("roll", "pitch"), _com_offset,
            _com_physical, "centre of mass off the described centre: torque d x (total thrust)", bounds=_com_bounds),
     Effect("aero_damping", ("damping_x", "damping_y", "damping_z"), ("N m s/rad",) * 3, (),
@@ -367,7 +370,8 @@ EFFECTS: list[Effect] = [
 # Not a candidate: a nuisance that one candidate is tested on top of (CONDITIONED_ON).
 RESIDUAL_LAG = Effect("residual_lag", ("delay_s",), ("s",), (), AXES, _residual_lag,
                       _identity_physical(("delay_s",)),
-                      "rotor stream lag left after the alignment, linearised: d dP/dt on every axis")
+                      "rotor stream lag left after the alignment, linearised: d dP/dt on every axis",
+                      differenced=True)
 
 # Look-alikes that one shared physical parameter tells apart: the candidate is tested (Wald,
 # held-out replication, sign, plausibility) on top of the nuisance. On yaw a telemetry lag d is,

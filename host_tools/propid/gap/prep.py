@@ -12,7 +12,9 @@ Rules (docs/gap.md, "Data preparation"):
   missing gyro samples are interpolated for the fits;
 - a sample-and-held rotor stream (more than 20 % of the rows repeat the previous row's
   rotor speeds exactly) is interpolated between its report instants;
-- derivatives by central differences on the log's time stamps;
+- derivatives by central differences on the log's time stamps; torque-axis regressors
+  that are not central differences themselves get the difference's response
+  (`difference_response`), so they are compared like with like;
 - measured torque tau = J dw/dt + w x J w with the vehicle file's J (and its
   `gyro_scale`, if given, undone first);
 - each segment is band-passed (zero phase) per `band`: torque axes high-passed at
@@ -76,14 +78,17 @@ class Flight:
     def rows(self) -> int:
         return sum(b - a for a, b in self.segs)
 
-    def filtered(self, x: np.ndarray, lowpass_only: bool = False) -> np.ndarray:
-        """Band-pass columns of x per segment; rows outside segments are 0."""
+    def filtered(self, x: np.ndarray, lowpass_only: bool = False, response: bool = False) -> np.ndarray:
+        """Band-pass columns of x per segment; rows outside segments are 0. `response`: also
+        give x the central difference's response (difference_response), as the measured
+        torque has it: for a regressor compared with J dw/dt."""
         two_d = x.ndim == 2
         xx = x if two_d else x[:, None]
         out = np.zeros_like(xx, dtype=float)
         lo = None if lowpass_only else self.band.highpass_hz
         for a, b in self.segs:
-            out[a:b] = bandpass(np.nan_to_num(xx[a:b]), self.rate_hz, lo, self.band.lowpass_hz)
+            y = bandpass(np.nan_to_num(xx[a:b]), self.rate_hz, lo, self.band.lowpass_hz)
+            out[a:b] = difference_response(y, self.rate_hz) if response else y
         return out if two_d else out[:, 0]
 
     def shifted(self, x: np.ndarray, delay_s: float) -> np.ndarray:
@@ -99,6 +104,23 @@ class Flight:
             for k in range(cols.shape[1]):
                 cols[a:b, k] = np.interp(tt + delay_s, tt, x[a:b, k] if two_d else x[a:b])
         return out
+
+
+def difference_response(x: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Columns of x given the response of a central difference against d/dt, sin(wT)/(wT)
+    with T the sample interval (0.94 at 10 Hz, 0.76 at 20 Hz in a 100 Hz log; 0.98 at 25 Hz
+    in a 500 Hz log). The measured angular acceleration is a central difference of the gyro,
+    so it reads an oscillation that much too small: a torque regressor that is not itself a
+    central difference gets the same response (a measurement model), rather than the torque
+    being divided by it (which amplifies the top of the band and its noise). Mirror-padded
+    FFT, as the band-pass's ends."""
+    n = x.shape[0]
+    xp = np.concatenate([x[::-1], x, x[::-1]])
+    w = 2.0 * np.pi * np.fft.rfftfreq(xp.shape[0], d=1.0 / rate_hz) / rate_hz
+    gain = np.ones_like(w)
+    gain[1:] = np.sin(w[1:]) / w[1:]
+    shape = (-1,) + (1,) * (x.ndim - 1)
+    return np.fft.irfft(np.fft.rfft(xp, axis=0) * gain.reshape(shape), n=xp.shape[0], axis=0)[n:2 * n]
 
 
 def _interp_missing(x: np.ndarray) -> np.ndarray:

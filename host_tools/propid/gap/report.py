@@ -174,6 +174,16 @@ def write_report(result: dict, directory: str | Path) -> Path:
     parts.append(_table(["quantity", "before", "95 % CI", "after", "95 % CI", "method"], rows))
     parts.append(f"<p>Agreement with the thrust kf: before {_fmt(result['base_fit_details']['agreement_before'])}; "
                  f"after {_fmt(result['base_fit_details']['agreement_after'])}.</p>")
+    parts.append(f"<p>{html.escape(result['base_fit_method'])}.</p>")
+    loop = next((e for e in result["effects"] if e["id"] == "closed_loop_cancellation" and e["significant"]), None)
+    if loop is not None:
+        p = loop["params"]
+        parts.append(f"<p><b>Closed-loop cancellation</b>: the roll/pitch torque kf of the band from "
+                     f"{_fmt(p['requested_highpass_hz'])} Hz is {_fmt(p['torque_gain_below'])}x the kf above "
+                     f"{_fmt(p['loop_bandwidth_hz'])} Hz (95 % {_fmt(p['torque_gain_below_ci'])}): the controller "
+                     f"cancels a slow torque ({_fmt(p['disturbance_torque_rms'])} N m rms below that edge) with its "
+                     f"rotors, which the gyro never sees. Before = from {_fmt(p['requested_highpass_hz'])} Hz; "
+                     f"after and every effect: above {_fmt(p['loop_bandwidth_hz'])} Hz.</p>")
     parts.append("<img src='base_fit.png'>")
     parts.append("<h2>Where the base model misses</h2>")
     w = result["where"]

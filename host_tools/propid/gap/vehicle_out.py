@@ -65,6 +65,10 @@ def corrected_vehicle(vehicle: Vehicle, effects: list[dict]) -> tuple[Vehicle, d
             if p["rotor_inertia"] > 0 and "rotor_inertia" not in {k for a in applied.values() for k in a}:
                 out.rotor_inertia = float(p["rotor_inertia"])
                 applied[eid] = {"rotor_inertia": out.rotor_inertia}
+        elif eid == "closed_loop_cancellation":
+            not_carried.append({"id": eid, "why": "a property of the closed loop, not of the vehicle: the filter "
+                                "would need torque rows above the loop's bandwidth (propid replay "
+                                f"--diagnostic-highpass {p['loop_bandwidth_hz']:g} is the diagnostic form)"})
         else:
             not_carried.append({"id": eid, "why": "no vehicle-file key for this effect"})
     notes = (" Corrected by propid gap: " + "; ".join(f"{k}: {v}" for k, v in applied.items())) if applied else ""

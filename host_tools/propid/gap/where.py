@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from propid.gap.design import Design, base_columns, responses, segment_rows
-from propid.gap.prep import Flight
+from propid.gap.prep import Flight, difference_response
 from propid.realdata_checks import bandpass
 
 BANDS = ((0.2, 1.0), (1.0, 2.0), (2.0, 5.0), (5.0, 10.0), (10.0, 20.0))
@@ -77,7 +77,7 @@ def per_band(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, kf
                 model = cols[a] @ theta
                 for s, e in f.segs:
                     y = bandpass(resp[a][s:e, None], f.rate_hz, lo, hi)[:, 0]
-                    m = bandpass(model[s:e, None], f.rate_hz, lo, hi)[:, 0]
+                    m = difference_response(bandpass(model[s:e, None], f.rate_hz, lo, hi), f.rate_hz)[:, 0]
                     res[a][0] += float(np.sum((y - m) ** 2))
                     res[a][1] += float(np.sum(y**2))
         out[key] = {a: (float(np.sqrt(v[0] / v[1])) if v[1] > 0 else None) for a, v in res.items()}
