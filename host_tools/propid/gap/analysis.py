@@ -38,17 +38,21 @@ class Options:
 
 
 HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0, 5.0)
+ALIGNMENT_HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0)  # the band the stream lag is searched in
 BAND_STABILITY = 0.10
+MIN_CANCELLATION_BLOCKS = 4  # fewer 2 s blocks give a bootstrap interval of a handful of values
 MIN_BAND_OCTAVES = 2.0  # a candidate high-pass leaves at least two octaves below the low-pass
 CLOSED_LOOP = "closed_loop_cancellation"
 
 
-def highpass_candidates(flights: list[Flight], band: Band) -> tuple[float, ...]:
+def highpass_candidates(flights: list[Flight], band: Band,
+                        candidates: tuple[float, ...] = HIGHPASS_CANDIDATES_HZ) -> tuple[float, ...]:
     top = min(band.for_rate(f.rate_hz).lowpass_hz for f in flights)
-    return tuple(h for h in HIGHPASS_CANDIDATES_HZ if h * 2.0**MIN_BAND_OCTAVES <= top) or HIGHPASS_CANDIDATES_HZ[:1]
+    return tuple(h for h in candidates if h * 2.0**MIN_BAND_OCTAVES <= top) or candidates[:1]
 
 
-def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band) -> tuple[Band, dict]:
+def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band,
+                    candidates: tuple[float, ...] = HIGHPASS_CANDIDATES_HZ) -> tuple[Band, dict]:
     """Closed-loop bias shows as a torque coefficient that depends on the band's lower
     edge: the controller cancels slow unmodelled torques, which drags the coefficient of
     a band reaching down to them towards 0. Rule: the lowest candidate high-pass whose
@@ -58,7 +62,7 @@ def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band) -> tupl
     below 1 - BAND_STABILITY (a noisy short log must not lose its slow content to scatter,
     and a low band reading MORE than a high one is not the closed-loop signature: a narrow
     high band is the attenuated one then); the highest candidate otherwise."""
-    candidates = highpass_candidates(flights, band)
+    candidates = highpass_candidates(flights, band, candidates)
     values, boots = {}, {}
     for hp in candidates:
         trial = [replace(f, band=Band(hp, band.lowpass_hz).for_rate(f.rate_hz)) for f in flights]
@@ -185,7 +189,13 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     progress = Progress(options.progress, total=60 + 12 * 6)
     flights = [prepare_flight(log, vehicle, options.band) for log in logs]
     band_rule = None
-    held_flights = [prepare_flight(log, vehicle, options.band) for log in holdout]
+    requested_band = options.band
+    if options.auto_highpass:  # the band the stream lag is searched in (the rule on unaligned logs)
+        search_band, _ = choose_highpass(flights, vehicle, options.band, ALIGNMENT_HIGHPASS_CANDIDATES_HZ)
+        flights = [replace(f, band=search_band.for_rate(f.rate_hz)) for f in flights]
+    else:
+        search_band = options.band
+    held_flights = [prepare_flight(log, vehicle, search_band) for log in holdout]
     progress(5)
     present = columns_present(logs + holdout, vehicle)
     with_thrust = bool(present["acc"] and present["mass"])
@@ -210,11 +220,11 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         align["per_log_delay_s"] = {f.name: d for f, d in zip(flights + held_flights, delays)}
     work = [shifted_flight(f, d) for f, d in zip(flights, delays)]
     work_held = [shifted_flight(f, d) for f, d in zip(held_flights, delays[len(flights):])]
-    # the band rule judges aligned logs: a misaligned rotor stream reads a torque fit that
-    # falls with frequency, which would hide the closed loop's rise above its bandwidth
-    requested_band = options.band
+    # the band rule again, on the aligned logs and with the 5 Hz candidate: a misaligned rotor
+    # stream reads a torque fit that falls with frequency, which would hide the closed loop's
+    # rise above its bandwidth
     if options.auto_highpass:
-        band, band_rule = choose_highpass(work, vehicle, options.band)
+        band, band_rule = choose_highpass(work, vehicle, requested_band)
         options = Options(band, options.progress, False)
         flights, held_flights, work, work_held = ([replace(f, band=band.for_rate(f.rate_hz)) for f in group]
                                                   for group in (flights, held_flights, work, work_held))
@@ -284,7 +294,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                         "significant": s["significant"], **({"step": s["step"]} if "step" in s else {}),
                         **({"conditioned_on": s["conditioned_on"]} if "conditioned_on" in s else {}),
                         **({"dropped": s["dropped"]} if "dropped" in s else {})})
-    loop_entry = closed_loop_entry(work_held or work, band_rule, requested_band, vehicle, kf_rotor, km_rotor)
+    loop_entry = closed_loop_entry(work_held or work, band_rule, requested_band, vehicle, kf_rotor, km_rotor,
+                                   fit_blocks=sum(len(f.blocks) for f in work))
     if loop_entry is not None:
         entries.append(loop_entry)
     if delay_significant:  # the alignment is applied before any effect is scored: it ranks by its own share
@@ -404,13 +415,13 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
 
 
 def closed_loop_entry(flights: list[Flight], band_rule: dict | None, requested: Band, vehicle: Vehicle,
-                      kf: np.ndarray, km: np.ndarray) -> dict | None:
+                      kf: np.ndarray, km: np.ndarray, fit_blocks: int) -> dict | None:
     """The controller cancelling a slow unmodelled torque with its rotors: the rotors then
     carry a torque the gyro never sees, so a torque fit over a band reaching down to it
     reads low (closed-loop identification bias). Its signature is the band rule's: the
     roll/pitch kf rises with the band's lower edge. Significant when the rule gave up the
     requested lower edge (the kf there shown more than BAND_STABILITY below the chosen
-    band's). Physical parameters: the band edge above which the fits agree (the loop's
+    band's) on at least MIN_CANCELLATION_BLOCKS fitted blocks. Physical parameters: the band edge above which the fits agree (the loop's
     disturbance-rejection bandwidth, to the candidates' resolution), the torque gain of
     the requested band against it, and the rms of the roll/pitch torque the base model
     (fitted above the loop) leaves below that edge: the disturbance torque the controller
@@ -458,7 +469,8 @@ def closed_loop_entry(flights: list[Flight], band_rule: dict | None, requested: 
     boot = np.asarray(boot)
     boot = boot[np.isfinite(boot)]
     ci = [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))] if boot.size else [float("nan")] * 2
-    significant = bool(chosen > req and ratio.size and np.percentile(ratio, 97.5) < 1.0 - BAND_STABILITY)
+    significant = bool(chosen > req and ratio.size and fit_blocks >= MIN_CANCELLATION_BLOCKS
+                       and np.percentile(ratio, 97.5) < 1.0 - BAND_STABILITY)
     return {"id": CLOSED_LOOP, "explained_fraction": frac, "ci": ci, "axes": ["roll", "pitch"],
             "params": {"loop_bandwidth_hz": chosen, "torque_gain_below": float(gain),
                        "torque_gain_below_ci": ([float(np.percentile(ratio, 2.5)), float(np.percentile(ratio, 97.5))]
