@@ -472,7 +472,10 @@ def closed_loop_entry(flights: list[Flight], band_rule: dict | None, requested: 
     significant = bool(chosen > req and ratio.size and fit_blocks >= MIN_CANCELLATION_BLOCKS
                        and np.percentile(ratio, 97.5) < 1.0 - BAND_STABILITY)
     return {"id": CLOSED_LOOP, "explained_fraction": frac, "ci": ci, "axes": ["roll", "pitch"],
-            "params": {"loop_bandwidth_hz": chosen, "torque_gain_below": float(gain),
+            "params": {"loop_bandwidth_hz": chosen,
+                       # the highest candidate: the kf may still rise above it (a lower bound)
+                       "loop_bandwidth_at_least": bool(chosen == cands[-1] and chosen > cands[0]),
+                       "torque_gain_below": float(gain),
                        "torque_gain_below_ci": ([float(np.percentile(ratio, 2.5)), float(np.percentile(ratio, 97.5))]
                                                 if ratio.size else [float("nan")] * 2),
                        "requested_highpass_hz": req,
