@@ -118,6 +118,30 @@ def test_summary_counts_and_keeps_sub_limit_flights_out_of_the_headline():
     assert s["by_detectability"]["0-5"]["n"] == 1
 
 
+def test_truths_under_the_tools_reporting_floors_are_counted_beside_the_headline():
+    """An esc_delay under 5 ms or a scale error under 3 % is below what the tool reports by its
+    own documented floors: such flights stay in the headline, and are counted apart beside it."""
+    def drawn(fid, kind, effects):
+        return {"flight_id": fid, "kind": kind, "effects": [
+            {"id": e, "strength": v, "detectability": 12.0, "below_limit": False} for e, v in effects]}
+    records = [
+        score_flight(drawn("a", "single", [("esc_delay", 0.001)]), result("none")),
+        score_flight(drawn("b", "single", [("esc_delay", 0.02)]), result("esc_delay", ["esc_delay"])),
+        score_flight(drawn("c", "single", [("gyro_scale", -0.02)]), result("none")),
+        score_flight(drawn("d", "single", [("inertia_error", 0.1)]), result("none")),
+        score_flight(drawn("e", "pair", [("gyro_scale", 0.007), ("com_offset", 0.1)]),
+                     result("com_offset", ["com_offset"])),
+        score_flight(drawn("f", "single", [("thrust_nonlinearity", 0.01)]), result("none")),
+    ]
+    assert [r["under_floor"] for r in records] == [True, False, True, False, True, False]
+    s = summarize(records)
+    assert s["overall"] == {"n": 6, "accuracy": pytest.approx(1 / 6)}  # the headline is unchanged
+    assert s["under_floor"] == {"n": 3, "accuracy": 0.0}
+    assert s["above_floors"]["overall"] == {"n": 3, "accuracy": pytest.approx(1 / 3)}
+    assert s["above_floors"]["singles"]["n"] == 3 and s["above_floors"]["pairs"]["n"] == 0
+    assert "truth under the tool's reporting floors" in render({"tool": s, "baseline": s})
+
+
 def test_lowpass_keeps_a_slow_sine_and_differentiates_it():
     fs = 500.0
     t = np.arange(0, 6, 1 / fs)

@@ -16,6 +16,11 @@ Rules, fixed before any run (docs/gap-bench.md):
   instead of naming it, the flight is not right but counted apart;
 - flights whose true effect is below the detection limit even at its plausible
   maximum (answer `below_limit`) are scored but kept out of the headline figures;
+- under the tool's reporting floors: a flight whose true effect is drawn below a floor
+  the tool documents and applies (docs/gap.md: an esc_delay under MIN_REPORTED_LAG_S, the
+  sensor chain's own lag; an inertia_error or gyro_scale under MIN_SCALE_EFFECT_SIZE, an
+  accelerometer's zero-g offset) stays in the headline figures; the figures without such
+  flights and their count are reported beside them (`above_floors`, `under_floor`);
 - shrink: per flight, the largest relative reduction of the per-axis residual RMS
   (1 - rms_after / rms_before) over the axes the tool reports.
 A run that fails (no OUT.json, bad JSON) is wrong, counted as failed.
@@ -25,10 +30,28 @@ from __future__ import annotations
 
 import math
 
+from propid.gap.effects import MIN_REPORTED_LAG_S
+from propid.gap.scoring import MIN_SCALE_EFFECT_SIZE
 from propid.gapbench.magnitudes import EFFECTS
 
 # Bands of the (smallest true effect's) detectability index, for "at which magnitudes".
 DETECTABILITY_BANDS = ((0.0, 5.0), (5.0, 10.0), (10.0, 20.0), (20.0, float("inf")))
+
+
+# true effects whose strength is a relative torque scale (magnitudes.py units)
+SCALE_STRENGTH = ("inertia_error", "gyro_scale")
+
+
+def under_reporting_floor(effect: dict) -> bool:
+    """A true effect drawn below a floor the tool itself applies before naming it."""
+    strength = effect.get("strength")
+    if not isinstance(strength, (int, float)):
+        return False
+    if effect["id"] == "esc_delay":
+        return abs(strength) < MIN_REPORTED_LAG_S
+    if effect["id"] in SCALE_STRENGTH:
+        return abs(strength) < MIN_SCALE_EFFECT_SIZE
+    return False
 
 
 def significant_ids(result: dict) -> list[str]:
@@ -80,6 +103,7 @@ def score_flight(answer: dict, result: dict | None) -> dict:
     indices = [e["detectability"] for e in answer["effects"]]
     record = {"flight_id": answer["flight_id"], "kind": kind, "truth": truth,
               "below_limit": below, "headline": not below,
+              "under_floor": any(under_reporting_floor(e) for e in answer["effects"]),
               "detectability": min(indices) if indices else None}
     if not isinstance(result, dict) or "verdict" not in result:
         record.update(failed=True, right=False, false_effect=False, false_effect_strict=False,
@@ -146,6 +170,8 @@ def summarize(records: list[dict]) -> dict:
     nones = [r for r in head if r["kind"] == "none"]
     below = [r for r in records if not r["headline"]]
     effectful = [r for r in head if r["kind"] != "none"]
+    above = [r for r in head if not r.get("under_floor")]
+    under = [r for r in head if r.get("under_floor")]
     return {
         "flights": len(records),
         "headline_flights": len(head),
@@ -159,6 +185,11 @@ def summarize(records: list[dict]) -> dict:
         "failed": sum(r["failed"] for r in records),
         "ambiguous_hits": sum(r["ambiguous_hit"] for r in head),
         "below_limit": {"n": len(below), "accuracy": _fraction(sum(r["right"] for r in below), len(below))},
+        "under_floor": {"n": len(under), "accuracy": _fraction(sum(r["right"] for r in under), len(under))},
+        "above_floors": {
+            kind: {"n": len(rows), "accuracy": _fraction(sum(r["right"] for r in rows), len(rows))}
+            for kind, rows in (("overall", above), ("singles", [r for r in above if r["kind"] == "single"]),
+                               ("pairs", [r for r in above if r["kind"] == "pair"]))},
         "shrink_median": _median([r["shrink"] for r in effectful if r["right"]]),
         "per_effect": per_effect,
         "by_detectability": {

@@ -31,6 +31,10 @@ def render(result: dict) -> str:
     acc_row("pairs (top two)", lambda s: s["pairs"])
     acc_row("effect-free (none)", lambda s: s["none"])
     acc_row("all right (target >= 95 %)", lambda s: s["overall"])
+    acc_row("  single effects, truth above the tool's floors", lambda s: s["above_floors"]["singles"])
+    acc_row("  pairs, truth above the tool's floors", lambda s: s["above_floors"]["pairs"])
+    acc_row("  all right, truth above the tool's floors", lambda s: s["above_floors"]["overall"])
+    acc_row("  truth under the tool's reporting floors", lambda s: s["under_floor"])
     rows.append(("false-effect rate (<= 5 %)", str(base["headline_flights"]),
                  _cell(tool, lambda s: _pct(s["false_effect_rate"])), _pct(base["false_effect_rate"])))
     rows.append(("  counting ambiguous members false", "",
