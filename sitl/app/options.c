@@ -50,6 +50,7 @@ void sitl_options_default(sitl_options_t *o)
     sitl_imu_default_params(&o->imu);
     sitl_esc_default_params(&o->esc);
     o->motor_time_constant = -1.0;
+    o->disturbance_torque_time = 0.5;
     o->rotor_speed_min = -1.0;
     o->rotor_speed_max = -1.0;
     o->prior_kf_rel_std = -1.0;
@@ -328,6 +329,13 @@ static const opt_t options[] = {
          "Replaces --filter-rotor-speed-noise(-time), --filter-esc-delay\n"
          "and --filter-input-error-compensation"),
 
+    NUMBER("Disturbance", "disturbance-torque", disturbance_torque_std, 0.0, 10.0, "NM",
+           "a random body torque outside every model, std per axis [N m]:\n"
+           "first-order Gauss-Markov, updated at the control rate; the\n"
+           "controller cancels it inside its bandwidth (docs/math.md §7).\n"
+           "Default 0 (none)"),
+    NUMBER(NULL, "disturbance-torque-time", disturbance_torque_time, 1e-3, 100.0, "S",
+           "its correlation time [s] (default 0.5)"),
     NUMBER("Vehicle overrides", "motor-tau", motor_time_constant, 1e-5, 10.0, "S",
            "motor time constant [s]"),
     NUMBER(NULL, "rotor-speed-min", rotor_speed_min, 0.0, 1e5, "RAD_S", "minimum rotor speed"),

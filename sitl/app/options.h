@@ -76,6 +76,8 @@ typedef struct {
 
     /* Vehicle overrides (< 0 = keep the vehicle's value). */
     double motor_time_constant;
+    double disturbance_torque_std;      /* random body torque [N m] per axis, 0: none */
+    double disturbance_torque_time;     /* its correlation time [s] */
     double rotor_speed_min;
     double rotor_speed_max;
 

@@ -142,10 +142,26 @@ typedef struct {
     int last_status;
     propid_damage_t detector;
     int damage_applied[SITL_MAX_DAMAGE];
+    sitl_rng_t disturbance_rng; /* its own stream: every other draw is the same with and without it */
 #ifdef PROPID_SITL_WITH_MAVLINK
     sitl_mavlink_t *link;
 #endif
 } flight_t;
+
+/* --disturbance-torque: a first-order Gauss-Markov torque of the given std per axis, exact
+ * discretisation over one control period, held by the plant until the next update. */
+static void update_disturbance_torque(flight_t *f, const sitl_options_t *o, double period_ns)
+{
+    if (!(o->disturbance_torque_std > 0.0)) {
+        return;
+    }
+    const double pole = exp(-period_ns * 1e-9 / o->disturbance_torque_time);
+    const double drive = o->disturbance_torque_std * sqrt(1.0 - pole * pole);
+    for (int k = 0; k < 3; k++) {
+        f->plant.disturbance_torque[k] = pole * f->plant.disturbance_torque[k] +
+                                         drive * sitl_rng_normal(&f->disturbance_rng);
+    }
+}
 
 static int fail(sitl_result_t *r, int code, const char *msg)
 {
@@ -301,6 +317,7 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
 
     sitl_imu_init(&f->imu, &o->imu, o->seed, &o->effects);
     sitl_faults_init(&f->faults, &o->faults, o->seed);
+    sitl_rng_init(&f->disturbance_rng, o->seed, SITL_RNG_DISTURBANCE_TORQUE);
     double history_rate = o->physics_rate_hz + o->imu.rate_hz + o->esc.rate_hz +
                           o->control_rate_hz;
     if (sitl_esc_init(&f->esc, &o->esc, n, sitl_effects_esc_extra_delay(&o->effects),
@@ -591,6 +608,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
             f->true_kf[0] *= 0.7;
         }
         if (now_ns == control.next_ns || now_ns >= end_ns) {
+            update_disturbance_torque(f, o, control.period_ns);
             sitl_flat_output_t ref;
             sitl_trajectory_eval(&f->trajectory, t, &ref);
             const propid_status_t est_status = propid_get_estimate(&f->filter, &est);

@@ -24,6 +24,7 @@ enum {
     SITL_RNG_ESC = 5,
     SITL_RNG_GYRO_BIAS = 6,
     SITL_RNG_ACCEL_BIAS = 7,
+    SITL_RNG_DISTURBANCE_TORQUE = 8,
 };
 
 void sitl_rng_init(sitl_rng_t *rng, uint64_t seed, uint64_t stream);

@@ -106,6 +106,12 @@ void sitl_plant_derivative(const sitl_plant_t *plant, const sitl_state_t *state,
         }
     }
 
+    for (int k = 0; k < 3; k++) {
+        if (plant->disturbance_torque[k] != 0.0) {
+            ld->torque_body[k] += plant->disturbance_torque[k];
+        }
+    }
+
     /* Translation: a = R F / m - g z. */
     double accel[3];
     sitl_mat3_mul_vec(accel, rot, ld->force_body);
@@ -143,11 +149,15 @@ void sitl_plant_derivative(const sitl_plant_t *plant, const sitl_state_t *state,
     }
 }
 
-/* Effects that change the rotor loads or add a wrench: with none of them on,
- * the derivative is the plain rigid body below. */
+/* Effects that change the rotor loads or add a wrench, or a disturbance torque: with none of
+ * them, the derivative is the plain rigid body below. */
 static int plain_physics(const sitl_plant_t *plant)
 {
     const int *on = plant->effects.enabled;
+    if (plant->disturbance_torque[0] != 0.0 || plant->disturbance_torque[1] != 0.0 ||
+        plant->disturbance_torque[2] != 0.0) {
+        return 0;
+    }
     return !(on[SITL_EFFECT_THRUST_NONLINEARITY] | on[SITL_EFFECT_TRANSLATIONAL_LIFT] |
              on[SITL_EFFECT_GROUND_EFFECT] | on[SITL_EFFECT_ROTOR_INERTIA] |
              on[SITL_EFFECT_ROTOR_GYROSCOPIC] | on[SITL_EFFECT_ROTOR_DRAG] |

@@ -28,6 +28,9 @@ typedef struct {
     double drag_coeff[SITL_MAX_ROTORS];          /* true km */
     sitl_motor_t motor;
     double reference_rotor_speed;                /* nominal hover speed (thrust_nonlinearity) */
+    /* A body torque from outside the model (gusts, a flexing frame) [N m], held between the
+     * simulation's updates of it (sim.c, --disturbance-torque); 0: none. */
+    double disturbance_torque[3];
 } sitl_plant_t;
 
 typedef struct {
