@@ -55,6 +55,8 @@ static void reset_moments(propid_damage_t *detector, uint8_t rotor)
     detector->cov1[rotor] = 0.0f;
     detector->residual_var[rotor] = 1.0f;
     detector->previous[rotor] = 0.0f;
+    detector->offset[rotor] = 0.0f;
+    detector->offset_last[rotor] = 0.0f;
 }
 
 static float clip_symmetric(float value, float bound)
@@ -124,6 +126,7 @@ propid_status_t propid_damage_init(propid_damage_t *detector, const propid_damag
     detector->threshold = threshold;
     detector->rotor_count = rotor_count;
     detector->last_rotor = -1;
+    detector->reanchors_seen = filter->counters.gate_reopened;
     for (uint8_t i = 0; i < rotor_count; ++i) {
         reset_moments(detector, i);
     }
@@ -190,6 +193,21 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
         inv_sd[a] = magnitude / fabsf(nu);
     }
 
+    /* Axes the filter re-anchored on this sample (propid_gyro.c: after
+     * gate_max_consecutive gated samples in a row the rate is set on the gyro):
+     * the re-anchor count moved, and the axis' innovation is outside the gate
+     * with its gated run back at zero. The stored innovation is the one before
+     * the re-anchor; from the next sample on that axis' innovation has lost
+     * it, a step the filter made itself. */
+    uint8_t reanchored[3] = {0u, 0u, 0u};
+    const uint32_t reanchors = filter->counters.gate_reopened;
+    if (reanchors != detector->reanchors_seen && filter->derived.gate_sq > 0.0f) {
+        detector->reanchors_seen = reanchors;
+        for (uint8_t a = 0; a < 3u; ++a) {
+            reanchored[a] = (uint8_t)(core->innovation_test_ratio[a] > 1.0f && core->gated_run[a] == 0u);
+        }
+    }
+
     const uint8_t rotor_count = detector->rotor_count;
     float km_rel[PROPID_MAX_ROTORS];
     const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
@@ -216,7 +234,8 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
             detector->statistic[i] = 0.0f; /* a stopped rotor leaves no signature */
             continue;
         }
-        const float projection = -dot / sqrtf(norm_sq);
+        const float norm = sqrtf(norm_sq);
+        const float projection = -dot / norm;
         /* The projection of a real filter's innovations is neither centred nor
          * white: slow model error shifts it (the running mean removes that),
          * and fast correlated model error (estimates drifting under quantised
@@ -238,8 +257,18 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
         const float correlation = rho < PROPID_DAMAGE_RHO_MAX ? rho : PROPID_DAMAGE_RHO_MAX;
         const float residual = deviation - correlation * detector->previous[i];
         const float residual_sd = sqrtf(detector->residual_var[i]);
-        const float level = deviation / sd;
-        const float whitened = residual / residual_sd;
+        /* The filter's own re-anchors (below) lift the projection by a known
+         * amount: only a rise can look like a loss, and only a rise is taken
+         * off, so every increment is at most the uncompensated one and the
+         * false-alarm rate derived for those still bounds it. */
+        /* An offset explains at most the rise the projection still shows: a
+         * re-anchored level that grows back (the model error rebuilds the
+         * rate error) takes it with it, and re-anchors in a row do not pile up. */
+        const float rise_left = deviation > 0.0f ? deviation : 0.0f;
+        const float offset = detector->offset[i] < rise_left ? detector->offset[i] : rise_left;
+        const float offset_residual = offset - correlation * detector->offset_last[i];
+        const float level = (deviation - offset) / sd;
+        const float whitened = (residual - (offset_residual > 0.0f ? offset_residual : 0.0f)) / residual_sd;
         const float standard = level < whitened ? level : whitened;
         /* Update the moments with values clipped to +-3 running sigmas, so an
          * onset is not absorbed. */
@@ -258,6 +287,19 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
         if (detector->residual_var[i] < PROPID_DAMAGE_VAR_FLOOR) {
             detector->residual_var[i] = PROPID_DAMAGE_VAR_FLOOR;
         }
+        /* The offset of this sample decays as the running mean absorbs a
+         * persisting step; a re-anchor on this sample adds the rise it makes in
+         * the next sample's projection: the re-anchored axis' innovation loses
+         * its level (the stored innovation, the rate error the re-anchor
+         * removed), so that axis' share -g_a z_a / |g| leaves the projection. */
+        float rise = 0.0f;
+        for (uint8_t a = 0; a < 3u; ++a) {
+            if (reanchored[a]) {
+                rise += g[a] * z[a] / norm;
+            }
+        }
+        detector->offset_last[i] = offset;
+        detector->offset[i] = (1.0f - alpha) * offset + (rise > 0.0f ? rise : 0.0f);
         if (!armed || holding) {
             continue;
         }

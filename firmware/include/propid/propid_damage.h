@@ -51,11 +51,14 @@ typedef struct {
     float cov1[PROPID_MAX_ROTORS];         /* running lag-1 autocovariance of the projection */
     float residual_var[PROPID_MAX_ROTORS]; /* running variance of its AR(1) prediction error */
     float previous[PROPID_MAX_ROTORS];     /* previous deviation from the mean, clipped at 3 sigma */
+    float offset[PROPID_MAX_ROTORS];       /* rise of the projection made by the filter's re-anchors, decaying */
+    float offset_last[PROPID_MAX_ROTORS];  /* the offset of the previous sample */
     float armed_s;                         /* time since (re-)start, arms the bank */
     uint64_t last_time_us;                 /* estimate time of the previous step */
     uint64_t hold_until_us;                /* bank frozen until then */
     uint64_t last_detection_us;            /* time of the latest detection */
     uint32_t detections;                   /* count since init */
+    uint32_t reanchors_seen;               /* the filter's gate re-opening count at the last step */
     uint16_t damaged_mask;                 /* bit i: rotor i detected since init */
     uint8_t rotor_count;
     uint8_t has_time;
