@@ -16,8 +16,9 @@ thrust columns in the roll and pitch rows or the four drag columns in the yaw
 row). From that structure the script writes the straight-line kernel
 
     P := F P F^T + Q dt + PROPID_VAR_LOADING diag(F P F^T) on the thrust
-         coefficients and biases, + PROPID_RATE_LOADING diag on the rates,
-         + Ld diag_drag(P) on the drag coefficients
+         coefficients and biases, + Ld diag_drag(P) on the drag coefficients,
+         + PROPID_RATE_LOADING m (P_aa + sum_p G_ap^2 P_pp) on the rates
+         (their rounding scale, m = 7 terms a row)
 
 (the rounding loading; the caller's Ld, drag_factor = 1 + Ld: docs/math.md §2)
 on the packed upper triangle (firmware/src/propid_quad_predict.h): column by
@@ -126,10 +127,22 @@ def generate() -> str:
     def own_loading(k: int) -> sympy.Symbol:
         return {"drag": drag_loading, "rate": rate_loading}.get(kind(k), loading)
 
+    # The rates' rounding scale (docs/math.md §2, "The rate block's loading"):
+    # m (P_aa + sum_p G_ap^2 P_pp) >= (sum_k |F_ak| sigma_k)^2 >= (|F| |P| |F|^T)_aa
+    # by Cauchy-Schwarz over the row's m = 1 + entries terms.
+    row_terms = 1 + entries
+    rate_scale_loading = f"({row_terms}.0f * PROPID_RATE_LOADING)"
+    scale_factor = rate_loading * row_terms                 # c of the C above, symbolically
+    rate_scale = [p_symbol(a, a) + sum(g[a][p] ** 2 * p_symbol(column, column)
+                                       for p, column in enumerate(structure[a])) for a in range(3)]
+
     def wanted(i: int, j: int) -> sympy.Expr:
         value = predicted[i, j]
         if i == j:
-            value += own_loading(i) * value + q[kind(i)]
+            if kind(i) == "rate":
+                value += rate_loading * row_terms * rate_scale[i] + q["rate"]
+            else:
+                value += own_loading(i) * value + q[kind(i)]
         return sympy.expand(value)
 
     def check_against_model(written: dict[tuple[int, int], sympy.Expr], what: str) -> None:
@@ -170,8 +183,8 @@ def generate() -> str:
         emit("        const float " + ", ".join(loads[7:]) + ";")
         t = []
         for a in range(3):
-            terms = [f"g{a}_{p} * {names[col]}" for p, col in enumerate(structure[a])]
-            emit(f"        const float t{a} = ({' + '.join(terms)}) + {names[a]};")
+            products = [f"g{a}_{p} * {names[col]}" for p, col in enumerate(structure[a])]
+            emit(f"        const float t{a} = ({' + '.join(products)}) + {names[a]};")
             t.append(sum(g[a][p] * sym[col] for p, col in enumerate(structure[a])) + sym[a])
         if j < FIRST_THRUST:
             for a in range(3):
@@ -186,14 +199,21 @@ def generate() -> str:
                 emit("        PROPID_RELOAD_BARRIER(rate_col2);")
             emit("    }")
             continue
-        # The coefficient columns' share of the rate block (T F^T)_ab, b >= a.
+        # The coefficient columns' share of the rate block (T F^T)_ab, b >= a; on
+        # the diagonal with the column's share of the rate's loading folded in,
+        # (T_aj + c G_aj P_jj) G_aj, c P_jj loaded once for the rows that use it.
+        if any(j in structure[a] for a in range(3)):
+            emit(f"        const float {names[j]}_loaded = {rate_scale_loading} * {names[j]};")
         for a in range(3):
             for b in range(a, 3):
                 if j in structure[b]:
                     p = structure[b].index(j)
-                    block_terms[(a, b)].append(f"block{a}{b} += t{a} * g{b}_{p};")
-                    emit(f"        block{a}{b} += t{a} * g{b}_{p};")
-                    block[(a, b)] += t[a] * g[b][p]
+                    if a == b:
+                        emit(f"        block{a}{b} += (t{a} + g{b}_{p} * {names[j]}_loaded) * g{b}_{p};")
+                        block[(a, b)] += (t[a] + g[b][p] * scale_factor * sym[j]) * g[b][p]
+                    else:
+                        emit(f"        block{a}{b} += t{a} * g{b}_{p};")
+                        block[(a, b)] += t[a] * g[b][p]
         for a in range(3):
             store(a, j, f"t{a}", t[a])
         own = names.get(j, None)
@@ -210,21 +230,30 @@ def generate() -> str:
         emit("        PROPID_SCHEDULE_BARRIER();")
         emit("    }")
     # The rate block from the rate columns and the collected coefficient terms.
-    emit("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp. */")
+    emit("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp; on the")
+    emit("     * diagonal + the loading c (P_aa + sum_p G_ap^2 P_pp), its coefficient terms")
+    emit("     * collected in the sweep, its rate terms here (the rate variances, c times). */")
+    loaded_rates = ", ".join(f"p{r}_loaded = {rate_scale_loading} * cov[propid_cov_index({r}u, {r}u)]"
+                             for r in range(3))
+    emit(f"    const float {loaded_rates};")
     for a in range(3):
         for b in range(a, 3):
-            terms = rate_block_terms(structure, a, b, lambda r, c: f"rate_col{r}[{c}]",
-                                     lambda r, p: f"g{r}_{p}")
+            products = rate_block_terms(structure, a, b, lambda r, c: f"rate_col{r}[{c}]",
+                                        lambda r, p: f"g{r}_{p}")
             value = rate_cols[(a, b)] + block[(a, b)]
             for p, column in rate_terms_of_row(structure, b):
                 value += rate_cols[(a, column)] * g[b][p]
             if a == b:
-                emit(f"    const float f{a}{b} = {' + '.join(terms)};")
-                emit(f"    cov[propid_cov_index({a}u, {b}u)] = (1.0f + PROPID_RATE_LOADING) * f{a}{b} + "
-                     f"q_rate;")
-                checked[(a, b)] = (1 + rate_loading) * value + q["rate"]
+                loaded = [f"(rate_col{a}[{column}] + g{b}_{p} * p{column}_loaded) * g{b}_{p}"
+                          for p, column in rate_terms_of_row(structure, b)]
+                emit(f"    const float f{a}{b} = {' + '.join([f'rate_col{a}[{a}]'] + loaded + [f'block{a}{b}', f'p{a}_loaded'])};")
+                emit(f"    cov[propid_cov_index({a}u, {b}u)] = f{a}{b} + q_rate;")
+                value = rate_cols[(a, a)] + block[(a, a)] + scale_factor * p_symbol(a, a)
+                for p, column in rate_terms_of_row(structure, b):
+                    value += (rate_cols[(a, column)] + g[b][p] * scale_factor * p_symbol(column, column)) * g[b][p]
+                checked[(a, b)] = value + q["rate"]
             else:
-                emit(f"    cov[propid_cov_index({a}u, {b}u)] = {' + '.join(terms)};")
+                emit(f"    cov[propid_cov_index({a}u, {b}u)] = {' + '.join(products)};")
                 checked[(a, b)] = value
 
     check_against_model(checked, "element")
@@ -255,7 +284,8 @@ def generate() -> str:
             for p in range(n_rate_entries, entries):
                 if structure[b][p] == j:
                     for a in range(b + 1):
-                        lean_block[(a, b)] += t[a] * g[b][p]
+                        own_share = g[b][p] * scale_factor * p_symbol(j, j) if a == b else 0
+                        lean_block[(a, b)] += (t[a] + own_share) * g[b][p]
         for a in range(3):
             lean[(a, j)] = t[a]
         factor = 1 + (drag_loading if kind(j) == "drag" else loading)
@@ -266,7 +296,11 @@ def generate() -> str:
             for p in range(n_rate_entries):
                 value += lean_rate_col[(a, structure[b][p])] * g[b][p]
             value += lean_block[(a, b)]
-            lean[(a, b)] = (1 + rate_loading) * value + q["rate"] if a == b else value
+            if a == b:
+                value += scale_factor * p_symbol(a, a) + sum(
+                    g[b][p] * scale_factor * p_symbol(structure[b][p], structure[b][p]) * g[b][p]
+                    for p in range(n_rate_entries))
+            lean[(a, b)] = value + q["rate"] if a == b else value
     check_against_model(lean, "lean kernel's element")
     entry_table = ", ".join("{" + ", ".join(f"{row.index(c)}u" if c in row and c >= FIRST_THRUST else "0xFFu"
                                             for c in range(N)) + "}" for row in structure)
@@ -311,14 +345,18 @@ def generate() -> str:
         out(f"            rate_col[{a_}][j] = t{a_};")
     out("            continue;")
     out("        }")
+    out("        float *diagonal = &cov[propid_cov_index(j, j)];")
+    out("        const float own = *diagonal;")
+    out(f"        const float own_loaded = {rate_scale_loading} * own; /* the diagonal's share of the loading */")
     for b_ in range(3):
         out(f"        const uint8_t p{b_} = propid_quad_jac_entry[{b_}][j];")
         out(f"        if (p{b_} < {entries}u) {{")
         for a_ in range(b_ + 1):
-            out(f"            block{a_}{b_} += t{a_} * jacobian_dt[{b_}][p{b_}];")
+            if a_ == b_:
+                out(f"            block{a_}{b_} += (t{a_} + jacobian_dt[{b_}][p{b_}] * own_loaded) * jacobian_dt[{b_}][p{b_}];")
+            else:
+                out(f"            block{a_}{b_} += t{a_} * jacobian_dt[{b_}][p{b_}];")
         out("        }")
-    out("        float *diagonal = &cov[propid_cov_index(j, j)];")
-    out("        const float own = *diagonal;")
     for a_ in range(3):
         out(f"        cov[propid_cov_index({a_}u, j)] = t{a_};")
     out(f"        if (j < {FIRST_DRAG}u) {{")
@@ -329,15 +367,21 @@ def generate() -> str:
     out("            *diagonal = (1.0f + PROPID_VAR_LOADING) * own + q_bias;")
     out("        }")
     out("    }")
-    out("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp. */")
+    out("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp; on the")
+    out("     * diagonal + the loading's rate terms (the coefficient terms are in block_aa). */")
+    out("    float rate_loaded[3]; /* constant indices: one cov_index call site, kept inline at -Os */")
+    for r in range(3):
+        out(f"    rate_loaded[{r}] = {rate_scale_loading} * cov[propid_cov_index({r}u, {r}u)];")
     for a_ in range(3):
         for b_ in range(a_, 3):
-            terms = rate_block_terms(structure, a_, b_, lambda r, c: f"rate_col[{r}][{c}]",
-                                     lambda r, p: f"jacobian_dt[{r}][{p}]")
+            products = rate_block_terms(structure, a_, b_, lambda r, c: f"rate_col[{r}][{c}]",
+                                        lambda r, p: f"jacobian_dt[{r}][{p}]")
             if a_ == b_:
-                out(f"    cov[propid_cov_index({a_}u, {b_}u)] = (1.0f + PROPID_RATE_LOADING) * ({' + '.join(terms)}) + q_rate;")
+                loaded = [f"(rate_col[{a_}][{column}] + jacobian_dt[{b_}][{p}] * rate_loaded[{column}]) * jacobian_dt[{b_}][{p}]"
+                          for p, column in rate_terms_of_row(structure, b_)]
+                out(f"    cov[propid_cov_index({a_}u, {b_}u)] = {' + '.join([f'rate_col[{a_}][{a_}]'] + loaded + [f'block{a_}{b_}', f'rate_loaded[{a_}]'])} + q_rate;")
             else:
-                out(f"    cov[propid_cov_index({a_}u, {b_}u)] = {' + '.join(terms)};")
+                out(f"    cov[propid_cov_index({a_}u, {b_}u)] = {' + '.join(products)};")
     out("}")
     lean_text = "\n".join(lean_lines) + "\n"
 
@@ -348,8 +392,9 @@ def generate() -> str:
     header = f"""/* Generated by firmware/codegen/quad_predict.py from its symbolic quad model:
  * do not edit (regenerate; tests/host_tools/test_codegen.py checks it is current).
  *
- * P := F P F^T + Q dt + PROPID_VAR_LOADING diag(F P F^T) (rates:
- * PROPID_RATE_LOADING; drag coefficients: drag_factor - 1) for the fixed quad layout (propid_internal.h), on the packed upper triangle, F = I + G with G in the 3
+ * P := F P F^T + Q dt + PROPID_VAR_LOADING diag(F P F^T) (rates: PROPID_RATE_LOADING
+ * of their rounding scale 7 (P_aa + sum_p G_ap^2 P_pp), docs/math.md §2; drag
+ * coefficients: drag_factor - 1) for the fixed quad layout (propid_internal.h), on the packed upper triangle, F = I + G with G in the 3
  * rate rows only: column by column, the 11 non-bias P_cj loaded once for the
  * three rows of T = F_rate P, the 18 G entries in registers, the rate block's
  * coefficient-column terms collected during the sweep; the rate columns (j < 3)

@@ -225,7 +225,10 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
 #define PROPID_ROUNDING_TOL (2.0f * PROPID_VAR_LOADING)
 
 /* Rate loading (docs/math.md §2 "The rate block's loading"): the body rates'
- * predicted variances get PROPID_RATE_LOADING instead. A gyro update cuts a rate
+ * predicted variances get PROPID_RATE_LOADING of their rounding scale
+ * m (P_aa + sum_p G_ap^2 P_pp) instead (m = 1 + the row's Jacobian entries, 7 in
+ * the quad layout; the general path takes max(8, m) eps for a longer row), which
+ * is also above what the prediction's own rounding can take. A gyro update cuts a rate
  * variance by its cancellation factor f = P_pred / P_post and rounds the rate
  * block by up to ~6 eps f relative to the result; a loading of l eps before the
  * update leaves a gap of about l eps f in the rate block's correlation after it,

@@ -295,20 +295,11 @@ static __attribute__((noinline)) void predict_covariance_any(
 {
     /* T = rate rows of F P = P_a + sum_p G_ap P_(column p). */
     float rows[3][PROPID_MAX_STATES];
-    /* Each rate variance's scale (sum_k |F_ak| sigma_k)^2 >= (|F| |P| |F|^T)_aa,
-     * what its rounding is relative to (docs/math.md §2, "The rate block's
-     * loading"): loaded by PROPID_RATE_LOADING of it, not of the result. */
+    /* Each rate variance is loaded by eps l m (P_aa + sum_p (G_ap dt)^2 P_(column p)),
+     * m = 1 + the row's entries, l = max(8, m) (docs/math.md §2, "The rate block's
+     * loading"): by Cauchy-Schwarz at least l eps (|F| |P| |F|^T)_aa, above what the
+     * rounding of this prediction (at most about m eps of that) can take from it. */
     float scale[3];
-    for (uint8_t a = 0; a < 3u; ++a) {
-        float s = sqrtf(cov[propid_cov_index(a, a)]);
-        for (uint8_t p = 0; p < derived->jac_count[a]; ++p) {
-            const uint8_t c = derived->jac_column[a][p];
-            if (c < n) { /* always (propid_config.c) */
-                s += fabsf(jacobian_dt[a][p]) * sqrtf(cov[propid_cov_index(c, c)]);
-            }
-        }
-        scale[a] = s * s;
-    }
     for (uint8_t a = 0; a < 3u; ++a) {
         float *acc = rows[a];
         /* Row `a` of the stored triangle: column a above the diagonal, then the row. */
@@ -319,6 +310,7 @@ static __attribute__((noinline)) void predict_covariance_any(
         for (uint8_t j = a; j < n; ++j) {
             acc[j] = row_a[j];
         }
+        float squares = row_a[a];
         const uint8_t count = derived->jac_count[a];
         for (uint8_t p = 0; p < count; ++p) {
             const float g = jacobian_dt[a][p];
@@ -335,10 +327,13 @@ static __attribute__((noinline)) void predict_covariance_any(
                 above += PROPID_MAX_STATES - 1u - j;
             }
             const float *row_source = propid_cov_row_const(cov, source);
+            squares += g * g * row_source[source];
             for (uint8_t j = source; j < n; ++j) {
                 acc[j] += g * row_source[j];
             }
         }
+        const uint32_t terms = count + 1u;
+        scale[a] = (float)(terms * (terms > 8u ? terms : 8u)) * squares;
     }
     /* Rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp, upper
      * triangle; Q dt on its diagonal. */
@@ -352,8 +347,8 @@ static __attribute__((noinline)) void predict_covariance_any(
             for (uint8_t p = 0; p < count; ++p) {
                 value += row[column[p]] * g[p];
             }
-            if (a == b) { /* Q dt and the rate block's rounding loading (propid_internal.h) */
-                value += PROPID_RATE_LOADING * scale[b] + propid_process_psd(derived, b) * dt;
+            if (a == b) { /* Q dt and the rate block's rounding loading (above) */
+                value += PROPID_VAR_LOADING * scale[b] + propid_process_psd(derived, b) * dt;
             }
             cov[propid_cov_index(a, b)] = value;
         }

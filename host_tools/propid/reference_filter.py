@@ -31,7 +31,6 @@ _F32_MAX = float(np.finfo(np.float32).max)
 VAR_LOADING = float(np.finfo(np.float32).eps)
 ROUNDING_TOL = 2.0 * VAR_LOADING
 UPDATE_LOADING = 64.0 * VAR_LOADING
-RATE_LOADING = 8.0 * VAR_LOADING  # the rates' loading, above the gyro update's rounding
 GATE_OFF_SQ = 1.0e30  # C: PROPID_GATE_OFF_SQ (gating off still refuses 1e15-sigma innovations)
 
 
@@ -129,6 +128,8 @@ class ReferenceFilter:
         self.claim_var = (self.converged_var / 9.0 - (0.0 if self.torque_scale is not None else inertia_var),
                           self.converged_var / 9.0 - inertia_var)
 
+        self.rate_terms = self._rate_row_terms()
+
         n = self.n
         self.prior_var = np.empty(n)
         self.process_psd = np.empty(n)
@@ -176,6 +177,31 @@ class ReferenceFilter:
             "accel_accepted": 0, "accel_gated": 0, "accel_reanchored": 0, "delay_overflows": 0,
         }
         self._core_to_prior()
+
+    def _rate_row_terms(self) -> np.ndarray:
+        """Terms of each rate row of F = I + G the C prediction lists (propid_config.c,
+        derive_quad_layout / derive_sparsity): 1 for the rate itself + the row's Jacobian
+        entries; the count m of the rounding scale's Cauchy-Schwarz bound (docs/math.md §2)."""
+        n_rot = self.rotor_count
+        # A_ab = sum_c coeff[a, b, c] omega_c: the gyroscopic Jacobian at each unit rate
+        coeff = np.stack([-(self.inertia_inv @ (_skew(e) @ self.inertia - _skew(self.inertia @ e)))
+                          for e in np.eye(3)], axis=2)
+        thrust = self.thrust_torque != 0.0
+        drag = self.drag_torque != 0.0
+        third_only = all(coeff[a, b, c] == 0.0 for a in range(3) for b in range(3) for c in range(3)
+                         if not (a != b and c != a and c != b))
+        if (n_rot == 4 and self.n == 3 + 2 * n_rot + 3 and not self.rotor_inertia_on and third_only
+                and not drag[:, :2].any() and not thrust[:, 2].any()):
+            return np.full(3, 1.0 + 6.0)  # the fixed quad layout: 2 rates + 4 coefficients a row
+        terms = np.ones(3)
+        for a in range(3):
+            for b in range(3):
+                rotor_term = self.rotor_inertia_on and b < 2 and self.inertia_inv[a, 1 - b] != 0.0
+                terms[a] += bool(np.any(coeff[a, b] != 0.0) or rotor_term)
+            terms[a] += np.count_nonzero(thrust[:, a])
+            terms[a] += n_rot if drag[:, a].any() else 0
+            terms[a] += 1 if self.first_disturbance is not None else 0
+        return terms
 
     # ------------------------------------------------------------------ life cycle
     def _core_to_prior(self) -> None:
@@ -497,17 +523,17 @@ class ReferenceFilter:
             n = self.n
             f = np.eye(n)
             f[:3, :] += jac_dt
-            # the rates' rounding scale (sum_k |F_ak| sigma_k)^2 (C: the general path's scale)
-            sigma = np.sqrt(np.diag(self.cov))
-            rate_scale = (sigma[:3] + np.abs(jac_dt) @ sigma) ** 2
+            # the rates' loading eps l m (P_aa + sum_p G_ap^2 P_pp), m = 1 + the row's listed
+            # entries, l = max(8, m) (C: the prediction's rounding scale, docs/math.md §2)
+            terms = self.rate_terms
+            rate_scale = terms * np.maximum(terms, 8.0) * (np.diag(self.cov)[:3] + (jac_dt ** 2) @ np.diag(self.cov))
             self.cov = f @ self.cov @ f.T
             self.cov = 0.5 * (self.cov + self.cov.T)
             # Q dt and the rounding loading (C: PROPID_VAR_LOADING, docs/math.md §2): on the
             # drag coefficients every second prediction (C: even check rows), on the rest every one;
-            # the rates' own (C: PROPID_RATE_LOADING).
+            # the rates' of their rounding scale (above).
             diag = np.diag_indices(n)
             loading = np.full(n, VAR_LOADING)
-            loading[:3] = RATE_LOADING
             if self.check_row % 2 != 0:
                 loading[self.first_drag:self.first_bias] = 0.0
             scaled = self.cov[diag].copy()

@@ -627,11 +627,7 @@ static void test_covariance_definite_with_rates_correlated_by_spin(void)
 }
 #endif
 
-#if PROPID_GENERAL_VEHICLES
-/* Fuzz findings of the 10^7-execution run on the general path (two rotors):
- * the prediction forms each rate variance as a sum of terms (|F| |P| |F|^T)_aa
- * far larger than the result when the rotor coefficients' block is nearly
- * singular, and its rounding is relative to those terms. */
+/* One gyro sample, the invariants, and 1 when P is not positive definite after it. */
 static uint32_t push_and_count(uint64_t time_us, const float gyro[3])
 {
     TEST_ASSERT_TRUE(propid_push_gyro(&filter, time_us, gyro) >= 0);
@@ -639,7 +635,64 @@ static uint32_t push_and_count(uint64_t time_us, const float gyro[3])
     return covariance_is_positive_definite() ? 0u : 1u;
 }
 
-/* Two rotors on a diagonal, gyro_sample_rate_hz 0.5 with samples every 7 ms (a
+/* The quad kernel's share of the general-path findings below (docs/math.md
+ * §2, "The rate block's loading"): a quad whose four rotors lie on one diagonal line (arms
+ * 0.204 m and 0.102 m, both sides) has roll and pitch torques that measure one
+ * and the same kf combination, like the two-rotor input below. With a gyro
+ * variance 250x below the default (a sample rate configured as 2 Hz, samples
+ * every 7 ms) the first updates pin that combination, and the next
+ * prediction forms the rate variances from terms far larger than the result.
+ * The quad kernel's loading relative to the result (1 + 8 eps) left P after
+ * the prediction-only sample (all axes gated) not positive definite (smallest
+ * pivot of the correlation matrix's Cholesky factor -2.0e-4, host build);
+ * loaded relative to the rounding scale 7 (P_aa + sum_p G_ap^2 P_pp) it is
+ * +2.1e-4. Runs on every build: the quad layout takes the generated kernel in
+ * each. */
+
+static void test_covariance_definite_with_quad_rates_predicted_from_cancelling_terms(void)
+{
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.05f + 0.3f * 131.0f / 255.0f,
+                                                                 0.0f, 1.0f, 5.57e-6f, 1.36e-7f));
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    const float c = (0.05f + 0.3f * 131.0f / 255.0f) * 0.70710677f;
+    const float on_the_line[4] = {c, -c, 0.5f * c, -0.5f * c}; /* x = y for every rotor */
+    for (uint8_t i = 0; i < 4u; ++i) {
+        config.rotor[i].position_m[0] = on_the_line[i];
+        config.rotor[i].position_m[1] = on_the_line[i];
+    }
+    config.gyro_sample_rate_hz = 2.0f;
+    config.rate_process_noise = 0x1.a36e3p-13f; /* 2e-4 */
+    config.gate_max_consecutive = 33667u;
+    config.rotor_stale_us = 2206416519u;
+    init_filter();
+    TEST_ASSERT_EQUAL_UINT8(1u, filter.derived.quad_layout);
+    const float slow[ROTORS] = {0x1.303e5ep+11f, 0x1.303e5ep+11f, 0x1.303e5ep+11f, 0x1.303e5ep+11f}; /* 2434 rad/s */
+    const float fast[ROTORS] = {0x1.c7337p+11f, 0x1.c7337p+11f, 0x1.c7337p+11f, 0x1.c7337p+11f};     /* 3642 rad/s */
+    const float steady[3] = {0x1.5f92c8p+0f, 0x1.5f92c8p+0f, 0x1.5f92c8p+0f}; /* 1.373 rad/s */
+    const float jump[3] = {0x1.206d3cp+1f, 0x1.206d3cp+1f, 0x1.206d3cp+1f};   /* 2.253 rad/s */
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1000081u, slow, 4u));
+    uint32_t failures = push_and_count(1007162u, steady);
+    failures += push_and_count(1007203u, steady);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1007242u, fast, 4u));
+    failures += push_and_count(1014364u, jump);
+    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite after the prediction");
+    uint64_t t = 1014364u;
+    for (uint32_t k = 0; k < 400u; ++k) {
+        t += 7161u;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, fast, 4u));
+        failures += push_and_count(t, (k % 5u) == 4u ? jump : steady);
+    }
+    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite later");
+}
+
+#if PROPID_GENERAL_VEHICLES
+/* Fuzz findings of the 10^7-execution run on the general path (two rotors):
+ * the prediction forms each rate variance as a sum of terms (|F| |P| |F|^T)_aa
+ * far larger than the result when the rotor coefficients' block is nearly
+ * singular, and its rounding is relative to those terms.
+ *
+ * Two rotors on a diagonal, gyro_sample_rate_hz 0.5 with samples every 7 ms (a
  * gyro noise variance 1000x below the default): the roll torque measures
  * kf0 - kf1, the rate variance is predicted as 0.013 from terms of 41 (dt G =
  * +-15 per unit kf_rel), whose rounding (~eps 41) exceeds the rate's conditional
@@ -726,6 +779,7 @@ int main(void)
 #if PROPID_MAX_ROTORS >= 7
     RUN_TEST(test_covariance_definite_with_rates_correlated_by_spin);
 #endif
+    RUN_TEST(test_covariance_definite_with_quad_rates_predicted_from_cancelling_terms);
 #if PROPID_GENERAL_VEHICLES
     RUN_TEST(test_covariance_definite_with_rate_predicted_from_cancelling_terms);
     RUN_TEST(test_covariance_definite_with_one_drag_coefficient_measured_alone);
