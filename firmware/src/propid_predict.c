@@ -312,7 +312,49 @@ static __attribute__((noinline)) void predict_covariance_any(
         }
         float squares = row_a[a];
         const uint8_t count = derived->jac_count[a];
-        for (uint8_t p = 0; p < count; ++p) {
+        const uint8_t *column = derived->jac_column[a];
+        /* Two entries at a time (the lists are ascending: propid_config.c): each
+         * element of T loaded and stored once per pair, the same multiply-adds in
+         * the same order as one entry at a time. */
+        uint8_t p = 0;
+        for (; p + 1u < count; p += 2u) {
+            const float g1 = jacobian_dt[a][p];
+            const float g2 = jacobian_dt[a][p + 1u];
+            const uint8_t s1 = column[p];
+            const uint8_t s2 = column[p + 1u];
+            if (s2 >= n || s1 >= s2) { /* never (propid_config.c): one at a time below */
+                break;
+            }
+            const float *row1 = propid_cov_row_const(cov, s1);
+            const float *row2 = propid_cov_row_const(cov, s2);
+            squares += g1 * g1 * row1[s1];
+            squares += g2 * g2 * row2[s2];
+            uint32_t above1 = s1;
+            uint32_t above2 = s2;
+            uint8_t j = 0;
+            for (; j < s1; ++j) { /* both above the diagonal: down their columns */
+                float value = acc[j];
+                value += g1 * cov[above1];
+                value += g2 * cov[above2];
+                acc[j] = value;
+                above1 += PROPID_MAX_STATES - 1u - j;
+                above2 += PROPID_MAX_STATES - 1u - j;
+            }
+            for (; j < s2; ++j) { /* along row s1, down column s2 */
+                float value = acc[j];
+                value += g1 * row1[j];
+                value += g2 * cov[above2];
+                acc[j] = value;
+                above2 += PROPID_MAX_STATES - 1u - j;
+            }
+            for (; j < n; ++j) { /* along both rows */
+                float value = acc[j];
+                value += g1 * row1[j];
+                value += g2 * row2[j];
+                acc[j] = value;
+            }
+        }
+        for (; p < count; ++p) {
             const float g = jacobian_dt[a][p];
             const uint8_t source = derived->jac_column[a][p];
             if (source >= n) { /* never (propid_config.c); bounds the index for the compiler */
