@@ -635,6 +635,35 @@ static uint32_t push_and_count(uint64_t time_us, const float gyro[3])
     return covariance_is_positive_definite() ? 0u : 1u;
 }
 
+/* The call sequence the fuzzer found (decoded): the rotors spin at 2434 rad/s
+ * for two samples, then at 3642 rad/s while the rate jumps from 1.373 to 2.253
+ * rad/s on every axis, then 400 more samples, every fifth one a jump. P must
+ * stay positive definite after the prediction-only sample and afterwards. */
+static void fly_spin_up_with_rate_jump(uint8_t rotor_count)
+{
+    float slow[PROPID_MAX_ROTORS] = {0.0f};
+    float fast[PROPID_MAX_ROTORS] = {0.0f};
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        slow[i] = 0x1.303e5ep+11f; /* 2434 rad/s */
+        fast[i] = 0x1.c7337p+11f;  /* 3642 rad/s */
+    }
+    const float steady[3] = {0x1.5f92c8p+0f, 0x1.5f92c8p+0f, 0x1.5f92c8p+0f}; /* 1.373 rad/s */
+    const float jump[3] = {0x1.206d3cp+1f, 0x1.206d3cp+1f, 0x1.206d3cp+1f};   /* 2.253 rad/s */
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1000081u, slow, rotor_count));
+    uint32_t failures = push_and_count(1007162u, steady);
+    failures += push_and_count(1007203u, steady);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1007242u, fast, rotor_count));
+    failures += push_and_count(1014364u, jump);
+    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite after the prediction");
+    uint64_t t = 1014364u;
+    for (uint32_t k = 0; k < 400u; ++k) {
+        t += 7161u;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, fast, rotor_count));
+        failures += push_and_count(t, (k % 5u) == 4u ? jump : steady);
+    }
+    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite later");
+}
+
 /* The quad kernel's share of the general-path findings below (docs/math.md
  * §2, "The rate block's loading"): a quad whose four rotors lie on one diagonal line (arms
  * 0.204 m and 0.102 m, both sides) has roll and pitch torques that measure one
@@ -667,23 +696,7 @@ static void test_covariance_definite_with_quad_rates_predicted_from_cancelling_t
     config.rotor_stale_us = 2206416519u;
     init_filter();
     TEST_ASSERT_EQUAL_UINT8(1u, filter.derived.quad_layout);
-    const float slow[ROTORS] = {0x1.303e5ep+11f, 0x1.303e5ep+11f, 0x1.303e5ep+11f, 0x1.303e5ep+11f}; /* 2434 rad/s */
-    const float fast[ROTORS] = {0x1.c7337p+11f, 0x1.c7337p+11f, 0x1.c7337p+11f, 0x1.c7337p+11f};     /* 3642 rad/s */
-    const float steady[3] = {0x1.5f92c8p+0f, 0x1.5f92c8p+0f, 0x1.5f92c8p+0f}; /* 1.373 rad/s */
-    const float jump[3] = {0x1.206d3cp+1f, 0x1.206d3cp+1f, 0x1.206d3cp+1f};   /* 2.253 rad/s */
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1000081u, slow, 4u));
-    uint32_t failures = push_and_count(1007162u, steady);
-    failures += push_and_count(1007203u, steady);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1007242u, fast, 4u));
-    failures += push_and_count(1014364u, jump);
-    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite after the prediction");
-    uint64_t t = 1014364u;
-    for (uint32_t k = 0; k < 400u; ++k) {
-        t += 7161u;
-        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, fast, 4u));
-        failures += push_and_count(t, (k % 5u) == 4u ? jump : steady);
-    }
-    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite later");
+    fly_spin_up_with_rate_jump(4u);
 }
 
 #if PROPID_GENERAL_VEHICLES
@@ -709,23 +722,7 @@ static void test_covariance_definite_with_rate_predicted_from_cancelling_terms(v
     config.gate_max_consecutive = 33667u;
     config.rotor_stale_us = 2206416519u;
     init_filter();
-    const float slow[PROPID_MAX_ROTORS] = {0x1.303e5ep+11f, 0x1.303e5ep+11f}; /* 2434 rad/s */
-    const float fast[PROPID_MAX_ROTORS] = {0x1.c7337p+11f, 0x1.c7337p+11f};   /* 3642 rad/s */
-    const float steady[3] = {0x1.5f92c8p+0f, 0x1.5f92c8p+0f, 0x1.5f92c8p+0f};  /* 1.373 rad/s */
-    const float jump[3] = {0x1.206d3cp+1f, 0x1.206d3cp+1f, 0x1.206d3cp+1f};    /* 2.253 rad/s */
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1000081u, slow, 2u));
-    uint32_t failures = push_and_count(1007162u, steady);
-    failures += push_and_count(1007203u, steady);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1007242u, fast, 2u));
-    failures += push_and_count(1014364u, jump);
-    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite after the prediction");
-    uint64_t t = 1014364u;
-    for (uint32_t k = 0; k < 400u; ++k) {
-        t += 7161u;
-        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, fast, 2u));
-        failures += push_and_count(t, (k % 5u) == 4u ? jump : steady);
-    }
-    TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite later");
+    fly_spin_up_with_rate_jump(2u);
 }
 
 /* Two rotors, rotor 0's km 1000x its nominal, no drag coefficient walk: rotor
