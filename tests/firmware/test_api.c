@@ -10,6 +10,7 @@
 #include "per_rotor_view.h"
 #include "propid/propid.h"
 #include "unity.h"
+#include "test_vehicle.h"
 
 #define ROTORS 4u
 #define GYRO_PERIOD_US 2000u
@@ -22,10 +23,7 @@ static uint64_t now_us;
 
 static void make_config(propid_config_t *out)
 {
-    propid_config_default(out);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(out, ROTORS, 0.17f, 0.0f, 1.0f,
-                                                                 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(out, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    test_vehicle_config(out, ROTORS, 0.17f, 0.0f);
 }
 
 /* Excite the filter so that every state and covariance entry has moved. */

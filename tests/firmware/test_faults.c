@@ -13,6 +13,7 @@
 #include "propid/propid.h"
 #include "unity.h"
 #include "test_rng.h"
+#include "test_vehicle.h"
 
 #define ROTORS 4u
 #define GYRO_PERIOD_US 2000u
@@ -24,10 +25,7 @@ static uint64_t now_us;
 
 static void make_config(propid_config_t *out)
 {
-    propid_config_default(out);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(out, ROTORS, 0.17f, 0.7853982f,
-                                                                 1.0f, 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(out, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    test_vehicle_config(out, ROTORS, 0.17f, 0.7853982f);
 }
 
 void setUp(void)
@@ -530,10 +528,7 @@ static void test_covariance_definite_after_gyroscopic_rate_inflation(void)
  * every accepted gyro sample. */
 static void test_covariance_definite_after_huge_rate_prior_and_torque(void)
 {
-    propid_config_default(&config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 5u, 0x1.33cd68p-2f, 0.7853982f, 1.0f,
-                                                                 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    test_vehicle_config(&config, 5u, 0x1.33cd68p-2f, 0.7853982f);
     config.rate_std0 = 1.0e5f;
     config.gyro_noise_density = 0x1.a36e3p-15f;   /* 5e-5: a tenth of the default */
     config.rate_process_noise = 0x1.47ae16p-6f;   /* 0.02 */
@@ -585,10 +580,7 @@ static void test_covariance_definite_after_huge_rate_prior_and_torque(void)
  * while; P tested (Cholesky in double) after every accepted gyro sample. */
 static void test_covariance_definite_with_rates_correlated_by_spin(void)
 {
-    propid_config_default(&config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 7u, 0x1.b6835p-5f, 0.0f, 1.0f,
-                                                                 5.57e-6f, 1.36e-7f)); /* arm 0.0535 m */
-    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    test_vehicle_config(&config, 7u, 0x1.b6835p-5f, 0.0f); /* arm 0.0535 m */
     config.rate_process_noise = 0x1.ffp-141f;             /* ~1e-42: none */
     config.rotor[0].thrust_coeff_nominal = 0x1.6d0918p-8f; /* 5.57e-3 */
     config.rotor[0].drag_coeff_nominal = 0x1.ep-146f;      /* ~2e-44: none */
@@ -680,10 +672,7 @@ static void fly_spin_up_with_rate_jump(uint8_t rotor_count)
 
 static void test_covariance_definite_with_quad_rates_predicted_from_cancelling_terms(void)
 {
-    propid_config_default(&config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.05f + 0.3f * 131.0f / 255.0f,
-                                                                 0.0f, 1.0f, 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    test_vehicle_config(&config, 4u, 0.05f + 0.3f * 131.0f / 255.0f, 0.0f);
     const float c = (0.05f + 0.3f * 131.0f / 255.0f) * 0.70710677f;
     const float on_the_line[4] = {c, -c, 0.5f * c, -0.5f * c}; /* x = y for every rotor */
     for (uint8_t i = 0; i < 4u; ++i) {
@@ -713,10 +702,7 @@ static void test_covariance_definite_with_quad_rates_predicted_from_cancelling_t
  * rates were loaded relative to their terms. */
 static void test_covariance_definite_with_rate_predicted_from_cancelling_terms(void)
 {
-    propid_config_default(&config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 2u, 0.05f + 0.3f * 131.0f / 255.0f,
-                                                                 0.7853982f, 1.0f, 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    test_vehicle_config(&config, 2u, 0.05f + 0.3f * 131.0f / 255.0f, 0.7853982f);
     config.gyro_sample_rate_hz = 0.5f;
     config.rate_process_noise = 0x1.a36e3p-13f; /* 2e-4 */
     config.gate_max_consecutive = 33667u;
@@ -733,10 +719,7 @@ static void test_covariance_definite_with_rate_predicted_from_cancelling_terms(v
  * cut combination's) keeps that cut above the rounding. */
 static void test_covariance_definite_with_one_drag_coefficient_measured_alone(void)
 {
-    propid_config_default(&config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 2u, 0.05f + 0.3f * 3.0f / 255.0f, 0.0f,
-                                                                 1.0f, 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    test_vehicle_config(&config, 2u, 0.05f + 0.3f * 3.0f / 255.0f, 0.0f);
     config.rate_process_noise = 0x1.99999ap-3f;      /* 0.2 */
     config.drag_coeff_rel_walk = 0x1p-149f;          /* none */
     config.gyro_range *= 0.1f;

@@ -16,6 +16,7 @@
 #include "per_rotor_view.h"
 #include "../../firmware/src/propid_model.h"
 #include "input_error_fixture.h"
+#include "test_vehicle.h"
 
 void setUp(void) {}
 void tearDown(void) {}
@@ -169,10 +170,7 @@ static void test_largest_input_noise_keeps_the_filter_finite(void)
 static void test_input_noise_compiled_out_refuses_the_option(void)
 {
     propid_config_t config;
-    propid_config_default(&config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.17f, 0.785398f, 1.0f,
-                                                                 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    test_vehicle_config(&config, 4u, 0.17f, 0.785398f);
     config.rotor_speed_noise = 1.0f;
     const char *bad = NULL;
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));

@@ -18,6 +18,7 @@
 #include "test_rng.h"
 #include "../../firmware/src/propid_internal.h"
 #include "../../firmware/src/propid_model.h"
+#include "test_vehicle.h"
 
 #define N_MAX PROPID_MAX_STATES
 
@@ -50,10 +51,7 @@ static void init_quad(void)
 static void init_quad_diag(float first_angle)
 {
     propid_config_t config;
-    propid_config_default(&config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.17f, first_angle, 1.0f,
-                                                                 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    test_vehicle_config(&config, 4u, 0.17f, first_angle);
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
     TEST_ASSERT_EQUAL_UINT8(1u, filter.derived.quad_layout);
 }
@@ -880,10 +878,7 @@ static void test_time_jump_resync_workflow(void)
 static void check_loading_schedule(uint8_t rotor_count)
 {
     propid_config_t config;
-    propid_config_default(&config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, rotor_count, 0.17f, 0.0f, 1.0f,
-                                                                 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    test_vehicle_config(&config, rotor_count, 0.17f, 0.0f);
     config.thrust_coeff_rel_walk = 0.0f;
     config.drag_coeff_rel_walk = 0.0f;
     config.gyro_bias_walk = 0.0f;

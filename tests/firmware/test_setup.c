@@ -11,6 +11,7 @@
 
 #include "propid/propid.h"
 #include "unity.h"
+#include "test_vehicle.h"
 
 #define ROTORS 4u
 
@@ -24,10 +25,7 @@ static propid_filter_t before;
 
 void setUp(void)
 {
-    propid_config_default(&config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, ROTORS, 0.17f, 0.7853982f, 1.0f,
-                                                                 5.57e-6f, 1.36e-7f));
-    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    test_vehicle_config(&config, ROTORS, 0.17f, 0.7853982f);
     config.gate_sigma = 4.0f;
     config.gyro_bias_std0 = 0.02f;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_setup_prepare(&config, &setup));
