@@ -120,6 +120,10 @@ static void print_live(FILE *out, double t, const sitl_metrics_t *m,
 typedef struct {
     sitl_vehicle_t vehicle;
     sitl_plant_t plant;
+    /* The plant's constants for the held command (sitl_plant_prepare); stale
+     * after a control step, a damage or a fault changes the command or the plant. */
+    sitl_plant_prepared_t plant_prepared;
+    int plant_prepared_stale;
     sitl_state_t state;
     sitl_trajectory_t trajectory;
     sitl_controller_t controller;
@@ -143,6 +147,7 @@ typedef struct {
     propid_damage_t detector;
     int damage_applied[SITL_MAX_DAMAGE];
     sitl_rng_t disturbance_rng; /* its own stream: every other draw is the same with and without it */
+    double disturbance_pole, disturbance_drive; /* its discretisation over one control period */
 #ifdef PROPID_SITL_WITH_MAVLINK
     sitl_mavlink_t *link;
 #endif
@@ -150,16 +155,21 @@ typedef struct {
 
 /* --disturbance-torque: a first-order Gauss-Markov torque of the given std per axis, exact
  * discretisation over one control period, held by the plant until the next update. */
-static void update_disturbance_torque(flight_t *f, const sitl_options_t *o, double period_ns)
+static void setup_disturbance_torque(flight_t *f, const sitl_options_t *o, double period_ns)
+{
+    f->disturbance_pole = exp(-period_ns * 1e-9 / o->disturbance_torque_time);
+    f->disturbance_drive =
+        o->disturbance_torque_std * sqrt(1.0 - f->disturbance_pole * f->disturbance_pole);
+}
+
+static void update_disturbance_torque(flight_t *f, const sitl_options_t *o)
 {
     if (!(o->disturbance_torque_std > 0.0)) {
         return;
     }
-    const double pole = exp(-period_ns * 1e-9 / o->disturbance_torque_time);
-    const double drive = o->disturbance_torque_std * sqrt(1.0 - pole * pole);
     for (int k = 0; k < 3; k++) {
-        f->plant.disturbance_torque[k] = pole * f->plant.disturbance_torque[k] +
-                                         drive * sitl_rng_normal(&f->disturbance_rng);
+        f->plant.disturbance_torque[k] = f->disturbance_pole * f->plant.disturbance_torque[k] +
+                                         f->disturbance_drive * sitl_rng_normal(&f->disturbance_rng);
     }
 }
 
@@ -402,6 +412,7 @@ static void apply_damage(flight_t *f, const sitl_options_t *o, sitl_result_t *r,
         f->true_km[d->rotor] *= 1.0 - d->fraction;
         f->plant.thrust_coeff[d->rotor] = f->true_kf[d->rotor];
         f->plant.drag_coeff[d->rotor] = f->true_km[d->rotor];
+        f->plant_prepared_stale = 1;
         if (o->mode == SITL_MODE_ORACLE &&
             sitl_allocation_set_coefficients(&f->allocation, f->true_kf, f->true_km) == 0) {
             memcpy(f->used_kf, f->true_kf, sizeof(f->used_kf));
@@ -529,6 +540,9 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
 
     schedule_t control, imu, esc, physics, logsched, live;
     schedule_init(&control, 0.0, o->control_rate_hz);
+    if (o->disturbance_torque_std > 0.0) {
+        setup_disturbance_torque(f, o, control.period_ns);
+    }
     schedule_init(&imu, o->imu_sample_at_start ? 0.0 : 1.0 / o->imu.rate_hz, o->imu.rate_hz);
     schedule_init(&esc, o->esc.phase_s, o->esc.rate_hz);
     schedule_init(&physics, 0.0, o->physics_rate_hz);
@@ -549,6 +563,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     accel_read |= f->link != NULL;
 #endif
     const double tilt_limit_cos = cos(o->divergence_tilt_deg * SITL_PI / 180.0);
+    f->plant_prepared_stale = 1;
     const double cpu_start = cpu_seconds();
 
     for (;;) {
@@ -606,9 +621,11 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
         if (sitl_faults_rotor_loss_now(&f->faults, t)) {
             f->plant.thrust_coeff[0] *= 0.7;
             f->true_kf[0] *= 0.7;
+            f->plant_prepared_stale = 1;
         }
         if (now_ns == control.next_ns || now_ns >= end_ns) {
-            update_disturbance_torque(f, o, control.period_ns);
+            f->plant_prepared_stale = 1; /* new command, new disturbance torque */
+            update_disturbance_torque(f, o);
             sitl_flat_output_t ref;
             sitl_trajectory_eval(&f->trajectory, t, &ref);
             const propid_status_t est_status = propid_get_estimate(&f->filter, &est);
@@ -704,7 +721,12 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
             next = end_ns;
         }
         if (next > now_ns) {
-            sitl_plant_step(&f->plant, &f->state, f->command, (double)(next - now_ns) * 1e-9);
+            if (f->plant_prepared_stale) {
+                sitl_plant_prepare(&f->plant, f->command, &f->plant_prepared);
+                f->plant_prepared_stale = 0;
+            }
+            sitl_plant_step_prepared(&f->plant, &f->plant_prepared, &f->state,
+                                     (double)(next - now_ns) * 1e-9);
             now_ns = next;
             sitl_esc_record(&f->esc, (double)now_ns * 1e-9, f->state.rotor_speed);
         }

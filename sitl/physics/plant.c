@@ -168,27 +168,21 @@ static int plain_physics(const sitl_plant_t *plant)
  * sitl_plant_derivative without effects and without the loads, for the RK4
  * stages: the same model, minus what only the loads need (body velocity,
  * specific force) and the products with the zero x/y body force. What does
- * not change within a step is taken once per step (plain_constants_t): the
- * clamped commands, the reciprocals of the motor time constant and of the
+ * not change while the command is held is taken once (sitl_plant_prepare):
+ * the clamped commands, the reciprocals of the motor time constant and of the
  * mass (7 divisions per stage were on the stages' dependent chain), and each
  * rotor's thrust and yaw-torque coefficients times its lever arms. Against
  * sitl_plant_derivative the results differ by rounding only.
  */
 #define SITL_INLINE static inline __attribute__((always_inline))
 
-typedef struct {
-    double clamped_command[SITL_MAX_ROTORS]; /* sitl_motor_clamp(command) */
-    double thrust[SITL_MAX_ROTORS];          /* kf: thrust per speed^2 */
-    double roll[SITL_MAX_ROTORS];            /* r_y kf: x torque per speed^2 */
-    double pitch[SITL_MAX_ROTORS];           /* -r_x kf: y torque per speed^2 */
-    double yaw[SITL_MAX_ROTORS];             /* yaw_sign km: z torque per speed^2 */
-    double inv_time_constant, inv_mass;
-    int diagonal_inertia; /* J and J^-1 diagonal: the 3x3 products are 3 */
-} plain_constants_t;
-
-SITL_INLINE void plain_setup(const sitl_plant_t *plant, int n, const double *rotor_command,
-                             plain_constants_t *c)
+void sitl_plant_prepare(const sitl_plant_t *plant, const double *rotor_command,
+                        sitl_plant_prepared_t *c)
 {
+    memset(c, 0, sizeof(*c));
+    const int n = plant->rotor_count;
+    memcpy(c->command, rotor_command, (size_t)n * sizeof(double));
+    c->plain = plain_physics(plant);
     for (int i = 0; i < n; i++) {
         const double *r = plant->rotor_position[i];
         c->clamped_command[i] = sitl_motor_clamp(&plant->motor, rotor_command[i]);
@@ -208,7 +202,7 @@ SITL_INLINE void plain_setup(const sitl_plant_t *plant, int n, const double *rot
 
 /* diagonal: a constant where inlined (c->diagonal_inertia picks the copy). */
 SITL_INLINE void plain_derivative(const sitl_plant_t *plant, int n, int diagonal,
-                                  const sitl_state_t *state, const plain_constants_t *c,
+                                  const sitl_state_t *state, const sitl_plant_prepared_t *c,
                                   sitl_state_derivative_t *deriv)
 {
     const double *q = state->quat;
@@ -341,7 +335,7 @@ SITL_INLINE void add_scaled(int rotor_count, const sitl_state_t *base,
 /* The four stages without effects; n and diagonal are constants where it is
  * inlined, so the rotor loops unroll and the inertia products shrink. */
 SITL_INLINE void plain_stages(const sitl_plant_t *plant, int n, int diagonal,
-                              const sitl_state_t *state, const plain_constants_t *c, double dt,
+                              const sitl_state_t *state, const sitl_plant_prepared_t *c, double dt,
                               sitl_state_derivative_t k[4])
 {
     sitl_state_t tmp;
@@ -357,17 +351,24 @@ SITL_INLINE void plain_stages(const sitl_plant_t *plant, int n, int diagonal,
 void sitl_plant_step(const sitl_plant_t *plant, sitl_state_t *state, const double *rotor_command,
                      double dt)
 {
+    sitl_plant_prepared_t prepared;
+    sitl_plant_prepare(plant, rotor_command, &prepared);
+    sitl_plant_step_prepared(plant, &prepared, state, dt);
+}
+
+void sitl_plant_step_prepared(const sitl_plant_t *plant, const sitl_plant_prepared_t *c,
+                              sitl_state_t *state, double dt)
+{
     const int n = plant->rotor_count;
     sitl_state_derivative_t stage[4];
-    if (plain_physics(plant)) {
-        plain_constants_t c;
-        plain_setup(plant, n, rotor_command, &c);
-        if (n == 4 && c.diagonal_inertia) {
-            plain_stages(plant, 4, 1, state, &c, dt, stage);
+    if (c->plain) {
+        if (n == 4 && c->diagonal_inertia) {
+            plain_stages(plant, 4, 1, state, c, dt, stage);
         } else {
-            plain_stages(plant, n, 0, state, &c, dt, stage);
+            plain_stages(plant, n, 0, state, c, dt, stage);
         }
     } else {
+        const double *rotor_command = c->command;
         sitl_state_t tmp;
         sitl_plant_derivative(plant, state, rotor_command, &stage[0], NULL);
         add_scaled(n, state, &stage[0], 0.5 * dt, &tmp);

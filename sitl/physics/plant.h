@@ -82,6 +82,34 @@ void sitl_plant_specific_force(const sitl_plant_t *plant, const sitl_state_t *st
 void sitl_plant_step(const sitl_plant_t *plant, sitl_state_t *state, const double *rotor_command,
                      double dt);
 
+/* What sitl_plant_step takes from the plant and the command before it
+ * integrates: the command, clamped, each rotor's load coefficients (kf, its
+ * lever arms times kf, yaw sign times km), the reciprocals of the motor time
+ * constant and of the mass, and which derivative applies. A flight holds one
+ * command for several steps (the physics rate is a multiple of the control
+ * rate, and the ESC reports split steps): it prepares once per command and
+ * steps with sitl_plant_step_prepared, bit for bit the state sitl_plant_step
+ * gives. Prepare again after anything of the plant changes (coefficients,
+ * disturbance torque) or the command does. */
+typedef struct {
+    double command[SITL_MAX_ROTORS];         /* as given */
+    double clamped_command[SITL_MAX_ROTORS]; /* sitl_motor_clamp(command) */
+    double thrust[SITL_MAX_ROTORS];          /* kf: thrust per speed^2 */
+    double roll[SITL_MAX_ROTORS];            /* r_y kf: x torque per speed^2 */
+    double pitch[SITL_MAX_ROTORS];           /* -r_x kf: y torque per speed^2 */
+    double yaw[SITL_MAX_ROTORS];             /* yaw_sign km: z torque per speed^2 */
+    double inv_time_constant, inv_mass;
+    int plain;            /* no effect, no disturbance torque: the plain rigid body */
+    int diagonal_inertia; /* J and J^-1 diagonal: the 3x3 products are 3 */
+} sitl_plant_prepared_t;
+
+void sitl_plant_prepare(const sitl_plant_t *plant, const double *rotor_command,
+                        sitl_plant_prepared_t *prepared);
+
+/* sitl_plant_step with the command and the plant's constants of prepared. */
+void sitl_plant_step_prepared(const sitl_plant_t *plant, const sitl_plant_prepared_t *prepared,
+                              sitl_state_t *state, double dt);
+
 /* Rotor speeds (true coefficients) that hold the vehicle still in the air:
  * total thrust m g, zero torque (minimum norm for N != 4). Returns 0, or -1
  * if that needs speeds outside the motor limits (speeds are then clipped). */

@@ -1,7 +1,8 @@
 /*
  * Plant physics: free fall, hover equilibrium, torque signs of the plus and
  * X layouts, motor lag, torque-free rigid-body rotation (RK4 quality), ground
- * contact and take-off, physics-rate independence.
+ * contact and take-off, physics-rate independence, one preparation held
+ * over many steps.
  */
 #include <math.h>
 #include <string.h>
@@ -218,6 +219,52 @@ static void test_step_size_independence(void)
     }
 }
 
+/* A flight prepares the plant once per command (sitl_plant_prepare) and steps
+ * it several times with unequal steps: the state is the one sitl_plant_step
+ * gives (which prepares at every call), bit for bit, on the quad path, the
+ * general rotor-count path and the effects' derivative. */
+static void test_prepared_steps_match_plain_steps(void)
+{
+    const char *presets[3] = {"crazyflie-plus", "hexa-x", "crazyflie-x"};
+    for (int p = 0; p < 3; p++) {
+        char err[256];
+        sitl_effects_t effects;
+        sitl_effects_clear(&effects);
+        if (p == 2) {
+            TEST_ASSERT_EQUAL_INT(0, sitl_effects_parse(&effects, "rotor_drag", err, (int)sizeof(err)));
+        }
+        TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset(presets[p], &vehicle));
+        TEST_ASSERT_EQUAL_INT(0, sitl_plant_init(&plant, &vehicle, NULL, NULL, &effects, err,
+                                                 (int)sizeof(err)));
+        sitl_state_t a, b;
+        double pos[3] = {0.0, 0.0, 2.0};
+        sitl_plant_hover_state(&plant, pos, 0.3, &a);
+        a.velocity[0] = 0.5;
+        a.body_rate[1] = 0.2;
+        b = a;
+        double cmd[SITL_MAX_ROTORS];
+        memcpy(cmd, a.rotor_speed, sizeof(cmd));
+        for (int i = 0; i < vehicle.rotor_count; i++) {
+            cmd[i] *= 1.0 + 0.01 * (double)(i + 1) * (i % 2 ? -1.0 : 1.0);
+        }
+        sitl_plant_prepared_t prepared;
+        sitl_plant_prepare(&plant, cmd, &prepared);
+        for (int k = 0; k < 40; k++) {
+            const double dt = k % 3 == 0 ? 0.00025 : 0.0005;
+            sitl_plant_step(&plant, &a, cmd, dt);
+            sitl_plant_step_prepared(&plant, &prepared, &b, dt);
+        }
+        TEST_ASSERT_EQUAL_MEMORY_MESSAGE(a.position, b.position, sizeof(a.position), presets[p]);
+        TEST_ASSERT_EQUAL_MEMORY_MESSAGE(a.velocity, b.velocity, sizeof(a.velocity), presets[p]);
+        TEST_ASSERT_EQUAL_MEMORY_MESSAGE(a.quat, b.quat, sizeof(a.quat), presets[p]);
+        TEST_ASSERT_EQUAL_MEMORY_MESSAGE(a.body_rate, b.body_rate, sizeof(a.body_rate), presets[p]);
+        TEST_ASSERT_EQUAL_MEMORY_MESSAGE(a.rotor_speed, b.rotor_speed, sizeof(a.rotor_speed),
+                                         presets[p]);
+        TEST_ASSERT_EQUAL_INT(a.on_ground, b.on_ground);
+        TEST_ASSERT_TRUE(a.position[0] > 0.005); /* it moved */
+    }
+}
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -229,5 +276,6 @@ int main(void)
     RUN_TEST(test_torque_free_rotation_conserves_energy_and_momentum);
     RUN_TEST(test_ground_holds_and_releases);
     RUN_TEST(test_step_size_independence);
+    RUN_TEST(test_prepared_steps_match_plain_steps);
     return UNITY_END();
 }
