@@ -203,7 +203,7 @@ static void trim_on_trajectory(flight_t *f, const sitl_flat_output_t *flat0)
         sitl_control_output_t cmd;
         sitl_controller_update(&f->controller, &vs, flat0, &cmd);
         if (pass == 0) {
-            memcpy(f->state.quat, cmd.desired_quat_wxyz, sizeof(f->state.quat));
+            sitl_quat_from_matrix(cmd.desired_rotation, f->state.quat);
             sitl_vec3_copy(f->state.body_rate, cmd.desired_body_rate);
         } else if (cmd.thrust > 0.0) {
             const double ratio = sqrt(cmd.thrust / (f->controller.mass * f->controller.gravity));

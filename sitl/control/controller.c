@@ -231,5 +231,7 @@ void sitl_controller_update(const sitl_controller_t *ctl, const sitl_vehicle_sta
         out->desired_body_rate[i] = rate_d[i];
         out->desired_body_accel[i] = accel_d[i];
     }
-    sitl_quat_from_matrix(rd, out->desired_quat_wxyz);
+    /* R_d as it is: the flight needs its quaternion only once (the trim), not
+     * at every control step. */
+    memcpy(out->desired_rotation, rd, sizeof(out->desired_rotation));
 }

@@ -57,7 +57,7 @@ typedef struct {
     double thrust;            /* collective thrust along body +z [N], >= 0 */
     double moment[3];         /* body moment [N m] */
     /* For logging and tests: */
-    double desired_quat_wxyz[4];
+    double desired_rotation[3][3]; /* R_d, body -> world (sitl_quat_from_matrix: its quaternion) */
     double desired_body_rate[3];
     double desired_body_accel[3];
     double position_error[3]; /* e_x = x - x_d [m] */

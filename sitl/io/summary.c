@@ -3,16 +3,18 @@
 #include <stdio.h>
 
 #include "json_file.h"
+#include "number_format.h"
 #include "sim.h"
 
-/* %.9g: every float estimate reads back exactly; non-finite -> null. */
+/* %.9g (the log's formatter, byte for byte printf's): every float estimate
+ * reads back exactly; non-finite -> null. */
 static cJSON *number9(double x)
 {
-    char buf[32];
+    char buf[SITL_G9_MAX];
     if (!isfinite(x)) {
         return cJSON_CreateNull();
     }
-    snprintf(buf, sizeof(buf), "%.9g", x);
+    sitl_format_g9(x, buf);
     return cJSON_CreateRaw(buf);
 }
 

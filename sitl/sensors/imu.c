@@ -42,6 +42,8 @@ void sitl_imu_init(sitl_imu_t *imu, const sitl_imu_params_t *params, uint64_t se
 {
     memset(imu, 0, sizeof(*imu));
     imu->params = *params;
+    imu->gyro_sigma = params->gyro.noise_density * sqrt(params->rate_hz);
+    imu->accel_sigma = params->accel.noise_density * sqrt(params->rate_hz);
     sitl_rng_t bias_rng;
     sitl_rng_init(&bias_rng, seed, SITL_RNG_GYRO_BIAS);
     for (int i = 0; i < 3; i++) {
@@ -74,8 +76,7 @@ void sitl_imu_sample(sitl_imu_t *imu, const double true_rate[3],
                      double accel_out[3])
 {
     const sitl_imu_params_t *p = &imu->params;
-    double sigma_g = p->gyro.noise_density * sqrt(p->rate_hz);
-    double sigma_a = p->accel.noise_density * sqrt(p->rate_hz);
+    const double sigma_g = imu->gyro_sigma, sigma_a = imu->accel_sigma;
     double walk_g = p->gyro.bias_walk * sqrt(dt > 0.0 ? dt : 0.0);
     double walk_a = p->accel.bias_walk * sqrt(dt > 0.0 ? dt : 0.0);
     double scaled[3];

@@ -30,6 +30,7 @@ typedef struct {
 
 typedef struct {
     sitl_imu_params_t params;
+    double gyro_sigma, accel_sigma; /* white-noise std per sample: density x sqrt(rate) */
     double gyro_bias[3];
     double accel_bias[3];
     double gyro_matrix[3][3];

@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "controller.h"
+#include "sitl_math.h"
 #include "trajectory.h"
 #include "check.h"
 
@@ -64,7 +65,9 @@ static void test_hover_equilibrium(const vehicle_t *v)
         CHECK(fabs(out.moment[i]) < 1e-15, "hover moment %d = %g", i, out.moment[i]);
         CHECK(fabs(out.desired_body_rate[i]) < 1e-15, "hover desired rate %d", i);
     }
-    CHECK(fabs(out.desired_quat_wxyz[0] - 1.0) < 1e-12, "hover desired attitude not level");
+    double q[4];
+    sitl_quat_from_matrix(out.desired_rotation, q);
+    CHECK(fabs(q[0] - 1.0) < 1e-12, "hover desired attitude not level");
 }
 
 static void test_gain_scaling(void)
@@ -106,7 +109,9 @@ static void test_error_signs(void)
     on_trajectory_state(&f, &s);
     s.position[0] = 0.2;
     sitl_controller_update(&ctl, &s, &f, &out);
-    CHECK(out.desired_quat_wxyz[2] < 0.0, "desired q_y %g for a +x offset", out.desired_quat_wxyz[2]);
+    double q[4];
+    sitl_quat_from_matrix(out.desired_rotation, q);
+    CHECK(q[2] < 0.0, "desired q_y %g for a +x offset", q[2]);
     CHECK(out.moment[1] < 0.0, "pitch moment %g for a +x offset", out.moment[1]);
 
     /* Rolled right-wing-down about +x: restoring moment about -x; spinning in yaw: damped. */
@@ -147,7 +152,9 @@ static void test_feed_forward_matches_attitude_derivative(sitl_trajectory_kind_t
             sitl_vehicle_state_t s;
             on_trajectory_state(&f, &s);
             sitl_controller_update(&ctl, &s, &f, &o[k]);
-            quat_to_matrix(o[k].desired_quat_wxyz, rd[k]);
+            double q[4];
+            sitl_quat_from_matrix(o[k].desired_rotation, q);
+            quat_to_matrix(q, rd[k]);
             memcpy(rates[k], o[k].desired_body_rate, sizeof(rates[k]));
         }
         /* w_d = vee(R_d^T dR_d/dt) */
@@ -236,7 +243,7 @@ static void fly(const vehicle_t *veh, sitl_trajectory_kind_t kind, const double 
     on_trajectory_state(&f0, &s0);
     sitl_control_output_t o0;
     sitl_controller_update(&ctl, &s0, &f0, &o0);
-    memcpy(b.q, o0.desired_quat_wxyz, sizeof(b.q));
+    sitl_quat_from_matrix(o0.desired_rotation, b.q);
     memcpy(b.w, o0.desired_body_rate, sizeof(b.w));
 
     double sum = 0.0, sum_yaw = 0.0, err = 0.0;
