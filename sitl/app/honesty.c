@@ -40,37 +40,46 @@ void sitl_honesty_init(sitl_honesty_t *h, const propid_filter_t *filter, const d
 
 /* e^T P^-1 e by Cholesky (double); reads the lower triangle of P only;
  * returns -1 when P is not positive definite. The divisions by the diagonal
- * are multiplications by its reciprocals (rounding-level difference). */
+ * are multiplications by its reciprocals (rounding-level difference). Both
+ * passes go column by column: every element takes the same operations in the
+ * same order as row by row, but the elements of one column do not wait for
+ * each other (independent chains instead of one through the whole row). */
 static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const double *e, int n)
 {
     double l[HONESTY_MAX_DOF][HONESTY_MAX_DOF];
     double inv_diag[HONESTY_MAX_DOF];
     double y[HONESTY_MAX_DOF];
-    for (int i = 0; i < n; i++) {
-        for (int j = 0; j <= i; j++) {
+    for (int j = 0; j < n; j++) {
+        double d = p[j][j];
+        for (int k = 0; k < j; k++) {
+            d -= l[j][k] * l[j][k];
+        }
+        if (!(d > 0.0)) {
+            return -1.0;
+        }
+        l[j][j] = sqrt(d);
+        inv_diag[j] = 1.0 / l[j][j];
+        for (int i = j + 1; i < n; i++) {
             double s = p[i][j];
             for (int k = 0; k < j; k++) {
                 s -= l[i][k] * l[j][k];
             }
-            if (i == j) {
-                if (!(s > 0.0)) {
-                    return -1.0;
-                }
-                l[i][i] = sqrt(s);
-                inv_diag[i] = 1.0 / l[i][i];
-            } else {
-                l[i][j] = s * inv_diag[j];
-            }
+            l[i][j] = s * inv_diag[j];
         }
     }
-    double nees = 0.0;
+    /* Forward substitution: y[i] = (e[i] - sum_k<i l[i][k] y[k]) / l[i][i], each
+     * sum taken in k order as y[k] becomes known. */
+    double rest[HONESTY_MAX_DOF];
     for (int i = 0; i < n; i++) {
-        double s = e[i];
-        for (int k = 0; k < i; k++) {
-            s -= l[i][k] * y[k];
+        rest[i] = e[i];
+    }
+    double nees = 0.0;
+    for (int k = 0; k < n; k++) {
+        y[k] = rest[k] * inv_diag[k];
+        nees += y[k] * y[k];
+        for (int i = k + 1; i < n; i++) {
+            rest[i] -= l[i][k] * y[k];
         }
-        y[i] = s * inv_diag[i];
-        nees += y[i] * y[i];
     }
     return nees;
 }
