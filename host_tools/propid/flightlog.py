@@ -63,6 +63,7 @@ class Vehicle:
     gyro_scale: list[float] | None = None  # gyro reads scale * true rate, per axis
     aero_damping: list[float] | None = None  # body torque -d_a * omega_a [N m s/rad]
     com_offset: list[float] | None = None  # CoM offset already applied to the rotor positions [m]
+    loop_bandwidth_hz: float | None = None  # the attitude loop cancels body torques below this [Hz]
     notes: str = ""
     path: Path | None = None
 
@@ -118,7 +119,7 @@ class Vehicle:
         return data
 
 
-EXTENSION_KEYS = ("esc_delay_s", "gyro_scale", "aero_damping", "com_offset")
+EXTENSION_KEYS = ("esc_delay_s", "gyro_scale", "aero_damping", "com_offset", "loop_bandwidth_hz")
 
 
 def _is_number(value) -> bool:
@@ -213,6 +214,7 @@ def parse_vehicle(data: dict, where: str = "vehicle") -> Vehicle:
         gyro_scale=_vector3_or_null(data, "gyro_scale", where, "", positive=True),
         aero_damping=_vector3_or_null(data, "aero_damping", where, " [N m s/rad]"),
         com_offset=_vector3_or_null(data, "com_offset", where, " [m]"),
+        loop_bandwidth_hz=_positive_or_null(data, "loop_bandwidth_hz", where),
         notes=str(data.get("notes", "") or ""),
     )
 

@@ -10,6 +10,7 @@ import pytest
 from propid.flightlog import FlightLog, Rotor, Vehicle
 from propid.gap import analysis
 from propid.gap.prep import Band, difference_response
+from propid.gap.vehicle_out import corrected_vehicle
 
 KF, ARM, MASS = 3e-8, 0.035, 0.035
 INERTIA = np.diag([1.7e-5, 1.7e-5, 3e-5])
@@ -65,11 +66,11 @@ def _closed_loop_log(seed: int, cancelled_rms: float, rate: float = 200.0, durat
 def _run(cancelled_rms: float):
     log, vehicle = _closed_loop_log(3, cancelled_rms)
     result = analysis.run([log], vehicle, [], analysis.Options(Band(), progress=False, auto_highpass=True))
-    return result, next(e for e in result["effects"] if e["id"] == "closed_loop_cancellation")
+    return result, next(e for e in result["effects"] if e["id"] == "closed_loop_cancellation"), vehicle
 
 
 def test_a_cancelled_slow_torque_is_named_with_its_size_and_the_fit_above_the_loop_agrees():
-    result, entry = _run(6e-5)
+    result, entry, vehicle = _run(6e-5)
     assert entry["significant"] and "closed_loop_cancellation" in result["significant"]
     # the band above the loop starts above the disturbance (1.2 Hz) and not far above it
     assert 1.2 < entry["params"]["loop_bandwidth_hz"] <= 2.0
@@ -82,11 +83,16 @@ def test_a_cancelled_slow_torque_is_named_with_its_size_and_the_fit_above_the_lo
     for key in ("kf_roll", "kf_pitch"):
         assert result["base_fit_after"][key]["value"] == pytest.approx(thrust, rel=0.05)
     assert result["inputs"]["band_hz"][0] == entry["params"]["loop_bandwidth_hz"]
+    # --vehicle-out carries the bandwidth (the key replay passes to the disturbance states)
+    corrected, carried = corrected_vehicle(vehicle, result["effects"])
+    assert corrected.loop_bandwidth_hz == entry["params"]["loop_bandwidth_hz"]
+    assert carried["applied"]["closed_loop_cancellation"]["loop_bandwidth_hz"] == corrected.loop_bandwidth_hz
 
 
 def test_without_a_cancelled_torque_nothing_is_named_and_the_band_stays_low():
-    result, entry = _run(0.0)
+    result, entry, vehicle = _run(0.0)
     assert not entry["significant"]
     assert result["significant"] == []
     assert result["inputs"]["band_hz"][0] <= 1.0
     assert result["base_fit"]["kf_roll"]["value"] == pytest.approx(KF, rel=0.05)
+    assert corrected_vehicle(vehicle, result["effects"])[0].loop_bandwidth_hz is None

@@ -95,3 +95,27 @@ def test_disturbance_bandwidth_reaches_the_filter_and_is_checked():
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(UserError, match="positive frequency"):
             build_config(vehicle, log, ReplayOptions(disturbance="on", disturbance_bandwidth=bad))
+
+
+def test_the_vehicle_files_loop_bandwidth_sets_the_disturbance_states_bandwidth(tmp_path):
+    """loop_bandwidth_hz (written by propid gap --vehicle-out, docs/flightlog.md) is the states'
+    bandwidth when they are on and none is given; a given --disturbance-bandwidth wins; with the
+    states off it is not used. The notes say where the value came from; the key survives a
+    write/read and a non-positive value is refused naming it."""
+    from propid.errors import UserError
+    from propid.flightlog import read_vehicle, write_vehicle
+
+    write_vehicle(tmp_path / "v.json", parse_vehicle({**VEHICLE, "loop_bandwidth_hz": 2.0}))
+    vehicle = read_vehicle(tmp_path / "v.json")
+    assert vehicle.loop_bandwidth_hz == 2.0
+    log = synthetic_log(duration=4.0)
+    config, notes = build_config(vehicle, log, ReplayOptions(disturbance="on"))
+    assert config["disturbance_bandwidth"] == 2.0 and "loop_bandwidth_hz" in notes["disturbance"]
+    config, notes = build_config(vehicle, log, ReplayOptions(disturbance="on", disturbance_bandwidth=5.0))
+    assert config["disturbance_bandwidth"] == 5.0 and "given" in notes["disturbance"]
+    config, notes = build_config(vehicle, log, ReplayOptions(disturbance="off"))
+    assert "disturbance_bandwidth" not in config and "disturbance_torque" not in config
+    assert notes["disturbance"].startswith("off") and "loop_bandwidth_hz" in notes["disturbance"]
+    for bad in (0.0, -2.0, "2", True):
+        with pytest.raises(UserError, match="loop_bandwidth_hz"):
+            parse_vehicle({**VEHICLE, "loop_bandwidth_hz": bad})

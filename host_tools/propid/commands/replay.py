@@ -99,7 +99,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--disturbance-bandwidth", type=float, default=None, metavar="HZ",
                         help="with --disturbance on: the states' bandwidth; they then take the torque residual "
                              "below it (what the vehicle's attitude controller cancels) and kf/km learn above it "
-                             "(docs/math.md §7); default: the library's slow walk")
+                             "(docs/math.md §7); default: the vehicle file's loop_bandwidth_hz (written by "
+                             "propid gap --vehicle-out) when it has one, else the library's slow walk")
     parser.add_argument("--rotor-inertia", choices=["auto", "on", "off"], default="auto",
                         help="model the rotors' yaw reaction and gyroscopic torque with the vehicle file's "
                              "rotor_inertia (auto: when it is given)")

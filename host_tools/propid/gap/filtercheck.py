@@ -4,7 +4,9 @@ held-out logs with the given vehicle file and with the corrected one.
 Both runs use the replay's recommended settings (`--segment flying`, or `all` when the
 replay finds no flying rows; telemetry delay: each file's `esc_delay_s` when it has
 one, else the replay's per-log rule), so the corrected run's filter holds the corrected delay. A `gyro_scale` in the corrected file is undone on the gyro before the
-replay (the filter takes rates as measured). Fleet kf = mean over rotors of each run's
+replay (the filter takes rates as measured). A file with `loop_bandwidth_hz` (the closed loop's
+bandwidth, from `closed_loop_cancellation`) runs with the disturbance states on at that bandwidth,
+so they take the torque the loop cancels and kf learns above it. Fleet kf = mean over rotors of each run's
 converged kf; run-to-run CV = std/mean over runs.
 """
 
@@ -31,7 +33,9 @@ def _replay_kf(log: FlightLog, vehicle: Vehicle, delay) -> float:
     log = copy.copy(log)
     if vehicle.gyro_scale is not None:
         log.gyro = log.gyro / np.asarray(vehicle.gyro_scale)[None, :]
-    gyro_only = dict(esc_delay=delay, aiding="gyro", rotor_inertia="off", torque_scale="off", progress=False)
+    disturbance = "on" if vehicle.loop_bandwidth_hz is not None else "off"  # the file's bandwidth (replay/config.py)
+    gyro_only = dict(esc_delay=delay, aiding="gyro", rotor_inertia="off", torque_scale="off", disturbance=disturbance,
+                     progress=False)
     try:
         result = replay(log, vehicle, ReplayOptions(segment="flying", **gyro_only))
     except UserError:  # the replay's flying detector found nothing (e.g. a log that starts airborne)
@@ -48,4 +52,7 @@ def filter_before_after(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehi
         if progress:
             progress()
     return {"logs": [str(l.path) for l in logs], "kf_before": _fleet(before), "kf_after": _fleet(after),
-            "mode": "gyro only (no accelerometer aiding), --segment flying"}
+            "mode": "gyro only (no accelerometer aiding), --segment flying" + "".join(
+                f"; {name}: disturbance states at its loop_bandwidth_hz {v.loop_bandwidth_hz:g} Hz"
+                for name, v in (("vehicle file", vehicle), ("corrected vehicle", corrected))
+                if v.loop_bandwidth_hz is not None)}

@@ -9,6 +9,7 @@ the vehicle JSON where the model can carry them (flight-log v1 extension keys, d
 | com_offset | rotor positions minus the fitted offset (x, y); `com_offset` = file's + offset |
 | aero_damping | `aero_damping` = file's + fitted [dx, dy, dz] |
 | rotor_inertia, rotor_gyroscopic | `rotor_inertia` = fitted J_r |
+| closed_loop_cancellation | `loop_bandwidth_hz` = the band edge the rule chose (a lower bound when it is the highest candidate) |
 Others (rotor_drag, translational_lift, ground_effect, thrust_nonlinearity) have no key:
 listed in `not_carried`.
 
@@ -66,9 +67,11 @@ def corrected_vehicle(vehicle: Vehicle, effects: list[dict]) -> tuple[Vehicle, d
                 out.rotor_inertia = float(p["rotor_inertia"])
                 applied[eid] = {"rotor_inertia": out.rotor_inertia}
         elif eid == "closed_loop_cancellation":
-            not_carried.append({"id": eid, "why": "a property of the closed loop, not of the vehicle: the filter "
-                                "would need torque rows above the loop's bandwidth (propid replay "
-                                f"--diagnostic-highpass {p['loop_bandwidth_hz']:g} is the diagnostic form)"})
+            # The filter's disturbance states take the torque below this edge (propid replay
+            # --disturbance on passes it as the firmware's disturbance_bandwidth).
+            out.loop_bandwidth_hz = float(p["loop_bandwidth_hz"])
+            applied[eid] = {"loop_bandwidth_hz": out.loop_bandwidth_hz,
+                            "at_least": bool(p.get("loop_bandwidth_at_least", False))}
         else:
             not_carried.append({"id": eid, "why": "no vehicle-file key for this effect"})
     notes = (" Corrected by propid gap: " + "; ".join(f"{k}: {v}" for k, v in applied.items())) if applied else ""

@@ -154,7 +154,17 @@ def _optional_terms(vehicle: Vehicle, log: FlightLog, options: ReplayOptions, co
         if not np.isfinite(bandwidth) or bandwidth <= 0.0:
             raise UserError(f"--disturbance-bandwidth {bandwidth!r}: give a positive frequency in Hz")
         config["disturbance_bandwidth"] = float(bandwidth)
-        notes["disturbance"] = f"on, bandwidth {bandwidth:g} Hz (walk = 2 pi f x the rate process noise)"
+        notes["disturbance"] = (f"on, bandwidth {bandwidth:g} Hz (given; walk = 2 pi f x the rate process "
+                                "noise)")
+    elif options.disturbance == "on" and vehicle.loop_bandwidth_hz is not None:
+        # The closed loop cancels body torques below its bandwidth (propid gap's
+        # closed_loop_cancellation): the states take that band, kf/km learn above it.
+        config["disturbance_bandwidth"] = float(vehicle.loop_bandwidth_hz)
+        notes["disturbance"] = (f"on, bandwidth {vehicle.loop_bandwidth_hz:g} Hz (the vehicle file's "
+                                "loop_bandwidth_hz; walk = 2 pi f x the rate process noise)")
+    elif vehicle.loop_bandwidth_hz is not None:
+        notes["disturbance"] = (f"off (the vehicle file's loop_bandwidth_hz {vehicle.loop_bandwidth_hz:g} Hz "
+                                "is used only with --disturbance on)")
     if options.rotor_inertia not in ("auto", "on", "off"):
         raise UserError(f"--rotor-inertia {options.rotor_inertia!r}: choose auto, on or off")
     inertias = vehicle.rotor_inertias
