@@ -23,15 +23,18 @@ row). From that structure the script writes the straight-line kernel
 (the rounding loading; the caller's Ld, drag_factor = 1 + Ld: docs/math.md §2)
 on the packed upper triangle (firmware/src/propid_quad_predict.h): column by
 column, each P_cj of the 11 non-bias rows loaded once and shared by the three
-rows of T = F_rate P, the rate block collecting its coefficient-column terms
-during the sweep. Every element the kernel writes is checked, symbolically,
+rows of T = F_rate P, the rate block's six elements collected in registers
+during the sweep (every term, the rate columns' too: no T_ab is kept for the
+end; the rate block is written last). Every element the kernel writes is checked, symbolically,
 against F P F^T + Q of the model before the file is written: the C is the
 model's arithmetic, only ordered for the Cortex-M4 (one multiply-add per term,
-the own element last so each sum starts in a fresh register; a variance's
+the own element last so each sum starts in a fresh register, but in the yaw
+row, which starts from it: OWN_FIRST_ROW; a variance's
 loading and noise, (1 + L) P_jj + q, in one).
 
 The same file holds the size-lean build's kernel (PROPID_SIZE_LEAN): the same
-sums per element as a loop over the columns over the model's column table
+sums per element (its rate block's terms in another order) as a loop over
+the columns over the model's column table
 (propid_quad_jac_entry and the column indices written from the structure
 above), interpreted symbolically here loop by loop and checked against the
 model the same way.
@@ -51,6 +54,11 @@ import sympy
 N_RATE, N_ROTOR, N_BIAS = 3, 4, 3
 N = N_RATE + 2 * N_ROTOR + N_BIAS          # 14 states
 FIRST_THRUST, FIRST_DRAG, FIRST_BIAS = 3, 7, 11
+# The row of T = F_rate P whose sum starts from its own element P_aj (a chain of
+# multiply-adds in that register, no multiply to start and add to end it): one
+# row per column can, the other two rows' sums still read P_aj (measured: row 2
+# 10 instructions a step fewer, row 0 9, rows 1 and 2 9, all three 3).
+OWN_FIRST_ROW = 2
 OUT = pathlib.Path(__file__).resolve().parents[1] / "src" / "propid_quad_predict.h"
 
 
@@ -167,7 +175,6 @@ def generate() -> str:
     names.update({FIRST_THRUST + i: f"k{i}" for i in range(N_ROTOR)})
     names.update({FIRST_DRAG + i: f"d{i}" for i in range(N_ROTOR)})
     loaded_rows = list(range(FIRST_BIAS))                # the 11 non-bias rows
-    rate_cols: dict[tuple[int, int], sympy.Expr] = {}
     block: dict[tuple[int, int], sympy.Expr] = {(a, b): sympy.Integer(0)
                                                for a in range(3) for b in range(a, 3)}
     block_terms: dict[tuple[int, int], list[str]] = {key: [] for key in block}
@@ -184,19 +191,45 @@ def generate() -> str:
         t = []
         for a in range(3):
             products = [f"g{a}_{p} * {names[col]}" for p, col in enumerate(structure[a])]
-            emit(f"        const float t{a} = ({' + '.join(products)}) + {names[a]};")
+            if a == OWN_FIRST_ROW:
+                emit(f"        const float t{a} = {names[a]} + {' + '.join(products)};")
+            else:
+                emit(f"        const float t{a} = ({' + '.join(products)}) + {names[a]};")
             t.append(sum(g[a][p] * sym[col] for p, col in enumerate(structure[a])) + sym[a])
         if j < FIRST_THRUST:
+            # A rate column's share of the rate block, collected here like the
+            # coefficient columns' (no T_ab kept for the end): T_ab itself when
+            # j = b, T_aj G_bp when j is row b's rate column p, and on the
+            # diagonal the loading's rate terms, c P_jj once and
+            # (T_aj + c G_aj P_jj) G_aj (docs/math.md §2).
+            emit(f"        const float {names[j]}_loaded = {rate_scale_loading} * {names[j]};")
             for a in range(3):
-                emit(f"        rate_col{a}[{j}] = t{a};")
-                rate_cols[(a, j)] = t[a]
+                for b in range(a, 3):
+                    value = block[(a, b)]
+                    terms = []
+                    if b == j:
+                        terms.append(f"t{a}")
+                        value += t[a]
+                        if a == b:
+                            terms.append(f"{names[j]}_loaded")
+                            value += scale_factor * sym[j]
+                    if j in structure[b]:
+                        p = structure[b].index(j)
+                        if a == b:
+                            terms.append(f"(t{a} + g{b}_{p} * {names[j]}_loaded) * g{b}_{p}")
+                            value += (t[a] + g[b][p] * scale_factor * sym[j]) * g[b][p]
+                        else:
+                            terms.append(f"t{a} * g{b}_{p}")
+                            value += t[a] * g[b][p]
+                    if not terms:
+                        continue
+                    if j == 0:
+                        emit(f"        block{a}{b} = {' + '.join(terms)};")
+                    else:
+                        for term in terms:
+                            emit(f"        block{a}{b} += {term};")
+                    block[(a, b)] = value
             emit("        PROPID_SCHEDULE_BARRIER();")
-            if j == FIRST_THRUST - 1:
-                # In memory until the rate block: held in registers through the
-                # coefficient columns they were spilled (4 instructions more).
-                emit("        PROPID_RELOAD_BARRIER(rate_col0);")
-                emit("        PROPID_RELOAD_BARRIER(rate_col1);")
-                emit("        PROPID_RELOAD_BARRIER(rate_col2);")
             emit("    }")
             continue
         # The coefficient columns' share of the rate block (T F^T)_ab, b >= a; on
@@ -229,32 +262,17 @@ def generate() -> str:
             checked[(j, j)] = (1 + loading) * p_symbol(j, j) + q[kind(j)]
         emit("        PROPID_SCHEDULE_BARRIER();")
         emit("    }")
-    # The rate block from the rate columns and the collected coefficient terms.
-    emit("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp; on the")
-    emit("     * diagonal + the loading c (P_aa + sum_p G_ap^2 P_pp), its coefficient terms")
-    emit("     * collected in the sweep, its rate terms here (the rate variances, c times). */")
-    loaded_rates = ", ".join(f"p{r}_loaded = {rate_scale_loading} * cov[propid_cov_index({r}u, {r}u)]"
-                             for r in range(3))
-    emit(f"    const float {loaded_rates};")
+    # The rate block: every term collected in the sweep.
+    emit("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp, and on the")
+    emit("     * diagonal the loading c (P_aa + sum_p G_ap^2 P_pp), all collected in the sweep. */")
     for a in range(3):
         for b in range(a, 3):
-            products = rate_block_terms(structure, a, b, lambda r, c: f"rate_col{r}[{c}]",
-                                        lambda r, p: f"g{r}_{p}")
-            value = rate_cols[(a, b)] + block[(a, b)]
-            for p, column in rate_terms_of_row(structure, b):
-                value += rate_cols[(a, column)] * g[b][p]
             if a == b:
-                loaded = [f"(rate_col{a}[{column}] + g{b}_{p} * p{column}_loaded) * g{b}_{p}"
-                          for p, column in rate_terms_of_row(structure, b)]
-                emit(f"    const float f{a}{b} = {' + '.join([f'rate_col{a}[{a}]'] + loaded + [f'block{a}{b}', f'p{a}_loaded'])};")
-                emit(f"    cov[propid_cov_index({a}u, {b}u)] = f{a}{b} + q_rate;")
-                value = rate_cols[(a, a)] + block[(a, a)] + scale_factor * p_symbol(a, a)
-                for p, column in rate_terms_of_row(structure, b):
-                    value += (rate_cols[(a, column)] + g[b][p] * scale_factor * p_symbol(column, column)) * g[b][p]
-                checked[(a, b)] = value + q["rate"]
+                emit(f"    cov[propid_cov_index({a}u, {b}u)] = block{a}{b} + q_rate;")
+                checked[(a, b)] = block[(a, b)] + q["rate"]
             else:
-                emit(f"    cov[propid_cov_index({a}u, {b}u)] = {' + '.join(products)};")
-                checked[(a, b)] = value
+                emit(f"    cov[propid_cov_index({a}u, {b}u)] = block{a}{b};")
+                checked[(a, b)] = block[(a, b)]
 
     check_against_model(checked, "element")
 
@@ -397,9 +415,8 @@ def generate() -> str:
  * coefficients: drag_factor - 1) for the fixed quad layout (propid_internal.h), on the packed upper triangle, F = I + G with G in the 3
  * rate rows only: column by column, the 11 non-bias P_cj loaded once for the
  * three rows of T = F_rate P, the 18 G entries in registers, the rate block's
- * coefficient-column terms collected during the sweep; the rate columns (j < 3)
- * go to a local array (kept in memory) first because later columns overwrite
- * rows 0..2. Every element
+ * six elements collected in registers during the sweep (every term: T_ab, the
+ * rate and coefficient columns' T_aj G_bp, the loading) and written last. Every element
  * written was checked against the model's F P F^T + Q by the generator. */
 #ifndef PROPID_QUAD_PREDICT_H
 #define PROPID_QUAD_PREDICT_H
@@ -416,9 +433,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
                                float drag_factor)
 {{
 {chr(10).join(g_loads)}
-    float rate_col0[3], rate_col1[3], rate_col2[3]; /* T_ab for the rate columns b */
-    float block00 = 0.0f, block01 = 0.0f, block02 = 0.0f; /* coefficient-column terms */
-    float block11 = 0.0f, block12 = 0.0f, block22 = 0.0f;
+    float block00, block01, block02, block11, block12, block22; /* the rate block's terms */
 {chr(10).join(lines)}
 }}
 #endif

@@ -6,9 +6,8 @@
  * coefficients: drag_factor - 1) for the fixed quad layout (propid_internal.h), on the packed upper triangle, F = I + G with G in the 3
  * rate rows only: column by column, the 11 non-bias P_cj loaded once for the
  * three rows of T = F_rate P, the 18 G entries in registers, the rate block's
- * coefficient-column terms collected during the sweep; the rate columns (j < 3)
- * go to a local array (kept in memory) first because later columns overwrite
- * rows 0..2. Every element
+ * six elements collected in registers during the sweep (every term: T_ab, the
+ * rate and coefficient columns' T_aj G_bp, the loading) and written last. Every element
  * written was checked against the model's F P F^T + Q by the generator. */
 #ifndef PROPID_QUAD_PREDICT_H
 #define PROPID_QUAD_PREDICT_H
@@ -103,19 +102,21 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
     const float g0_0 = jacobian_dt[0][0], g0_1 = jacobian_dt[0][1], g0_2 = jacobian_dt[0][2], g0_3 = jacobian_dt[0][3], g0_4 = jacobian_dt[0][4], g0_5 = jacobian_dt[0][5];
     const float g1_0 = jacobian_dt[1][0], g1_1 = jacobian_dt[1][1], g1_2 = jacobian_dt[1][2], g1_3 = jacobian_dt[1][3], g1_4 = jacobian_dt[1][4], g1_5 = jacobian_dt[1][5];
     const float g2_0 = jacobian_dt[2][0], g2_1 = jacobian_dt[2][1], g2_2 = jacobian_dt[2][2], g2_3 = jacobian_dt[2][3], g2_4 = jacobian_dt[2][4], g2_5 = jacobian_dt[2][5];
-    float rate_col0[3], rate_col1[3], rate_col2[3]; /* T_ab for the rate columns b */
-    float block00 = 0.0f, block01 = 0.0f, block02 = 0.0f; /* coefficient-column terms */
-    float block11 = 0.0f, block12 = 0.0f, block22 = 0.0f;
+    float block00, block01, block02, block11, block12, block22; /* the rate block's terms */
     { /* column 0 */
         const float p0 = cov[propid_cov_index(0u, 0u)], p1 = cov[propid_cov_index(0u, 1u)], p2 = cov[propid_cov_index(0u, 2u)];
         const float k0 = cov[propid_cov_index(0u, 3u)], k1 = cov[propid_cov_index(0u, 4u)], k2 = cov[propid_cov_index(0u, 5u)], k3 = cov[propid_cov_index(0u, 6u)];
         const float d0 = cov[propid_cov_index(0u, 7u)], d1 = cov[propid_cov_index(0u, 8u)], d2 = cov[propid_cov_index(0u, 9u)], d3 = cov[propid_cov_index(0u, 10u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
-        rate_col0[0] = t0;
-        rate_col1[0] = t1;
-        rate_col2[0] = t2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        const float p0_loaded = (7.0f * PROPID_RATE_LOADING) * p0;
+        block00 = t0 + p0_loaded;
+        block01 = t0 * g1_0;
+        block02 = t0 * g2_0;
+        block11 = (t1 + g1_0 * p0_loaded) * g1_0;
+        block12 = t1 * g2_0;
+        block22 = (t2 + g2_0 * p0_loaded) * g2_0;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 1 */
@@ -124,10 +125,15 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(1u, 7u)], d1 = cov[propid_cov_index(1u, 8u)], d2 = cov[propid_cov_index(1u, 9u)], d3 = cov[propid_cov_index(1u, 10u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
-        rate_col0[1] = t0;
-        rate_col1[1] = t1;
-        rate_col2[1] = t2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        const float p1_loaded = (7.0f * PROPID_RATE_LOADING) * p1;
+        block00 += (t0 + g0_0 * p1_loaded) * g0_0;
+        block01 += t0;
+        block02 += t0 * g2_1;
+        block11 += t1;
+        block11 += p1_loaded;
+        block12 += t1 * g2_1;
+        block22 += (t2 + g2_1 * p1_loaded) * g2_1;
         PROPID_SCHEDULE_BARRIER();
     }
     { /* column 2 */
@@ -136,14 +142,16 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(2u, 7u)], d1 = cov[propid_cov_index(2u, 8u)], d2 = cov[propid_cov_index(2u, 9u)], d3 = cov[propid_cov_index(2u, 10u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
-        rate_col0[2] = t0;
-        rate_col1[2] = t1;
-        rate_col2[2] = t2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        const float p2_loaded = (7.0f * PROPID_RATE_LOADING) * p2;
+        block00 += (t0 + g0_1 * p2_loaded) * g0_1;
+        block01 += t0 * g1_1;
+        block02 += t0;
+        block11 += (t1 + g1_1 * p2_loaded) * g1_1;
+        block12 += t1;
+        block22 += t2;
+        block22 += p2_loaded;
         PROPID_SCHEDULE_BARRIER();
-        PROPID_RELOAD_BARRIER(rate_col0);
-        PROPID_RELOAD_BARRIER(rate_col1);
-        PROPID_RELOAD_BARRIER(rate_col2);
     }
     { /* column 3 */
         const float p0 = cov[propid_cov_index(0u, 3u)], p1 = cov[propid_cov_index(1u, 3u)], p2 = cov[propid_cov_index(2u, 3u)];
@@ -151,7 +159,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(3u, 7u)], d1 = cov[propid_cov_index(3u, 8u)], d2 = cov[propid_cov_index(3u, 9u)], d3 = cov[propid_cov_index(3u, 10u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float k0_loaded = (7.0f * PROPID_RATE_LOADING) * k0;
         block00 += (t0 + g0_2 * k0_loaded) * g0_2;
         block01 += t0 * g1_2;
@@ -168,7 +176,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(4u, 7u)], d1 = cov[propid_cov_index(4u, 8u)], d2 = cov[propid_cov_index(4u, 9u)], d3 = cov[propid_cov_index(4u, 10u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float k1_loaded = (7.0f * PROPID_RATE_LOADING) * k1;
         block00 += (t0 + g0_3 * k1_loaded) * g0_3;
         block01 += t0 * g1_3;
@@ -185,7 +193,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(5u, 7u)], d1 = cov[propid_cov_index(5u, 8u)], d2 = cov[propid_cov_index(5u, 9u)], d3 = cov[propid_cov_index(5u, 10u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float k2_loaded = (7.0f * PROPID_RATE_LOADING) * k2;
         block00 += (t0 + g0_4 * k2_loaded) * g0_4;
         block01 += t0 * g1_4;
@@ -202,7 +210,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(6u, 7u)], d1 = cov[propid_cov_index(6u, 8u)], d2 = cov[propid_cov_index(6u, 9u)], d3 = cov[propid_cov_index(6u, 10u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float k3_loaded = (7.0f * PROPID_RATE_LOADING) * k3;
         block00 += (t0 + g0_5 * k3_loaded) * g0_5;
         block01 += t0 * g1_5;
@@ -219,7 +227,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(7u, 7u)], d1 = cov[propid_cov_index(7u, 8u)], d2 = cov[propid_cov_index(7u, 9u)], d3 = cov[propid_cov_index(7u, 10u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float d0_loaded = (7.0f * PROPID_RATE_LOADING) * d0;
         block02 += t0 * g2_2;
         block12 += t1 * g2_2;
@@ -236,7 +244,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(7u, 8u)], d1 = cov[propid_cov_index(8u, 8u)], d2 = cov[propid_cov_index(8u, 9u)], d3 = cov[propid_cov_index(8u, 10u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float d1_loaded = (7.0f * PROPID_RATE_LOADING) * d1;
         block02 += t0 * g2_3;
         block12 += t1 * g2_3;
@@ -253,7 +261,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(7u, 9u)], d1 = cov[propid_cov_index(8u, 9u)], d2 = cov[propid_cov_index(9u, 9u)], d3 = cov[propid_cov_index(9u, 10u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float d2_loaded = (7.0f * PROPID_RATE_LOADING) * d2;
         block02 += t0 * g2_4;
         block12 += t1 * g2_4;
@@ -270,7 +278,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(7u, 10u)], d1 = cov[propid_cov_index(8u, 10u)], d2 = cov[propid_cov_index(9u, 10u)], d3 = cov[propid_cov_index(10u, 10u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float d3_loaded = (7.0f * PROPID_RATE_LOADING) * d3;
         block02 += t0 * g2_5;
         block12 += t1 * g2_5;
@@ -287,7 +295,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(7u, 11u)], d1 = cov[propid_cov_index(8u, 11u)], d2 = cov[propid_cov_index(9u, 11u)], d3 = cov[propid_cov_index(10u, 11u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         cov[propid_cov_index(0u, 11u)] = t0;
         cov[propid_cov_index(1u, 11u)] = t1;
         cov[propid_cov_index(2u, 11u)] = t2;
@@ -301,7 +309,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(7u, 12u)], d1 = cov[propid_cov_index(8u, 12u)], d2 = cov[propid_cov_index(9u, 12u)], d3 = cov[propid_cov_index(10u, 12u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         cov[propid_cov_index(0u, 12u)] = t0;
         cov[propid_cov_index(1u, 12u)] = t1;
         cov[propid_cov_index(2u, 12u)] = t2;
@@ -315,7 +323,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float d0 = cov[propid_cov_index(7u, 13u)], d1 = cov[propid_cov_index(8u, 13u)], d2 = cov[propid_cov_index(9u, 13u)], d3 = cov[propid_cov_index(10u, 13u)];
         const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
         const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = (g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3) + p2;
+        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         cov[propid_cov_index(0u, 13u)] = t0;
         cov[propid_cov_index(1u, 13u)] = t1;
         cov[propid_cov_index(2u, 13u)] = t2;
@@ -323,19 +331,14 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(13u, 13u)] = (1.0f + PROPID_VAR_LOADING) * own + q_bias;
         PROPID_SCHEDULE_BARRIER();
     }
-    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp; on the
-     * diagonal + the loading c (P_aa + sum_p G_ap^2 P_pp), its coefficient terms
-     * collected in the sweep, its rate terms here (the rate variances, c times). */
-    const float p0_loaded = (7.0f * PROPID_RATE_LOADING) * cov[propid_cov_index(0u, 0u)], p1_loaded = (7.0f * PROPID_RATE_LOADING) * cov[propid_cov_index(1u, 1u)], p2_loaded = (7.0f * PROPID_RATE_LOADING) * cov[propid_cov_index(2u, 2u)];
-    const float f00 = rate_col0[0] + (rate_col0[1] + g0_0 * p1_loaded) * g0_0 + (rate_col0[2] + g0_1 * p2_loaded) * g0_1 + block00 + p0_loaded;
-    cov[propid_cov_index(0u, 0u)] = f00 + q_rate;
-    cov[propid_cov_index(0u, 1u)] = rate_col0[1] + rate_col0[0] * g1_0 + rate_col0[2] * g1_1 + block01;
-    cov[propid_cov_index(0u, 2u)] = rate_col0[2] + rate_col0[0] * g2_0 + rate_col0[1] * g2_1 + block02;
-    const float f11 = rate_col1[1] + (rate_col1[0] + g1_0 * p0_loaded) * g1_0 + (rate_col1[2] + g1_1 * p2_loaded) * g1_1 + block11 + p1_loaded;
-    cov[propid_cov_index(1u, 1u)] = f11 + q_rate;
-    cov[propid_cov_index(1u, 2u)] = rate_col1[2] + rate_col1[0] * g2_0 + rate_col1[1] * g2_1 + block12;
-    const float f22 = rate_col2[2] + (rate_col2[0] + g2_0 * p0_loaded) * g2_0 + (rate_col2[1] + g2_1 * p1_loaded) * g2_1 + block22 + p2_loaded;
-    cov[propid_cov_index(2u, 2u)] = f22 + q_rate;
+    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp, and on the
+     * diagonal the loading c (P_aa + sum_p G_ap^2 P_pp), all collected in the sweep. */
+    cov[propid_cov_index(0u, 0u)] = block00 + q_rate;
+    cov[propid_cov_index(0u, 1u)] = block01;
+    cov[propid_cov_index(0u, 2u)] = block02;
+    cov[propid_cov_index(1u, 1u)] = block11 + q_rate;
+    cov[propid_cov_index(1u, 2u)] = block12;
+    cov[propid_cov_index(2u, 2u)] = block22 + q_rate;
 }
 #endif
 
