@@ -30,7 +30,8 @@
 #define PROPID_DAMAGE_MIN_SAMPLES 3.0f
 /* Clip (in running sigmas) of the values that update the running mean/variance. */
 #define PROPID_DAMAGE_CLIP 3.0f
-/* Floor of the running variance (an honest filter gives 1). */
+/* Floor of the running variances with the fixed design (an honest filter
+ * gives 1); the derived design floors them at the gyro noise's share. */
 #define PROPID_DAMAGE_VAR_FLOOR 0.25f
 /* Largest lag-1 correlation the whitening uses: the prediction error keeps at
  * least sqrt(1 - 0.95^2) = 31 % of the projection's own variance. */
@@ -43,6 +44,7 @@ void propid_damage_config_default(propid_damage_config_t *config)
     }
     config->false_alarms_per_hour = 1.0e-3f;
     config->design_shift_sigma = 8.0f;
+    config->design_loss_fraction = 0.0f;
     config->hold_s = 0.5f;
     config->adapt_time_s = 0.5f;
 }
@@ -55,6 +57,7 @@ static void reset_moments(propid_damage_t *detector, uint8_t rotor)
     detector->cov1[rotor] = 0.0f;
     detector->residual_var[rotor] = 1.0f;
     detector->previous[rotor] = 0.0f;
+    detector->loss_shift[rotor] = 0.0f;
     detector->offset[rotor] = 0.0f;
     detector->offset_last[rotor] = 0.0f;
 }
@@ -105,6 +108,7 @@ propid_status_t propid_damage_init(propid_damage_t *detector, const propid_damag
     const uint8_t rotor_count = filter->config.rotor_count;
     if (!(config->false_alarms_per_hour > 0.0f) || !isfinite(config->false_alarms_per_hour) ||
         !(config->design_shift_sigma > 0.0f) || !(config->design_shift_sigma < 50.0f) ||
+        !(config->design_loss_fraction >= 0.0f) || !(config->design_loss_fraction < 1.0f) ||
         !(config->hold_s >= 0.0f) || !(config->hold_s < 60.0f) || !(rate_hz > 0.0f) ||
         !(config->adapt_time_s > 0.0f) || !(config->adapt_time_s < 600.0f) ||
         rotor_count == 0u || rotor_count > PROPID_MAX_ROTORS) {
@@ -124,13 +128,47 @@ propid_status_t propid_damage_init(propid_damage_t *detector, const propid_damag
     detector->drift = drift;
     detector->clip = drift + threshold / PROPID_DAMAGE_MIN_SAMPLES;
     detector->threshold = threshold;
+    detector->arl_samples = arl;
     detector->rotor_count = rotor_count;
     detector->last_rotor = -1;
     detector->reanchors_seen = filter->counters.gate_reopened;
     for (uint8_t i = 0; i < rotor_count; ++i) {
         reset_moments(detector, i);
+        detector->rotor_drift[i] = drift;
+        detector->rotor_threshold[i] = threshold;
+        detector->rotor_clip[i] = detector->clip;
     }
     return PROPID_OK;
+}
+
+/* At arming, each rotor's CUSUM is tuned for the smallest loss it must catch
+ * (docs/damage.md): a loss delta moves the projection by delta |g_i| on its
+ * first sample (more later, while the rate absorbs the missing torque), in
+ * running sigmas delta |g_i| / sd_i; the CUSUM's reference value for a shift mu
+ * is mu / 2, and h is solved for that k from the same average run length, so
+ * the derived false-alarm rate holds whatever k is. Where the shift cannot be
+ * measured (no signature yet, or a k whose h is out of range) the configured
+ * design shift stays. */
+static void derive_rotor_design(propid_damage_t *detector)
+{
+    const float loss = detector->config.design_loss_fraction;
+    for (uint8_t i = 0; i < detector->rotor_count; ++i) {
+        const float k = 0.5f * loss * detector->loss_shift[i];
+        float h = -1.0f;
+        if (k > 0.0f && k < 0.5f * 50.0f) {
+            h = propid_damage_threshold(k, detector->arl_samples);
+        }
+        if (h > 0.0f) {
+            detector->rotor_drift[i] = k;
+            detector->rotor_threshold[i] = h;
+            detector->rotor_clip[i] = k + h / PROPID_DAMAGE_MIN_SAMPLES;
+        } else {
+            detector->rotor_drift[i] = detector->drift;
+            detector->rotor_threshold[i] = detector->threshold;
+            detector->rotor_clip[i] = detector->clip;
+        }
+    }
+    detector->design_set = 1u;
 }
 
 /* The rotor's kf and km variance back to the prior, their correlations
@@ -216,8 +254,12 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
     const float alpha = dt < adapt ? dt / adapt : 1.0f;
     detector->armed_s += dt;
     const int armed = detector->armed_s > 3.0f * adapt;
+    const int derived_design = detector->config.design_loss_fraction > 0.0f;
+    if (armed && derived_design && !detector->design_set) {
+        derive_rotor_design(detector);
+    }
     int8_t best = -1;
-    float best_statistic = detector->threshold;
+    float best_excess = 1.0f; /* statistic / its threshold */
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const float kf_rel = core->state[propid_first_thrust() + i];
         const float weight = dt * core->rotor_speed_sq[i];
@@ -257,6 +299,17 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
         const float correlation = rho < PROPID_DAMAGE_RHO_MAX ? rho : PROPID_DAMAGE_RHO_MAX;
         const float residual = deviation - correlation * detector->previous[i];
         const float residual_sd = sqrtf(detector->residual_var[i]);
+        /* The share of the projection's variance the gyro's own white noise puts
+         * in it, sum_a (g_a / |g|)^2 R / S_a: the innovation's prediction error is
+         * independent of the sample's gyro noise, so no running variance can be
+         * below it (docs/damage.md); both running variances are floored there. */
+        float noise_share = 0.0f;
+        for (uint8_t a = 0; a < 3u; ++a) {
+            const float w = g[a] * inv_sd[a] / norm;
+            noise_share += w * w;
+        }
+        const float noise_floor = filter->derived.gyro_var * noise_share;
+        const float var_floor = derived_design ? noise_floor : PROPID_DAMAGE_VAR_FLOOR;
         /* The filter's own re-anchors (below) lift the projection by a known
          * amount: only a rise can look like a loss, and only a rise is taken
          * off, so every increment is at most the uncompensated one and the
@@ -279,14 +332,24 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
         detector->cov1[i] += alpha * (dev_clipped * detector->previous[i] - detector->cov1[i]);
         detector->residual_var[i] += alpha * (res_clipped * res_clipped - detector->residual_var[i]);
         detector->previous[i] = dev_clipped;
-        /* Floors (an honest filter gives 1): a near-constant projection cannot
-         * make every small wiggle a many-sigma event. */
-        if (detector->var[i] < PROPID_DAMAGE_VAR_FLOOR) {
-            detector->var[i] = PROPID_DAMAGE_VAR_FLOOR;
+        /* Floors: a near-constant projection cannot make every small wiggle a
+         * many-sigma event. */
+        if (!(detector->var[i] >= var_floor)) {
+            detector->var[i] = var_floor;
         }
-        if (detector->residual_var[i] < PROPID_DAMAGE_VAR_FLOOR) {
-            detector->residual_var[i] = PROPID_DAMAGE_VAR_FLOOR;
+        if (!(detector->residual_var[i] >= var_floor)) {
+            detector->residual_var[i] = var_floor;
         }
+        /* A whole loss' shift in running sigmas, for the design: norm on the
+         * first sample; the rate's gain on its axis is 1 - R / S, so the rate error
+         * a persisting loss leaves grows by the share r = R / S kept after each
+         * update, and over the 3 samples an alarm needs at least (the clip) the
+         * shift averages first x (3 + 2 r + r^2) / 3. */
+        const float kept = noise_floor < 1.0f ? noise_floor : 1.0f; /* r: S >= R */
+        const float shift = norm * (3.0f + kept * (2.0f + kept)) / (3.0f * sqrtf(detector->var[i]));
+        detector->loss_shift[i] = detector->loss_shift[i] > 0.0f
+                                      ? detector->loss_shift[i] + alpha * (shift - detector->loss_shift[i])
+                                      : shift;
         /* The offset of this sample decays as the running mean absorbs a
          * persisting step; a re-anchor on this sample adds the rise it makes in
          * the next sample's projection: the re-anchored axis' innovation loses
@@ -305,11 +368,12 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
         }
         /* Clipped increment: one or two outliers (a lost or quantised telemetry
          * sample) cannot alarm alone; a damage's shift persists. */
-        const float increment = standard > detector->clip ? detector->clip : standard;
-        const float next = detector->statistic[i] + increment - detector->drift;
+        const float increment = standard > detector->rotor_clip[i] ? detector->rotor_clip[i] : standard;
+        const float next = detector->statistic[i] + increment - detector->rotor_drift[i];
         detector->statistic[i] = next > 0.0f ? next : 0.0f;
-        if (detector->statistic[i] > best_statistic) {
-            best_statistic = detector->statistic[i];
+        const float excess = detector->statistic[i] / detector->rotor_threshold[i];
+        if (excess > best_excess) {
+            best_excess = excess;
             best = (int8_t)i;
         }
     }
@@ -325,6 +389,7 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
     /* Start afresh: the re-opened coefficients re-converge during the hold and
      * the running moments are re-learnt (armed again after 3 adapt times). */
     detector->armed_s = 0.0f;
+    detector->design_set = 0u;
     for (uint8_t i = 0; i < rotor_count; ++i) {
         detector->statistic[i] = 0.0f;
         reset_moments(detector, i);

@@ -61,6 +61,7 @@ void sitl_options_default(sitl_options_t *o)
     o->filter_coeff_walk = -1.0;
     o->filter_bias_walk = -1.0;
     o->damage_false_alarms_per_hour = -1.0;
+    o->damage_design_loss = -1.0;
 }
 
 
@@ -360,6 +361,10 @@ static const opt_t options[] = {
          "coefficients"),
     NUMBER(NULL, "damage-false-alarm-rate", damage_false_alarms_per_hour, 1e-12, 1e6, "PER_H",
            "detector design false alarms per flight hour (default 1e-3)"),
+    NUMBER(NULL, "damage-design-loss", damage_design_loss, 0.0, 0.99, "FRACTION",
+           "detector tuned per rotor for a loss of FRACTION, variance\n"
+           "floor at the gyro noise's share (docs/math.md 4); 0: the\n"
+           "fixed design (default)"),
     NUMBER("Excitation (docs/results.md, \"Extended campaign\")", "null-dither", null_dither, 0.0, 0.5,
            "FRACTION",
            "more than 4 rotors: excite the allocation's null space\n"

@@ -108,6 +108,7 @@ typedef struct {
     int damage_count;
     int detect_damage;                  /* run propid_damage_step after every gyro sample */
     double damage_false_alarms_per_hour; /* detector design rate (< 0 = library default) */
+    double damage_design_loss;          /* detector's derived design loss (< 0 = library default: off) */
     double null_dither;                 /* null-space excitation, fraction of mean Omega^2 (0 = off) */
 } sitl_options_t;
 

@@ -320,6 +320,9 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
         if (o->damage_false_alarms_per_hour > 0.0) {
             dc.false_alarms_per_hour = (float)o->damage_false_alarms_per_hour;
         }
+        if (o->damage_design_loss >= 0.0) {
+            dc.design_loss_fraction = (float)o->damage_design_loss;
+        }
         if (propid_damage_init(&f->detector, &dc, &f->filter) != PROPID_OK) {
             return fail(r, SITL_EXIT_USAGE, "damage detector rejected its configuration");
         }

@@ -49,7 +49,10 @@ typedef struct {
     propid_damage_t detector;
 } flight_t;
 
-static void setup_flight(flight_t *f, uint32_t seed)
+/* speed_noise > 0: the filter carries the rotor-speed input error of held
+ * telemetry (std speed_noise, held 1 s: the rate form, docs/math.md §14) while
+ * the test still reports the speeds exactly. */
+static void setup_flight_with(flight_t *f, uint32_t seed, float speed_noise)
 {
     memset(f, 0, sizeof(*f));
     f->rng.state = seed * 2654435761u + 1u;
@@ -74,9 +77,25 @@ static void setup_flight(flight_t *f, uint32_t seed)
     c.thrust_coeff_rel_walk = 0.0f;
     c.drag_coeff_rel_walk = 0.0f;
     c.gyro_bias_walk = 0.0f;
+    c.rotor_speed_noise = speed_noise;
+    c.rotor_speed_noise_time = speed_noise > 0.0f ? 1.0f : 0.0f;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&f->filter, &c));
     propid_damage_config_t dc;
     propid_damage_config_default(&dc);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_damage_init(&f->detector, &dc, &f->filter));
+}
+
+static void setup_flight(flight_t *f, uint32_t seed)
+{
+    setup_flight_with(f, seed, 0.0f);
+}
+
+/* The detector with the derived design, tuned for a 20 % loss. */
+static void use_derived_design(flight_t *f)
+{
+    propid_damage_config_t dc;
+    propid_damage_config_default(&dc);
+    dc.design_loss_fraction = 0.2f;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_damage_init(&f->detector, &dc, &f->filter));
 }
 
@@ -191,6 +210,11 @@ static void test_init_rejects_bad_input(void)
     dc.design_shift_sigma = NAN;
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_damage_init(&d, &dc, &f.filter));
     propid_damage_config_default(&dc);
+    dc.design_loss_fraction = 1.0f;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_damage_init(&d, &dc, &f.filter));
+    dc.design_loss_fraction = NAN;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_damage_init(&d, &dc, &f.filter));
+    propid_damage_config_default(&dc);
     dc.adapt_time_s = -1.0f;
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_damage_init(&d, &dc, &f.filter));
     propid_filter_t blank;
@@ -270,6 +294,41 @@ static void test_large_loss_relearnt_without_overshoot(void)
         TEST_ASSERT_TRUE_MESSAGE(lowest > 0.8f, "no overshoot below 0.8x the damaged kf");
         TEST_ASSERT_FLOAT_WITHIN(0.05f * f.kf[damaged], f.kf[damaged], e.thrust_coeff[damaged]);
     }
+}
+
+/* The held input error the filter carries as rate process noise (the honest
+ * input model of DShot telemetry, docs/math.md §14) widens every innovation
+ * variance S_a by what the error does over a whole hold; with speeds that are
+ * in fact exact the innovations' own variance is far below S, and a loss moves
+ * them by fewer nominal sigmas. The detector's variance floor (the gyro noise's
+ * share R / S) and its design shift (the shift of a 20 % loss in running
+ * sigmas) follow that scale with the derived design (design_loss_fraction 0.2): a 20 %
+ * loss on each rotor is detected within 50 ms and isolated, and a healthy 8 s
+ * flight has no alarm. With the fixed design (floor 0.25, design shift 8
+ * sigmas, the default) the first loss went undetected
+ * (4 rad/s: about one DShot step at this vehicle's hover, 1790 rad/s with 7 pole
+ * pairs; the SITL's rule takes step / sqrt(3), and at 2 rad/s this synthetic
+ * flight's strong excitation still let the fixed design detect). */
+static void test_loss_detected_under_the_input_error_model(void)
+{
+    const float speed_noise = 4.0f;
+    for (uint8_t damaged = 0; damaged < 4; damaged++) {
+        flight_t f;
+        setup_flight_with(&f, 51u + damaged, speed_noise);
+        use_derived_design(&f);
+        int8_t rotor;
+        TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 2.0f, &rotor));
+        f.kf[damaged] *= 0.8f; /* 20 % loss of kf and km */
+        f.km[damaged] *= 0.8f;
+        const float at = fly(&f, 2.0f, 2.2f, &rotor);
+        TEST_ASSERT_TRUE_MESSAGE(at > 2.0f && at <= 2.05f, "detected within 50 ms");
+        TEST_ASSERT_EQUAL_INT(damaged, rotor);
+    }
+    flight_t f;
+    setup_flight_with(&f, 61u, speed_noise);
+    use_derived_design(&f);
+    int8_t rotor;
+    TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 8.0f, &rotor));
 }
 
 /* Feed the detector a filter whose stored innovations are a Gaussian AR(1)
@@ -413,6 +472,7 @@ int main(void)
     RUN_TEST(test_healthy_flight_has_no_alarm);
     RUN_TEST(test_damage_detected_isolated_and_reconverged);
     RUN_TEST(test_large_loss_relearnt_without_overshoot);
+    RUN_TEST(test_loss_detected_under_the_input_error_model);
     RUN_TEST(test_correlated_innovations_keep_the_design_rate);
     RUN_TEST(test_reanchor_is_not_a_loss);
     return UNITY_END();

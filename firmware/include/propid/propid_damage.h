@@ -31,6 +31,16 @@ typedef struct {
     /* Mean shift of the projected, normalised innovation the test is tuned to
      * detect fastest [standard deviations]; the CUSUM drift is half of it. */
     float design_shift_sigma;
+    /* Derived design (docs/math.md §4, "The damage detector's variance floor
+     * and design shift, derived"): when > 0, the smallest loss (fraction of a
+     * rotor's kf and km) the bank is tuned for: each rotor's design shift is
+     * the shift that loss makes in its standardised projection, measured while
+     * the bank arms, and the running variances are floored at the gyro noise's
+     * share (for a filter whose innovation variances S are wide, e.g. one that
+     * carries a held rotor-speed error); design_shift_sigma stays only where the
+     * shift cannot be measured. 0 (default): design_shift_sigma for every rotor
+     * and a fixed floor of 0.25. */
+    float design_loss_fraction;
     /* After a detection the bank is frozen this long while the re-opened
      * coefficients re-converge [s]. */
     float hold_s;
@@ -45,6 +55,11 @@ typedef struct {
     float drift;                           /* CUSUM reference value k [sigma] */
     float threshold;                       /* CUSUM decision threshold h [sigma] */
     float clip;                            /* increments clipped at drift + threshold / 3 [sigma] */
+    float arl_samples;                     /* in-control average run length each test is designed for */
+    float rotor_drift[PROPID_MAX_ROTORS];  /* each rotor's k, from its design loss (or drift) [sigma] */
+    float rotor_threshold[PROPID_MAX_ROTORS]; /* each rotor's h for that k and arl_samples [sigma] */
+    float rotor_clip[PROPID_MAX_ROTORS];   /* each rotor's increment clip, k + h / 3 [sigma] */
+    float loss_shift[PROPID_MAX_ROTORS];   /* running |g_i| / sd_i: a whole loss' first-sample shift [sigma] */
     float statistic[PROPID_MAX_ROTORS];    /* CUSUM statistic per rotor [sigma] */
     float mean[PROPID_MAX_ROTORS];         /* running mean of the projection */
     float var[PROPID_MAX_ROTORS];          /* running variance of the projection */
@@ -62,11 +77,13 @@ typedef struct {
     uint16_t damaged_mask;                 /* bit i: rotor i detected since init */
     uint8_t rotor_count;
     uint8_t has_time;
+    uint8_t design_set;                    /* the rotors' k and h were derived since the last (re-)start */
     int8_t last_rotor;                     /* latest isolated rotor, -1 none */
 } propid_damage_t;
 
-/* Defaults: 1e-3 false alarms per flight hour, design shift 8 sigma, hold 0.5 s,
- * adaptation 0.5 s (armed 1.5 s after start and after each detection). */
+/* Defaults: 1e-3 false alarms per flight hour, design shift 8 sigma (no derived
+ * design), hold 0.5 s, adaptation 0.5 s (armed 1.5 s after start and after
+ * each detection). */
 void propid_damage_config_default(propid_damage_config_t *config);
 
 /* Threshold h of one CUSUM test whose in-control average run length is
