@@ -33,8 +33,8 @@ row, which starts from it: OWN_FIRST_ROW; a variance's
 loading and noise, (1 + L) P_jj + q, in one).
 
 The same file holds the size-lean build's kernel (PROPID_SIZE_LEAN): the same
-sums per element (its rate block's terms in another order) as a loop over
-the columns over the model's column table
+sums per element (its rate block's terms, also collected in the sweep, in
+another order) as a loop over the columns over the model's column table
 (propid_quad_jac_entry and the column indices written from the structure
 above), interpreted symbolically here loop by loop and checked against the
 model the same way.
@@ -87,18 +87,6 @@ def rate_jacobian_structure() -> list[list[int]]:
                    if sympy.simplify(sympy.diff(rate_dot[a], x)) != 0]
         rows.append(columns)
     return rows
-
-
-def rate_terms_of_row(structure: list[list[int]], row: int) -> list[tuple[int, int]]:
-    """(entry, column) of a rate row's Jacobian entries that fall in the rate block."""
-    return [(p, column) for p, column in enumerate(structure[row]) if column < FIRST_THRUST]
-
-
-def rate_block_terms(structure: list[list[int]], a: int, b: int, rate_col, gain) -> list[str]:
-    """C terms of the rate block's (a, b) element, (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp
-    + the collected coefficient block; rate_col and gain name the kernel's variables."""
-    products = [f"{rate_col(a, column)} * {gain(b, p)}" for p, column in rate_terms_of_row(structure, b)]
-    return [rate_col(a, b)] + products + [f"block{a}{b}"]
 
 
 def p_symbol(i: int, j: int) -> sympy.Symbol:
@@ -279,13 +267,7 @@ def generate() -> str:
     # The size-lean build's kernel: the same per-element arithmetic as loops over
     # the model's column table; interpreted here, symbolically, loop by loop as the
     # C below runs it, and checked against the model the same way.
-    rate_entries = [sum(1 for c in row if c < FIRST_THRUST) for row in structure]
-    if len(set(rate_entries)) != 1 or any(row[:rate_entries[0]] != sorted(c for c in row if c < FIRST_THRUST)
-                                          for row in structure):
-        raise SystemExit("quad_predict: every rate row must list its rate columns first, as many in each")
-    n_rate_entries = rate_entries[0]
     lean: dict[tuple[int, int], sympy.Expr] = {}
-    lean_rate_col = {}
     lean_block = {(a, b): sympy.Integer(0) for a in range(3) for b in range(a, 3)}
     for j in range(N):
         t = []
@@ -294,33 +276,27 @@ def generate() -> str:
             for p in range(1, entries):
                 acc += g[a][p] * p_symbol(structure[a][p], j)
             t.append(acc + p_symbol(a, j))
-        if j < FIRST_THRUST:
-            for a in range(3):
-                lean_rate_col[(a, j)] = t[a]
-            continue
+        own_loaded = scale_factor * p_symbol(j, j)
         for b in range(3):
-            for p in range(n_rate_entries, entries):
+            for p in range(entries):
                 if structure[b][p] == j:
                     for a in range(b + 1):
-                        own_share = g[b][p] * scale_factor * p_symbol(j, j) if a == b else 0
+                        own_share = g[b][p] * own_loaded if a == b else 0
                         lean_block[(a, b)] += (t[a] + own_share) * g[b][p]
+        if j < FIRST_THRUST:
+            for a in range(j + 1):
+                lean_block[(a, j)] += t[a]
+            lean_block[(j, j)] += own_loaded
+            continue
         for a in range(3):
             lean[(a, j)] = t[a]
         factor = 1 + (drag_loading if kind(j) == "drag" else loading)
         lean[(j, j)] = factor * p_symbol(j, j) + q[kind(j)]
     for b in range(3):
         for a in range(b + 1):
-            value = lean_rate_col[(a, b)]
-            for p in range(n_rate_entries):
-                value += lean_rate_col[(a, structure[b][p])] * g[b][p]
-            value += lean_block[(a, b)]
-            if a == b:
-                value += scale_factor * p_symbol(a, a) + sum(
-                    g[b][p] * scale_factor * p_symbol(structure[b][p], structure[b][p]) * g[b][p]
-                    for p in range(n_rate_entries))
-            lean[(a, b)] = value + q["rate"] if a == b else value
+            lean[(a, b)] = lean_block[(a, b)] + q["rate"] if a == b else lean_block[(a, b)]
     check_against_model(lean, "lean kernel's element")
-    entry_table = ", ".join("{" + ", ".join(f"{row.index(c)}u" if c in row and c >= FIRST_THRUST else "0xFFu"
+    entry_table = ", ".join("{" + ", ".join(f"{row.index(c)}u" if c in row else "0xFFu"
                                             for c in range(N)) + "}" for row in structure)
 
     # The C of the size-lean kernel: a loop over the columns j, its body written
@@ -331,8 +307,9 @@ def generate() -> str:
     out("/* The size-lean build (PROPID_SIZE_LEAN): the same sums per element as a loop")
     out(" * over the columns j, each column's body written out (its 11 loads walked")
     out(" * through the packed triangle, the three rows' sums, the rate block's")
-    out(" * coefficient terms found through propid_quad_jac_entry); small code, more")
-    out(" * instructions. */")
+    out(" * terms found through propid_quad_jac_entry, the rate columns' too, and")
+    out(" * collected in the sweep as in the fast kernel, in its own order); small")
+    out(" * code, more instructions. */")
     out(f"static const uint8_t propid_quad_jac_entry[3][{N}] = {{{entry_table}}};")
     out("")
     out("static inline __attribute__((always_inline)) void")
@@ -340,8 +317,7 @@ def generate() -> str:
     out("                               float q_rate, float q_thrust, float q_drag, float q_bias,")
     out("                               float drag_factor)")
     out("{")
-    out("    float rate_col[3][3]; /* T_ab for the rate columns b */")
-    out("    float block00 = 0.0f, block01 = 0.0f, block02 = 0.0f; /* coefficient-column terms */")
+    out("    float block00 = 0.0f, block01 = 0.0f, block02 = 0.0f; /* the rate block's terms */")
     out("    float block11 = 0.0f, block12 = 0.0f, block22 = 0.0f;")
     out(f"    for (uint8_t j = 0; j < {N}u; ++j) {{")
     out(f"        /* P_cj of the {FIRST_BIAS} non-bias rows c: down column j above the diagonal")
@@ -358,11 +334,6 @@ def generate() -> str:
         rest = "".join(f" + jacobian_dt[{a_}][{p_}] * column_j[{c_}]"
                        for p_, c_ in enumerate(structure[a_]) if p_ > 0)
         out(f"        const float t{a_} = ({first}{rest}) + column_j[{a_}];")
-    out(f"        if (j < {FIRST_THRUST}u) {{ /* kept until the rate block: later columns overwrite rows 0..2 */")
-    for a_ in range(3):
-        out(f"            rate_col[{a_}][j] = t{a_};")
-    out("            continue;")
-    out("        }")
     out("        float *diagonal = &cov[propid_cov_index(j, j)];")
     out("        const float own = *diagonal;")
     out(f"        const float own_loaded = {rate_scale_loading} * own; /* the diagonal's share of the loading */")
@@ -375,6 +346,17 @@ def generate() -> str:
             else:
                 out(f"            block{a_}{b_} += t{a_} * jacobian_dt[{b_}][p{b_}];")
         out("        }")
+    out(f"        if (j < {FIRST_THRUST}u) {{ /* a rate column: T_aj in the rate block, not stored */")
+    for j_ in range(FIRST_THRUST):
+        keyword = "if" if j_ == 0 else "} else if" if j_ < FIRST_THRUST - 1 else "} else"
+        condition = f" (j == {j_}u)" if j_ < FIRST_THRUST - 1 else ""
+        out(f"            {keyword}{condition} {{")
+        for a_ in range(j_ + 1):
+            out(f"                block{a_}{j_} += t{a_};")
+        out(f"                block{j_}{j_} += own_loaded;")
+    out("            }")
+    out("            continue;")
+    out("        }")
     for a_ in range(3):
         out(f"        cov[propid_cov_index({a_}u, j)] = t{a_};")
     out(f"        if (j < {FIRST_DRAG}u) {{")
@@ -385,21 +367,10 @@ def generate() -> str:
     out("            *diagonal = (1.0f + PROPID_VAR_LOADING) * own + q_bias;")
     out("        }")
     out("    }")
-    out("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp; on the")
-    out("     * diagonal + the loading's rate terms (the coefficient terms are in block_aa). */")
-    out("    float rate_loaded[3]; /* constant indices: one cov_index call site, kept inline at -Os */")
-    for r in range(3):
-        out(f"    rate_loaded[{r}] = {rate_scale_loading} * cov[propid_cov_index({r}u, {r}u)];")
+    out("    /* The rate block, every term collected in the sweep. */")
     for a_ in range(3):
         for b_ in range(a_, 3):
-            products = rate_block_terms(structure, a_, b_, lambda r, c: f"rate_col[{r}][{c}]",
-                                        lambda r, p: f"jacobian_dt[{r}][{p}]")
-            if a_ == b_:
-                loaded = [f"(rate_col[{a_}][{column}] + jacobian_dt[{b_}][{p}] * rate_loaded[{column}]) * jacobian_dt[{b_}][{p}]"
-                          for p, column in rate_terms_of_row(structure, b_)]
-                out(f"    cov[propid_cov_index({a_}u, {b_}u)] = {' + '.join([f'rate_col[{a_}][{a_}]'] + loaded + [f'block{a_}{b_}', f'rate_loaded[{a_}]'])} + q_rate;")
-            else:
-                out(f"    cov[propid_cov_index({a_}u, {b_}u)] = {' + '.join(products)};")
+            out(f"    cov[propid_cov_index({a_}u, {b_}u)] = block{a_}{b_}{' + q_rate' if a_ == b_ else ''};")
     out("}")
     lean_text = "\n".join(lean_lines) + "\n"
 

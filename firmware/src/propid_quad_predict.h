@@ -20,17 +20,17 @@
 /* The size-lean build (PROPID_SIZE_LEAN): the same sums per element as a loop
  * over the columns j, each column's body written out (its 11 loads walked
  * through the packed triangle, the three rows' sums, the rate block's
- * coefficient terms found through propid_quad_jac_entry); small code, more
- * instructions. */
-static const uint8_t propid_quad_jac_entry[3][14] = {{0xFFu, 0xFFu, 0xFFu, 2u, 3u, 4u, 5u, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu}, {0xFFu, 0xFFu, 0xFFu, 2u, 3u, 4u, 5u, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu}, {0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 2u, 3u, 4u, 5u, 0xFFu, 0xFFu, 0xFFu}};
+ * terms found through propid_quad_jac_entry, the rate columns' too, and
+ * collected in the sweep as in the fast kernel, in its own order); small
+ * code, more instructions. */
+static const uint8_t propid_quad_jac_entry[3][14] = {{0xFFu, 0u, 1u, 2u, 3u, 4u, 5u, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu}, {0u, 0xFFu, 1u, 2u, 3u, 4u, 5u, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu}, {0u, 1u, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 0xFFu, 2u, 3u, 4u, 5u, 0xFFu, 0xFFu, 0xFFu}};
 
 static inline __attribute__((always_inline)) void
 propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][PROPID_JAC_ROW],
                                float q_rate, float q_thrust, float q_drag, float q_bias,
                                float drag_factor)
 {
-    float rate_col[3][3]; /* T_ab for the rate columns b */
-    float block00 = 0.0f, block01 = 0.0f, block02 = 0.0f; /* coefficient-column terms */
+    float block00 = 0.0f, block01 = 0.0f, block02 = 0.0f; /* the rate block's terms */
     float block11 = 0.0f, block12 = 0.0f, block22 = 0.0f;
     for (uint8_t j = 0; j < 14u; ++j) {
         /* P_cj of the 11 non-bias rows c: down column j above the diagonal
@@ -45,12 +45,6 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float t0 = (jacobian_dt[0][0] * column_j[1] + jacobian_dt[0][1] * column_j[2] + jacobian_dt[0][2] * column_j[3] + jacobian_dt[0][3] * column_j[4] + jacobian_dt[0][4] * column_j[5] + jacobian_dt[0][5] * column_j[6]) + column_j[0];
         const float t1 = (jacobian_dt[1][0] * column_j[0] + jacobian_dt[1][1] * column_j[2] + jacobian_dt[1][2] * column_j[3] + jacobian_dt[1][3] * column_j[4] + jacobian_dt[1][4] * column_j[5] + jacobian_dt[1][5] * column_j[6]) + column_j[1];
         const float t2 = (jacobian_dt[2][0] * column_j[0] + jacobian_dt[2][1] * column_j[1] + jacobian_dt[2][2] * column_j[7] + jacobian_dt[2][3] * column_j[8] + jacobian_dt[2][4] * column_j[9] + jacobian_dt[2][5] * column_j[10]) + column_j[2];
-        if (j < 3u) { /* kept until the rate block: later columns overwrite rows 0..2 */
-            rate_col[0][j] = t0;
-            rate_col[1][j] = t1;
-            rate_col[2][j] = t2;
-            continue;
-        }
         float *diagonal = &cov[propid_cov_index(j, j)];
         const float own = *diagonal;
         const float own_loaded = (7.0f * PROPID_RATE_LOADING) * own; /* the diagonal's share of the loading */
@@ -69,6 +63,22 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
             block12 += t1 * jacobian_dt[2][p2];
             block22 += (t2 + jacobian_dt[2][p2] * own_loaded) * jacobian_dt[2][p2];
         }
+        if (j < 3u) { /* a rate column: T_aj in the rate block, not stored */
+            if (j == 0u) {
+                block00 += t0;
+                block00 += own_loaded;
+            } else if (j == 1u) {
+                block01 += t0;
+                block11 += t1;
+                block11 += own_loaded;
+            } else {
+                block02 += t0;
+                block12 += t1;
+                block22 += t2;
+                block22 += own_loaded;
+            }
+            continue;
+        }
         cov[propid_cov_index(0u, j)] = t0;
         cov[propid_cov_index(1u, j)] = t1;
         cov[propid_cov_index(2u, j)] = t2;
@@ -80,18 +90,13 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
             *diagonal = (1.0f + PROPID_VAR_LOADING) * own + q_bias;
         }
     }
-    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp; on the
-     * diagonal + the loading's rate terms (the coefficient terms are in block_aa). */
-    float rate_loaded[3]; /* constant indices: one cov_index call site, kept inline at -Os */
-    rate_loaded[0] = (7.0f * PROPID_RATE_LOADING) * cov[propid_cov_index(0u, 0u)];
-    rate_loaded[1] = (7.0f * PROPID_RATE_LOADING) * cov[propid_cov_index(1u, 1u)];
-    rate_loaded[2] = (7.0f * PROPID_RATE_LOADING) * cov[propid_cov_index(2u, 2u)];
-    cov[propid_cov_index(0u, 0u)] = rate_col[0][0] + (rate_col[0][1] + jacobian_dt[0][0] * rate_loaded[1]) * jacobian_dt[0][0] + (rate_col[0][2] + jacobian_dt[0][1] * rate_loaded[2]) * jacobian_dt[0][1] + block00 + rate_loaded[0] + q_rate;
-    cov[propid_cov_index(0u, 1u)] = rate_col[0][1] + rate_col[0][0] * jacobian_dt[1][0] + rate_col[0][2] * jacobian_dt[1][1] + block01;
-    cov[propid_cov_index(0u, 2u)] = rate_col[0][2] + rate_col[0][0] * jacobian_dt[2][0] + rate_col[0][1] * jacobian_dt[2][1] + block02;
-    cov[propid_cov_index(1u, 1u)] = rate_col[1][1] + (rate_col[1][0] + jacobian_dt[1][0] * rate_loaded[0]) * jacobian_dt[1][0] + (rate_col[1][2] + jacobian_dt[1][1] * rate_loaded[2]) * jacobian_dt[1][1] + block11 + rate_loaded[1] + q_rate;
-    cov[propid_cov_index(1u, 2u)] = rate_col[1][2] + rate_col[1][0] * jacobian_dt[2][0] + rate_col[1][1] * jacobian_dt[2][1] + block12;
-    cov[propid_cov_index(2u, 2u)] = rate_col[2][2] + (rate_col[2][0] + jacobian_dt[2][0] * rate_loaded[0]) * jacobian_dt[2][0] + (rate_col[2][1] + jacobian_dt[2][1] * rate_loaded[1]) * jacobian_dt[2][1] + block22 + rate_loaded[2] + q_rate;
+    /* The rate block, every term collected in the sweep. */
+    cov[propid_cov_index(0u, 0u)] = block00 + q_rate;
+    cov[propid_cov_index(0u, 1u)] = block01;
+    cov[propid_cov_index(0u, 2u)] = block02;
+    cov[propid_cov_index(1u, 1u)] = block11 + q_rate;
+    cov[propid_cov_index(1u, 2u)] = block12;
+    cov[propid_cov_index(2u, 2u)] = block22 + q_rate;
 }
 #else
 static inline __attribute__((always_inline)) void
