@@ -398,15 +398,20 @@ def _family_design(rng, n, strength, k_candidates, rate=100.0, test_rows=10):
 
 def _family_rejects(design, k_candidates, current=(0,)):
     """selection.forward_select's rule on one step: Holm over the Wald tests of the
-    candidates not in `current`, each confirmed by its held-out paired test (Holm, 5 %)."""
+    candidates not in `current`, each confirmed by its held-out paired test (blocks weighted
+    by their 1 s block's held-out residual power; Holm, 5 %)."""
     from propid.gap import scoring, significance
 
     gr = scoring.grams(design)
     current = list(current)
     held0 = scoring.cv_sse(gr, current)
     candidates = [k for k in range(1, k_candidates + 1) if k not in current]
-    held = [significance.paired_test(held0, scoring.cv_sse(gr, current + [k]), [0],
-                                     scoring.cv_cross(gr, current, current + [k]))["p_value"] for k in candidates]
+    held = []
+    for k in candidates:
+        held1 = scoring.cv_sse(gr, current + [k])
+        weights = significance.block_weights(held1, gr.count, design.fold_group)
+        held.append(significance.paired_test(held0, held1, [0], scoring.cv_cross(gr, current, current + [k]),
+                                             weights)["p_value"])
     p = [significance.effect_test(gr, current, [k])["p_value"] for k in candidates]
     replicated = significance.holm(held, significance.REPLICATION_LEVEL)
     return dict(zip(candidates, [r and h for r, h in zip(significance.holm(p), replicated)]))
@@ -419,6 +424,36 @@ def test_effect_test_names_no_effect_beyond_its_family_level_when_none_is_there(
     rng = np.random.default_rng(2024)
     hits = sum(any(_family_rejects(_family_design(rng, 1200, 0.0, 11), 11).values()) for _ in range(300))
     assert hits / 300 <= 0.05 + 2.6 * np.sqrt(0.05 * 0.95 / 300)
+
+
+def _replication_p(design, weighted):
+    from propid.gap import scoring, significance
+
+    gr = scoring.grams(design)
+    held0, held1 = scoring.cv_sse(gr, [0]), scoring.cv_sse(gr, [0, 1])
+    weights = significance.block_weights(held1, gr.count, design.fold_group) if weighted else None
+    return significance.paired_test(held0, held1, [0], scoring.cv_cross(gr, [0], [0, 1]), weights)["p_value"]
+
+
+def _loud_first_second(design, strength, factor):
+    """The same design with the first second's noise `factor` times larger (a start transient, a gust)."""
+    x = design.x["roll"]
+    noise = design.y["roll"] - x[:, 0] - strength * x[:, 1]
+    return replace(design, y={"roll": design.y["roll"] + np.where(design.time < 1.0, (factor - 1.0) * noise, 0.0)})
+
+
+def test_held_out_replication_weighs_a_loud_second_down():
+    """A first second with 10x the noise: with each held-out block weighted by its 1 s block's
+    held-out residual power, the replication keeps its level on effect-free data and confirms a
+    weak effect that the unweighted test loses in that second's variance (docs/gap.md, Scoring)."""
+    rng = np.random.default_rng(5)
+    null = sum(_replication_p(_loud_first_second(_family_design(rng, 1200, 0.0, 1), 0.0, 10.0), True) <= 0.05
+               for _ in range(200))
+    assert null / 200 <= 0.05 + 2.6 * np.sqrt(0.05 * 0.95 / 200)
+    designs = [_loud_first_second(_family_design(rng, 1200, 0.15, 1), 0.15, 10.0) for _ in range(60)]
+    weighted = sum(_replication_p(d, True) <= 0.05 for d in designs)
+    unweighted = sum(_replication_p(d, False) <= 0.05 for d in designs)
+    assert weighted >= unweighted + 12
 
 
 def test_one_sided_effect_test_keeps_its_level_and_names_only_the_physical_direction():

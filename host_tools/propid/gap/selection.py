@@ -60,7 +60,8 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
     nonnegative = by_id(effect_id).nonnegative
 
     def evidence(given, held_given, held_with):
-        test = significance.paired_test(held_given, held_with, idx, scoring.cv_cross(gr, given, given + own))
+        weights = significance.block_weights(held_with, gr.count, design.fold_group)
+        test = significance.paired_test(held_given, held_with, idx, scoring.cv_cross(gr, given, given + own), weights)
         # one parameter that physics keeps >= 0: the physical-sign rule already makes the
         # alternative one-sided, so the test is too (docs/gap.md, Scoring)
         lm = significance.effect_test(gr, given, own, nonnegative=nonnegative)

@@ -8,7 +8,11 @@ Rules (docs/gap.md, "Scoring"):
   effect whose parameter physics keeps >= 0, the chi-bar-square test of the orthant
   (chi_bar_p) for an effect with several such parameters;
 - replication: the held-out improvement must be confirmed by its own one-sided paired
-  test (paired_test), Holm at REPLICATION_LEVEL = 5 % over the same candidates: the Wald
+  test (paired_test), Holm at REPLICATION_LEVEL = 5 % over the same candidates, each
+  held-out block weighted per axis by the inverse of its 1 s block's held-out residual power
+  (block_weights: a residual whose level changes in time, e.g. a start transient or a gust,
+  would otherwise let one loud second set the test's variance; the reported fraction and
+  interval stay unweighted): the Wald
   test on a whole flight also flags fits that soak up what the model gets wrong
   everywhere (the sensor chain's lag, a drifting gyro bias: on effect-free benchmark
   flights gyro_scale reached p ~ 1e-14 with a negative held-out fraction); they do not
@@ -156,17 +160,27 @@ def t_quantile(p: float, dof: float) -> float:
     return 0.5 * (lo + hi)
 
 
-def paired_test(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[int],
-                cross: np.ndarray | None = None) -> dict:
-    """Paired held-out test: c_b per block as in the module text, t = sum c_b / sqrt(Var) on
-    B - 1 degrees of freedom (under "adds nothing" the held-out improvement has mean <= 0:
-    extra columns only add estimation noise, so the test is conservative). Returns the
-    explained fraction, its 95 % interval and that p-value. Blocks in time order."""
+def block_weights(sse_with: np.ndarray, rows: np.ndarray, group: np.ndarray | None) -> np.ndarray:
+    """(B, A) weight of each held-out block in the replication test: 1 / the with-model's
+    held-out residual power per row over the block's group (the 1 s fold block it is a piece
+    of), per axis; ones without groups. A residual whose level changes in time (a start
+    transient, a gust) then does not let one loud second set the test's variance."""
+    weights = np.ones_like(sse_with)
+    if group is None:
+        return weights
+    for g in np.unique(group):
+        members = group == g
+        power = sse_with[members].sum(axis=0) / max(float(rows[members].sum()), 1.0)
+        weights[members] = np.where(power > 0, 1.0 / np.where(power > 0, power, 1.0), 0.0)[None, :]
+    return weights
+
+
+def _improvement_p(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[int],
+                   cross: np.ndarray | None) -> tuple[float, float, float, float, float]:
+    """The held-out improvement test on (possibly weighted) block sums: p, value, se, dof and
+    the Newey-West bandwidth."""
     c = block_contributions(sse_without, sse_with, axis_idx)
     value = float(c.sum())
-    n = c.shape[0]
-    if n < 3:
-        return {"value": value, "ci": [float("-inf"), float("inf")], "p_value": 1.0, "blocks": n, "bandwidth": 0.0}
     # c_b = |delta_b|^2 + 2 r_b' delta_b (delta: what the effect changed in the prediction,
     # r: the with-model's residual): only the second term is noise; with `cross` its
     # variance is the test's, so a strong effect's own smooth |delta|^2 does not widen it
@@ -177,8 +191,27 @@ def paired_test(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[in
         noise = (2.0 * cross[:, axis_idx][:, ok] / total[ok]).sum(axis=1) / max(ok.sum(), 1)
     var, bw = long_run_variance(noise)
     se = math.sqrt(var)
-    dof = variance_dof(n, bw)
+    dof = variance_dof(c.shape[0], bw)
     p = t_sf(value / se, dof) if se > 0 else (0.0 if value > 0 else 1.0)
+    return p, value, se, dof, bw
+
+
+def paired_test(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[int],
+                cross: np.ndarray | None = None, weights: np.ndarray | None = None) -> dict:
+    """Paired held-out test: c_b per block as in the module text, t = sum c_b / sqrt(Var) on
+    B - 1 degrees of freedom (under "adds nothing" the held-out improvement has mean <= 0:
+    extra columns only add estimation noise, so the test is conservative). Returns the
+    explained fraction, its 95 % interval and that p-value. Blocks in time order. With
+    `weights` (block_weights) the p-value is the same test on the weighted block sums; the
+    fraction and its interval stay unweighted."""
+    n = sse_without.shape[0]
+    if n < 3:
+        value = float(block_contributions(sse_without, sse_with, axis_idx).sum())
+        return {"value": value, "ci": [float("-inf"), float("inf")], "p_value": 1.0, "blocks": n, "bandwidth": 0.0}
+    p, value, se, dof, bw = _improvement_p(sse_without, sse_with, axis_idx, cross)
+    if weights is not None:
+        p = _improvement_p(sse_without * weights, sse_with * weights, axis_idx,
+                           None if cross is None else cross * weights)[0]
     half = t_quantile(0.025, dof) * se
     return {"value": value, "ci": [value - half, value + half], "p_value": float(p), "blocks": n, "bandwidth": bw}
 
