@@ -1,8 +1,9 @@
 /*
  * libFuzzer harness of the firmware's public API (make fuzz, docs/reliability.md).
  *
- * The input bytes are decoded into a configuration (a valid base with fields
- * overwritten by fuzzed values, some of them absurd) and a stream of calls:
+ * The input bytes are decoded into a configuration (a valid base, symmetric or
+ * with rotors placed one by one, with fields overwritten by fuzzed values,
+ * some of them absurd) and a stream of calls:
  * rotor speeds, gyro samples (with fuzzed timestamps: steps, repeats,
  * backward steps, jumps), resync, reset, reset_rotor, estimate. After every
  * call the harness checks, and aborts (a crash for libFuzzer) when one fails:
@@ -82,6 +83,37 @@ static void fuzz_field(reader_t *r, float *field)
     *field = raw_float(r);
 }
 
+/* Planar positions and spin directions of every rotor: angles first, then
+ * signed radii (128: the centre; 192: the arm; 64: the arm on the opposite
+ * side), then a mask that flips the symmetric frame's yaw signs. A run of
+ * equal angle bytes (a common mutation) puts the rotors on one line through
+ * the centre, on both sides when their radii differ in sign. Degenerate frames
+ * (rotors on a line, together, at the centre) give torque combinations the
+ * gyro cannot tell apart: the rounding of the prediction's cancelling terms is
+ * what the covariance has to survive (docs/reliability.md). */
+static void place_rotors(reader_t *r, propid_config_t *config, uint8_t rotors, float arm)
+{
+    float angle[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < rotors; ++i) {
+        angle[i] = 6.2831853f * (float)read_u8(r) / 256.0f;
+    }
+    for (uint8_t i = 0; i < rotors; ++i) {
+        const float radius = arm * ((float)read_u8(r) - 128.0f) / 64.0f; /* -2 to +2 arms */
+        config->rotor[i].position_m[0] = radius * cosf(angle[i]);
+        config->rotor[i].position_m[1] = radius * sinf(angle[i]);
+    }
+    const uint8_t flips = read_u8(r);
+    for (uint8_t i = 0; i < rotors; ++i) {
+        if (flips & (1u << i)) {
+            config->rotor[i].yaw_sign = -config->rotor[i].yaw_sign;
+        }
+    }
+}
+
+/* Input layout: rotor count, arm, plus/X, geometry (< 128: the symmetric
+ * frame; else place_rotors' bytes), the fuzzed fields, the guards; then the
+ * calls. tests/fuzz/reencode_corpus.py converted the seed corpus from the
+ * layout without the geometry byte. */
 static void make_config(reader_t *r, propid_config_t *config)
 {
     propid_config_default(config);
@@ -90,6 +122,9 @@ static void make_config(reader_t *r, propid_config_t *config)
     const float angle = (read_u8(r) & 1u) ? 0.7853982f : 0.0f;
     if (propid_config_set_symmetric(config, rotors, arm, angle, 1.0f, 5.57e-6f, 1.36e-7f) != PROPID_OK) {
         abort();
+    }
+    if (read_u8(r) >= 128u) {
+        place_rotors(r, config, rotors, arm);
     }
     propid_config_set_inertia_diag(config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
     float *fields[] = {
