@@ -18,6 +18,7 @@ uint32_t propid_abi_offsetof_config_converged_rel_std(void);
 uint32_t propid_abi_offsetof_estimate_health(void);
 uint32_t propid_abi_offsetof_counters_rejected(void);
 void propid_abi_copy_state(const propid_filter_t *filter, float *state, float *covariance);
+void propid_abi_instrument_counts(const propid_filter_t *filter, uint32_t counts[2]);
 
 uint32_t propid_abi_max_rotors(void) { return PROPID_MAX_ROTORS; }
 uint32_t propid_abi_delay_slots(void) { return PROPID_DELAY_SLOTS; }
@@ -65,4 +66,20 @@ void propid_abi_copy_state(const propid_filter_t *filter, float *state, float *c
             covariance[i * PROPID_MAX_STATES + j] = core.cov[propid_cov_index(i, j)];
         }
     }
+}
+
+/* The motor commands' first stage (propid_instrument.c): commands accepted and rotor
+ * samples whose input came from it; zeros in a build without it. */
+void propid_abi_instrument_counts(const propid_filter_t *filter, uint32_t counts[2])
+{
+    if (filter == NULL || counts == NULL) {
+        return;
+    }
+#if PROPID_WITH_INSTRUMENT
+    counts[0] = filter->instrument.command_accepted;
+    counts[1] = filter->instrument.inputs;
+#else
+    counts[0] = 0u;
+    counts[1] = 0u;
+#endif
 }

@@ -64,6 +64,9 @@ void propid_config_default(propid_config_t *config)
     config->inertia_rel_std = 0.0f;
     config->motor_time_constant = 0.01f;
     config->input_error_compensation = 0u;
+    config->motor_command_instrument = 0u;
+    config->motor_command_lag = 0.03f;
+    config->motor_command_memory = 10.0f;
 }
 
 propid_status_t propid_config_set_symmetric(propid_config_t *config, uint8_t rotor_count,
@@ -576,6 +579,20 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (config->input_error_compensation > 1u ||
         (config->input_error_compensation && !(config->rotor_speed_noise > 0.0f))) {
         PROPID_BAD("input_error_compensation");
+    }
+
+    /* The commands' first stage (propid_instrument.c): compiled out, only 0. A lag
+     * or memory is needed only with it on; off, any finite non-negative value. */
+    if (config->motor_command_instrument > 1u || (config->motor_command_instrument && !PROPID_WITH_INSTRUMENT)) {
+        PROPID_BAD("motor_command_instrument");
+    }
+    if (!isfinite(config->motor_command_lag) || config->motor_command_lag < 0.0f || config->motor_command_lag > 1.0f ||
+        (config->motor_command_instrument && !(config->motor_command_lag >= 1.0e-4f))) {
+        PROPID_BAD("motor_command_lag");
+    }
+    if (!isfinite(config->motor_command_memory) || config->motor_command_memory < 0.0f ||
+        config->motor_command_memory > 1.0e4f || (config->motor_command_instrument && !(config->motor_command_memory >= 0.01f))) {
+        PROPID_BAD("motor_command_memory");
     }
 
 #if PROPID_WITH_INPUT_NOISE

@@ -91,7 +91,7 @@ static void apply_oldest_rotor(propid_filter_t *filter)
     delay->count--;
 }
 
-propid_status_t propid_delay_push_rotor(propid_filter_t *filter, uint64_t time_us, const float *speed_rad_s)
+propid_status_t propid_delay_push_rotor(propid_filter_t *filter, uint64_t time_us, const float *speed_sq)
 {
     propid_delay_t *delay = &filter->delay;
     if (delay->count >= PROPID_DELAY_SLOTS) {
@@ -102,7 +102,7 @@ propid_status_t propid_delay_push_rotor(propid_filter_t *filter, uint64_t time_u
     entry->time_us = time_us;
     entry->kind = PROPID_DELAY_ROTOR;
     for (uint8_t i = 0; i < filter->config.rotor_count; ++i) {
-        entry->value[i] = speed_rad_s[i] * speed_rad_s[i];
+        entry->value[i] = speed_sq[i];
     }
     filter->counters.rotor_accepted++;
     return PROPID_OK_QUEUED;

@@ -59,9 +59,10 @@ int propid_delay_newest(const propid_filter_t *filter, uint8_t kind, uint64_t *t
  * its push then releases what is due at its time. */
 propid_status_t propid_delay_hold_imu(propid_filter_t *filter, uint8_t kind, uint64_t time_us,
                                       const float values[3]);
-/* d < 0: hold a validated rotor sample, squared, release time time_us (a full
- * buffer first applies its oldest early). */
-propid_status_t propid_delay_push_rotor(propid_filter_t *filter, uint64_t time_us, const float *speed_rad_s);
+/* d < 0: hold a validated rotor sample's input (speeds squared, or the commands'
+ * first stage: propid_instrument.h), release time time_us (a full buffer first
+ * applies its oldest early). */
+propid_status_t propid_delay_push_rotor(propid_filter_t *filter, uint64_t time_us, const float *speed_sq);
 /* d < 0: apply the held rotor samples whose release time is at or before time_us. */
 void propid_delay_release_rotor(propid_filter_t *filter, uint64_t time_us);
 

@@ -8,6 +8,7 @@
 #include "propid_delay.h"
 #include "propid_internal.h"
 #include "propid_consistency.h"
+#include "propid_instrument.h"
 
 static int initialised(const propid_filter_t *filter)
 {
@@ -32,6 +33,9 @@ static void core_to_prior(propid_filter_t *filter)
 #endif
 #if PROPID_CONSISTENCY
     propid_consistency_reset(filter);
+#endif
+#if PROPID_WITH_INSTRUMENT
+    propid_instrument_clear(filter);
 #endif
 }
 
@@ -242,9 +246,20 @@ propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_
         return checked;
     }
     const uint64_t stamp = time_us + propid_delay_rotor_shift(&filter->config);
+#if PROPID_WITH_INSTRUMENT
+    /* The rotor input: the telemetry squared, or its projection on the motor
+     * commands (stamped on the gyro clock, as the commands are). */
+    float input_sq[PROPID_MAX_ROTORS];
+    propid_instrument_input(filter, time_us, rotor_speed_rad_s, input_sq);
+#elif PROPID_DELAY_SLOTS > 0
+    float input_sq[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        input_sq[i] = rotor_speed_rad_s[i] * rotor_speed_rad_s[i];
+    }
+#endif
 #if PROPID_DELAY_SLOTS > 0
     if (filter->config.rotor_delay_us < 0) {
-        return propid_delay_push_rotor(filter, stamp, rotor_speed_rad_s);
+        return propid_delay_push_rotor(filter, stamp, input_sq);
     }
     if (filter->config.rotor_delay_us > 0) {
         /* IMU samples of an earlier time are fused with the speeds before this one. */
@@ -253,7 +268,11 @@ propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_
 #endif
     propid_core_t *core = &filter->core;
     for (uint8_t i = 0; i < rotor_count; ++i) {
+#if PROPID_WITH_INSTRUMENT || PROPID_DELAY_SLOTS > 0
+        core->rotor_speed_sq[i] = input_sq[i];
+#else
         core->rotor_speed_sq[i] = rotor_speed_rad_s[i] * rotor_speed_rad_s[i];
+#endif
     }
     core->rotor_time_us = stamp;
     core->has_rotor_data = 1u;

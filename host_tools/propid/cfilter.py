@@ -159,6 +159,9 @@ _OPTIONAL_FIELDS = [
     ("inertia_rel_std", ctypes.c_float),
     ("motor_time_constant", ctypes.c_float),
     ("input_error_compensation", ctypes.c_uint8),
+    ("motor_command_instrument", ctypes.c_uint8),
+    ("motor_command_lag", ctypes.c_float),
+    ("motor_command_memory", ctypes.c_float),
 ]
 _INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int32)
 
@@ -286,6 +289,11 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "motor_time_constant": 0.01,
     # Errors-in-variables compensation of the coefficient update (needs rotor_speed_noise > 0).
     "input_error_compensation": 0,
+    # The motor commands as the rotor input's instrument (docs/math.md §16): on/off, the first
+    # stage's lag [s] and memory [s].
+    "motor_command_instrument": 0,
+    "motor_command_lag": 0.03,
+    "motor_command_memory": 10.0,
 }
 
 
@@ -343,6 +351,9 @@ class FilterConfig:
     inertia_rel_std: float = DEFAULT_TUNING["inertia_rel_std"]
     motor_time_constant: float = DEFAULT_TUNING["motor_time_constant"]
     input_error_compensation: int = DEFAULT_TUNING["input_error_compensation"]
+    motor_command_instrument: int = DEFAULT_TUNING["motor_command_instrument"]
+    motor_command_lag: float = DEFAULT_TUNING["motor_command_lag"]
+    motor_command_memory: float = DEFAULT_TUNING["motor_command_memory"]
 
     @property
     def rotor_count(self) -> int:
@@ -554,6 +565,9 @@ def _declare(lib: ctypes.CDLL) -> None:
                                              ctypes.POINTER(ctypes.c_float), ctypes.c_uint8]
     lib.propid_push_gyro.restype = ctypes.c_int
     lib.propid_push_gyro.argtypes = [c_filter_p, ctypes.c_uint64, ctypes.POINTER(ctypes.c_float)]
+    lib.propid_push_motor_command.restype = ctypes.c_int
+    lib.propid_push_motor_command.argtypes = [c_filter_p, ctypes.c_uint64,
+                                              ctypes.POINTER(ctypes.c_float), ctypes.c_uint8]
     lib.propid_push_accel.restype = ctypes.c_int
     lib.propid_push_accel.argtypes = [c_filter_p, ctypes.c_uint64, ctypes.POINTER(ctypes.c_float)]
     lib.propid_get_estimate.restype = ctypes.c_int
@@ -562,6 +576,8 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.propid_get_counters.argtypes = [c_filter_p, ctypes.POINTER(CountersStruct)]
     lib.propid_status_name.restype = ctypes.c_char_p
     lib.propid_status_name.argtypes = [ctypes.c_int]
+    lib.propid_abi_instrument_counts.restype = None
+    lib.propid_abi_instrument_counts.argtypes = [c_filter_p, ctypes.POINTER(ctypes.c_uint32)]
     lib.propid_abi_copy_state.restype = None
     lib.propid_abi_copy_state.argtypes = [c_filter_p, ctypes.POINTER(ctypes.c_float),
                                           ctypes.POINTER(ctypes.c_float)]
@@ -631,6 +647,7 @@ class CFilter:
         self._speeds = (ctypes.c_float * self._max_rotors)()
         self._gyro = (ctypes.c_float * 3)()
         self._accel = (ctypes.c_float * 3)()
+        self._commands = (ctypes.c_float * self._max_rotors)()
 
     @staticmethod
     def status_name(code: int) -> str:
@@ -650,6 +667,15 @@ class CFilter:
             raise ValueError("gyro needs 3 components [rad/s]")
         self._gyro[0], self._gyro[1], self._gyro[2] = float(gyro[0]), float(gyro[1]), float(gyro[2])
         return self._lib.propid_push_gyro(self._handle, int(t_us), self._gyro)
+
+    def push_motor_command(self, t_us: int, commands: Sequence[float]) -> int:
+        """Motor commands 0..1 (needs config.motor_command_instrument)."""
+        count = len(commands)
+        if count > self._max_rotors:
+            return self._lib.propid_push_motor_command(self._handle, int(t_us), self._commands, 255)
+        for i in range(count):
+            self._commands[i] = float(commands[i])
+        return self._lib.propid_push_motor_command(self._handle, int(t_us), self._commands, count)
 
     def push_accel(self, t_us: int, specific_force: Sequence[float]) -> int:
         """Body specific force [m/s^2] (z is fused); needs config.mass > 0."""
@@ -705,6 +731,8 @@ class CFilter:
         c = CountersStruct()
         self._lib.propid_get_counters(self._handle, ctypes.byref(c))
         rejected = {STATUS_NAME[-i]: int(c.rejected[i]) for i in range(1, REJECT_SLOTS) if c.rejected[i]}
+        counts = (ctypes.c_uint32 * 2)()
+        self._lib.propid_abi_instrument_counts(self._handle, counts)
         return {
             "gyro_accepted": int(c.gyro_accepted),
             "rotor_accepted": int(c.rotor_accepted),
@@ -719,6 +747,8 @@ class CFilter:
             "accel_reanchored": int(c.accel_reanchored),
             "delay_overflows": int(c.delay_overflows),
             "model_mismatch": int(c.model_mismatch),
+            "command_accepted": int(counts[0]),
+            "instrument_inputs": int(counts[1]),
         }
 
     def scaled_state(self) -> tuple[np.ndarray, np.ndarray]:

@@ -77,6 +77,15 @@ MODES = [
     ("gyro_walk_band_calibrated", "the same with the 5 Hz disturbance states, vehicle file calibrated on the other half",
      dict(aiding="gyro", rotor_inertia="off", disturbance="on", disturbance_bandwidth=DISTURBANCE_BANDWIDTH_HZ,
           torque_scale="off", thrust_coeff_walk="auto")),
+    # The motor commands as the rotor input's instrument (docs/math.md §16), beside the same mode without it.
+    ("gyro_instrument", "gyro only, rotor input from the motor commands' first stage (instrument)",
+     dict(aiding="gyro", rotor_inertia="off", disturbance="off", torque_scale="off", instrument="commands")),
+    ("gyro_band_instrument", "gyro only + 5 Hz disturbance states + the commands' instrument",
+     dict(aiding="gyro", rotor_inertia="off", disturbance="on", disturbance_bandwidth=DISTURBANCE_BANDWIDTH_HZ,
+          torque_scale="off", instrument="commands")),
+    ("accel_scale_walk_instrument", "+ accelerometer, scale walk (rule) + the commands' instrument",
+     dict(aiding="gyro+accel", rotor_inertia="off", disturbance="off", torque_scale="on", torque_scale_walk="auto",
+          instrument="commands")),
 ]
 # A calibrated mode: (its gyro-only mode, the accelerometer mode), both replayed with the file as given.
 CALIBRATED = {"gyro_walk_calibrated": ("gyro_walk", "accel_scale_walk"),

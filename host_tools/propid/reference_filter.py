@@ -22,6 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from propid.cfilter import DELAY_SLOTS, HEALTH, MODEL_TERMS, STATUS, Estimate, FilterConfig, health_names
+from propid.reference_instrument import FirstStage
 
 _F32_MAX = float(np.finfo(np.float32).max)
 # Covariance health constants of the C filter (propid_internal.h): the rounding
@@ -175,7 +176,14 @@ class ReferenceFilter:
             "gyro_accepted": 0, "rotor_accepted": 0, "axis_gated": [0, 0, 0], "gate_reopened": 0,
             "cov_repairs": 0, "state_clamps": 0, "resyncs": 0, "rejected": [0] * 16,
             "accel_accepted": 0, "accel_gated": 0, "accel_reanchored": 0, "delay_overflows": 0,
+            "command_accepted": 0, "instrument_inputs": 0,
         }
+        # The motor commands' first stage (C: propid_instrument.c), when configured.
+        self.instrument = None
+        if int(getattr(config, "motor_command_instrument", 0)):
+            self.instrument = FirstStage(n_rot, _f32(config.motor_command_lag), _f32(config.motor_command_memory),
+                                         _f32(config.max_rotor_speed), int(config.rotor_stale_us),
+                                         int(config.max_gyro_gap_us))
         self._core_to_prior()
 
     def _rate_row_terms(self) -> np.ndarray:
@@ -242,6 +250,8 @@ class ReferenceFilter:
         self.input_information = np.zeros(3)
         self.input_error_information = np.zeros(3)
         self.input_information_time = 0.0
+        if self.instrument is not None:
+            self.instrument.clear()
 
     def reset(self) -> int:
         self._core_to_prior()
@@ -396,6 +406,9 @@ class ReferenceFilter:
             if held:
                 self.held = []
         speed_sq = [v * v for v in values]
+        if self.instrument is not None:
+            speed_sq, projected = self.instrument.input(int(t_us), speed_sq)
+            self.counters_data["instrument_inputs"] += int(projected)
         if self.rotor_delay_us < 0:
             if len(self.held) >= DELAY_SLOTS:
                 self._apply_held_rotor()
@@ -409,6 +422,24 @@ class ReferenceFilter:
         self.rotor_time_us = stamp
         self.has_rotor_data = True
         self.counters_data["rotor_accepted"] += 1
+        return STATUS["PROPID_OK"]
+
+    def push_motor_command(self, t_us: int, command: Sequence[float]) -> int:
+        """Mirror of propid_push_motor_command (propid_instrument.c)."""
+        if self.instrument is None:
+            return self._reject("PROPID_ERR_CONFIG")
+        if len(command) != self.rotor_count:
+            return self._reject("PROPID_ERR_ROTOR_COUNT")
+        values = [_f32(v) for v in command]
+        for v in values:
+            if not math.isfinite(v):
+                return self._reject("PROPID_ERR_NOT_FINITE")
+            if v < 0.0 or v > 1.0:
+                return self._reject("PROPID_ERR_ROTOR_SPEED_RANGE")
+        if self.instrument.has_command and int(t_us) <= self.instrument.command_time_us:
+            return self._reject("PROPID_ERR_TIME_BACKWARDS")
+        self.instrument.push(int(t_us), np.array(values))
+        self.counters_data["command_accepted"] += 1
         return STATUS["PROPID_OK"]
 
     # ------------------------------------------------------------------ telemetry delay

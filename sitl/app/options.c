@@ -322,6 +322,12 @@ static const opt_t options[] = {
          "filter: with --filter-rotor-speed-noise, remove the average part of\n"
          "each coefficient update that error explains (errors in variables,\n"
          "docs/math.md §14)"),
+    FLAG(NULL, "filter-instrument", filter_instrument, 1,
+         "filter: push each control step's rotor commands\n"
+         "(propid_push_motor_command, normalised by the vehicle's top speed)\n"
+         "and use their first stage as the rotor input, so the telemetry's\n"
+         "error stays out of the regressor (docs/math.md §16); lag: the\n"
+         "vehicle's motor time constant"),
     FLAG(NULL, "filter-sensor-errors", filter_sensor_errors, 1,
          "filter: input-error terms from the sensor model (docs/sitl.md):\n"
          "rotor-speed noise = the telemetry step at the hover speed the\n"

@@ -650,6 +650,15 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
                     (void)sitl_allocation_add_null_dither(&f->allocation, o->null_dither, t, &alloc);
                     memcpy(f->command, alloc.rotor_speed, (size_t)n * sizeof(double));
                 }
+                if (o->filter_instrument) {
+                    /* The command sent at t, as the ESC receives it (0..1 of the top speed). */
+                    float command[SITL_MAX_ROTORS];
+                    for (int i = 0; i < n; i++) {
+                        command[i] = (float)(sitl_motor_clamp(&f->plant.motor, f->command[i]) /
+                                             f->vehicle.rotor_speed_max);
+                    }
+                    (void)propid_push_motor_command(&f->filter, t_us, command, (uint8_t)n);
+                }
             }
             /* The row holds the state at t and the command sent at t. */
             if (now_ns >= logsched.next_ns || why != NULL || now_ns >= end_ns) {

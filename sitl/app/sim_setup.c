@@ -166,6 +166,10 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
     c->rotor_speed_noise_time = (float)opts->filter_rotor_speed_noise_time;
     c->inertia_rel_std = (float)opts->filter_inertia_rel_std;
     c->input_error_compensation = (uint8_t)(opts->filter_input_error_compensation != 0);
+    if (opts->filter_instrument) {
+        c->motor_command_instrument = 1u;
+        c->motor_command_lag = (float)v->motor_time_constant;
+    }
     if (opts->filter_sensor_errors) {
         sitl_sensor_errors_t e;
         if (sitl_sensor_errors(v, &opts->esc, flown_kf, &e) != 0) {

@@ -122,6 +122,9 @@ def replay(filt, events, perturb_at=None):
                 status = filt.push_accel(t_us, values)
                 state, cov = filt.scaled_state()
                 trace.append((status, state, np.diag(cov).copy()))
+        elif kind == "command":
+            if filt.config.motor_command_instrument:
+                assert filt.push_motor_command(t_us, values) == STATUS["PROPID_OK"]
         elif kind == "reset_rotor":
             assert filt.reset_rotor(values) == STATUS["PROPID_OK"]
         else:
@@ -298,6 +301,62 @@ def test_delay_compensates_a_shifted_stream(flight):
             assert (worst < 1e-9) == expect_equal
 
 
+def with_commands(events, lead_us: int = 1000, full_speed: float = 1600.0):
+    """The flight with a motor command (0..1, the commanded speed over full_speed) lead_us before each
+    rotor sample."""
+    out = []
+    for t_us, kind, values in events:
+        if kind == "rotor" and t_us >= lead_us:
+            out.append((t_us - lead_us, "command", [min(v / full_speed, 1.0) for v in values]))
+        out.append((t_us, kind, values))
+    return out
+
+
+@pytest.mark.parametrize("options", ["plain", "all"])
+def test_c_agrees_with_reference_with_the_command_instrument(flight, options):
+    """The motor commands' first stage (docs/math.md §16): same bounds, the fit takes over the rotor input
+    (counted), and it changes the run (the comparison would see it missing on one side)."""
+    events = with_commands(flight)
+    config = make_config(options).with_overrides(motor_command_instrument=1, motor_command_lag=0.005,
+                                                 motor_command_memory=2.0)
+    c_filter, ref = CFilter(config), ReferenceFilter(config)
+    trace_c, trace_ref = replay(c_filter, events), replay(ref, events)
+    state_err, cov_err = disagreement(trace_c, trace_ref)
+    print(f"C vs reference, command instrument ({options}): max |dx|/std = {state_err:.3g}, "
+          f"max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+    rotor_samples = sum(1 for _, kind, _ in flight if kind == "rotor")
+    for counters in (c_filter.counters(), ref.counters()):
+        assert counters["command_accepted"] == rotor_samples - 1
+        assert counters["instrument_inputs"] == rotor_samples - 1 - 50  # all but the fit's first 50
+    assert c_filter.counters()["instrument_inputs"] == ref.counters()["instrument_inputs"]
+    off = replay(CFilter(make_config(options)), events)
+    moved = max(float(np.max(np.abs(a[1] - b[1]) / np.sqrt(b[2]))) for a, b in zip(off, trace_ref))
+    assert moved > 10.0 * STATE_TOL_SIGMA
+
+
+def test_command_rejections_agree():
+    """propid_push_motor_command's rejection codes are the same in both filters, and a rejected command
+    leaves the first stage untouched."""
+    on = make_config().with_overrides(motor_command_instrument=1)
+    for filt in (CFilter(make_config()), ReferenceFilter(make_config())):
+        assert filt.push_motor_command(1000, [0.5] * 4) == STATUS["PROPID_ERR_CONFIG"]
+    c_filter, ref = CFilter(on), ReferenceFilter(on)
+    for filt in (c_filter, ref):
+        assert filt.push_motor_command(1000, [0.5] * 3) == STATUS["PROPID_ERR_ROTOR_COUNT"]
+        assert filt.push_motor_command(1000, [0.5, math.nan, 0.5, 0.5]) == STATUS["PROPID_ERR_NOT_FINITE"]
+        assert filt.push_motor_command(1000, [0.5, math.inf, 0.5, 0.5]) == STATUS["PROPID_ERR_NOT_FINITE"]
+        assert filt.push_motor_command(1000, [0.5, 1.01, 0.5, 0.5]) == STATUS["PROPID_ERR_ROTOR_SPEED_RANGE"]
+        assert filt.push_motor_command(1000, [0.5, -0.01, 0.5, 0.5]) == STATUS["PROPID_ERR_ROTOR_SPEED_RANGE"]
+        assert filt.push_motor_command(1000, [0.5] * 4) == STATUS["PROPID_OK"]
+        assert filt.push_motor_command(1000, [0.6] * 4) == STATUS["PROPID_ERR_TIME_BACKWARDS"]
+        assert filt.push_motor_command(900, [0.6] * 4) == STATUS["PROPID_ERR_TIME_BACKWARDS"]
+        assert filt.push_motor_command(2000, [0.6] * 4) == STATUS["PROPID_OK"]
+        assert filt.counters()["command_accepted"] == 2
+    assert c_filter.counters()["rejected"] == ref.counters()["rejected"]
+
+
 def test_accel_rejections_agree(flight):
     """The accelerometer's rejection codes are the same in both filters."""
     for options, expected in (("plain", "PROPID_ERR_CONFIG"), ("all", None)):
@@ -379,6 +438,17 @@ def test_quad_build_rejects_compiled_out_options():
     _, path = quad_library()
     with pytest.raises(UserError, match="bad"):
         CFilter(make_config("all"), library=path)
+
+
+def test_quad_build_refuses_the_command_instrument():
+    """The quad build compiles the first stage out: the option is a configuration error, a command is
+    refused with PROPID_ERR_CONFIG."""
+    _, path = quad_library()
+    with pytest.raises(UserError, match="bad motor_command_instrument"):
+        CFilter(make_config().with_overrides(motor_command_instrument=1), library=path)
+    filt = CFilter(make_config(), library=path)
+    assert filt.push_motor_command(1000, [0.5] * 4) == STATUS["PROPID_ERR_CONFIG"]
+    assert filt.counters()["command_accepted"] == 0
 
 
 def test_disagreement_is_detected(flight, reference_trace):

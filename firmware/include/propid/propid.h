@@ -47,7 +47,8 @@ typedef enum {
     PROPID_ERR_NOT_FINITE = -4,       /* NaN or Inf in an input sample */
     PROPID_ERR_ROTOR_SPEED_NEGATIVE = -5,
     PROPID_ERR_ROTOR_SPEED_RANGE = -6, /* above config.max_rotor_speed, or changed since the previous
-                                          sample faster than a motor of config.motor_time_constant can */
+                                          sample faster than a motor of config.motor_time_constant can;
+                                          a motor command outside 0..1 */
     PROPID_ERR_ROTOR_COUNT = -7,      /* sample's rotor count differs from the configuration */
     PROPID_ERR_ROTOR_INDEX = -8,      /* rotor index out of range */
     PROPID_ERR_GYRO_RANGE = -9,       /* |gyro| beyond config.gyro_range (saturated sensor) */
@@ -171,6 +172,15 @@ typedef struct {
                                          of the coefficients the part the rotor-speed error explains
                                          on average (errors-in-variables bias, docs/math.md §14).
                                          0: off */
+    uint8_t motor_command_instrument; /* 1: the rotor input u_i = Omega_i^2 is the first stage's
+                                         projection of the telemetry on the motor commands
+                                         (propid_push_motor_command; docs/math.md §16): the
+                                         telemetry's error then stays out of the regressor.
+                                         0: off, the telemetry as measured */
+    float motor_command_lag;          /* [s] first-order lag of the rotor speed behind its command
+                                         in the first stage (> 0 with the instrument on) */
+    float motor_command_memory;       /* [s] forgetting time of the first stage's fit (battery sag);
+                                         > 0 with the instrument on */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -398,6 +408,28 @@ typedef struct {
 } propid_delay_t;
 #endif
 
+#if PROPID_WITH_INSTRUMENT
+/* Private: the motor commands' first stage (propid_instrument.c), per rotor: the
+ * held command and its first-order lag, and the exponentially weighted moments of
+ * the fit y = u / max_rotor_speed^2 = a + b z + c z^2, z = lagged command - 1/2:
+ * sum w {1, z, z^2, y} of the levels, sum w {dz dz, dz dz2, dz2 dz2, dz dy, dz2 dy}
+ * of the increments between rotor samples (z2 = z^2). */
+#define PROPID_INSTRUMENT_MOMENTS 9
+typedef struct {
+    float command[PROPID_MAX_ROTORS];               /* latest accepted command, held (0..1) */
+    float lagged[PROPID_MAX_ROTORS];                /* the lag's output at command_time_us */
+    float moment[PROPID_MAX_ROTORS][PROPID_INSTRUMENT_MOMENTS];
+    float previous[PROPID_MAX_ROTORS][3];           /* z, z^2, y of the fit's latest sample */
+    uint64_t command_time_us;
+    uint64_t fit_time_us;                           /* time of the fit's latest rotor sample */
+    uint32_t fit_samples;                           /* rotor samples in the fit since init/reset */
+    uint32_t command_accepted;                      /* motor-command samples accepted (kept by reset) */
+    uint32_t inputs;                                /* rotor samples whose input came from the first
+                                                       stage for every rotor (kept by reset) */
+    uint8_t has_command;
+} propid_instrument_t;
+#endif
+
 /* Private: the model-consistency monitor's window (propid_consistency.c). */
 typedef struct {
     float start_coeff[2 * PROPID_MAX_ROTORS];       /* kf, km (scaled) at the window's start */
@@ -455,6 +487,9 @@ typedef struct {
 #endif
 #if PROPID_CONSISTENCY
     propid_consistency_t consistency;
+#endif
+#if PROPID_WITH_INSTRUMENT
+    propid_instrument_t instrument;
 #endif
     uint32_t magic;                                 /* set by a successful propid_init() */
 } propid_filter_t;
@@ -519,6 +554,19 @@ propid_status_t propid_push_rotor_speeds(propid_filter_t *filter, uint64_t time_
 
 propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
                                  const float gyro_rad_s[3]);
+
+/* Motor commands (config.motor_command_instrument = 1, else PROPID_ERR_CONFIG): the
+ * commands the flight controller sends the ESCs, normalised 0..1 (0 = stop, 1 = full),
+ * any rate, their own time stamps on the gyro's clock. They never enter the model
+ * directly: a per-rotor first stage (lag, then a + b z + c z^2, fitted online to the
+ * telemetry) turns them into the rotor input the filter uses instead of the measured
+ * Omega^2 (docs/math.md §16). Rejected (state untouched): PROPID_ERR_NOT_FINITE,
+ * PROPID_ERR_ROTOR_SPEED_RANGE (a command outside 0..1), PROPID_ERR_ROTOR_COUNT,
+ * PROPID_ERR_TIME_BACKWARDS (not after the previous command). A command older than
+ * config.rotor_stale_us at a rotor sample is stale: that sample's telemetry is used
+ * as measured. */
+propid_status_t propid_push_motor_command(propid_filter_t *filter, uint64_t time_us,
+                                          const float *command, uint8_t rotor_count);
 
 /* Accelerometer aiding (config.mass > 0, else PROPID_ERR_CONFIG): body specific
  * force [m/s^2] (what an accelerometer reads: +g on z at hover), any rate, its

@@ -101,6 +101,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "below it (what the vehicle's attitude controller cancels) and kf/km learn above it "
                              "(docs/math.md §7); default: the vehicle file's loop_bandwidth_hz (written by "
                              "propid gap --vehicle-out) when it has one, else the library's slow walk")
+    parser.add_argument("--instrument", choices=["off", "commands"], default="off",
+                        help="commands: the log's cmd_i columns (motor commands 0..1) go to the filter "
+                             "(propid_push_motor_command) and its rotor input becomes the first stage's projection "
+                             "of the telemetry on them, so the telemetry's error stays out of the regressor "
+                             "(docs/math.md §16); default off")
+    parser.add_argument("--command-lag", type=_lag, default="auto", metavar="auto|S",
+                        help="with --instrument commands: the first stage's motor lag [s]; auto (default): the "
+                             "per-log rule (the lag whose lagged command explains most of the speed^2)")
+    parser.add_argument("--command-memory", type=float, default=None, metavar="S",
+                        help="with --instrument commands: the first stage's forgetting time [s] (default 10)")
     parser.add_argument("--rotor-inertia", choices=["auto", "on", "off"], default="auto",
                         help="model the rotors' yaw reaction and gyroscopic torque with the vehicle file's "
                              "rotor_inertia (auto: when it is given)")
@@ -185,6 +195,18 @@ def _prefilter(text: str):
 def _dpi(text: str) -> int:
     return _word_or_number(text, (), int, lambda v: 20 <= v <= 1200,
                            "a whole number of dots per inch", "dpi must be within 20..1200")
+
+
+def _lag(text: str):
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give auto or a lag in seconds") from None
+    if not (math.isfinite(value) and 1.0e-4 <= value <= 1.0):
+        raise argparse.ArgumentTypeError(f"{text!r}: the lag must be within 0.0001..1 s")
+    return value
 
 
 def _finite_json(value):
@@ -293,6 +315,9 @@ def run(args: argparse.Namespace) -> int:
         aiding=args.aiding,
         disturbance=args.disturbance,
         disturbance_bandwidth=args.disturbance_bandwidth,
+        instrument=args.instrument,
+        command_lag=args.command_lag,
+        command_memory=args.command_memory,
         rotor_inertia=args.rotor_inertia,
         torque_scale=args.torque_scale,
         torque_scale_walk=args.torque_scale_walk,

@@ -45,6 +45,12 @@ class ReplayOptions:
     rotor_speed_noise_time: float | None = None
     # The errors-in-variables compensation of the coefficient update with that error (needs rotor_speed_noise).
     input_error_compensation: bool = False
+    # The motor commands as the rotor input's instrument (docs/math.md §16): "off" or "commands" (the log's
+    # cmd_i columns through propid_push_motor_command); the first stage's lag [s] or "auto" (the per-log rule,
+    # replay/instrument.py) and its memory [s].
+    instrument: str = "off"
+    command_lag: float | str = "auto"
+    command_memory: float | None = None
     record_every: int = 1  # keep every k-th estimate for the time series
     progress: bool = True
 

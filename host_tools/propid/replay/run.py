@@ -10,6 +10,7 @@ from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.replay.alignment import detect_streams, estimate_esc_delay, filter_input_rule
 from propid.replay.config import build_config
+from propid.replay.instrument import DEFAULT_MEMORY_S, choose_lag, command_columns
 from propid.replay.noise import nis_mean, replay_nis
 from propid.replay.options import US, ReplayOptions, ReplayResult
 from propid.replay.prefilter import highpass_emulation_log, prefilter_log
@@ -60,6 +61,25 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         notes["prefilter"] = prefilter_info
     if highpass_info is not None:
         notes["diagnostic_highpass"] = highpass_info
+    commands = None
+    if options.instrument == "commands":
+        commands = np.ascontiguousarray(command_columns(log), dtype=np.float32)
+        if options.command_lag == "auto":
+            lag_info = choose_lag(log, commands.astype(float), mask)
+        else:
+            lag = float(options.command_lag)
+            if not (np.isfinite(lag) and 1.0e-4 <= lag <= 1.0):
+                raise UserError(f"--command-lag {options.command_lag!r}: give 0.0001..1 s or auto")
+            lag_info = {"rule": "given", "lag_s": lag}
+        memory = DEFAULT_MEMORY_S if options.command_memory is None else float(options.command_memory)
+        if not (np.isfinite(memory) and 0.01 <= memory <= 1.0e4):
+            raise UserError(f"--command-memory {options.command_memory!r}: give 0.01..10000 s")
+        config_fields["motor_command_instrument"] = 1
+        config_fields["motor_command_lag"] = float(lag_info["lag_s"])
+        config_fields["motor_command_memory"] = memory
+        notes["instrument"] = dict(lag_info, memory_s=memory)
+    elif options.instrument != "off":
+        raise UserError(f"--instrument {options.instrument!r}: give off or commands")
     filt = FilterSession(vehicle, config_fields)
     kf_nominal = [float(v) for v in config_fields["thrust_coeff_nominal"]]
     km_nominal = [float(v) for v in config_fields["drag_coeff_nominal"]]
@@ -105,6 +125,12 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         while next_rotor < len(rotor_rows) and t_us[rotor_rows[next_rotor]] <= t_us[i]:
             j = rotor_rows[next_rotor]
             next_rotor += 1
+            if commands is not None and np.all(np.isfinite(commands[j])):
+                # The command of this row first: the lag holds the previous one up to this stamp.
+                status = filt.push_motor_command(int(t_us[j]), commands[j])
+                if status < 0:
+                    name = "command " + filt.status_name(status)
+                    status_counts[name] = status_counts.get(name, 0) + 1
             status = filt.push_rotor_speeds(int(t_us[j]), speeds[j])
             if status < 0:
                 name = filt.status_name(status)

@@ -49,6 +49,9 @@ class FilterSession:
     def push_gyro(self, t_us: int, gyro: np.ndarray) -> int:
         return int(self._filter.push_gyro(t_us, gyro))
 
+    def push_motor_command(self, t_us: int, commands: np.ndarray) -> int:
+        return int(self._filter.push_motor_command(t_us, commands))
+
     def push_accel(self, t_us: int, specific_force: np.ndarray) -> int:
         return int(self._filter.push_accel(t_us, specific_force))
 

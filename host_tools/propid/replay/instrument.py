@@ -1,0 +1,79 @@
+"""The motor commands as the rotor input's instrument (docs/math.md §16): the log's cmd_i
+columns, pushed with propid_push_motor_command, and the per-log rule for the first
+stage's lag.
+
+The lag rule uses the log's commands and rotor speeds only (never a coefficient): the lag
+from LAG_CANDIDATES_S whose lagged command explains the most of the increments of
+Omega_i^2 (fit on the increments of z and z^2, per rotor, pooled over the rotors): the
+first stage's own least-squares criterion, as a two-stage fit chooses its first stage."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import UserError
+from ..flightlog import FlightLog
+
+LAG_CANDIDATES_S = (0.01, 0.02, 0.03, 0.05, 0.08, 0.12)
+DEFAULT_MEMORY_S = 10.0
+
+
+def command_columns(log: FlightLog) -> np.ndarray:
+    """(n, N) motor commands 0..1 from cmd_1..cmd_N, or a one-line error."""
+    names = tuple(f"cmd_{i + 1}" for i in range(log.rotor_count))
+    commands = log.group(names)
+    if commands is None:
+        raise UserError(f"--instrument commands needs the columns {', '.join(names)} (motor commands 0..1): "
+                        f"the log has none")
+    finite = commands[np.isfinite(commands)]
+    if finite.size == 0:
+        raise UserError("--instrument commands: the cmd_* columns hold no finite value")
+    if finite.min() < 0.0 or finite.max() > 1.0:
+        raise UserError(f"--instrument commands: cmd_* outside 0..1 ({finite.min():.3g}..{finite.max():.3g}); "
+                        f"the commands must be normalised")
+    return commands
+
+
+def lagged(commands: np.ndarray, t: np.ndarray, lag_s: float) -> np.ndarray:
+    """The first stage's lag as the firmware runs it: the previous command held over each interval."""
+    out = np.empty_like(commands)
+    state = np.nan_to_num(commands[0])
+    held = state.copy()
+    out[0] = state
+    for k in range(1, len(commands)):
+        decay = np.exp(-(t[k] - t[k - 1]) / lag_s)
+        state = held + (state - held) * decay
+        out[k] = state
+        row = commands[k]
+        held = np.where(np.isfinite(row), row, held)
+    return out
+
+
+def first_stage_residual(log: FlightLog, commands: np.ndarray, mask: np.ndarray, lag_s: float) -> float:
+    """Pooled residual share of the increments of Omega^2 after their fit on the increments of
+    z and z^2 (z = lagged command - 1/2), the first stage's own criterion (propid_instrument.c)."""
+    s = lagged(commands, log.t, lag_s)
+    residual, total = 0.0, 0.0
+    for i in range(log.rotor_count):
+        y = log.rotor_speed[:, i] ** 2
+        ok = mask & np.isfinite(y) & np.isfinite(s[:, i])
+        rows = np.flatnonzero(ok)
+        if rows.size < 10:
+            continue
+        z = s[rows, i] - 0.5
+        design = np.column_stack([np.diff(z), np.diff(z * z)])
+        target = np.diff(y[rows])
+        theta, *_ = np.linalg.lstsq(design, target, rcond=None)
+        residual += float(np.sum((target - design @ theta) ** 2))
+        total += float(np.sum(target ** 2))
+    return residual / total if total > 0 else float("nan")
+
+
+def choose_lag(log: FlightLog, commands: np.ndarray, mask: np.ndarray) -> dict:
+    shares = {lag: first_stage_residual(log, commands, mask, lag) for lag in LAG_CANDIDATES_S}
+    finite = {k: v for k, v in shares.items() if np.isfinite(v)}
+    if not finite:
+        raise UserError("--instrument commands: no rows with both commands and rotor speeds to fit the first stage")
+    lag = min(finite, key=finite.get)
+    return {"rule": "least first-stage residual of the increments", "lag_s": lag,
+            "residual_share": {f"{k:g}": round(v, 4) for k, v in shares.items()}}
