@@ -170,9 +170,12 @@ void propid_instrument_input(propid_filter_t *filter, uint64_t time_us, const fl
     const float decay = time_us > instrument->command_time_us
                             ? expf(-(float)(time_us - instrument->command_time_us) * 1.0e-6f / config->motor_command_lag)
                             : 1.0f;
-    const float forget = (instrument->fit_samples > 0u && time_us > instrument->fit_time_us)
-                             ? expf(-(float)(time_us - instrument->fit_time_us) * 1.0e-6f / config->motor_command_memory)
-                             : (instrument->fit_samples > 0u ? 1.0f : 0.0f);
+    float forget = 0.0f; /* the first sample starts the fit */
+    if (instrument->fit_samples > 0u) {
+        forget = time_us > instrument->fit_time_us
+                     ? expf(-(float)(time_us - instrument->fit_time_us) * 1.0e-6f / config->motor_command_memory)
+                     : 1.0f;
+    }
     const float full_sq = config->max_rotor_speed * config->max_rotor_speed;
     const float scale = 1.0f / full_sq;
     const int valid = instrument->fit_samples >= PROPID_INSTRUMENT_MIN_SAMPLES;
