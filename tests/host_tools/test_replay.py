@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,19 +29,24 @@ KM_TRUE = KM_NOMINAL * np.array([0.95, 1.10, 1.00, 1.08])
 BIAS_TRUE = np.array([0.02, -0.015, 0.01])
 
 
-def synthetic_log(duration: float = 20.0, rate: float = 500.0, seed: int = 7) -> FlightLog:
-    """Rotational dynamics of an X quad with KF_TRUE/KM_TRUE exactly as the filter models
-    them. A rate controller that knows the true coefficients turns multisine torque and
-    thrust demands (plus rate feedback) into rotor speeds; gyro = rate + bias + white
-    noise; rotor speeds get noise, a few NaN rows and eRPM spikes."""
-    rng = np.random.default_rng(seed)
+@dataclass(frozen=True)
+class RateLoopFlight:
+    """What a synthetic rate-loop flight of VEHICLE starts from: its dynamics, the true
+    allocation and the multisine thrust and torque demands the loop follows."""
+    inertia: np.ndarray
+    inertia_inv: np.ndarray
+    allocation: np.ndarray  # [thrust, tau_x, tau_y, tau_z] = allocation @ omega^2 (true coefficients)
+    allocation_inv: np.ndarray
+    t: np.ndarray
+    thrust: np.ndarray
+    demand: np.ndarray  # torque demands, one row per sample
+
+
+def rate_loop_flight(duration: float, rate: float, rng: np.random.Generator) -> RateLoopFlight:
     vehicle = parse_vehicle(VEHICLE)
     inertia = np.diag(VEHICLE["inertia"])
-    j_inv = np.linalg.inv(inertia)
     pos, signs = vehicle.positions, vehicle.yaw_signs
-    # [thrust, tau_x, tau_y, tau_z] = allocation @ omega^2, with the true coefficients
     allocation = np.vstack([KF_TRUE, KF_TRUE * pos[:, 1], -KF_TRUE * pos[:, 0], KM_TRUE * signs])
-    alloc_inv = np.linalg.inv(allocation)
     n = int(duration * rate)
     t = np.arange(n) / rate
     weight = VEHICLE["mass"] * 9.81
@@ -49,6 +55,19 @@ def synthetic_log(duration: float = 20.0, rate: float = 500.0, seed: int = 7) ->
     for axis, scale in enumerate((8e-5, 8e-5, 3e-5)):
         freqs, phases = rng.uniform(0.5, 5.0, 3), rng.uniform(0, 2 * np.pi, 3)
         demand[:, axis] = scale * np.sin(2 * np.pi * freqs[:, None] * t + phases[:, None]).sum(axis=0)
+    return RateLoopFlight(inertia, np.linalg.inv(inertia), allocation, np.linalg.inv(allocation), t, thrust, demand)
+
+
+def synthetic_log(duration: float = 20.0, rate: float = 500.0, seed: int = 7) -> FlightLog:
+    """Rotational dynamics of an X quad with KF_TRUE/KM_TRUE exactly as the filter models
+    them. A rate controller that knows the true coefficients turns multisine torque and
+    thrust demands (plus rate feedback) into rotor speeds; gyro = rate + bias + white
+    noise; rotor speeds get noise, a few NaN rows and eRPM spikes."""
+    rng = np.random.default_rng(seed)
+    f = rate_loop_flight(duration, rate, rng)
+    inertia, j_inv, allocation, alloc_inv = f.inertia, f.inertia_inv, f.allocation, f.allocation_inv
+    t, thrust, demand = f.t, f.thrust, f.demand
+    n = len(t)
     speeds = np.empty((n, 4))
     rate_true = np.zeros((n, 3))
     omega = np.zeros(3)

@@ -10,7 +10,7 @@ from propid.errors import UserError
 from propid.flightlog import FlightLog, parse_vehicle
 from propid.replay import ReplayOptions, replay
 from propid.replay.instrument import LAG_CANDIDATES_S, choose_lag, command_columns
-from test_replay import BIAS_TRUE, KF_TRUE, KM_TRUE, VEHICLE
+from test_replay import BIAS_TRUE, KF_TRUE, KM_TRUE, VEHICLE, rate_loop_flight
 
 TOP_SPEED = 4000.0  # the commands' full scale [rad/s]
 MOTOR_LAG = 0.03  # [s]
@@ -22,20 +22,10 @@ def commanded_log(telemetry_rel_noise: float, duration: float = 20.0, rate: floa
     commands with a first-order lag; the telemetry is the true speed with white noise of
     telemetry_rel_noise of it; cmd_i = command / TOP_SPEED."""
     rng = np.random.default_rng(seed)
-    vehicle = parse_vehicle(VEHICLE)
-    inertia = np.diag(VEHICLE["inertia"])
-    j_inv = np.linalg.inv(inertia)
-    pos, signs = vehicle.positions, vehicle.yaw_signs
-    allocation = np.vstack([KF_TRUE, KF_TRUE * pos[:, 1], -KF_TRUE * pos[:, 0], KM_TRUE * signs])
-    alloc_inv = np.linalg.inv(allocation)
-    n = int(duration * rate)
-    t = np.arange(n) / rate
-    weight = VEHICLE["mass"] * 9.81
-    thrust = weight * (1 + 0.15 * np.sin(2 * np.pi * 0.7 * t) + 0.1 * np.sin(2 * np.pi * 2.3 * t + 1.0))
-    demand = np.zeros((n, 3))
-    for axis, scale in enumerate((8e-5, 8e-5, 3e-5)):
-        freqs, phases = rng.uniform(0.5, 5.0, 3), rng.uniform(0, 2 * np.pi, 3)
-        demand[:, axis] = scale * np.sin(2 * np.pi * freqs[:, None] * t + phases[:, None]).sum(axis=0)
+    f = rate_loop_flight(duration, rate, rng)
+    inertia, j_inv, allocation, alloc_inv = f.inertia, f.inertia_inv, f.allocation, f.allocation_inv
+    t, thrust, demand = f.t, f.thrust, f.demand
+    n = len(t)
     speeds = np.empty((n, 4))
     commands = np.empty((n, 4))
     rate_true = np.zeros((n, 3))
