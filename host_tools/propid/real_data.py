@@ -61,31 +61,41 @@ MODES = [
     ("accel_scale_walk_input_error", "+ accelerometer, scale walk (rule) + rotor-speed error with its compensation",
      dict(aiding="gyro+accel", rotor_inertia="off", disturbance="off", torque_scale="on", torque_scale_walk="auto",
           rotor_speed_noise="auto", input_error_compensation=True)),
-    ("gyro_band", "gyro only + disturbance states of 5 Hz bandwidth (above them the controller does not cancel)",
-     dict(aiding="gyro", rotor_inertia="off", disturbance="on", disturbance_bandwidth=DISTURBANCE_BANDWIDTH_HZ,
-          torque_scale="off")),
-    ("accel_scale_walk_band", "+ accelerometer, scale walk (rule) + disturbance states of 5 Hz bandwidth",
-     dict(aiding="gyro+accel", rotor_inertia="off", disturbance="on", disturbance_bandwidth=DISTURBANCE_BANDWIDTH_HZ,
-          torque_scale="on", torque_scale_walk="auto")),
+]
+
+
+def _variant(base: str, name: str, what: str, **extra) -> tuple[str, str, dict]:
+    """Mode `name`: the mode `base` above with the options in extra added."""
+    options = next(options for mode, _, options in MODES if mode == base)
+    return (name, what, {**options, **extra})
+
+
+# The disturbance states with a bandwidth (above it the controller does not cancel).
+BAND = dict(disturbance="on", disturbance_bandwidth=DISTURBANCE_BANDWIDTH_HZ)
+MODES += [
+    _variant("gyro", "gyro_band", "gyro only + disturbance states of 5 Hz bandwidth (above them the controller does "
+             "not cancel)", **BAND),
+    _variant("accel_scale_walk", "accel_scale_walk_band", "+ accelerometer, scale walk (rule) + disturbance states of "
+             "5 Hz bandwidth", **BAND),
     ("gyro_walk", "gyro only, coefficient walk by the per-log torque-gain rule",
      dict(aiding="gyro", rotor_inertia="off", disturbance="off", torque_scale="off", thrust_coeff_walk="auto")),
     ("gyro_walk_calibrated", "the same, vehicle file calibrated with the accelerometer on the other half of the runs",
      dict(aiding="gyro", rotor_inertia="off", disturbance="off", torque_scale="off", thrust_coeff_walk="auto")),
-    ("gyro_walk_band", "gyro only, coefficient walk (rule) + disturbance states of 5 Hz bandwidth",
-     dict(aiding="gyro", rotor_inertia="off", disturbance="on", disturbance_bandwidth=DISTURBANCE_BANDWIDTH_HZ,
-          torque_scale="off", thrust_coeff_walk="auto")),
-    ("gyro_walk_band_calibrated", "the same with the 5 Hz disturbance states, vehicle file calibrated on the other half",
-     dict(aiding="gyro", rotor_inertia="off", disturbance="on", disturbance_bandwidth=DISTURBANCE_BANDWIDTH_HZ,
-          torque_scale="off", thrust_coeff_walk="auto")),
-    # The motor commands as the rotor input's instrument (docs/math.md §16), beside the same mode without it.
-    ("gyro_instrument", "gyro only, rotor input from the motor commands' first stage (instrument)",
-     dict(aiding="gyro", rotor_inertia="off", disturbance="off", torque_scale="off", instrument="commands")),
-    ("gyro_band_instrument", "gyro only + 5 Hz disturbance states + the commands' instrument",
-     dict(aiding="gyro", rotor_inertia="off", disturbance="on", disturbance_bandwidth=DISTURBANCE_BANDWIDTH_HZ,
-          torque_scale="off", instrument="commands")),
-    ("accel_scale_walk_instrument", "+ accelerometer, scale walk (rule) + the commands' instrument",
-     dict(aiding="gyro+accel", rotor_inertia="off", disturbance="off", torque_scale="on", torque_scale_walk="auto",
-          instrument="commands")),
+]
+MODES += [
+    _variant("gyro_walk", "gyro_walk_band", "gyro only, coefficient walk (rule) + disturbance states of 5 Hz bandwidth",
+             **BAND),
+    _variant("gyro_walk_calibrated", "gyro_walk_band_calibrated", "the same with the 5 Hz disturbance states, vehicle "
+             "file calibrated on the other half", **BAND),
+]
+# The motor commands as the rotor input's instrument (docs/math.md §16), beside the same mode without it.
+MODES += [
+    _variant("gyro", "gyro_instrument", "gyro only, rotor input from the motor commands' first stage (instrument)",
+             instrument="commands"),
+    _variant("gyro_band", "gyro_band_instrument", "gyro only + 5 Hz disturbance states + the commands' instrument",
+             instrument="commands"),
+    _variant("accel_scale_walk", "accel_scale_walk_instrument", "+ accelerometer, scale walk (rule) + the commands' "
+             "instrument", instrument="commands"),
 ]
 # A calibrated mode: (its gyro-only mode, the accelerometer mode), both replayed with the file as given.
 CALIBRATED = {"gyro_walk_calibrated": ("gyro_walk", "accel_scale_walk"),

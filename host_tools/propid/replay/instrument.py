@@ -77,3 +77,29 @@ def choose_lag(log: FlightLog, commands: np.ndarray, mask: np.ndarray) -> dict:
     lag = min(finite, key=finite.get)
     return {"rule": "least first-stage residual of the increments", "lag_s": lag,
             "residual_share": {f"{k:g}": round(v, 4) for k, v in shares.items()}}
+
+
+def resolve_instrument(log: FlightLog, mask: np.ndarray, options, config_fields: dict,
+                       notes: dict) -> np.ndarray | None:
+    """--instrument / --command-lag / --command-memory into the filter's configuration and the
+    replay's notes; the (n, N) float32 commands to push, or None with the instrument off."""
+    if options.instrument == "off":
+        return None
+    if options.instrument != "commands":
+        raise UserError(f"--instrument {options.instrument!r}: give off or commands")
+    commands = np.ascontiguousarray(command_columns(log), dtype=np.float32)
+    if options.command_lag == "auto":
+        lag_info = choose_lag(log, commands.astype(float), mask)
+    else:
+        lag = float(options.command_lag)
+        if not (np.isfinite(lag) and 1.0e-4 <= lag <= 1.0):
+            raise UserError(f"--command-lag {options.command_lag!r}: give 0.0001..1 s or auto")
+        lag_info = {"rule": "given", "lag_s": lag}
+    memory = DEFAULT_MEMORY_S if options.command_memory is None else float(options.command_memory)
+    if not (np.isfinite(memory) and 0.01 <= memory <= 1.0e4):
+        raise UserError(f"--command-memory {options.command_memory!r}: give 0.01..10000 s")
+    config_fields["motor_command_instrument"] = 1
+    config_fields["motor_command_lag"] = float(lag_info["lag_s"])
+    config_fields["motor_command_memory"] = memory
+    notes["instrument"] = dict(lag_info, memory_s=memory)
+    return commands

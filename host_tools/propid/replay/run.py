@@ -10,7 +10,7 @@ from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.replay.alignment import detect_streams, estimate_esc_delay, filter_input_rule
 from propid.replay.config import build_config
-from propid.replay.instrument import DEFAULT_MEMORY_S, choose_lag, command_columns
+from propid.replay.instrument import resolve_instrument
 from propid.replay.noise import nis_mean, replay_nis
 from propid.replay.options import US, ReplayOptions, ReplayResult
 from propid.replay.prefilter import highpass_emulation_log, prefilter_log
@@ -61,25 +61,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         notes["prefilter"] = prefilter_info
     if highpass_info is not None:
         notes["diagnostic_highpass"] = highpass_info
-    commands = None
-    if options.instrument == "commands":
-        commands = np.ascontiguousarray(command_columns(log), dtype=np.float32)
-        if options.command_lag == "auto":
-            lag_info = choose_lag(log, commands.astype(float), mask)
-        else:
-            lag = float(options.command_lag)
-            if not (np.isfinite(lag) and 1.0e-4 <= lag <= 1.0):
-                raise UserError(f"--command-lag {options.command_lag!r}: give 0.0001..1 s or auto")
-            lag_info = {"rule": "given", "lag_s": lag}
-        memory = DEFAULT_MEMORY_S if options.command_memory is None else float(options.command_memory)
-        if not (np.isfinite(memory) and 0.01 <= memory <= 1.0e4):
-            raise UserError(f"--command-memory {options.command_memory!r}: give 0.01..10000 s")
-        config_fields["motor_command_instrument"] = 1
-        config_fields["motor_command_lag"] = float(lag_info["lag_s"])
-        config_fields["motor_command_memory"] = memory
-        notes["instrument"] = dict(lag_info, memory_s=memory)
-    elif options.instrument != "off":
-        raise UserError(f"--instrument {options.instrument!r}: give off or commands")
+    commands = resolve_instrument(log, mask, options, config_fields, notes)
     filt = FilterSession(vehicle, config_fields)
     kf_nominal = [float(v) for v in config_fields["thrust_coeff_nominal"]]
     km_nominal = [float(v) for v in config_fields["drag_coeff_nominal"]]
