@@ -8,6 +8,13 @@
 
 #include "propid_internal.h"
 
+#if !PROPID_GENERAL_VEHICLES
+const uint8_t propid_quad_state_kind[PROPID_MAX_STATES] = {
+    PROPID_KIND_RATE,   PROPID_KIND_RATE,   PROPID_KIND_RATE,   PROPID_KIND_THRUST, PROPID_KIND_THRUST,
+    PROPID_KIND_THRUST, PROPID_KIND_THRUST, PROPID_KIND_DRAG,   PROPID_KIND_DRAG,   PROPID_KIND_DRAG,
+    PROPID_KIND_DRAG,   PROPID_KIND_BIAS,   PROPID_KIND_BIAS,   PROPID_KIND_BIAS};
+#endif
+
 void propid_cov_set_prior(const propid_derived_t *derived, const propid_drag_basis_t *basis, propid_core_t *core)
 {
     const uint8_t rotor_count = basis->rotor_count;

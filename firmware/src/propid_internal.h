@@ -595,20 +595,23 @@ static inline uint32_t propid_outside_positive_range(float value, uint32_t floor
 #define PROPID_KIND_ACCEL_BIAS (4u + PROPID_WITH_DISTURBANCE)
 #define PROPID_KIND_TORQUE_SCALE (5u + PROPID_WITH_DISTURBANCE)
 
+#if !PROPID_GENERAL_VEHICLES
+/* The fixed quad layout's rate, thrust, drag and bias blocks (propid_covariance.c):
+ * one table in flash for every file that reads it (a static copy per file cost
+ * 14 B each). */
+extern const uint8_t propid_quad_state_kind[PROPID_MAX_STATES];
+#endif
+
 /* Kind of state i: derived->state_kind, or without the general path (the quad
- * build) the fixed quad layout's rate, thrust, drag and bias blocks, from a
- * table in flash (one load, like the RAM copy; compares cost ~100 B of code). */
+ * build) propid_quad_state_kind (one load, like the RAM copy; compares cost
+ * ~100 B of code). */
 static inline uint8_t propid_state_kind(const propid_derived_t *derived, uint8_t i)
 {
 #if PROPID_GENERAL_VEHICLES
     return derived->state_kind[i];
 #else
-    static const uint8_t quad_kind[PROPID_MAX_STATES] = {
-        PROPID_KIND_RATE,   PROPID_KIND_RATE,   PROPID_KIND_RATE,   PROPID_KIND_THRUST, PROPID_KIND_THRUST,
-        PROPID_KIND_THRUST, PROPID_KIND_THRUST, PROPID_KIND_DRAG,   PROPID_KIND_DRAG,   PROPID_KIND_DRAG,
-        PROPID_KIND_DRAG,   PROPID_KIND_BIAS,   PROPID_KIND_BIAS,   PROPID_KIND_BIAS};
     (void)derived;
-    return quad_kind[i];
+    return propid_quad_state_kind[i];
 #endif
 }
 
