@@ -361,6 +361,17 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                                 for old, c in zip(extras[axis], per_flight)]
     after_shape, after_details = basefit.base_fit(work, vehicle.positions, vehicle.yaw_signs, vehicle.mass,
                                                   extras, scales, shape=shape)
+    instrument_scales = basefit.instrument_scales(scales, after_details)
+    if instrument_scales:  # the torque scale without the attenuation the instrument removes
+        scales = {axis: s["scale"] for axis, s in instrument_scales.items()}
+        after_shape, after_details = basefit.base_fit(work, vehicle.positions, vehicle.yaw_signs, vehicle.mass,
+                                                      extras, scales, shape=shape)
+        if "inertia_error" in by_entry:
+            params = by_entry["inertia_error"]["params"]
+            for axis, key in (("roll", "inertia_scale_xx"), ("pitch", "inertia_scale_yy")):
+                if axis in instrument_scales and "inertia_error" in selected_ids:
+                    params[key + "_least_squares"] = params[key]
+                    params[key] = instrument_scales[axis]["scale"]
     roll_fit = base_details.get("kf_roll") or {}
     result["base_fit_method"] = (
         "torque coefficients by instrumental variables: the motor commands (cmd_i) predict the rotor speeds"
@@ -370,6 +381,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     result["base_fit"] = base_shape
     result["base_fit_after"] = after_shape
     result["base_fit_details"] = {"before": base_details, "after": after_details,
+                                  **({"torque_scale_instrument": instrument_scales} if instrument_scales else {}),
                                   "agreement_before": _agreement(base_shape),
                                   "agreement_after": _agreement(after_shape)}
     progress(10)

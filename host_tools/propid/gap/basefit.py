@@ -31,6 +31,7 @@ from propid.gap.prep import Flight
 
 INSTRUMENT_LAGS = (2, 3, 5, 8, 13)
 QUANTITIES = {"kf_thrust": "thrust", "kf_roll": "roll", "kf_pitch": "pitch", "km_yaw": "yaw"}
+QUANTITY_OF = {axis: key for key, axis in QUANTITIES.items()}
 
 
 def main_regressor(axis: str, u: np.ndarray, positions: np.ndarray, signs: np.ndarray,
@@ -143,6 +144,29 @@ def fleet_fit(flights: list[Flight], axis: str, positions: np.ndarray, signs: np
            "least_squares_value": float(ls_value), "r2": r2, "rows": int(y.size)}
     if keep_bootstrap:  # the resamples depend only on rng_seed and the block count: paired across calls
         out["bootstrap"] = np.asarray(boot)
+    return out
+
+
+def instrument_scales(scales: dict, after_details: dict) -> dict:
+    """The torque scales (axis -> response scale of a significant inertia_error / gyro_scale)
+    without the rotor-speed noise's attenuation. Selection fits such a scale by least squares
+    against the accelerometer's kf, so it also absorbs the attenuation of the torque regressor
+    (errors in variables: a noisy regressor reads low under least squares, not under
+    instrumental variables; a true inertia error reads low under both). With motor commands
+    that attenuation is measured on the same axis, band and extra columns as the after-fit:
+    least-squares / instrumental-variables value of the fleet coefficient (both are linear in
+    the response, so the ratio does not depend on the scale applied). The scale the
+    instrument gives is the least-squares one times that ratio. Empty without commands."""
+    out = {}
+    for axis, scale in scales.items():
+        fit = after_details.get(QUANTITY_OF.get(axis, ""))
+        if not fit or not fit["method"].startswith("instrumental") or not fit["value"] > 0:
+            continue
+        attenuation = fit["least_squares_value"] / fit["value"]
+        if not attenuation > 0:  # a least-squares fit of the other sign: no attenuation to read
+            continue
+        out[axis] = {"least_squares_scale": float(scale), "attenuation": float(attenuation),
+                     "scale": float(scale * attenuation)}
     return out
 
 
