@@ -64,6 +64,7 @@ void propid_config_default(propid_config_t *config)
     config->inertia_rel_std = 0.0f;
     config->motor_time_constant = 0.01f;
     config->input_error_compensation = 0u;
+    config->rotor_speed_noise_hold = 0u;
     config->motor_command_instrument = 0u;
     config->motor_command_lag = 0.03f;
     config->motor_command_memory = 10.0f;
@@ -580,6 +581,12 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         (config->input_error_compensation && !(config->rotor_speed_noise > 0.0f))) {
         PROPID_BAD("input_error_compensation");
     }
+    /* The hold sets the time of an error of the configured size: nothing without one.
+     * The compensation's memory is per axis with one time for all rotors. */
+    if (config->rotor_speed_noise_hold > 1u ||
+        (config->rotor_speed_noise_hold && (!(config->rotor_speed_noise > 0.0f) || config->input_error_compensation))) {
+        PROPID_BAD("rotor_speed_noise_hold");
+    }
 
     /* The commands' first stage (propid_instrument.c): compiled out, only 0. A lag
      * or memory is needed only with it on; off, any finite non-negative value. */
@@ -600,6 +607,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     out.input_noise_var = 4.0f * config->rotor_speed_noise * config->rotor_speed_noise;
     out.input_noise_time = config->rotor_speed_noise_time;
     out.input_compensation = config->input_error_compensation;
+    out.input_noise_hold = config->rotor_speed_noise_hold;
 #endif
     out.layout.rate = 0u;
     out.layout.thrust = propid_first_thrust();

@@ -449,14 +449,15 @@ static void add_input_block(float *cov, const float (*gain)[PROPID_MAX_ROTORS], 
  * thrust columns in the roll and pitch rows, drag columns in the yaw row;
  * straight-line. */
 static __attribute__((noinline)) void add_input_noise_quad(const propid_derived_t *derived,
-                                                           propid_core_t *core, const float *km_rel, float weight)
+                                                           propid_core_t *core, const float *km_rel,
+                                                           const float *weight)
 {
     const float *state = core->state;
     float input_var[4];
     float gain[3][4];
 PROPID_UNROLL(4)
     for (uint8_t i = 0; i < 4u; ++i) {
-        input_var[i] = weight * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
+        input_var[i] = weight[i] * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
         gain[0][i] = derived->jac_torque[0][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_THRUST + i];
         gain[1][i] = derived->jac_torque[1][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_THRUST + i];
         gain[2][i] = derived->jac_torque[2][PROPID_QUAD_TORQUE_FIRST + i] * km_rel[i];
@@ -476,13 +477,14 @@ PROPID_UNROLL(3)
 
 /* Any vehicle, over the sparsity lists. */
 static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t *derived,
-                                                          propid_core_t *core, const float *km_rel, float weight)
+                                                          propid_core_t *core, const float *km_rel,
+                                                          const float *weight)
 {
     const float *state = core->state;
     const uint8_t rotor_count = (uint8_t)(derived->layout.drag - derived->layout.thrust);
     float input_var[PROPID_MAX_ROTORS];
     for (uint8_t i = 0; i < rotor_count; ++i) {
-        input_var[i] = weight * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
+        input_var[i] = weight[i] * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
     }
     float gain[3][PROPID_MAX_ROTORS] = {{0.0f}}; /* B */
     for (uint8_t a = 0; a < 3u; ++a) {
@@ -500,16 +502,39 @@ static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t
     add_input_block(core->cov, (const float (*)[PROPID_MAX_ROTORS])gain, input_var, rotor_count);
 }
 
+/* The held error's span per rotor (docs/math.md §14, "Hold time from the
+ * telemetry"): an error that has stood for a (its value unchanged since) and
+ * stays through the step adds dt (dt + 2 a) to the variance of its integrated
+ * effect, dt alone when the value changes within the step (a fresh error); the
+ * configured time bounds it as before. The age then moves on. */
+static float held_span(propid_core_t *core, uint8_t rotor, float dt, float ceiling)
+{
+    float span;
+    if (core->rotor_speed_sq[rotor] != core->input_speed_sq[rotor]) {
+        span = dt;
+        core->input_hold_age[rotor] = 0.0f;
+    } else {
+        span = dt + 2.0f * core->input_hold_age[rotor];
+        const float age = core->input_hold_age[rotor] + dt;
+        core->input_hold_age[rotor] = age < ceiling ? age : ceiling; /* (bounded: the span is) */
+    }
+    return span < ceiling ? span : ceiling;
+}
+
 static void add_input_noise(const propid_derived_t *derived, propid_core_t *core, float dt)
 {
     /* Var(u_i) dt max(dt, time) = input_noise_var u_i dt span, u_i the trapezoid mean
      * (the factor 0.5 of that mean folded in). */
+    const uint8_t rotor_count = (uint8_t)(derived->layout.drag - derived->layout.thrust);
     const float span = derived->input_noise_time > dt ? derived->input_noise_time : dt;
-    const float weight = 0.5f * derived->input_noise_var * dt * span;
+    float weight[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const float rotor_span = derived->input_noise_hold ? held_span(core, i, dt, span) : span;
+        weight[i] = 0.5f * derived->input_noise_var * dt * rotor_span;
+    }
     /* B at the drag coefficients per rotor (kept in their yaw basis; this term is
      * in the general build only, whose derived data holds the basis). */
-    const propid_drag_basis_t basis = {derived->drag_basis, derived->drag_basis_scale,
-                                       (uint8_t)(derived->layout.drag - derived->layout.thrust)};
+    const propid_drag_basis_t basis = {derived->drag_basis, derived->drag_basis_scale, rotor_count};
     float km_rel[PROPID_MAX_ROTORS];
     propid_drag_per_rotor(&basis, core, km_rel, NULL);
     if (derived->quad_layout) {

@@ -160,6 +160,7 @@ _OPTIONAL_FIELDS = [
     ("motor_time_constant", ctypes.c_float),
     ("input_error_compensation", ctypes.c_uint8),
     ("motor_command_instrument", ctypes.c_uint8),
+    ("rotor_speed_noise_hold", ctypes.c_uint8),
     ("motor_command_lag", ctypes.c_float),
     ("motor_command_memory", ctypes.c_float),
 ]
@@ -294,6 +295,9 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "motor_command_instrument": 0,
     "motor_command_lag": 0.03,
     "motor_command_memory": 10.0,
+    # The input error's correlation time per rotor from how long its value has stood
+    # (docs/math.md §14; needs rotor_speed_noise > 0, the configured time its ceiling).
+    "rotor_speed_noise_hold": 0,
 }
 
 
@@ -354,6 +358,7 @@ class FilterConfig:
     motor_command_instrument: int = DEFAULT_TUNING["motor_command_instrument"]
     motor_command_lag: float = DEFAULT_TUNING["motor_command_lag"]
     motor_command_memory: float = DEFAULT_TUNING["motor_command_memory"]
+    rotor_speed_noise_hold: int = DEFAULT_TUNING["rotor_speed_noise_hold"]
 
     @property
     def rotor_count(self) -> int:

@@ -122,6 +122,7 @@ class ReferenceFilter:
         self.input_noise_var = 4.0 * _f32(config.rotor_speed_noise) ** 2
         self.input_noise_time = _f32(config.rotor_speed_noise_time)
         self.input_compensation = bool(getattr(config, "input_error_compensation", 0))
+        self.input_noise_hold = bool(getattr(config, "rotor_speed_noise_hold", 0))
         self.converged_var = c["converged_rel_std"] ** 2
         # C (propid_config.c): a claim counts the configured inertia's scale error too, which
         # the data cannot see (for kf not when the torque-scale state takes it).
@@ -250,6 +251,8 @@ class ReferenceFilter:
         self.input_information = np.zeros(3)
         self.input_error_information = np.zeros(3)
         self.input_information_time = 0.0
+        # Per rotor, how long its input value has stood (C: input_hold_age).
+        self.input_hold_age = np.zeros(self.rotor_count)
         if self.instrument is not None:
             self.instrument.clear()
 
@@ -300,6 +303,14 @@ class ReferenceFilter:
         return code
 
     # ------------------------------------------------------------------ model
+    def _held_spans(self, dt: float, ceiling: float) -> np.ndarray:
+        """The held error's span per rotor (C: held_span, docs/math.md §14): dt when the
+        value changes within the step, else dt + 2 age, bounded by the configured time."""
+        changed = self.rotor_speed_sq != self.input_speed_sq
+        span = np.where(changed, dt, np.minimum(dt + 2.0 * self.input_hold_age, ceiling))
+        self.input_hold_age = np.where(changed, 0.0, np.minimum(self.input_hold_age + dt, ceiling))
+        return span
+
     def rate_derivative_and_jacobian(self, state: np.ndarray, speed_sq: np.ndarray, momentum_z: float = 0.0):
         """Angular acceleration and its Jacobian rows (3 x n); momentum_z = sum_i yaw_sign_i J_r,i
         Omega_i (rotor inertia; the yaw reaction is added by the caller, it does not depend on x)."""
@@ -587,7 +598,10 @@ class ReferenceFilter:
                 _, unit_rows = self.rate_derivative_and_jacobian(coeffs, np.ones(n_rot))
                 gain = (unit_rows[:, 3:3 + n_rot] * coeffs[3:3 + n_rot]
                         + unit_rows[:, 3 + n_rot:3 + 2 * n_rot] * coeffs[3 + n_rot:3 + 2 * n_rot])
-                input_var = self.input_noise_var * speed_sq * dt * max(dt, self.input_noise_time)
+                span = np.full(n_rot, max(dt, self.input_noise_time))
+                if self.input_noise_hold:
+                    span = self._held_spans(dt, span[0])
+                input_var = self.input_noise_var * speed_sq * dt * span
                 self.cov[:3, :3] += (gain * input_var) @ gain.T
             self.state[:3] = rate_next
         else:

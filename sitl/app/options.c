@@ -314,6 +314,10 @@ static const opt_t options[] = {
            "rate process noise (docs/math.md §14). Default 0 (exact)"),
     NUMBER(NULL, "filter-rotor-speed-noise-time", filter_rotor_speed_noise_time, 0.0, 1.0, "S",
            "filter: correlation time of that error [s] (default 0: one step)"),
+    FLAG(NULL, "filter-rotor-speed-noise-hold", filter_rotor_speed_noise_hold, 1,
+         "filter: that error's correlation time per rotor from the telemetry,\n"
+         "how long the rotor's value has stood (the configured time its\n"
+         "ceiling; docs/math.md §14). Also with --filter-sensor-errors"),
     NUMBER(NULL, "filter-inertia-std", filter_inertia_rel_std, 0.0, 1.0, "R",
            "filter: relative std of the vehicle file's inertia scale\n"
            "(inertia_rel_std): the data cannot see it, converged claims\n"

@@ -183,5 +183,7 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
         c->rotor_delay_us = (int32_t)lround(e.rotor_delay_s * 1e6);
         c->input_error_compensation = 0u; /* the truncation's error is not classical (sensor_errors.c) */
     }
+    /* After the sensor errors, which set the error's size and ceiling time. */
+    c->rotor_speed_noise_hold = (uint8_t)(opts->filter_rotor_speed_noise_hold != 0);
     return propid_config_check(c, bad_field);
 }

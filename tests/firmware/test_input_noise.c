@@ -5,6 +5,8 @@
  * - on, it adds exactly B Sigma_u B^T dt max(dt, time) to the rate block and
  *   nothing elsewhere, B computed here densely from the model's Jacobian at the
  *   current coefficients (quad layout, general lists, hexa);
+ * - with rotor_speed_noise_hold, the span per rotor from how long its value
+ *   has stood (dt + 2 age, a change renews it, the configured time its ceiling);
  * - the configuration check refuses bad values by name.
  */
 #include <math.h>
@@ -25,6 +27,55 @@ void tearDown(void) {}
 static propid_filter_t with_noise;
 static propid_filter_t without_noise;
 
+/* The block one prediction step added (`with` after the step minus `plain`, the
+ * same filter stepped without the term) against B Sigma_u B^T dt span_i, B computed
+ * densely from the model's Jacobian; everything outside the rate block bit for bit. */
+static void check_block(const propid_filter_t *with, const propid_filter_t *plain, const float *span, float sigma,
+                        float dt)
+{
+    const uint8_t rotors = with->config.rotor_count;
+    /* B_ai = d(omega_dot_a)/d(u_i): the model's coefficient columns divided by u_i. */
+    float rows[3][PROPID_MAX_STATES];
+    float unit_speed_sq[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < rotors; ++i) {
+        unit_speed_sq[i] = 1.0f;
+    }
+    /* The model per rotor (the filter keeps the drag block in its yaw basis). */
+    const propid_core_t per_rotor = per_rotor_core(with);
+    const float *x = per_rotor.state;
+    propid_model_rate_jacobian(&with->config, &with->derived, x, unit_speed_sq, rows);
+    for (uint8_t a = 0; a < 3u; ++a) {
+        for (uint8_t b = a; b < 3u; ++b) {
+            float expected = 0.0f;
+            for (uint8_t i = 0; i < rotors; ++i) {
+                const float gain_a = rows[a][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
+                                     rows[a][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
+                const float gain_b = rows[b][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
+                                     rows[b][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
+                const float mean_u = 0.5f * (with->core.input_speed_sq[i] + with->core.rotor_speed_sq[i]);
+                expected += gain_a * gain_b * 4.0f * sigma * sigma * mean_u * dt * span[i];
+            }
+            const uint32_t k = propid_cov_index(a, b);
+            const float added = with->core.cov[k] - plain->core.cov[k];
+            TEST_ASSERT_FLOAT_WITHIN(1.0e-3f * fabsf(expected) + 1.0e-6f * fabsf(with->core.cov[k]), expected,
+                                     added);
+            if (a == b) {
+                TEST_ASSERT_TRUE(expected > 0.0f);
+            }
+        }
+    }
+    const uint8_t n = with->derived.state_count;
+    for (uint8_t i = 0; i < n; ++i) {
+        for (uint8_t j = i; j < n; ++j) {
+            if (j < 3u) {
+                continue;
+            }
+            const uint32_t k = propid_cov_index(i, j);
+            TEST_ASSERT_EQUAL_MEMORY(&plain->core.cov[k], &with->core.cov[k], sizeof(float));
+        }
+    }
+}
+
 static void check_added_block(uint8_t rotors, int full_inertia, float time)
 {
     const float sigma = 3.0f;
@@ -42,49 +93,11 @@ static void check_added_block(uint8_t rotors, int full_inertia, float time)
     propid_predict_covariance(&without_noise.derived, &without_noise.core, dt, jac_dt);
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_noise, dt, rate_next, jac_dt));
     propid_predict_covariance(&with_noise.derived, &with_noise.core, dt, jac_dt);
-
-    /* B_ai = d(omega_dot_a)/d(u_i): the model's coefficient columns divided by u_i. */
-    float rows[3][PROPID_MAX_STATES];
-    float unit_speed_sq[PROPID_MAX_ROTORS];
+    float span[PROPID_MAX_ROTORS];
     for (uint8_t i = 0; i < rotors; ++i) {
-        unit_speed_sq[i] = 1.0f;
+        span[i] = time > dt ? time : dt;
     }
-    /* The model per rotor (the filter keeps the drag block in its yaw basis). */
-    const propid_core_t per_rotor = per_rotor_core(&with_noise);
-    const float *x = per_rotor.state;
-    propid_model_rate_jacobian(&with_noise.config, &with_noise.derived, x, unit_speed_sq, rows);
-    const float span = time > dt ? time : dt;
-    for (uint8_t a = 0; a < 3u; ++a) {
-        for (uint8_t b = a; b < 3u; ++b) {
-            float expected = 0.0f;
-            for (uint8_t i = 0; i < rotors; ++i) {
-                const float gain_a = rows[a][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
-                                     rows[a][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
-                const float gain_b = rows[b][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
-                                     rows[b][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
-                const float mean_u = 0.5f * (with_noise.core.input_speed_sq[i] + with_noise.core.rotor_speed_sq[i]);
-                expected += gain_a * gain_b * 4.0f * sigma * sigma * mean_u * dt * span;
-            }
-            const uint32_t k = propid_cov_index(a, b);
-            const float added = with_noise.core.cov[k] - without_noise.core.cov[k];
-            TEST_ASSERT_FLOAT_WITHIN(1.0e-3f * fabsf(expected) + 1.0e-6f * fabsf(with_noise.core.cov[k]), expected,
-                                     added);
-            if (a == b) {
-                TEST_ASSERT_TRUE(expected > 0.0f);
-            }
-        }
-    }
-    /* Everything outside the rate block is the plain prediction, bit for bit. */
-    const uint8_t n = with_noise.derived.state_count;
-    for (uint8_t i = 0; i < n; ++i) {
-        for (uint8_t j = i; j < n; ++j) {
-            if (j < 3u) {
-                continue;
-            }
-            const uint32_t k = propid_cov_index(i, j);
-            TEST_ASSERT_EQUAL_MEMORY(&without_noise.core.cov[k], &with_noise.core.cov[k], sizeof(float));
-        }
-    }
+    check_block(&with_noise, &without_noise, span, sigma, dt);
 }
 
 static void test_input_noise_adds_its_block_to_the_rate_covariance(void)
@@ -111,6 +124,86 @@ static void test_input_noise_off_is_the_plain_prediction(void)
     TEST_ASSERT_EQUAL_MEMORY(without_noise.core.cov, with_noise.core.cov, sizeof(with_noise.core.cov));
 }
 
+/* rotor_speed_noise_hold (docs/math.md §14, "Hold time from the telemetry"): a
+ * rotor whose value changes within the step gets one step's span dt; one whose
+ * value has stood for a gets dt + 2 a, bounded by the configured time; a change
+ * starts the age again. Five steps of dt = 2 ms, ceiling 10 ms = 5 dt: rotor 0
+ * changes every step, rotors 1 to 3 stand, rotors 2 and 3 change at the fourth
+ * step. With one configured time every span would be 10 ms. */
+static void test_held_input_error_spans_from_the_telemetry(void)
+{
+    static const uint8_t quad_and_hexa[2] = {4u, 6u};
+    for (uint8_t v = 0; v < 2u; ++v) {
+        const uint8_t rotors = quad_and_hexa[v];
+        const float sigma = 3.0f;
+        const float dt = 0.002f;
+        propid_config_t config;
+        input_error_configure(&config, rotors, 0);
+        config.rotor_speed_noise = sigma;
+        config.rotor_speed_noise_time = 5.0f * dt;
+        config.rotor_speed_noise_hold = 1u;
+        input_error_off_prior(&with_noise, &config);
+        /* In units of dt, per step and rotor (rotors 4, 5 of the hexa stand like 1):
+         * a held error's first full step 1, then 3, 5, ... ((n + 1)^2 - n^2). */
+        static const float expected_span[6][4] = {
+            {1.0f, 1.0f, 1.0f, 1.0f}, /* step 0: the fixture's speeds differ at both ends */
+            {1.0f, 1.0f, 1.0f, 1.0f}, /* the new values' first full step */
+            {1.0f, 3.0f, 3.0f, 3.0f}, /* stood one step */
+            {1.0f, 5.0f, 1.0f, 1.0f}, /* two: 5 dt (the ceiling); rotors 2 and 3 change */
+            {1.0f, 5.0f, 1.0f, 1.0f}, /* 7 dt bounded to 5 dt */
+            {1.0f, 5.0f, 3.0f, 3.0f},
+        };
+        for (uint8_t step = 0; step < 6u; ++step) {
+            if (step > 0u) {
+                memcpy(with_noise.core.input_speed_sq, with_noise.core.rotor_speed_sq,
+                       sizeof(with_noise.core.input_speed_sq));
+                with_noise.core.rotor_speed_sq[0] += 100.0f;
+                if (step == 3u) {
+                    with_noise.core.rotor_speed_sq[2] += 100.0f;
+                    with_noise.core.rotor_speed_sq[3] += 100.0f;
+                }
+            }
+            without_noise = with_noise;
+            without_noise.derived.input_noise_var = 0.0f; /* the same step without the term */
+            float rate_next[3];
+            float jac_dt[3][PROPID_JAC_ROW];
+            TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_noise, dt, rate_next, jac_dt));
+            propid_predict_covariance(&without_noise.derived, &without_noise.core, dt, jac_dt);
+            TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_noise, dt, rate_next, jac_dt));
+            propid_predict_covariance(&with_noise.derived, &with_noise.core, dt, jac_dt);
+            float span[PROPID_MAX_ROTORS];
+            for (uint8_t i = 0; i < rotors; ++i) {
+                span[i] = dt * expected_span[step][i < 4u ? i : 1u];
+            }
+            check_block(&with_noise, &without_noise, span, sigma, dt);
+            /* Only the covariance moves: the state is the same step's. */
+            TEST_ASSERT_EQUAL_MEMORY(without_noise.core.state, with_noise.core.state, sizeof(with_noise.core.state));
+        }
+    }
+}
+
+/* The hold with a configured time of one step or less is the plain term, bit for
+ * bit: every span is dt either way. */
+static void test_held_input_error_within_one_step_is_the_plain_term(void)
+{
+    propid_config_t config;
+    input_error_configure(&config, 4u, 0);
+    config.rotor_speed_noise = 3.0f;
+    config.rotor_speed_noise_time = 0.001f;
+    input_error_off_prior(&without_noise, &config);
+    config.rotor_speed_noise_hold = 1u;
+    input_error_off_prior(&with_noise, &config);
+    for (uint8_t step = 0; step < 3u; ++step) {
+        float rate_next[3];
+        float jac_dt[3][PROPID_JAC_ROW];
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_noise, 0.002f, rate_next, jac_dt));
+        propid_predict_covariance(&without_noise.derived, &without_noise.core, 0.002f, jac_dt);
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_noise, 0.002f, rate_next, jac_dt));
+        propid_predict_covariance(&with_noise.derived, &with_noise.core, 0.002f, jac_dt);
+        TEST_ASSERT_EQUAL_MEMORY(without_noise.core.cov, with_noise.core.cov, sizeof(with_noise.core.cov));
+    }
+}
+
 static void test_input_noise_config_is_checked(void)
 {
     propid_config_t config;
@@ -131,6 +224,19 @@ static void test_input_noise_config_is_checked(void)
     }
     config.rotor_speed_noise_time = 0.002f;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
+    /* The hold: 0 or 1, with an error size, not with the compensation. */
+    config.rotor_speed_noise_hold = 2u;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_hold", bad);
+    config.rotor_speed_noise_hold = 1u;
+    config.input_error_compensation = 1u;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_hold", bad);
+    config.input_error_compensation = 0u;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
+    config.rotor_speed_noise = 0.0f;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_hold", bad);
 }
 
 /* The largest accepted error (sigma = max_rotor_speed, correlated over 1 s) at full
@@ -184,6 +290,8 @@ int main(void)
 #if PROPID_WITH_INPUT_NOISE
     RUN_TEST(test_input_noise_adds_its_block_to_the_rate_covariance);
     RUN_TEST(test_input_noise_off_is_the_plain_prediction);
+    RUN_TEST(test_held_input_error_spans_from_the_telemetry);
+    RUN_TEST(test_held_input_error_within_one_step_is_the_plain_term);
     RUN_TEST(test_input_noise_config_is_checked);
     RUN_TEST(test_largest_input_noise_keeps_the_filter_finite);
 #else

@@ -177,6 +177,11 @@ typedef struct {
                                          (propid_push_motor_command; docs/math.md §16): the
                                          telemetry's error then stays out of the regressor.
                                          0: off, the telemetry as measured */
+    uint8_t rotor_speed_noise_hold;   /* 1 (needs rotor_speed_noise > 0, no compensation): the error's
+                                         correlation time per rotor from the telemetry itself, how long
+                                         the rotor's value has stood (renewed when it changes), with
+                                         rotor_speed_noise_time its ceiling (docs/math.md §14). 0: the
+                                         configured time for every rotor */
     float motor_command_lag;          /* [s] first-order lag of the rotor speed behind its command
                                          in the first stage (> 0 with the instrument on) */
     float motor_command_memory;       /* [s] forgetting time of the first stage's fit (battery sag);
@@ -276,6 +281,9 @@ typedef struct {
     float input_step_carried[3];
     float input_step_cross[3];
     uint8_t input_valid[3];
+    /* Per rotor, how long its input value has stood before the current step [s]
+     * (rotor_speed_noise_hold; 0 after init, reset and a change). */
+    float input_hold_age[PROPID_MAX_ROTORS];
 #endif
 } propid_core_t;
 
@@ -381,6 +389,7 @@ typedef struct {
     float input_noise_var;                          /* 4 rotor_speed_noise^2: Var(u_i) per unit u_i */
     float input_noise_time;                         /* rotor_speed_noise_time */
     uint8_t input_compensation;                     /* config.input_error_compensation */
+    uint8_t input_noise_hold;                       /* config.rotor_speed_noise_hold */
 #endif
     float quad_gyro[3];                             /* quad layout only: A_ab = quad_gyro[a] omega_c for
                                                        both other axes b, c of row a (symmetric in b, c) */
