@@ -521,7 +521,9 @@ static float held_span(propid_core_t *core, uint8_t rotor, float dt, float ceili
     return span < ceiling ? span : ceiling;
 }
 
-static void add_input_noise(const propid_derived_t *derived, propid_core_t *core, float dt)
+/* Not inlined: its per-rotor arrays stay out of propid_predict_covariance's frame,
+ * which is on the deepest stack chain (predict_covariance_any). */
+static __attribute__((noinline)) void add_input_noise(const propid_derived_t *derived, propid_core_t *core, float dt)
 {
     /* Var(u_i) dt max(dt, time) = input_noise_var u_i dt span, u_i the trapezoid mean
      * (the factor 0.5 of that mean folded in). */
