@@ -98,6 +98,29 @@ def test_tracking_misses_are_attributed():
     assert "| 4: 2 / 2 / 1 / 1 |" in damage_bench.render(damage_bench.summarise(records, config()))
 
 
+def test_share_where_the_oracle_holds_yaw():
+    """Beside the share within 1.5x over every damaged flight, the share over the flights whose
+    Oracle keeps its yaw RMSE after the damage at or below 10 deg (a spinning Oracle is no
+    reference); a flight without a yaw figure counts as held."""
+    def record(f, o, oracle_yaw):
+        spec = {"damages": [[1, 2.5, 0.3]], "effects": [], "index": 0}
+        oracle = {"stable": True, "rmse_after_damage_m": o}
+        if oracle_yaw is not None:
+            oracle["rmse_yaw_after_damage_deg"] = oracle_yaw
+        return {"spec": spec, "filter": {"detections": [{"rotor": 1, "time_s": 2.505}], "stable": True,
+                                         "rmse_after_damage_m": f}, "oracle": oracle}
+    records = [record(0.014, 0.010, 2.0),    # held, within
+               record(0.030, 0.010, 10.0),   # held (at the line), above
+               record(0.012, 0.010, None),   # no yaw figure: held, within
+               record(0.011, 0.010, 40.0),   # lost: not counted, though within
+               record(0.300, 0.100, 10.5)]   # lost: not counted
+    result = damage_bench.summarise(records, config())
+    assert result["tracking_within_1_5x"] == pytest.approx(3 / 5)
+    assert result["oracle_holds_yaw_flights"] == 3
+    assert result["tracking_within_1_5x_oracle_holds_yaw"] == pytest.approx(2 / 3)
+    assert "| 67 % of 3 flights |" in damage_bench.render(result)
+
+
 def test_missed_damage_counts_against_the_rate():
     spec = {"damages": [[1, 2.5, 0.12]], "effects": [], "index": 0}
     records = [{"spec": spec, "filter": {"detections": [{"rotor": 1, "time_s": 2.0}], "stable": True},
