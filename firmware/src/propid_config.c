@@ -5,6 +5,7 @@
 #include <stddef.h>
 #include <string.h>
 
+#include "propid_aero_damping.h"
 #include "propid_delay.h"
 #include "propid_internal.h"
 
@@ -226,7 +227,8 @@ typedef struct {
 static void derive_quad_layout(const propid_config_t *config, const geometry_t *geo, propid_derived_t *out)
 {
     out->quad_layout = 0u;
-    if (config->rotor_count != 4u || out->state_count != PROPID_QUAD_STATES || propid_rotor_inertia_on(out)) {
+    if (config->rotor_count != 4u || out->state_count != PROPID_QUAD_STATES || propid_rotor_inertia_on(out) ||
+        propid_aero_damping_on(out)) {
         return; /* the fixed kernels know neither the optional states nor the rotor terms */
     }
     for (uint8_t a = 0; a < 3u; ++a) {
@@ -317,7 +319,8 @@ static void derive_sparsity(const propid_config_t *config, const geometry_t *geo
         for (uint8_t b = 0; b < 3u; ++b) {
             const float *coeff = geo->gyro_jacobian[a][b];
             const int rotor_term = b < 2u && propid_rotor_gyro(out, a, b) != 0.0f;
-            if (coeff[0] != 0.0f || coeff[1] != 0.0f || coeff[2] != 0.0f || rotor_term) {
+            const int damping_term = propid_aero_damping_entry(out, a, b) != 0.0f;
+            if (coeff[0] != 0.0f || coeff[1] != 0.0f || coeff[2] != 0.0f || rotor_term || damping_term) {
                 out->jac_column[a][count] = b;
                 out->jac_rotor[a][count] = 0u;
                 out->jac_torque[a][count] = 0.0f;
@@ -509,6 +512,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             PROPID_BAD("rotor_inertia");
         }
     }
+    if (!propid_aero_damping_valid(config)) {
+        PROPID_BAD("aero_damping");
+    }
     if (config->disturbance_torque > (PROPID_WITH_DISTURBANCE ? 1u : 0u)) {
         PROPID_BAD("disturbance_torque");
     }
@@ -654,6 +660,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     for (uint8_t a = 0; a < 3u; ++a) {
         out.rotor_gyro[a][0] = out.rotor_inertia_on ? -geo.inertia_inv[a][1] : 0.0f;
         out.rotor_gyro[a][1] = out.rotor_inertia_on ? geo.inertia_inv[a][0] : 0.0f;
+    }
+#endif
+#if PROPID_WITH_AERO_DAMPING
+    if (!propid_aero_damping_derive(config, (const float (*)[3])geo.inertia_inv, &out)) {
+        PROPID_BAD("aero_damping");
     }
 #endif
     for (uint8_t i = 0; i < rotor_count; ++i) {

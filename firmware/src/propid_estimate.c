@@ -130,6 +130,7 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
 #if PROPID_WITH_ROTOR_INERTIA
     terms |= derived->rotor_inertia_on ? PROPID_TERM_ROTOR_INERTIA : 0u;
 #endif
+    terms |= propid_aero_damping_on(derived) ? PROPID_TERM_AERO_DAMPING : 0u;
     terms |= propid_kept_delay_us(config) != 0 ? PROPID_TERM_ESC_DELAY : 0u;
     estimate->model_terms = terms;
     estimate->rotor_delay_us = propid_kept_delay_us(config);

@@ -293,6 +293,33 @@ static inline float propid_rotor_gyro(const propid_derived_t *derived, uint8_t a
 }
 #endif
 
+/* The aerodynamic damping's rate-block entries A_ab = -(J^-1 D)_ab (docs/math.md
+ * §17), one pair of accessors per build. */
+#if PROPID_WITH_AERO_DAMPING
+static inline int propid_aero_damping_on(const propid_derived_t *derived)
+{
+    return derived->aero_damping_on != 0u;
+}
+static inline float propid_aero_damping_entry(const propid_derived_t *derived, uint8_t a, uint8_t b)
+{
+    return derived->aero_damping[a][b];
+}
+#else
+/* Compiled out (propid_config.h): off, and every entry 0. */
+static inline int propid_aero_damping_on(const propid_derived_t *derived)
+{
+    (void)derived;
+    return 0;
+}
+static inline float propid_aero_damping_entry(const propid_derived_t *derived, uint8_t a, uint8_t b)
+{
+    (void)derived;
+    (void)a;
+    (void)b;
+    return 0.0f;
+}
+#endif
+
 /* Index of the first thrust coefficient, first drag coefficient, first bias. */
 static inline uint8_t propid_first_thrust(void) { return PROPID_RATE_STATES; }
 static inline uint8_t propid_first_drag(uint8_t rotor_count)

@@ -97,6 +97,7 @@ MODEL_TERMS = {
     "TORQUE_SCALE": 1 << 2,
     "ROTOR_INERTIA": 1 << 3,
     "ESC_DELAY": 1 << 4,
+    "AERO_DAMPING": 1 << 5,
 }
 
 
@@ -173,7 +174,8 @@ def _config_struct(max_rotors: int) -> type:
         ("rotor_count", ctypes.c_uint8),
         ("rotor", RotorConfigStruct * max_rotors),
         ("inertia", (ctypes.c_float * 3) * 3),
-    ] + _TUNING_FIELDS + [("rotor_inertia", ctypes.c_float * max_rotors)] + _OPTIONAL_FIELDS})
+    ] + _TUNING_FIELDS + [("rotor_inertia", ctypes.c_float * max_rotors)] + _OPTIONAL_FIELDS
+        + [("aero_damping", ctypes.c_float * 3)]})
 
 
 def _estimate_struct(max_rotors: int) -> type:
@@ -359,6 +361,9 @@ class FilterConfig:
     motor_command_lag: float = DEFAULT_TUNING["motor_command_lag"]
     motor_command_memory: float = DEFAULT_TUNING["motor_command_memory"]
     rotor_speed_noise_hold: int = DEFAULT_TUNING["rotor_speed_noise_hold"]
+    # Known aerodynamic rate damping [N m s/rad] per body axis (body torque -d_a omega_a, docs/math.md §17);
+    # None or zeros: not modelled.
+    aero_damping: Optional[list] = None
 
     @property
     def rotor_count(self) -> int:
@@ -438,6 +443,11 @@ class FilterConfig:
                 raise UserError(f"rotor_inertia has {len(self.rotor_inertia)} values for {self.rotor_count} rotors")
             for i, value in enumerate(self.rotor_inertia):
                 s.rotor_inertia[i] = float(value)
+        if self.aero_damping is not None:
+            if len(self.aero_damping) != 3:
+                raise UserError(f"aero_damping has {len(self.aero_damping)} values, needs 3 (x, y, z)")
+            for a, value in enumerate(self.aero_damping):
+                s.aero_damping[a] = float(value)
         return s
 
 

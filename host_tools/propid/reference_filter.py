@@ -108,6 +108,10 @@ class ReferenceFilter:
         self.rotor_inertia_on = bool(np.any(rotor_inertia > 0.0))
         self.rotor_momentum = yaw * rotor_inertia
         self.rotor_reaction = np.outer(self.rotor_momentum, self.inertia_inv[:, 2])
+        # Known aerodynamic rate damping (docs/math.md §17): omega_dot += -J^-1 D omega, D diagonal.
+        damping = np.array([_f32(v) for v in (getattr(config, "aero_damping", None) or [0.0] * 3)])
+        self.aero_rate = -self.inertia_inv * damping[None, :]
+        self.aero_damping_on = bool(np.any(damping > 0.0))
         if c["mass"] > 0.0:
             self.thrust_per_mass = self.kf_nominal / c["mass"]
             self.accel_var = c["accel_noise_std"] ** 2
@@ -199,14 +203,16 @@ class ReferenceFilter:
         drag = self.drag_torque != 0.0
         third_only = all(coeff[a, b, c] == 0.0 for a in range(3) for b in range(3) for c in range(3)
                          if not (a != b and c != a and c != b))
-        if (n_rot == 4 and self.n == 3 + 2 * n_rot + 3 and not self.rotor_inertia_on and third_only
+        if (n_rot == 4 and self.n == 3 + 2 * n_rot + 3 and not self.rotor_inertia_on and not self.aero_damping_on
+                and third_only
                 and not drag[:, :2].any() and not thrust[:, 2].any()):
             return np.full(3, 1.0 + 6.0)  # the fixed quad layout: 2 rates + 4 coefficients a row
         terms = np.ones(3)
         for a in range(3):
             for b in range(3):
                 rotor_term = self.rotor_inertia_on and b < 2 and self.inertia_inv[a, 1 - b] != 0.0
-                terms[a] += bool(np.any(coeff[a, b] != 0.0) or rotor_term)
+                damping_term = self.aero_rate[a, b] != 0.0
+                terms[a] += bool(np.any(coeff[a, b] != 0.0) or rotor_term or damping_term)
             terms[a] += np.count_nonzero(thrust[:, a])
             terms[a] += n_rot if drag[:, a].any() else 0
             terms[a] += 1 if self.first_disturbance is not None else 0
@@ -337,6 +343,9 @@ class ReferenceFilter:
             rotor_gyro[:, 1] = self.inertia_inv[:, 0] * momentum_z
             rate_dot = rate_dot + rotor_gyro @ rate
             rows[:, :3] += rotor_gyro
+        if self.aero_damping_on:
+            rate_dot = rate_dot + self.aero_rate @ rate
+            rows[:, :3] += self.aero_rate
         if self.first_disturbance is not None:
             d = self.first_disturbance
             rate_dot = rate_dot + state[d:d + 3]
@@ -925,6 +934,7 @@ class ReferenceFilter:
                               | (MODEL_TERMS["ACCEL"] if self.accel_bias is not None else 0)
                               | (MODEL_TERMS["TORQUE_SCALE"] if self.torque_scale is not None else 0)
                               | (MODEL_TERMS["ROTOR_INERTIA"] if self.rotor_inertia_on else 0)
+                              | (MODEL_TERMS["AERO_DAMPING"] if self.aero_damping_on else 0)
                               | (MODEL_TERMS["ESC_DELAY"] if self.rotor_delay_us else 0))
         return out
 

@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from propid.cfilter import (STATUS, CFilter, FilterConfig, c_default_tuning, DEFAULT_TUNING, library_path,
+from propid.cfilter import (MODEL_TERMS, STATUS, CFilter, FilterConfig, c_default_tuning, DEFAULT_TUNING, library_path,
                             load_library)
 from propid.errors import UserError
 from propid.reference_filter import ReferenceFilter
@@ -191,6 +191,28 @@ def test_c_agrees_with_reference_with_a_disturbance_bandwidth(flight):
     slow_c = replay(CFilter(slow.with_overrides(rate_process_noise=1.0)), flight)
     disturbance = slice(14, 17)
     assert np.all(trace_c[-1][2][disturbance] > 10.0 * slow_c[-1][2][disturbance])
+
+
+AERO_DAMPING = [0.01, 0.012, 0.02]  # [N m s/rad]: decay rates 2.7 / 3.3 / 2.8 1/s on this inertia
+
+
+@pytest.mark.parametrize("options", ["plain", "all"])
+def test_c_agrees_with_reference_with_aero_damping(flight, options):
+    """A known aerodynamic rate damping (docs/math.md §17): same bounds, and the term changes the run (the
+    comparison would see it missing on one side)."""
+    config = make_config(options).with_overrides(aero_damping=AERO_DAMPING)
+    trace_ref = replay(ReferenceFilter(config), flight)
+    trace_c = replay(CFilter(config), flight)
+    assert len(trace_c) == len(trace_ref) > 2000
+    state_err, cov_err = disagreement(trace_c, trace_ref)
+    print(f"C vs reference, aero damping ({options}): max |dx|/std = {state_err:.3g}, "
+          f"max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+    without = replay(CFilter(make_config(options)), flight)
+    moved, _ = disagreement(trace_c, without)
+    assert moved > 1.0  # the term moves the estimate by more than its std somewhere
+    assert CFilter(config).estimate().model_terms & MODEL_TERMS["AERO_DAMPING"]
 
 
 @pytest.mark.parametrize("options", ["plain", "all"])
@@ -458,6 +480,15 @@ def test_quad_build_rejects_compiled_out_options():
     _, path = quad_library()
     with pytest.raises(UserError, match="bad"):
         CFilter(make_config("all"), library=path)
+
+
+def test_quad_build_refuses_aero_damping():
+    """The quad build has no general step for the damping's rate entries: a nonzero value is a
+    configuration error naming the field; zeros are the plain filter."""
+    _, path = quad_library()
+    with pytest.raises(UserError, match="bad aero_damping"):
+        CFilter(make_config().with_overrides(aero_damping=[0.0, 0.0, 1e-3]), library=path)
+    CFilter(make_config().with_overrides(aero_damping=[0.0, 0.0, 0.0]), library=path)
 
 
 def test_quad_build_refuses_the_command_instrument():

@@ -186,6 +186,10 @@ typedef struct {
                                          in the first stage (> 0 with the instrument on) */
     float motor_command_memory;       /* [s] forgetting time of the first stage's fit (battery sag);
                                          > 0 with the instrument on */
+    float aero_damping[3];            /* known aerodynamic rate damping [N m s/rad] per body axis: a
+                                         body torque -aero_damping[a] omega_a (docs/math.md §17; the
+                                         vehicle file's key of that name). 0: not modelled. Full build
+                                         only (the quad build refuses a nonzero value) */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -380,6 +384,10 @@ typedef struct {
     float rotor_momentum[PROPID_MAX_ROTORS];        /* yaw_sign_i J_r,i: h = sum_i rotor_momentum_i Omega_i */
     float rotor_gyro[3][2];                         /* rotor gyroscopic term: A_ab += rotor_gyro[a][b] h, b < 2 */
     float rotor_reaction[PROPID_MAX_ROTORS][3];     /* J^-1 z yaw_sign_i J_r,i: delta omega per delta Omega_i */
+#endif
+#if PROPID_WITH_AERO_DAMPING
+    uint8_t aero_damping_on;                        /* any config.aero_damping > 0 */
+    float aero_damping[3][3];                       /* -J^-1 D: its rate acceleration A_ab omega_b */
 #endif
 #if PROPID_WITH_ACCEL
     float thrust_per_mass[PROPID_MAX_ROTORS];       /* kf_nominal_i / mass (accelerometer row) */
@@ -624,6 +632,7 @@ typedef struct {
 #define PROPID_TERM_TORQUE_SCALE  (1u << 2) /* thrust-torque scale state */
 #define PROPID_TERM_ROTOR_INERTIA (1u << 3) /* rotor inertia: yaw reaction, gyroscopic torque */
 #define PROPID_TERM_ESC_DELAY     (1u << 4) /* a nonzero telemetry delay held in the buffer */
+#define PROPID_TERM_AERO_DAMPING  (1u << 5) /* a known aerodynamic rate damping (config.aero_damping) */
 
 propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estimate_t *estimate);
 propid_status_t propid_get_counters(const propid_filter_t *filter, propid_counters_t *counters);

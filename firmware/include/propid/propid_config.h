@@ -45,6 +45,9 @@
 #ifndef PROPID_WITH_INSTRUMENT          /* propid_push_motor_command(): the commands' first stage */
 #define PROPID_WITH_INSTRUMENT PROPID_DEFAULT_FEATURES
 #endif
+#ifndef PROPID_WITH_AERO_DAMPING        /* a known aerodynamic rate damping -D omega in the rate dynamics */
+#define PROPID_WITH_AERO_DAMPING PROPID_DEFAULT_FEATURES
+#endif
 
 /* 1: the step also has its general path, for any rotor count up to
  * PROPID_MAX_ROTORS, any inertia and the optional terms (the Jacobian's sparsity
@@ -55,10 +58,12 @@
  * rows take no RAM, flash or stack. */
 #ifndef PROPID_GENERAL_VEHICLES
 #define PROPID_GENERAL_VEHICLES (PROPID_DEFAULT_FEATURES || PROPID_WITH_ACCEL || PROPID_WITH_DISTURBANCE || \
-                                 PROPID_WITH_ROTOR_INERTIA || PROPID_WITH_INPUT_NOISE || PROPID_WITH_INSTRUMENT)
+                                 PROPID_WITH_ROTOR_INERTIA || PROPID_WITH_INPUT_NOISE || PROPID_WITH_INSTRUMENT || \
+                                 PROPID_WITH_AERO_DAMPING)
 #endif
 #if !PROPID_GENERAL_VEHICLES && (PROPID_MAX_ROTORS != 4 || PROPID_WITH_ACCEL || PROPID_WITH_DISTURBANCE || \
-                                 PROPID_WITH_ROTOR_INERTIA || PROPID_WITH_INPUT_NOISE || PROPID_WITH_INSTRUMENT)
+                                 PROPID_WITH_ROTOR_INERTIA || PROPID_WITH_INPUT_NOISE || PROPID_WITH_INSTRUMENT || \
+                                 PROPID_WITH_AERO_DAMPING)
 #error "PROPID_GENERAL_VEHICLES 0 needs PROPID_MAX_ROTORS 4 and every optional model term off"
 #endif
 
