@@ -114,6 +114,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rotor-inertia", choices=["auto", "on", "off"], default="auto",
                         help="model the rotors' yaw reaction and gyroscopic torque with the vehicle file's "
                              "rotor_inertia (auto: when it is given)")
+    parser.add_argument("--aero-damping", choices=["auto", "on", "off"], default="off",
+                        help="model the airframe's aerodynamic rate damping (a body torque -d_a omega_a) with the "
+                             "vehicle file's aero_damping [N m s/rad] (docs/math.md §17; auto: when it is given; "
+                             "default off)")
+    parser.add_argument("--gyro-scale", choices=["auto", "off"], default="auto",
+                        help="divide the gyro by the vehicle file's gyro_scale (the gyro reads s_a x the true "
+                             "rate) before the filter (auto, the default: when the file has it)")
     parser.add_argument("--torque-scale", choices=["auto", "on", "off"], default="auto",
                         help="with the accelerometer, also estimate the scale of the thrust torques relative to the "
                              "vehicle file's inertia and arms, so kf's scale comes from the accelerometer alone "
@@ -319,6 +326,8 @@ def run(args: argparse.Namespace) -> int:
         command_lag=args.command_lag,
         command_memory=args.command_memory,
         rotor_inertia=args.rotor_inertia,
+        aero_damping=args.aero_damping,
+        gyro_scale=args.gyro_scale,
         torque_scale=args.torque_scale,
         torque_scale_walk=args.torque_scale_walk,
         thrust_coeff_walk=thrust_coeff_walk,

@@ -10,6 +10,7 @@ from propid.flightlog import FlightLog, Vehicle
 from propid.realdata_checks import absurd_speed_limit, check_log, flying_mask
 from propid.replay.noise import estimate_noise
 from propid.replay.options import ReplayOptions
+from propid.replay.vehicle_terms import resolve_aero_damping
 
 NOISE_FIELDS = ("gyro_noise_density", "gyro_sample_rate_hz", "rate_process_noise")
 
@@ -126,7 +127,8 @@ def accel_noise(log: FlightLog, vehicle: Vehicle, mask: np.ndarray) -> float:
 
 
 def _optional_terms(vehicle: Vehicle, log: FlightLog, options: ReplayOptions, config: dict, notes: dict) -> None:
-    """Accelerometer aiding, disturbance-torque states and rotor inertia (docs/math.md §7-9)."""
+    """Accelerometer aiding, disturbance-torque states, rotor inertia and aerodynamic damping (docs/math.md
+    §7-9, §17)."""
     aiding = resolve_aiding(vehicle, log, options)
     notes["aiding"] = aiding
     if aiding == "gyro+accel":
@@ -174,4 +176,5 @@ def _optional_terms(vehicle: Vehicle, log: FlightLog, options: ReplayOptions, co
     if use:
         config["rotor_inertia"] = [float(v) for v in inertias]
     notes["rotor_inertia"] = "vehicle file" if use else "not modelled"
+    resolve_aero_damping(vehicle, options, config, notes)
 

@@ -33,6 +33,13 @@ class ReplayOptions:
     # controller cancels) and the coefficients learn above it; None: the library's slow walk.
     disturbance_bandwidth: float | None = None
     rotor_inertia: str = "auto"  # "auto"/"on": the vehicle's rotor_inertia enters the model; "off"
+    # The vehicle file's aero_damping (a body torque -d_a omega_a, docs/math.md §17): "auto"/"on" into the
+    # filter's config when the file has it; "off".
+    aero_damping: str = "off"
+    # The vehicle file's gyro_scale undone at the boundary (gyro / scale): "auto" when the file has it; "off".
+    # Off for library callers by default (a caller may have undone it on its log already); the CLI's default
+    # is auto.
+    gyro_scale: str = "off"
     torque_scale: str = "auto"  # "auto"/"on": estimate the thrust-torque scale when the accelerometer is fused; "off"
     # Its random walk [1/sqrt(s)]: None (the library default, a constant), a number, or "auto" (replay/scale_walk.py).
     torque_scale_walk: float | str | None = None

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from propid import cfilter
@@ -15,6 +17,7 @@ from propid.replay.noise import nis_mean, replay_nis
 from propid.replay.options import US, ReplayOptions, ReplayResult
 from propid.replay.prefilter import highpass_emulation_log, prefilter_log
 from propid.replay.session import FilterSession, segment_mask
+from propid.replay.vehicle_terms import undo_gyro_scale
 from propid.signals import median_dt
 
 
@@ -23,8 +26,9 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     options = options or ReplayOptions()
     if log.rotor_count != vehicle.rotor_count:
         raise UserError(f"the log has {log.rotor_count} rotors, the vehicle file {vehicle.rotor_count}")
+    log, gyro_scale_note = undo_gyro_scale(log, vehicle, options)  # the boundary: true rates from here on
     if options.noise == "nis":
-        return replay_nis(log, vehicle, options)
+        return replay_nis(log, vehicle, replace(options, gyro_scale="off"))
     streams = detect_streams(log) if options.streams == "auto" else options.streams
     logged_streams = streams  # --skip-repeats turns a rows log into events below; the time base stays the rows'
     mask = segment_mask(log, options.segment)
@@ -51,6 +55,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
             raise UserError("--diagnostic-highpass needs a rows log and cannot be combined with --skip-repeats")
         log, highpass_info = highpass_emulation_log(log, vehicle, mask, float(options.diagnostic_highpass_hz))
     config_fields, notes = build_config(vehicle, log, options)
+    notes["gyro_scale"] = gyro_scale_note
     esc_delay_s, delay_rule = resolve_esc_delay(log, vehicle, mask, options, logged_streams)
     delay_us = int(round(esc_delay_s * US))
     config_fields["rotor_delay_us"] = delay_us  # the firmware holds the leading stream (docs/math.md §12)
@@ -239,6 +244,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "aiding": aiding,
         "disturbance": notes.get("disturbance", "off"),
         "rotor_inertia": notes.get("rotor_inertia", "not modelled"),
+        "aero_damping": notes.get("aero_damping", "not modelled"),
+        "gyro_scale": notes.get("gyro_scale", "none"),
         "disturbance_torque": [float(v) for v in final["disturbance_torque"]],
         "disturbance_torque_std": [float(v) for v in final["disturbance_torque_std"]],
         "accel_bias": float(final["accel_bias"]),
