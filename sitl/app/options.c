@@ -326,6 +326,11 @@ static const opt_t options[] = {
          "filter: with --filter-rotor-speed-noise, remove the average part of\n"
          "each coefficient update that error explains (errors in variables,\n"
          "docs/math.md §14)"),
+    FLAG(NULL, "filter-aero-damping", filter_aero_damping, 1,
+         "filter: the airframe's aerodynamic rate damping in its model\n"
+         "(config aero_damping, docs/math.md §17): the aero_damping effect's\n"
+         "torque per unit body rate at hover speed, diagonal; 0 without\n"
+         "that effect"),
     FLAG(NULL, "filter-instrument", filter_instrument, 1,
          "filter: push each control step's rotor commands\n"
          "(propid_push_motor_command, normalised by the vehicle's top speed)\n"

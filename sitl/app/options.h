@@ -104,6 +104,8 @@ typedef struct {
     int filter_input_error_compensation;  /* input_error_compensation (docs/math.md §14); 0: off */
     int filter_instrument;                /* motor_command_instrument: the commands pushed to the filter
                                              as its rotor input's instrument (docs/math.md §16); 0: off */
+    int filter_aero_damping;              /* 1: the airframe's rate damping (its aero_damping effect at
+                                             hover speed) in the filter's model (docs/math.md §17) */
     int filter_sensor_errors;           /* input-error terms from the sensor model (sensor_errors.h) */
 
     /* Propeller damage scenario and the firmware's damage detector. */

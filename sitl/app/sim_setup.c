@@ -6,6 +6,7 @@
 #include "rng.h"
 #include "sensor_errors.h"
 #include "sim.h"
+#include "sitl_math.h"
 
 int sitl_setup_vehicle(const sitl_options_t *opts, sitl_vehicle_t *v, char *err, int err_size)
 {
@@ -100,6 +101,36 @@ double sitl_setup_true_torque_scale(const sitl_effects_t *effects)
     return e != 0.0 && 1.0 + e > 0.0 ? 1.0 / (1.0 + e) : 1.0; /* as effects_setup.c applies it */
 }
 
+/* The diagonal of the aero_damping effect's rate damping at hover [N m s/rad]
+ * (effects_rotor.c: rotor i's drag law on its hub velocity omega x r_i, scaled by
+ * its speed), the speed every rotor has when the flown coefficients hold the
+ * weight: d_a = -(sum_i r_i x F_i(omega = e_a))_a. */
+static void hover_aero_damping(const sitl_options_t *opts, const sitl_vehicle_t *v, const double *flown_kf,
+                               double damping[3])
+{
+    const double strength = sitl_effect_strength(&opts->effects, SITL_EFFECT_AERO_DAMPING);
+    double kf_sum = 0.0;
+    for (int i = 0; i < v->rotor_count; i++) {
+        kf_sum += flown_kf[i];
+    }
+    const double hover = kf_sum > 0.0 ? sqrt(v->mass * 9.81 / kf_sum) : 0.0;
+    for (int a = 0; a < 3; a++) {
+        const double unit[3] = {a == 0 ? 1.0 : 0.0, a == 1 ? 1.0 : 0.0, a == 2 ? 1.0 : 0.0};
+        double torque = 0.0;
+        for (int i = 0; i < v->rotor_count; i++) {
+            double velocity[3];
+            double moment[3];
+            sitl_vec3_cross(velocity, unit, v->rotor[i].position);
+            const double force[3] = {-strength * hover * v->rotor_drag_coeff * velocity[0],
+                                     -strength * hover * v->rotor_drag_coeff * velocity[1],
+                                     -strength * hover * v->inflow_coeff * velocity[2]};
+            sitl_vec3_cross(moment, v->rotor[i].position, force);
+            torque += moment[a];
+        }
+        damping[a] = -torque;
+    }
+}
+
 propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_vehicle_t *v,
                                          const double *flown_kf, propid_config_t *c, const char **bad_field)
 {
@@ -166,6 +197,13 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
     c->rotor_speed_noise_time = (float)opts->filter_rotor_speed_noise_time;
     c->inertia_rel_std = (float)opts->filter_inertia_rel_std;
     c->input_error_compensation = (uint8_t)(opts->filter_input_error_compensation != 0);
+    if (opts->filter_aero_damping) {
+        double damping[3];
+        hover_aero_damping(opts, v, flown_kf, damping);
+        for (int a = 0; a < 3; a++) {
+            c->aero_damping[a] = (float)damping[a];
+        }
+    }
     if (opts->filter_instrument) {
         c->motor_command_instrument = 1u;
         c->motor_command_lag = (float)v->motor_time_constant;
