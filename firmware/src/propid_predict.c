@@ -145,16 +145,6 @@ PROPID_UNROLL(3)
 }
 
 #if PROPID_GENERAL_VEHICLES
-/* dt times the rate-block entry A_ab of the terms linear in omega: the rotors'
- * gyroscopic torque (rotor inertia, docs/math.md §8; momentum_dt = dt h) and the
- * aerodynamic damping (§17; damping_dt = dt when it is on, else 0). */
-static inline float linear_entry(const propid_derived_t *derived, uint8_t a, uint8_t b, float momentum_dt,
-                                 float damping_dt)
-{
-    const float rotor = b < 2u ? propid_rotor_gyro(derived, a, b) * momentum_dt : 0.0f;
-    return rotor + propid_aero_damping_entry(derived, a, b) * damping_dt;
-}
-
 /* Any vehicle and any optional term, over the sparsity lists. Not inlined: its
  * frame stays off the quad path's stack. */
 static __attribute__((noinline)) propid_status_t
@@ -194,8 +184,8 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
         momentum_dt *= half_dt;
     }
 #endif
-    /* Aerodynamic damping (docs/math.md §17): A_ab += aero_damping[a][b], linear in
-     * omega like the rotor gyroscopic term. */
+    /* Aerodynamic damping (docs/math.md §17): A_ab += aero_damping[a][b], in the
+     * rows' rate entries (propid_config.c lists them). */
     const float damping_dt = propid_aero_damping_on(derived) ? dt : 0.0f;
     const uint8_t n = derived->state_count;
     const propid_drag_basis_t basis = propid_drag_basis(derived, &filter->config);
@@ -214,11 +204,20 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
         for (uint8_t p = 0; p < rate_count; ++p) {
             const float *coeff = derived->gyro_jacobian[a][column[p]];
             const float entry = dt * (coeff[0] * rate[0] + coeff[1] * rate[1] + coeff[2] * rate[2]);
-            /* The rotor and damping terms are linear in omega: twice their share in
-             * this sum, which holds twice the (quadratic) gyroscopic acceleration. */
-            const float rotor_entry = linear_entry(derived, a, column[p], momentum_dt, damping_dt);
+            /* The rotor term is linear in omega: twice its share in this sum,
+             * which holds twice the (quadratic) gyroscopic acceleration. */
+            const float rotor_entry = column[p] < 2u ? propid_rotor_gyro(derived, a, column[p]) * momentum_dt : 0.0f;
             sum += (entry + 2.0f * rotor_entry) * rate[column[p]];
             g[p] = entry + rotor_entry;
+        }
+        if (damping_dt != 0.0f) {
+            /* Aerodynamic damping, linear in omega like the rotor term (twice its
+             * share in the sum). Its own pass: the plain step pays one test. */
+            for (uint8_t p = 0; p < rate_count; ++p) {
+                const float damping = propid_aero_damping_entry(derived, a, column[p]) * damping_dt;
+                sum += 2.0f * damping * rate[column[p]];
+                g[p] += damping;
+            }
         }
         gyroscopic[a] = sum;
         /* Rotor torques: G = torque dt u, velocity change sum G x_coefficient.
@@ -261,9 +260,17 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
             const float *coeff = derived->gyro_jacobian[a][column[p]];
             const float entry = dt * (coeff[0] * predictor[0] + coeff[1] * predictor[1] +
                                       coeff[2] * predictor[2]);
-            const float rotor_entry = linear_entry(derived, a, column[p], momentum_dt, damping_dt);
+            const float rotor_entry = column[p] < 2u ? propid_rotor_gyro(derived, a, column[p]) * momentum_dt : 0.0f;
             corrector += (entry + 2.0f * rotor_entry) * predictor[column[p]];
             g[p] = 0.5f * (entry + g[p] + rotor_entry); /* g[p] held entry(omega) + rotor_entry */
+        }
+        if (damping_dt != 0.0f) {
+            /* g[p] held the damping entry L too, halved above: L in full. */
+            for (uint8_t p = 0; p < rate_count; ++p) {
+                const float damping = propid_aero_damping_entry(derived, a, column[p]) * damping_dt;
+                corrector += 2.0f * damping * predictor[column[p]];
+                g[p] += 0.5f * damping;
+            }
         }
         rate_next[a] = rate[a] + (rotors[a] + 0.25f * (gyroscopic[a] + corrector));
         /* A non-finite G entry makes its product in a sum non-finite (Inf times

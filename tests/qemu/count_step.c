@@ -185,6 +185,13 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
         config.rotor_inertia[i] = COUNT_STEP_ROTOR_INERTIA;
     }
 #endif
+#ifdef COUNT_STEP_AERO_DAMPING
+    /* -DCOUNT_STEP_AERO_DAMPING=D: an aerodynamic rate damping D [N m s/rad] on every axis
+     * (docs/math.md §17; the general step's rate entries). */
+    for (uint32_t a = 0; a < 3u; ++a) {
+        config.aero_damping[a] = COUNT_STEP_AERO_DAMPING;
+    }
+#endif
 #ifdef COUNT_STEP_INPUT_NOISE
     /* -DCOUNT_STEP_INPUT_NOISE=S: rotor-speed input error of std S [rad/s] in the rate
      * process noise (docs/math.md §14), correlated over 10 ms. */

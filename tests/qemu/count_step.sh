@@ -15,6 +15,7 @@
 # Prints, per variant (quad plus, quad X, hexa, octo, dense baseline on the quad),
 # median/min/max instructions per step and the mean per function (self); --json
 # writes the same. Optional terms: -DCOUNT_STEP_DISTURBANCE, -DCOUNT_STEP_ROTOR_INERTIA=J,
+# -DCOUNT_STEP_AERO_DAMPING=D,
 # -DCOUNT_STEP_DELAY_US=D, -DCOUNT_STEP_INPUT_NOISE=S (+ -DCOUNT_STEP_INPUT_COMPENSATION) in COUNT_STEP_CFLAGS. QEMU does not model cycles: these are
 # instruction counts.
 set -euo pipefail
