@@ -30,6 +30,7 @@ CASES = [
     ("rotor_drag", 1.0, ["--filter-disturbance"], "disturbance-torque states"),
     ("rotor_inertia", 1.0, ["--filter-rotor-inertia"], "rotor inertia in the model"),
     ("esc_delay", 0.02, ["--filter-esc-delay", f"{ESC_LATENCY_S + 0.02:g}"], "telemetry delay held"),
+    ("aero_damping", 1.0, ["--filter-aero-damping"], "aerodynamic damping in the model"),
 ]
 MODES = ("oracle", "filter")
 
