@@ -31,13 +31,6 @@ static const float inertia[3] = {3.65e-3f, 3.68e-3f, 7.03e-3f};
 /* The airframe's damping [N m s/rad]: decay rates 3.0 / 3.0 / 2.1 1/s on this inertia. */
 static const float damping[3] = {0.011f, 0.011f, 0.015f};
 
-static float rng_normal(rng_t *rng)
-{
-    const float u1 = ((float)(rng_next(rng) >> 8) + 0.5f) * (1.0f / 16777216.0f);
-    const float u2 = ((float)(rng_next(rng) >> 8) + 0.5f) * (1.0f / 16777216.0f);
-    return sqrtf(-2.0f * logf(u1)) * cosf(2.0f * SIM_PI * u2);
-}
-
 static void quad_config(propid_config_t *config)
 {
     propid_config_default(config);

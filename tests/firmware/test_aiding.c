@@ -36,13 +36,6 @@ static propid_filter_t before;
 static uint32_t thrust_claimed_reads;
 static uint32_t mismatch_reads;
 
-static float rng_normal(rng_t *rng)
-{
-    const float u1 = ((float)(rng_next(rng) >> 8) + 0.5f) * (1.0f / 16777216.0f);
-    const float u2 = ((float)(rng_next(rng) >> 8) + 0.5f) * (1.0f / 16777216.0f);
-    return sqrtf(-2.0f * logf(u1)) * cosf(2.0f * SIM_PI * u2);
-}
-
 static void quad_config(propid_config_t *config)
 {
     propid_config_default(config);

@@ -22,18 +22,6 @@ void tearDown(void) {}
 
 /* ---- PRNG: xorshift32 + Box-Muller -------------------------------------- */
 /* Open interval (0, 1): Box-Muller takes its logarithm. */
-static float rng_uniform(rng_t *rng)
-{
-    return ((float)(rng_next(rng) >> 8) + 0.5f) * (1.0f / 16777216.0f);
-}
-
-static float rng_normal(rng_t *rng)
-{
-    const float u1 = rng_uniform(rng);
-    const float u2 = rng_uniform(rng);
-    return sqrtf(-2.0f * logf(u1)) * cosf(2.0f * SIM_PI * u2);
-}
-
 /* ---- Scenario ----------------------------------------------------------- */
 typedef struct {
     uint8_t rotor_count;
@@ -167,11 +155,11 @@ static void fly(const scenario_t *sc, float reset_rotor_at_s, outcome_t *out)
     rng_t rng = {sc->seed};
     const uint8_t n = sc->rotor_count;
     for (uint8_t i = 0; i < n; ++i) {
-        out->kf_true[i] = sc->kf_nominal * (1.0f + 0.4f * (rng_uniform(&rng) - 0.5f));
-        out->km_true[i] = sc->km_nominal * (1.0f + 0.4f * (rng_uniform(&rng) - 0.5f));
+        out->kf_true[i] = sc->kf_nominal * (1.0f + 0.4f * (rng_open_unit(&rng) - 0.5f));
+        out->km_true[i] = sc->km_nominal * (1.0f + 0.4f * (rng_open_unit(&rng) - 0.5f));
     }
     for (int a = 0; a < 3; ++a) {
-        out->bias[a] = 0.06f * (rng_uniform(&rng) - 0.5f);
+        out->bias[a] = 0.06f * (rng_open_unit(&rng) - 0.5f);
     }
     const float gyro_std = config.gyro_noise_density * sqrtf(sc->gyro_rate_hz);
     /* Collective at about 60 % of the maximum speed, squared. */
