@@ -3,16 +3,16 @@ held-out logs with the given vehicle file and with the corrected one.
 
 Both runs use the replay's recommended settings (`--segment flying`, or `all` when the
 replay finds no flying rows; telemetry delay: each file's `esc_delay_s` when it has
-one, else the replay's per-log rule), so the corrected run's filter holds the corrected delay. A `gyro_scale` in the corrected file is undone on the gyro before the
-replay (the filter takes rates as measured). A file with `loop_bandwidth_hz` (the closed loop's
-bandwidth, from `closed_loop_cancellation`) runs with the disturbance states on at that bandwidth,
-so they take the torque the loop cancels and kf learns above it. Fleet kf = mean over rotors of each run's
+one, else the replay's per-log rule), so the corrected run's filter holds the corrected delay. Every
+other model key a file carries goes in the way `propid replay` takes it (replay/vehicle_terms.py,
+replay/config.py): `gyro_scale` undone on the gyro at the boundary, `rotor_inertia` and
+`aero_damping` into the filter's model, and `loop_bandwidth_hz` (the closed loop's bandwidth, from
+`closed_loop_cancellation`) with the disturbance states on at that bandwidth, so they take the
+torque the loop cancels and kf learns above it. Fleet kf = mean over rotors of each run's
 converged kf; run-to-run CV = std/mean over runs.
 """
 
 from __future__ import annotations
-
-import copy
 
 import numpy as np
 
@@ -30,12 +30,9 @@ def _fleet(values: list[float]) -> dict:
 def _replay_kf(log: FlightLog, vehicle: Vehicle, delay) -> float:
     from propid.replay import ReplayOptions, replay
 
-    log = copy.copy(log)
-    if vehicle.gyro_scale is not None:
-        log.gyro = log.gyro / np.asarray(vehicle.gyro_scale)[None, :]
     disturbance = "on" if vehicle.loop_bandwidth_hz is not None else "off"  # the file's bandwidth (replay/config.py)
-    gyro_only = dict(esc_delay=delay, aiding="gyro", rotor_inertia="off", torque_scale="off", disturbance=disturbance,
-                     progress=False)
+    gyro_only = dict(esc_delay=delay, aiding="gyro", rotor_inertia="auto", aero_damping="auto", gyro_scale="auto",
+                     torque_scale="off", disturbance=disturbance, progress=False)
     try:
         result = replay(log, vehicle, ReplayOptions(segment="flying", **gyro_only))
     except UserError:  # the replay's flying detector found nothing (e.g. a log that starts airborne)
@@ -52,7 +49,8 @@ def filter_before_after(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehi
         if progress:
             progress()
     return {"logs": [str(l.path) for l in logs], "kf_before": _fleet(before), "kf_after": _fleet(after),
-            "mode": "gyro only (no accelerometer aiding), --segment flying" + "".join(
+            "mode": "gyro only (no accelerometer aiding), --segment flying, the file's rotor_inertia, "
+                    "aero_damping and gyro_scale carried as propid replay takes them" + "".join(
                 f"; {name}: disturbance states at its loop_bandwidth_hz {v.loop_bandwidth_hz:g} Hz"
                 for name, v in (("vehicle file", vehicle), ("corrected vehicle", corrected))
                 if v.loop_bandwidth_hz is not None)}
