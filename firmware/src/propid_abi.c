@@ -18,7 +18,7 @@ uint32_t propid_abi_offsetof_config_converged_rel_std(void);
 uint32_t propid_abi_offsetof_estimate_health(void);
 uint32_t propid_abi_offsetof_counters_rejected(void);
 void propid_abi_copy_state(const propid_filter_t *filter, float *state, float *covariance);
-void propid_abi_instrument_counts(const propid_filter_t *filter, uint32_t counts[2]);
+void propid_abi_instrument_counts(const propid_filter_t *filter, uint32_t counts[3]);
 
 uint32_t propid_abi_max_rotors(void) { return PROPID_MAX_ROTORS; }
 uint32_t propid_abi_delay_slots(void) { return PROPID_DELAY_SLOTS; }
@@ -68,9 +68,10 @@ void propid_abi_copy_state(const propid_filter_t *filter, float *state, float *c
     }
 }
 
-/* The motor commands' first stage (propid_instrument.c): commands accepted and rotor
- * samples whose input came from it; zeros in a build without it. */
-void propid_abi_instrument_counts(const propid_filter_t *filter, uint32_t counts[2])
+/* The motor commands' first stage (propid_instrument.c): commands accepted, rotor
+ * samples whose input came from it, rotor inputs its weak-instrument guard left to the
+ * telemetry; zeros in a build without it. */
+void propid_abi_instrument_counts(const propid_filter_t *filter, uint32_t counts[3])
 {
     if (filter == NULL || counts == NULL) {
         return;
@@ -78,8 +79,10 @@ void propid_abi_instrument_counts(const propid_filter_t *filter, uint32_t counts
 #if PROPID_WITH_INSTRUMENT
     counts[0] = filter->instrument.command_accepted;
     counts[1] = filter->instrument.inputs;
+    counts[2] = filter->instrument.guarded;
 #else
     counts[0] = 0u;
     counts[1] = 0u;
+    counts[2] = 0u;
 #endif
 }

@@ -69,6 +69,7 @@ void propid_config_default(propid_config_t *config)
     config->motor_command_instrument = 0u;
     config->motor_command_lag = 0.03f;
     config->motor_command_memory = 10.0f;
+    config->motor_command_min_f = 0.0f;
 }
 
 propid_status_t propid_config_set_symmetric(propid_config_t *config, uint8_t rotor_count,
@@ -606,6 +607,10 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (!isfinite(config->motor_command_memory) || config->motor_command_memory < 0.0f ||
         config->motor_command_memory > 1.0e4f || (config->motor_command_instrument && !(config->motor_command_memory >= 0.01f))) {
         PROPID_BAD("motor_command_memory");
+    }
+    if (!isfinite(config->motor_command_min_f) || config->motor_command_min_f < 0.0f ||
+        config->motor_command_min_f > 1.0e6f) {
+        PROPID_BAD("motor_command_min_f");
     }
 
 #if PROPID_WITH_INPUT_NOISE

@@ -27,7 +27,15 @@
  * normal equations of b, c are solved per rotor sample with a ridge of
  * PROPID_INSTRUMENT_RIDGE (hover: z^2's increments are nearly collinear with
  * z's; the ridge then keeps b, c finite, the value still a function of the
- * commands alone). */
+ * commands alone).
+ *
+ * Weak-instrument guard (config.motor_command_min_f > 0): a first stage that
+ * explains little of its rotor's increments is a weak instrument, and its own
+ * estimation noise (relative variance of the fitted slope ~ 1/(k F)) enters the
+ * filter as a slowly varying scale error of that rotor's input. The fit's F
+ * statistic, (explained / k) / (residual / (n_eff - k)) with k = 2 regressors
+ * and the Kish effective count n_eff = (sum w)^2 / sum w^2 of the forgetting
+ * weights, must reach the threshold; otherwise the rotor keeps its telemetry. */
 #include <math.h>
 
 #include "propid_instrument.h"
@@ -66,8 +74,9 @@ void propid_instrument_clear(propid_filter_t *filter)
     }
     instrument->command_time_us = 0u;
     instrument->fit_time_us = 0u;
+    instrument->weight_sq = 0.0f;
     instrument->fit_samples = 0u;
-    instrument->has_command = 0u; /* (the two counts are kept, like counters) */
+    instrument->has_command = 0u; /* (the three counts are kept, like counters) */
 }
 #endif
 
@@ -127,10 +136,18 @@ propid_status_t propid_push_motor_command(propid_filter_t *filter, uint64_t time
 
 #if PROPID_WITH_INSTRUMENT
 
+/* What the first stage gives a rotor sample. */
+typedef enum {
+    FIRST_STAGE_NONE = 0, /* singular increments' equations: the telemetry */
+    FIRST_STAGE_VALUE,    /* the fit's value */
+    FIRST_STAGE_WEAK      /* the fit fails the weak-instrument guard: the telemetry */
+} first_stage_t;
+
 /* a + b z + c z^2 of the fit in m (moment layout in propid.h): b and c from the
  * increments (2 x 2 normal equations with the ridge), a from the weighted means;
- * 0 when the increments' equations are singular. */
-static int first_stage_value(const float *m, float z, float *value)
+ * with min_f > 0 only if the increments' F statistic over the effective count
+ * (sum w)^2 / weight_sq reaches min_f. */
+static first_stage_t first_stage_value(const float *m, float z, float weight_sq, float min_f, float *value)
 {
     const float weight = m[0];
     const float ridge = PROPID_INSTRUMENT_RIDGE * (m[4] + m[6]);
@@ -139,7 +156,7 @@ static int first_stage_value(const float *m, float z, float *value)
     const float s22 = m[6] + ridge;
     const float det = s11 * s22 - s12 * s12;
     if (!(weight > 0.0f) || !(s11 > 0.0f) || !(det > 1.0e-6f * s11 * s22)) {
-        return 0;
+        return FIRST_STAGE_NONE;
     }
     const float inv_det = 1.0f / det;
     const float b = (s22 * m[7] - s12 * m[8]) * inv_det;
@@ -148,10 +165,19 @@ static int first_stage_value(const float *m, float z, float *value)
     const float a = (m[3] - b * m[1] - c * m[2]) * inv_weight;
     const float result = a + z * (b + z * c);
     if (!isfinite(result)) {
-        return 0;
+        return FIRST_STAGE_NONE;
+    }
+    if (min_f > 0.0f) {
+        /* F >= min_f as explained (n_eff - 2) >= 2 min_f residual (no division). */
+        const float explained = b * m[7] + c * m[8];
+        const float residual = m[9] - explained;
+        const float n_eff = weight_sq > 0.0f ? weight * weight / weight_sq : 0.0f;
+        if (!(explained * (n_eff - 2.0f) >= 2.0f * min_f * residual)) {
+            return FIRST_STAGE_WEAK;
+        }
     }
     *value = result;
-    return 1;
+    return FIRST_STAGE_VALUE;
 }
 
 void propid_instrument_input(propid_filter_t *filter, uint64_t time_us, const float *speed_rad_s,
@@ -186,10 +212,15 @@ void propid_instrument_input(propid_filter_t *filter, uint64_t time_us, const fl
         const float z = held + (instrument->lagged[i] - held) * decay - 0.5f;
         const float y = speed_sq[i] * scale;
         float value = 0.0f;
-        if (valid && first_stage_value(m, z, &value)) {
+        const first_stage_t stage = valid ? first_stage_value(m, z, instrument->weight_sq,
+                                                              config->motor_command_min_f, &value)
+                                          : FIRST_STAGE_NONE;
+        if (stage == FIRST_STAGE_VALUE) {
             value = value < 0.0f ? 0.0f : (value > 1.0f ? 1.0f : value);
             speed_sq[i] = value * full_sq;
             projected++;
+        } else if (stage == FIRST_STAGE_WEAK && instrument->guarded < UINT32_MAX) {
+            instrument->guarded++;
         }
         const float z2 = z * z;
         /* Levels (for a) always; increments from the previous sample of the fit. */
@@ -199,7 +230,7 @@ void propid_instrument_input(propid_filter_t *filter, uint64_t time_us, const fl
         const float have_increment = instrument->fit_samples > 0u ? 1.0f : 0.0f;
         const float term[PROPID_INSTRUMENT_MOMENTS] = {
             1.0f, z, z2, y, have_increment * dz * dz, have_increment * dz * dz2, have_increment * dz2 * dz2,
-            have_increment * dz * dy, have_increment * dz2 * dy};
+            have_increment * dz * dy, have_increment * dz2 * dy, have_increment * dy * dy};
         for (uint8_t k = 0; k < PROPID_INSTRUMENT_MOMENTS; ++k) {
             m[k] = forget * m[k] + term[k];
         }
@@ -207,6 +238,7 @@ void propid_instrument_input(propid_filter_t *filter, uint64_t time_us, const fl
         instrument->previous[i][1] = z2;
         instrument->previous[i][2] = y;
     }
+    instrument->weight_sq = forget * forget * instrument->weight_sq + 1.0f;
     instrument->fit_time_us = time_us;
     if (instrument->fit_samples < UINT32_MAX) {
         instrument->fit_samples++;

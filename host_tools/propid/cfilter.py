@@ -164,6 +164,7 @@ _OPTIONAL_FIELDS = [
     ("rotor_speed_noise_hold", ctypes.c_uint8),
     ("motor_command_lag", ctypes.c_float),
     ("motor_command_memory", ctypes.c_float),
+    ("motor_command_min_f", ctypes.c_float),
 ]
 _INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int32)
 
@@ -293,10 +294,11 @@ DEFAULT_TUNING: dict[str, float | int] = {
     # Errors-in-variables compensation of the coefficient update (needs rotor_speed_noise > 0).
     "input_error_compensation": 0,
     # The motor commands as the rotor input's instrument (docs/math.md §16): on/off, the first
-    # stage's lag [s] and memory [s].
+    # stage's lag [s] and memory [s], and its weak-instrument guard (least F statistic; 0: none).
     "motor_command_instrument": 0,
     "motor_command_lag": 0.03,
     "motor_command_memory": 10.0,
+    "motor_command_min_f": 0.0,
     # The input error's correlation time per rotor from how long its value has stood
     # (docs/math.md §14; needs rotor_speed_noise > 0, the configured time its ceiling).
     "rotor_speed_noise_hold": 0,
@@ -360,6 +362,7 @@ class FilterConfig:
     motor_command_instrument: int = DEFAULT_TUNING["motor_command_instrument"]
     motor_command_lag: float = DEFAULT_TUNING["motor_command_lag"]
     motor_command_memory: float = DEFAULT_TUNING["motor_command_memory"]
+    motor_command_min_f: float = DEFAULT_TUNING["motor_command_min_f"]
     rotor_speed_noise_hold: int = DEFAULT_TUNING["rotor_speed_noise_hold"]
     # Known aerodynamic rate damping [N m s/rad] per body axis (body torque -d_a omega_a, docs/math.md §17);
     # None or zeros: not modelled.
@@ -746,7 +749,7 @@ class CFilter:
         c = CountersStruct()
         self._lib.propid_get_counters(self._handle, ctypes.byref(c))
         rejected = {STATUS_NAME[-i]: int(c.rejected[i]) for i in range(1, REJECT_SLOTS) if c.rejected[i]}
-        counts = (ctypes.c_uint32 * 2)()
+        counts = (ctypes.c_uint32 * 3)()
         self._lib.propid_abi_instrument_counts(self._handle, counts)
         return {
             "gyro_accepted": int(c.gyro_accepted),
@@ -764,6 +767,7 @@ class CFilter:
             "model_mismatch": int(c.model_mismatch),
             "command_accepted": int(counts[0]),
             "instrument_inputs": int(counts[1]),
+            "instrument_guarded": int(counts[2]),
         }
 
     def scaled_state(self) -> tuple[np.ndarray, np.ndarray]:

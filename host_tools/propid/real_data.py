@@ -97,6 +97,15 @@ MODES += [
     _variant("accel_scale_walk", "accel_scale_walk_instrument", "+ accelerometer, scale walk (rule) + the commands' "
              "instrument", instrument="commands"),
 ]
+# The same with the first stage's weak-instrument guard (docs/math.md §16): F >= 10 (the usual rule of thumb for a
+# first stage) and F >= 200 (the fitted slope's relative std 1/sqrt(2 F) within the 5 % per-rotor tolerance).
+MODES += [
+    _variant(base, f"{base}_instrument_f{min_f}", f"{what}, weak-instrument guard F >= {min_f}",
+             instrument="commands", command_min_f=float(min_f))
+    for base, what in (("gyro", "gyro only + the commands' instrument"),
+                       ("accel_scale_walk", "+ accelerometer, scale walk (rule) + the commands' instrument"))
+    for min_f in (10, 200)
+]
 # A calibrated mode: (its gyro-only mode, the accelerometer mode), both replayed with the file as given.
 CALIBRATED = {"gyro_walk_calibrated": ("gyro_walk", "accel_scale_walk"),
               "gyro_walk_band_calibrated": ("gyro_walk_band", "accel_scale_walk")}

@@ -181,14 +181,15 @@ class ReferenceFilter:
             "gyro_accepted": 0, "rotor_accepted": 0, "axis_gated": [0, 0, 0], "gate_reopened": 0,
             "cov_repairs": 0, "state_clamps": 0, "resyncs": 0, "rejected": [0] * 16,
             "accel_accepted": 0, "accel_gated": 0, "accel_reanchored": 0, "delay_overflows": 0,
-            "command_accepted": 0, "instrument_inputs": 0,
+            "command_accepted": 0, "instrument_inputs": 0, "instrument_guarded": 0,
         }
         # The motor commands' first stage (C: propid_instrument.c), when configured.
         self.instrument = None
         if int(getattr(config, "motor_command_instrument", 0)):
             self.instrument = FirstStage(n_rot, _f32(config.motor_command_lag), _f32(config.motor_command_memory),
                                          _f32(config.max_rotor_speed), int(config.rotor_stale_us),
-                                         int(config.max_gyro_gap_us))
+                                         int(config.max_gyro_gap_us),
+                                         _f32(getattr(config, "motor_command_min_f", 0.0)))
         self._core_to_prior()
 
     def _rate_row_terms(self) -> np.ndarray:
@@ -427,8 +428,9 @@ class ReferenceFilter:
                 self.held = []
         speed_sq = [v * v for v in values]
         if self.instrument is not None:
-            speed_sq, projected = self.instrument.input(int(t_us), speed_sq)
+            speed_sq, projected, guarded = self.instrument.input(int(t_us), speed_sq)
             self.counters_data["instrument_inputs"] += int(projected)
+            self.counters_data["instrument_guarded"] += guarded
         if self.rotor_delay_us < 0:
             if len(self.held) >= DELAY_SLOTS:
                 self._apply_held_rotor()

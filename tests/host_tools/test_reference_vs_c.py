@@ -542,3 +542,29 @@ def test_c_agrees_with_reference_on_the_bounds(flight, options):
     assert abs(clamps - ref.counters()["state_clamps"]) <= 0.02 * clamps
     assert state_err < STATE_TOL_SIGMA
     assert cov_err < COV_TOL_REL
+
+
+def test_c_agrees_with_reference_with_the_weak_instrument_guard(flight):
+    """The first stage's weak-instrument guard (motor_command_min_f, docs/math.md §16): with the last
+    rotor's command unrelated to its speed (white), C and the reference leave that rotor (about all its samples
+    after the fit's first 50) to its telemetry, by the same count, and agree within the usual bounds."""
+    rng = np.random.default_rng(7)
+    events = []
+    for t_us, kind, values in with_commands(flight):
+        if kind == "command":  # the last rotor's command: white, independent of every speed
+            values = list(values[:-1]) + [float(rng.uniform(0.4, 0.8))]
+        events.append((t_us, kind, values))
+    config = make_config().with_overrides(motor_command_instrument=1, motor_command_lag=0.005,
+                                          motor_command_memory=2.0, motor_command_min_f=10.0)
+    c_filter, ref = CFilter(config), ReferenceFilter(config)
+    trace_c, trace_ref = replay(c_filter, events), replay(ref, events)
+    state_err, cov_err = disagreement(trace_c, trace_ref)
+    guarded_c, guarded_ref = c_filter.counters()["instrument_guarded"], ref.counters()["instrument_guarded"]
+    rotor_samples = sum(1 for _, kind, _ in flight if kind == "rotor")
+    print(f"C vs reference, weak-instrument guard: max |dx|/std = {state_err:.3g}, max |dP_ii|/P_ii = "
+          f"{cov_err:.3g}; guarded C {guarded_c}, reference {guarded_ref} of {rotor_samples} rotor samples")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+    assert abs(guarded_c - guarded_ref) <= max(2, guarded_ref // 100)
+    assert guarded_ref >= 0.9 * (rotor_samples - 1 - 50)
+    assert c_filter.counters()["instrument_inputs"] < guarded_ref  # the last rotor never from the fit

@@ -93,3 +93,22 @@ def test_missing_or_unscaled_commands_are_one_line_errors():
         replay(log, parse_vehicle(VEHICLE), ReplayOptions(progress=False, instrument="yes"))
     with pytest.raises(UserError, match="command-lag"):
         replay(log, parse_vehicle(VEHICLE), ReplayOptions(progress=False, instrument="commands", command_lag=5.0))
+
+
+def test_the_guard_reaches_the_filter_and_refuses_a_bad_threshold(cfilter_available):
+    """--command-min-f: into the configuration and the notes; on this log every rotor's command follows its
+    speed, so the guard (F >= 10) holds the telemetry only while the fit is young (measured: the samples of
+    its first 1.3 s, 925 rotor inputs), then the first stage throughout."""
+    log = commanded_log(0.005, duration=10.0)
+    options = ReplayOptions(progress=False, aiding="gyro", instrument="commands", max_rotor_speed=TOP_SPEED,
+                            command_min_f=10.0)
+    summary = replay(log, parse_vehicle(VEHICLE), options).summary
+    assert summary["config"]["motor_command_min_f"] == 10.0
+    assert summary["config_notes"]["instrument"]["min_f"] == 10.0
+    assert 0 < summary["counters"]["instrument_guarded"] < 4 * len(log) // 5
+    assert summary["counters"]["instrument_inputs"] > 0.8 * len(log)
+    # (kf / truth 0.958 with the guard, 0.980 without: the young fit's samples keep the telemetry's attenuation.)
+    guarded = float(np.mean(np.array(summary["kf_mean"]) / KF_TRUE))
+    assert abs(guarded - 1.0) < 0.05
+    with pytest.raises(UserError, match="command-min-f"):
+        replay(log, parse_vehicle(VEHICLE), ReplayOptions(progress=False, instrument="commands", command_min_f=-1.0))

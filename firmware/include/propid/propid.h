@@ -186,6 +186,10 @@ typedef struct {
                                          in the first stage (> 0 with the instrument on) */
     float motor_command_memory;       /* [s] forgetting time of the first stage's fit (battery sag);
                                          > 0 with the instrument on */
+    float motor_command_min_f;        /* weak-instrument guard: a rotor's first stage replaces its
+                                         telemetry only while the F statistic of its increments' fit
+                                         (over the fit's effective sample count) is >= this
+                                         (docs/math.md §16). 0: no guard */
     float aero_damping[3];            /* known aerodynamic rate damping [N m s/rad] per body axis: a
                                          body torque -aero_damping[a] omega_a (docs/math.md §17; the
                                          vehicle file's key of that name). 0: not modelled. Full build
@@ -429,9 +433,9 @@ typedef struct {
 /* Private: the motor commands' first stage (propid_instrument.c), per rotor: the
  * held command and its first-order lag, and the exponentially weighted moments of
  * the fit y = u / max_rotor_speed^2 = a + b z + c z^2, z = lagged command - 1/2:
- * sum w {1, z, z^2, y} of the levels, sum w {dz dz, dz dz2, dz2 dz2, dz dy, dz2 dy}
+ * sum w {1, z, z^2, y} of the levels, sum w {dz dz, dz dz2, dz2 dz2, dz dy, dz2 dy, dy dy}
  * of the increments between rotor samples (z2 = z^2). */
-#define PROPID_INSTRUMENT_MOMENTS 9
+#define PROPID_INSTRUMENT_MOMENTS 10
 typedef struct {
     float command[PROPID_MAX_ROTORS];               /* latest accepted command, held (0..1) */
     float lagged[PROPID_MAX_ROTORS];                /* the lag's output at command_time_us */
@@ -439,10 +443,13 @@ typedef struct {
     float previous[PROPID_MAX_ROTORS][3];           /* z, z^2, y of the fit's latest sample */
     uint64_t command_time_us;
     uint64_t fit_time_us;                           /* time of the fit's latest rotor sample */
+    float weight_sq;                                /* sum w^2 of the fit's weights (effective count) */
     uint32_t fit_samples;                           /* rotor samples in the fit since init/reset */
     uint32_t command_accepted;                      /* motor-command samples accepted (kept by reset) */
     uint32_t inputs;                                /* rotor samples whose input came from the first
                                                        stage for every rotor (kept by reset) */
+    uint32_t guarded;                               /* rotor inputs the weak-instrument guard left to
+                                                       the telemetry (kept by reset) */
     uint8_t has_command;
 } propid_instrument_t;
 #endif

@@ -111,6 +111,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "per-log rule (the lag whose lagged command explains most of the speed^2)")
     parser.add_argument("--command-memory", type=float, default=None, metavar="S",
                         help="with --instrument commands: the first stage's forgetting time [s] (default 10)")
+    parser.add_argument("--command-min-f", type=float, default=0.0, metavar="F",
+                        help="with --instrument commands: the weak-instrument guard, a rotor keeps its telemetry "
+                             "while the F statistic of its first stage (over the fit's effective sample count) is "
+                             "below F (docs/math.md §16); default 0: no guard")
     parser.add_argument("--rotor-inertia", choices=["auto", "on", "off"], default="auto",
                         help="model the rotors' yaw reaction and gyroscopic torque with the vehicle file's "
                              "rotor_inertia (auto: when it is given)")
@@ -325,6 +329,7 @@ def run(args: argparse.Namespace) -> int:
         instrument=args.instrument,
         command_lag=args.command_lag,
         command_memory=args.command_memory,
+        command_min_f=args.command_min_f,
         rotor_inertia=args.rotor_inertia,
         aero_damping=args.aero_damping,
         gyro_scale=args.gyro_scale,

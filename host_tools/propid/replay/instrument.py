@@ -81,7 +81,7 @@ def choose_lag(log: FlightLog, commands: np.ndarray, mask: np.ndarray) -> dict:
 
 def resolve_instrument(log: FlightLog, mask: np.ndarray, options, config_fields: dict,
                        notes: dict) -> np.ndarray | None:
-    """--instrument / --command-lag / --command-memory into the filter's configuration and the
+    """--instrument / --command-lag / --command-memory / --command-min-f into the filter's configuration and the
     replay's notes; the (n, N) float32 commands to push, or None with the instrument off."""
     if options.instrument == "off":
         return None
@@ -100,6 +100,10 @@ def resolve_instrument(log: FlightLog, mask: np.ndarray, options, config_fields:
         raise UserError(f"--command-memory {options.command_memory!r}: give 0.01..10000 s")
     config_fields["motor_command_instrument"] = 1
     config_fields["motor_command_lag"] = float(lag_info["lag_s"])
+    min_f = float(options.command_min_f)
+    if not (np.isfinite(min_f) and 0.0 <= min_f <= 1.0e6):
+        raise UserError(f"--command-min-f {options.command_min_f!r}: give 0..1e6 (0: no guard)")
     config_fields["motor_command_memory"] = memory
-    notes["instrument"] = dict(lag_info, memory_s=memory)
+    config_fields["motor_command_min_f"] = min_f
+    notes["instrument"] = dict(lag_info, memory_s=memory, min_f=min_f)
     return commands

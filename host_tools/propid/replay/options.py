@@ -58,6 +58,8 @@ class ReplayOptions:
     instrument: str = "off"
     command_lag: float | str = "auto"
     command_memory: float | None = None
+    # The first stage's weak-instrument guard: least F statistic of a rotor's fit (0: none).
+    command_min_f: float = 0.0
     record_every: int = 1  # keep every k-th estimate for the time series
     progress: bool = True
 
