@@ -139,7 +139,18 @@ def run_summary(summary: dict, reference_kf: float) -> dict:
         "torque_scale_walk": summary["config"].get("torque_scale_walk", 0.0),
         "esc_delay_s": summary["esc_delay_s"],
         "finite": summary["finite"],
+        "kf_rotors_over_reference": [k / reference_kf for k in kf],
+        # With the commands' instrument: the share of rotor inputs its weak-instrument guard left to the telemetry.
+        "instrument_guarded_share": _guarded_share(summary, len(kf)),
     }
+
+
+def _guarded_share(summary: dict, rotor_count: int) -> float | None:
+    counters = summary.get("counters", {})
+    samples = counters.get("rotor_accepted", 0) * rotor_count
+    if not counters.get("command_accepted") or samples == 0:
+        return None
+    return counters.get("instrument_guarded", 0) / samples
 
 
 def mode_summary(runs: dict[str, dict]) -> dict:
