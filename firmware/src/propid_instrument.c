@@ -168,8 +168,12 @@ static first_stage_t first_stage_value(const float *m, float z, float weight_sq,
         return FIRST_STAGE_NONE;
     }
     if (min_f > 0.0f) {
-        /* F >= min_f as explained (n_eff - 2) >= 2 min_f residual (no division). */
-        const float explained = b * m[7] + c * m[8];
+        /* F >= min_f as explained (n_eff - 2) >= 2 min_f residual (no division).
+         * explained = b S_zy + c S_z2y, in float32 summed as dz's part plus the
+         * part of dz2 orthogonal to dz (two non-negative terms): near hover dz2 is
+         * nearly collinear with dz, and b S_zy, c S_z2y are then large and cancel. */
+        const float cross = s11 * m[8] - s12 * m[7];
+        const float explained = m[7] * m[7] / s11 + cross * cross * inv_det / s11;
         const float residual = m[9] - explained;
         const float n_eff = weight_sq > 0.0f ? weight * weight / weight_sq : 0.0f;
         if (!(explained * (n_eff - 2.0f) >= 2.0f * min_f * residual)) {

@@ -64,7 +64,8 @@ class FirstStage:
         if not math.isfinite(value):
             return None
         if self.min_f > 0.0:
-            explained = b * m[7] + c * m[8]
+            cross = s11 * m[8] - s12 * m[7]  # C's form: dz's part + dz2's part orthogonal to dz
+            explained = m[7] * m[7] / s11 + cross * cross / det / s11
             residual = m[9] - explained
             n_eff = m[0] * m[0] / self.weight_sq if self.weight_sq > 0.0 else 0.0
             if not explained * (n_eff - 2.0) >= 2.0 * self.min_f * residual:

@@ -163,7 +163,7 @@ static void test_the_guard_leaves_a_rotor_with_an_unrelated_command_its_telemetr
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
 #ifdef PROPID_TEST_VERBOSE
     printf("rotor 3 unrelated: kf / truth without the guard %.3f %.3f %.3f %.3f, with F >= 10 %.3f %.3f %.3f %.3f "
-           "(%u of %u rotor-3 samples guarded, %u all-rotor inputs)\n",
+           "(%u rotor inputs guarded of %u rotor samples, %u samples with every rotor from the commands)\n",
            (double)unguarded[0], (double)unguarded[1], (double)unguarded[2], (double)unguarded[3],
            (double)guarded[0], (double)guarded[1], (double)guarded[2], (double)guarded[3],
            (unsigned)filter.instrument.guarded, (unsigned)counters.rotor_accepted, (unsigned)filter.instrument.inputs);
