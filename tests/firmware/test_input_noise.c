@@ -27,6 +27,17 @@ void tearDown(void) {}
 static propid_filter_t with_noise;
 static propid_filter_t without_noise;
 
+/* One prediction step of dt of both filters (the same inputs). */
+static void predict_both(float dt)
+{
+    float rate_next[3];
+    float jac_dt[3][PROPID_JAC_ROW];
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_noise, dt, rate_next, jac_dt));
+    propid_predict_covariance(&without_noise.derived, &without_noise.core, dt, jac_dt);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_noise, dt, rate_next, jac_dt));
+    propid_predict_covariance(&with_noise.derived, &with_noise.core, dt, jac_dt);
+}
+
 /* The block one prediction step added (`with` after the step minus `plain`, the
  * same filter stepped without the term) against B Sigma_u B^T dt span_i, B computed
  * densely from the model's Jacobian; everything outside the rate block bit for bit. */
@@ -87,12 +98,7 @@ static void check_added_block(uint8_t rotors, int full_inertia, float time)
     config.rotor_speed_noise_time = time;
     input_error_off_prior(&with_noise, &config);
 
-    float rate_next[3];
-    float jac_dt[3][PROPID_JAC_ROW];
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_noise, dt, rate_next, jac_dt));
-    propid_predict_covariance(&without_noise.derived, &without_noise.core, dt, jac_dt);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_noise, dt, rate_next, jac_dt));
-    propid_predict_covariance(&with_noise.derived, &with_noise.core, dt, jac_dt);
+    predict_both(dt);
     float span[PROPID_MAX_ROTORS];
     for (uint8_t i = 0; i < rotors; ++i) {
         span[i] = time > dt ? time : dt;
@@ -115,12 +121,7 @@ static void test_input_noise_off_is_the_plain_prediction(void)
     input_error_off_prior(&without_noise, &config);
     config.rotor_speed_noise_time = 0.05f; /* a time alone switches nothing on */
     input_error_off_prior(&with_noise, &config);
-    float rate_next[3];
-    float jac_dt[3][PROPID_JAC_ROW];
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_noise, 0.002f, rate_next, jac_dt));
-    propid_predict_covariance(&without_noise.derived, &without_noise.core, 0.002f, jac_dt);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_noise, 0.002f, rate_next, jac_dt));
-    propid_predict_covariance(&with_noise.derived, &with_noise.core, 0.002f, jac_dt);
+    predict_both(0.002f);
     TEST_ASSERT_EQUAL_MEMORY(without_noise.core.cov, with_noise.core.cov, sizeof(with_noise.core.cov));
 }
 
@@ -165,12 +166,7 @@ static void test_held_input_error_spans_from_the_telemetry(void)
             }
             without_noise = with_noise;
             without_noise.derived.input_noise_var = 0.0f; /* the same step without the term */
-            float rate_next[3];
-            float jac_dt[3][PROPID_JAC_ROW];
-            TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_noise, dt, rate_next, jac_dt));
-            propid_predict_covariance(&without_noise.derived, &without_noise.core, dt, jac_dt);
-            TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_noise, dt, rate_next, jac_dt));
-            propid_predict_covariance(&with_noise.derived, &with_noise.core, dt, jac_dt);
+            predict_both(dt);
             float span[PROPID_MAX_ROTORS];
             for (uint8_t i = 0; i < rotors; ++i) {
                 span[i] = dt * expected_span[step][i < 4u ? i : 1u];
@@ -194,12 +190,7 @@ static void test_held_input_error_within_one_step_is_the_plain_term(void)
     config.rotor_speed_noise_hold = 1u;
     input_error_off_prior(&with_noise, &config);
     for (uint8_t step = 0; step < 3u; ++step) {
-        float rate_next[3];
-        float jac_dt[3][PROPID_JAC_ROW];
-        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_noise, 0.002f, rate_next, jac_dt));
-        propid_predict_covariance(&without_noise.derived, &without_noise.core, 0.002f, jac_dt);
-        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_noise, 0.002f, rate_next, jac_dt));
-        propid_predict_covariance(&with_noise.derived, &with_noise.core, 0.002f, jac_dt);
+        predict_both(0.002f);
         TEST_ASSERT_EQUAL_MEMORY(without_noise.core.cov, with_noise.core.cov, sizeof(with_noise.core.cov));
     }
 }

@@ -58,6 +58,27 @@ def rate_loop_flight(duration: float, rate: float, rng: np.random.Generator) -> 
     return RateLoopFlight(inertia, np.linalg.inv(inertia), allocation, np.linalg.inv(allocation), t, thrust, demand)
 
 
+def fly_rate_loop(f: RateLoopFlight, rate: float, damping=None) -> tuple[np.ndarray, np.ndarray]:
+    """(rotor speeds, true body rates) of the flight's rate loop: the controller turns the
+    demands (plus rate feedback) into rotor speeds with the true coefficients; the body
+    integrates the rotor torque (minus damping * omega when given) with 4 Euler substeps."""
+    n = len(f.t)
+    speeds = np.empty((n, 4))
+    rate_true = np.zeros((n, 3))
+    omega = np.zeros(3)
+    substeps = 4
+    for k in range(n):
+        rate_true[k] = omega
+        torque_cmd = f.demand[k] - f.inertia @ (4.0 * omega)  # rate feedback keeps the rates bounded
+        u = np.clip(f.allocation_inv @ np.concatenate([[f.thrust[k]], torque_cmd]), 1.0, None)
+        speeds[k] = np.sqrt(u)
+        rotor_torque = (f.allocation @ u)[1:]
+        for _ in range(substeps):
+            torque = rotor_torque if damping is None else rotor_torque - damping * omega
+            omega = omega + f.inertia_inv @ (torque - np.cross(omega, f.inertia @ omega)) / (rate * substeps)
+    return speeds, rate_true
+
+
 def synthetic_log(duration: float = 20.0, rate: float = 500.0, seed: int = 7) -> FlightLog:
     """Rotational dynamics of an X quad with KF_TRUE/KM_TRUE exactly as the filter models
     them. A rate controller that knows the true coefficients turns multisine torque and
@@ -65,21 +86,9 @@ def synthetic_log(duration: float = 20.0, rate: float = 500.0, seed: int = 7) ->
     noise; rotor speeds get noise, a few NaN rows and eRPM spikes."""
     rng = np.random.default_rng(seed)
     f = rate_loop_flight(duration, rate, rng)
-    inertia, j_inv, allocation, alloc_inv = f.inertia, f.inertia_inv, f.allocation, f.allocation_inv
-    t, thrust, demand = f.t, f.thrust, f.demand
+    t = f.t
     n = len(t)
-    speeds = np.empty((n, 4))
-    rate_true = np.zeros((n, 3))
-    omega = np.zeros(3)
-    substeps = 4
-    for k in range(n):
-        rate_true[k] = omega
-        torque_cmd = demand[k] - inertia @ (4.0 * omega)  # rate feedback keeps the rates bounded
-        u = np.clip(alloc_inv @ np.concatenate([[thrust[k]], torque_cmd]), 1.0, None)
-        speeds[k] = np.sqrt(u)
-        torque = (allocation @ u)[1:]
-        for _ in range(substeps):
-            omega = omega + j_inv @ (torque - np.cross(omega, inertia @ omega)) / (rate * substeps)
+    speeds, rate_true = fly_rate_loop(f, rate)
     gyro = rate_true + BIAS_TRUE + rng.normal(0, 0.005, size=(n, 3))
     measured = speeds + rng.normal(0, 1.0, size=speeds.shape)
     glitch_rows = rng.choice(n, 18, replace=False)

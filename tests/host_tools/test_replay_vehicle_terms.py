@@ -13,7 +13,7 @@ import pytest
 from propid.errors import UserError
 from propid.flightlog import FlightLog, parse_vehicle
 from propid.replay import ReplayOptions, replay
-from test_replay import BIAS_TRUE, KF_TRUE, KM_TRUE, VEHICLE, rate_loop_flight
+from test_replay import BIAS_TRUE, KF_TRUE, KM_TRUE, VEHICLE, fly_rate_loop, rate_loop_flight
 
 DAMPING = [8.6e-5, 8.6e-5, 1.7e-4]  # [N m s/rad]: a decay rate of 6 1/s on every axis of this airframe
 GYRO_SCALE = [1.06, 1.06, 0.97]
@@ -24,21 +24,8 @@ def damped_log(damping, gyro_scale, duration: float = 20.0, rate: float = 500.0,
     gyro_scale x the true rate (+ bias + white noise); clean rotor speeds (1 rad/s noise)."""
     rng = np.random.default_rng(seed)
     f = rate_loop_flight(duration, rate, rng)
-    d = np.asarray(damping, dtype=float)
     n = len(f.t)
-    speeds = np.empty((n, 4))
-    rate_true = np.zeros((n, 3))
-    omega = np.zeros(3)
-    substeps = 4
-    for k in range(n):
-        rate_true[k] = omega
-        torque_cmd = f.demand[k] - f.inertia @ (4.0 * omega)
-        u = np.clip(f.allocation_inv @ np.concatenate([[f.thrust[k]], torque_cmd]), 1.0, None)
-        speeds[k] = np.sqrt(u)
-        rotor_torque = (f.allocation @ u)[1:]
-        for _ in range(substeps):
-            torque = rotor_torque - d * omega
-            omega = omega + f.inertia_inv @ (torque - np.cross(omega, f.inertia @ omega)) / (rate * substeps)
+    speeds, rate_true = fly_rate_loop(f, rate, damping=np.asarray(damping, dtype=float))
     gyro = rate_true * np.asarray(gyro_scale)[None, :] + BIAS_TRUE + rng.normal(0, 0.005, size=(n, 3))
     return FlightLog(t=f.t, gyro=gyro, rotor_speed=speeds + rng.normal(0, 1.0, size=speeds.shape), extra={})
 
