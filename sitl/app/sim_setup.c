@@ -3,6 +3,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "effects_physics.h"
 #include "rng.h"
 #include "sensor_errors.h"
 #include "sim.h"
@@ -118,13 +119,9 @@ static void hover_aero_damping(const sitl_options_t *opts, const sitl_vehicle_t 
         const double unit[3] = {a == 0 ? 1.0 : 0.0, a == 1 ? 1.0 : 0.0, a == 2 ? 1.0 : 0.0};
         double torque = 0.0;
         for (int i = 0; i < v->rotor_count; i++) {
-            double velocity[3];
+            double force[3];
             double moment[3];
-            sitl_vec3_cross(velocity, unit, v->rotor[i].position);
-            const double force[3] = {-strength * hover * v->rotor_drag_coeff * velocity[0],
-                                     -strength * hover * v->rotor_drag_coeff * velocity[1],
-                                     -strength * hover * v->inflow_coeff * velocity[2]};
-            sitl_vec3_cross(moment, v->rotor[i].position, force);
+            sitl_aero_damping_rotor(v, v->rotor[i].position, hover, unit, strength, force, moment);
             torque += moment[a];
         }
         damping[a] = -torque;

@@ -23,4 +23,9 @@ void sitl_effects_rotor_wrench(const sitl_plant_t *plant, const sitl_state_t *st
                                const double velocity_body[3], const double *rotor_accel,
                                double force_body[3], double torque_body[3]);
 
+/* aero_damping's force and torque (position x force) of one rotor at `position`
+ * spinning at rotor_speed while the body turns at body_rate (effects_rotor.c). */
+void sitl_aero_damping_rotor(const sitl_vehicle_t *vehicle, const double position[3], double rotor_speed,
+                             const double body_rate[3], double strength, double force[3], double torque[3]);
+
 #endif /* SITL_EFFECTS_PHYSICS_H */

@@ -19,12 +19,21 @@
 #include "effects_physics.h"
 #include "sitl_math.h"
 
-static void rotor_drag_force(const sitl_plant_t *plant, double omega, const double v[3],
+static void rotor_drag_force(const sitl_vehicle_t *vehicle, double omega, const double v[3],
                              double scale, double force[3])
 {
-    force[0] = -scale * omega * plant->vehicle.rotor_drag_coeff * v[0];
-    force[1] = -scale * omega * plant->vehicle.rotor_drag_coeff * v[1];
-    force[2] = -scale * omega * plant->vehicle.inflow_coeff * v[2];
+    force[0] = -scale * omega * vehicle->rotor_drag_coeff * v[0];
+    force[1] = -scale * omega * vehicle->rotor_drag_coeff * v[1];
+    force[2] = -scale * omega * vehicle->inflow_coeff * v[2];
+}
+
+void sitl_aero_damping_rotor(const sitl_vehicle_t *vehicle, const double position[3], double rotor_speed,
+                             const double body_rate[3], double strength, double force[3], double torque[3])
+{
+    double v_rot[3];
+    sitl_vec3_cross(v_rot, body_rate, position);
+    rotor_drag_force(vehicle, rotor_speed, v_rot, strength, force);
+    sitl_vec3_cross(torque, position, force);
 }
 
 void sitl_effects_rotor_wrench(const sitl_plant_t *plant, const sitl_state_t *state,
@@ -55,7 +64,7 @@ void sitl_effects_rotor_wrench(const sitl_plant_t *plant, const sitl_state_t *st
     if (s != 0.0) {
         for (int i = 0; i < plant->rotor_count; i++) {
             double omega = state->rotor_speed[i], f[3], m[3];
-            rotor_drag_force(plant, omega, velocity_body, s, f);
+            rotor_drag_force(&plant->vehicle, omega, velocity_body, s, f);
             sitl_vec3_axpy(force_body, 1.0, f);
             sitl_vec3_cross(m, plant->rotor_position[i], f);
             sitl_vec3_axpy(torque_body, 1.0, m);
@@ -68,11 +77,10 @@ void sitl_effects_rotor_wrench(const sitl_plant_t *plant, const sitl_state_t *st
     s = sitl_effect_strength(fx, SITL_EFFECT_AERO_DAMPING);
     if (s != 0.0) {
         for (int i = 0; i < plant->rotor_count; i++) {
-            double v_rot[3], f[3], m[3];
-            sitl_vec3_cross(v_rot, state->body_rate, plant->rotor_position[i]);
-            rotor_drag_force(plant, state->rotor_speed[i], v_rot, s, f);
+            double f[3], m[3];
+            sitl_aero_damping_rotor(&plant->vehicle, plant->rotor_position[i], state->rotor_speed[i],
+                                    state->body_rate, s, f, m);
             sitl_vec3_axpy(force_body, 1.0, f);
-            sitl_vec3_cross(m, plant->rotor_position[i], f);
             sitl_vec3_axpy(torque_body, 1.0, m);
         }
     }
