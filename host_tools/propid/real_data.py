@@ -23,6 +23,9 @@ reference value (the reference kf only divides the results for display):
   here, after the instrumented band fits of these logs): the disturbance states with a bandwidth
   (DISTURBANCE_BANDWIDTH_HZ below, docs/math.md §7) beside gyro only, the scale-walk mode and the gyro-only walk
   chain (calibrated as above);
+- added later (docs/real-data.md "Repeated rows"; the rule was written before the calibrated and accelerometer
+  modes were run, after the uncalibrated gyro-only mode had been seen): the scale-walk mode and the gyro-only walk
+  chain (calibrated as above) with exact repeats of the previous row skipped (`--skip-repeats`);
 - "square" runs are the logs whose name starts with "square", the others are the rest;
 - per run: kf = mean over rotors of the converged-part mean; rotor spread = the worst
   rotor's |kf_i / run mean - 1|; km converged = all rotors' relative std below 5 % at the end.
@@ -106,9 +109,20 @@ MODES += [
                        ("accel_scale_walk", "+ accelerometer, scale walk (rule) + the commands' instrument"))
     for min_f in (10, 200)
 ]
+# Exact repeats of the previous row are no new sample (--skip-repeats): a logger that samples separately streamed
+# blocks by sample-and-hold writes a lost packet as a copy of the previous one (docs/real-data.md "Repeated rows").
+SKIP = dict(skip_repeats=True)
+MODES += [
+    _variant("accel_scale_walk", "accel_scale_walk_skip", "+ accelerometer, scale walk (rule), repeated rows skipped",
+             **SKIP),
+    _variant("gyro_walk", "gyro_walk_skip", "gyro only, coefficient walk (rule), repeated rows skipped", **SKIP),
+    _variant("gyro_walk", "gyro_walk_skip_calibrated", "the same, vehicle file calibrated with the accelerometer "
+             "(repeated rows skipped) on the other half of the runs", **SKIP),
+]
 # A calibrated mode: (its gyro-only mode, the accelerometer mode), both replayed with the file as given.
 CALIBRATED = {"gyro_walk_calibrated": ("gyro_walk", "accel_scale_walk"),
-              "gyro_walk_band_calibrated": ("gyro_walk_band", "accel_scale_walk")}
+              "gyro_walk_band_calibrated": ("gyro_walk_band", "accel_scale_walk"),
+              "gyro_walk_skip_calibrated": ("gyro_walk_skip", "accel_scale_walk_skip")}
 ROTOR_WITHIN = 0.05
 
 

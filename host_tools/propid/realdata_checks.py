@@ -382,6 +382,46 @@ def _commands(log: FlightLog, rotors: int) -> np.ndarray | None:
     return np.column_stack(columns)
 
 
+def repeated_row_shares(log: FlightLog, rows: np.ndarray) -> dict:
+    """Share of `rows` (a mask) whose gyro triple, or rotor-speed set, equals the previous row's bit for bit:
+    a logger's sample-and-hold copy of a lost packet, not a new sample (docs/real-data.md "Repeated rows")."""
+    same_gyro = np.zeros(len(log), dtype=bool)
+    same_gyro[1:] = np.all(log.gyro[1:] == log.gyro[:-1], axis=1)
+    same_rotor = np.zeros(len(log), dtype=bool)
+    same_rotor[1:] = np.all(log.rotor_speed[1:] == log.rotor_speed[:-1], axis=1)
+    count = int(rows.sum())
+    if count == 0:
+        return {"gyro": float("nan"), "rotor": float("nan")}
+    return {"gyro": float(same_gyro[rows].sum()) / count, "rotor": float(same_rotor[rows].sum()) / count}
+
+
+def thrust_fit_with_bias(force: np.ndarray, sum_u: np.ndarray, rows: np.ndarray,
+                         climb: np.ndarray | None = None) -> dict:
+    """m acc_z = kf sum(Omega^2) [+ d sum(Omega) v_z,body] + m b over `rows`, unfiltered.
+
+    With the intercept b free, kf is the slope of the thrust against the collective, which is what a
+    filter with an accelerometer-bias state reads; through the origin (the `thrust_kf` fit) it is the
+    hover ratio. The optional climb term is a force linear in the body-z velocity at the rotor speed
+    (a rotor in axial climb makes less thrust at the same speed; frame drag in climb): d < 0 when present.
+    Returns kf, the intercept as a force (bias x mass) [N], d, R^2 and the rows used."""
+    ok = rows & np.isfinite(force) & np.isfinite(sum_u)
+    if climb is not None:
+        ok &= np.isfinite(climb)
+    nan = {"kf": float("nan"), "bias_force": float("nan"), "climb": float("nan"), "r2": float("nan"),
+           "rows": int(ok.sum())}
+    if ok.sum() < 10:
+        return nan
+    columns = [sum_u[ok], np.ones(int(ok.sum()))] + ([climb[ok]] if climb is not None else [])
+    x = np.column_stack(columns)
+    y = force[ok]
+    coeffs, *_ = np.linalg.lstsq(x, y, rcond=None)
+    resid = y - x @ coeffs
+    total = float(np.sum((y - y.mean()) ** 2))
+    return {"kf": float(coeffs[0]), "bias_force": float(coeffs[1]),
+            "climb": float(coeffs[2]) if climb is not None else float("nan"),
+            "r2": 1.0 - float(np.sum(resid**2)) / total if total > 0 else float("nan"), "rows": int(ok.sum())}
+
+
 def check_log(
     log: FlightLog,
     vehicle: Vehicle,
@@ -423,6 +463,7 @@ def check_log(
         "fit_rows": rows,
         "segments": len(segs),
         "repaired_rotor_samples": repaired,
+        "repeated_rows": repeated_row_shares(log, fly),
         "absurd_speed_limit": limit,
         "bands": {},
     }
@@ -456,6 +497,14 @@ def check_log(
             force = vehicle.mass * np.nan_to_num(acc[:, 2], nan=float(np.nanmedian(acc[:, 2])))
             thrust_lags = range(0, 1) if band == (None, None) else lags
             entry["thrust_kf"] = lagged_fit(force, sum_u, segs, rate, band, thrust_lags).as_dict(["kf"], rate)
+            if band == (None, None):
+                seg_rows = np.zeros(len(log), dtype=bool)
+                for a, b in segs:
+                    seg_rows[a:b] = True
+                entry["thrust_kf_with_bias"] = thrust_fit_with_bias(force, sum_u[:, 0], seg_rows)
+                if body_velocity is not None:
+                    climb = speeds.sum(axis=1) * body_velocity[:, 2]
+                    entry["thrust_kf_climb"] = thrust_fit_with_bias(force, sum_u[:, 0], seg_rows, climb)
         band_lags = range(0, 1) if band == (None, None) else lags
         entry["roll_kf"] = lagged_fit(torque[:, 0], reg_roll, segs, rate, band, band_lags).as_dict(["kf"], rate)
         entry["pitch_kf"] = lagged_fit(torque[:, 1], reg_pitch, segs, rate, band, band_lags).as_dict(["kf"], rate)
@@ -505,6 +554,18 @@ def format_checks(result: dict) -> str:
             f"{band:>9} {thrust:>20} {cell(entry['roll_kf'], 'kf'):>24} {cell(entry['pitch_kf'], 'kf'):>24} "
             f"{cell(entry['yaw_km'], 'km'):>24} {yr['km']:.2e}, {yr['rotor_inertia']:.2e} ({yr['r2']:.2f})"
         )
+    repeated = result.get("repeated_rows")
+    if repeated:
+        lines.append(f"rows repeating the previous row's sample (sample-and-hold copies; --skip-repeats): "
+                     f"gyro {100 * repeated['gyro']:.1f} %, rotor speeds {100 * repeated['rotor']:.1f} %")
+    raw = result.get("bands", {}).get("raw", {})
+    if "thrust_kf_with_bias" in raw:
+        fit = raw["thrust_kf_with_bias"]
+        line = f"thrust kf with a free bias (the slope a filter with an accelerometer bias reads): {fit['kf']:.3e}"
+        if "thrust_kf_climb" in raw:
+            climb = raw["thrust_kf_climb"]
+            line += f"; with a climb term d sum(Omega) v_z: {climb['kf']:.3e}, d {climb['climb']:.2e} N/(rad/s m/s)"
+        lines.append(line)
     velocity_lines = []
     for band, entry in result.get("bands", {}).items():
         if "roll_kf_with_velocity" in entry:
