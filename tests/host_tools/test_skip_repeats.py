@@ -48,6 +48,9 @@ def test_duplicated_rows_bias_kf_low_and_skipping_them_removes_the_bias(cfilter_
     assert fused < reference - 0.03
     assert abs(skipped - 1.0) < 0.025
     assert fused_summary["repeated_rows_skipped"] == {"gyro": 0, "rotor": 0}
+    # the replay says so when it fuses the copies, and not when it skips them or there are none
+    assert any("30 % of the rows repeat the previous gyro sample" in w for w in fused_summary["warnings"])
+    assert not any("repeat the previous gyro" in w for w in skipped_summary["warnings"] + reference_summary["warnings"])
     # every copied row is counted, for both streams (the NaN rows of the synthetic log are not repeats)
     counts = skipped_summary["repeated_rows_skipped"]
     nan_copies = int(np.sum(~np.isfinite(duplicated.rotor_speed[rows]).all(axis=1)))

@@ -262,7 +262,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "body_rate_max_abs": float(np.max(np.abs(series["body_rate"]))) if finite else float("nan"),
         "config": config_fields,
         "config_notes": notes,
-        "warnings": replay_warnings(rates, gyro_accepted, gyro_pushes),
+        "warnings": replay_warnings(rates, gyro_accepted, gyro_pushes,
+                                    None if options.skip_repeats else repeated_gyro_share(log, rows)),
         "definitions": {
             "kf_mean": "mean of the estimate from the first sample with rel std < converged_rel_std to the end; "
                        "second half of the replay if never below",
@@ -317,6 +318,10 @@ def estimates_finite(series: dict) -> bool:
 MIN_GYRO_RATE_HZ = 100.0
 MIN_ROTOR_RATE_HZ = 50.0
 MIN_ACCEPTED_GYRO_FRACTION = 0.5
+# A row repeating the previous gyro triple bit for bit is a logger's copy of a lost packet; fused, it is a
+# zero rate change against the rotor torque and kf reads low (10 % copies: 1-2 % low on the synthetic flight
+# of docs/real-data.md "Repeated rows", 30 %: 5-11 %). Above this share the replay says so.
+MAX_REPEATED_GYRO_SHARE = 0.05
 
 
 def stream_rates(log: FlightLog, rows: np.ndarray) -> dict:
@@ -339,7 +344,16 @@ def stream_rates(log: FlightLog, rows: np.ndarray) -> dict:
     return {"gyro": rate(log.gyro), "rotor": rate(log.rotor_speed)}
 
 
-def replay_warnings(rates: dict, accepted: int, pushed: int) -> list[str]:
+def repeated_gyro_share(log: FlightLog, rows: np.ndarray) -> float:
+    """Share of `rows` (indices) whose gyro triple equals the previous row's, every axis finite."""
+    rows = rows[rows > 0]
+    if rows.size == 0:
+        return 0.0
+    same = np.all(log.gyro[rows] == log.gyro[rows - 1], axis=1)
+    return float(np.sum(same)) / rows.size
+
+
+def replay_warnings(rates: dict, accepted: int, pushed: int, repeated_gyro: float | None = None) -> list[str]:
     warnings = []
     if rates["gyro"] < MIN_GYRO_RATE_HZ:
         warnings.append(f"gyro at {rates['gyro']:.0f} Hz (< {MIN_GYRO_RATE_HZ:.0f} Hz): the rate dynamics are "
@@ -349,6 +363,9 @@ def replay_warnings(rates: dict, accepted: int, pushed: int) -> list[str]:
                         "speed lags the true one; kf/km are biased even when flagged converged")
     if pushed and accepted < MIN_ACCEPTED_GYRO_FRACTION * pushed:
         warnings.append(f"the filter accepted only {accepted} of {pushed} gyro samples")
+    if repeated_gyro is not None and repeated_gyro > MAX_REPEATED_GYRO_SHARE:
+        warnings.append(f"{100 * repeated_gyro:.0f} % of the rows repeat the previous gyro sample (sample-and-hold "
+                        "copies of lost packets, fused as measurements: kf reads low): replay with --skip-repeats")
     return warnings
 
 
