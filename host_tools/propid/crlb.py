@@ -90,8 +90,19 @@ def _gyroscopic_jacobians(inertia: np.ndarray, inertia_inv: np.ndarray, omega: n
     return -inertia_inv @ (skew(omega) @ inertia - skew(omega @ inertia.T))
 
 
-def bound_along_log(columns: dict[str, np.ndarray], vehicle: Vehicle, config: BoundConfig) -> Bound:
-    """The bound along one SITL log (rows at the gyro samples; true_w*, omega_i columns)."""
+@dataclass
+class FlightSteps:
+    """The filter's linearised step along a flight's true trajectory."""
+    t: np.ndarray  # gyro sample times [s]
+    dts: np.ndarray  # t[k+1] - t[k]
+    steps: np.ndarray  # (samples - 1, 3, n): rate rows G_k of F_k = I + G_k
+    count: int  # rotors
+
+
+def flight_steps(columns: dict[str, np.ndarray], vehicle: Vehicle) -> FlightSteps:
+    """F_k = I + G_k of the filter's model at the truth for every gyro step of a SITL log
+    (rows at the gyro samples; true_w*, omega_i columns): gyroscopic block at the
+    midpoint, trapezoid input."""
     count = rotor_count(columns)
     if count != vehicle.rotor_count:
         raise UserError(f"log has {count} rotors, vehicle {vehicle.rotor_count}")
@@ -109,23 +120,32 @@ def bound_along_log(columns: dict[str, np.ndarray], vehicle: Vehicle, config: Bo
     omega = np.vstack([columns[f"true_w{a}"][rows] for a in "xyz"]).T
     speed_sq = np.vstack([columns[f"omega_{i}"][rows] for i in range(1, count + 1)]).T ** 2
     inertia, inertia_inv, torque = _torque_directions(vehicle)
-
     n = 6 + 2 * count
     coeff = slice(3, 3 + 2 * count)
-    # rate rows G_k of F_k = I + G_k for every step k -> k+1 (the filter's Jacobian
-    # at the truth: gyroscopic block at the midpoint, trapezoid input)
     ubar = 0.5 * (speed_sq[1:] + speed_sq[:-1])
     steps = np.zeros((t.size - 1, 3, n))
     steps[:, :, 0:3] = dts[:, None, None] * _gyroscopic_jacobians(
         inertia, inertia_inv, 0.5 * (omega[1:] + omega[:-1]))
     steps[:, :, coeff] = dts[:, None, None] * torque[None, :, :] * np.hstack([ubar, ubar])[:, None, :]
+    return FlightSteps(t=t, dts=dts, steps=steps, count=count)
+
+
+def prior_covariance(config: BoundConfig, count: int) -> np.ndarray:
+    return np.diag(np.concatenate([np.full(3, config.rate_std0 ** 2),
+                                   np.full(2 * count, config.coeff_rel_std0 ** 2),
+                                   np.full(3, config.bias_std0 ** 2)]))
+
+
+def bound_along_log(columns: dict[str, np.ndarray], vehicle: Vehicle, config: BoundConfig) -> Bound:
+    """The bound along one SITL log (rows at the gyro samples; true_w*, omega_i columns)."""
+    flight = flight_steps(columns, vehicle)
+    t, dts, steps, count = flight.t, flight.dts, flight.steps, flight.count
+    n = 6 + 2 * count
     walk = np.concatenate([np.zeros(3), np.full(2 * count, config.coeff_walk ** 2),
                            np.full(3, config.bias_walk ** 2)])
     walk_on = bool(np.any(walk > 0))
 
-    P = np.diag(np.concatenate([np.full(3, config.rate_std0 ** 2),
-                                np.full(2 * count, config.coeff_rel_std0 ** 2),
-                                np.full(3, config.bias_std0 ** 2)]))
+    P = prior_covariance(config, count)
     samples = t.size
     out = np.empty((samples, n))
     eye3 = np.eye(3)

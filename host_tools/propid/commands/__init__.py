@@ -18,6 +18,7 @@ COMMAND_MODULES = [
     "observability",
     "damage_bench",
     "table1_extended",
+    "bound_check",
     "effects_demo",
     "real_data",
 ]

@@ -1,0 +1,285 @@
+"""Is a convergence miss the filter's or the flight's? (`propid bound-check`)
+
+The Cramér-Rao bound (propid.crlb) gives a standard deviation; Table 1's convergence
+time asks something else of an *error*: the last time it leaves a band of 0.1 prior
+std. An efficient estimator whose std ends at 0.8 of the band still ends outside it on
+a good share of flights. This module answers with the errors themselves: for each kept
+log of a campaign it runs linear Kalman filters along the flight's TRUE trajectory
+(the bound's model, noise and prior: crlb.flight_steps) and draws the Monte-Carlo
+distribution of their errors (prior errors = this flight's true ones, the rate's drawn
+from its prior; gyro and rate process noise drawn), then applies Table 1's criterion to
+every realisation. Three covariance recursions ("loadings"):
+
+- ``none``: the bound's own recursion. Its gain is optimal, its error covariance IS the
+  bound: what an efficient estimator gives on this flight, under the table's criterion.
+- ``filter``: the same plus the C filter's deterministic covariance loadings
+  (docs/math.md §2: the rates by ``l m eps`` of their rounding scale, kf and biases by
+  ``1 + eps`` per step, the drag coefficients by ``1 + eps`` in their yaw basis every
+  second step). The filter linearised at the truth, as implemented in float32.
+- ``torque-basis``: as ``filter`` but the kf loaded in an orthogonal basis whose first
+  elements are the roll and pitch torque directions (the arm vectors), then the
+  collective: what keeping the kf in such a basis, as the km are kept in their yaw
+  basis, would give.
+
+All three evolve the same errors with the TRUE process noise (the loadings are not
+noise in the plant), so their differences are the gains' alone.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from propid import crlb, table1
+from propid.errors import UserError
+from propid.flightlog import Vehicle, read_vehicle
+
+LOADINGS = ("none", "filter", "torque-basis")
+VAR_LOADING = float(np.finfo(np.float32).eps)  # C: PROPID_VAR_LOADING
+RATE_LOADING_MIN = 8.0  # C: PROPID_RATE_LOADING / PROPID_VAR_LOADING
+
+
+@dataclass(frozen=True)
+class Bands:
+    coeff: float  # |kf_rel, km_rel error| band
+    bias: float  # |bias error| band [rad/s]
+
+
+def drag_basis(vehicle: Vehicle) -> np.ndarray:
+    """The km's kept basis (C: propid_drag_basis, docs/math.md §2): Householder
+    reflection whose first row is the yaw-torque direction."""
+    signs = np.asarray(vehicle.yaw_signs, dtype=float)
+    v = np.zeros(signs.size)
+    v[0] = 1.0
+    v += signs[0] * signs / math.sqrt(signs.size)
+    return np.eye(signs.size) - 2.0 * np.outer(v, v) / (v @ v)
+
+
+def thrust_torque_basis(vehicle: Vehicle) -> np.ndarray:
+    """Orthonormal N x N rows: roll-torque direction (the rotors' y arms), pitch (x
+    arms), collective, then the rest (Gram-Schmidt of the identity)."""
+    pos = np.asarray(vehicle.positions, dtype=float)
+    count = pos.shape[0]
+    q, _ = np.linalg.qr(np.column_stack([pos[:, 1], pos[:, 0], np.ones(count), np.eye(count)]))
+    return q[:, :count].T
+
+
+def rate_row_terms(count: int) -> float:
+    """m of the C prediction's rate loading (docs/math.md §2, "The rate block's
+    loading"): 7 in the fixed quad layout, else two rates + N coefficients + 1."""
+    return 7.0 if count == 4 else 3.0 + count
+
+
+def criterion_times(t: np.ndarray, last_outside: np.ndarray, duration: float) -> tuple[float, float]:
+    """(mean convergence time with never = duration, share that never converged) of
+    realisations whose last outside sample index is ``last_outside`` (-1: never outside)."""
+    final = t.size - 1
+    never = last_outside == final
+    times = np.where(last_outside < 0, t[0], t[np.minimum(last_outside + 1, final)])
+    return float(np.mean(np.where(never, duration, times))), float(np.mean(never))
+
+
+@dataclass
+class Run:
+    """One recursion along a flight with its Monte-Carlo errors."""
+    t: np.ndarray
+    cov: np.ndarray  # final covariance
+    errors: np.ndarray  # (realisations, n) final errors
+    last_bias_outside: np.ndarray  # per realisation: last sample index outside the band (-1: never)
+    last_coeff_outside: np.ndarray
+
+
+def propagate(flight: crlb.FlightSteps, vehicle: Vehicle, config: crlb.BoundConfig, bands: Bands,
+              loading: str, initial: np.ndarray | None, realisations: int, rng: np.random.Generator) -> Run:
+    """The covariance recursion with ``loading`` and the errors of the linear filter with
+    its gains, under the true noise. ``initial``: the (coefficient, bias) errors at the
+    start, or None to draw them from the prior (Gaussian)."""
+    if loading not in LOADINGS:
+        raise UserError(f"unknown loading {loading} (known: {', '.join(LOADINGS)})")
+    t, dts, steps, count = flight.t, flight.dts, flight.steps, flight.count
+    n = 6 + 2 * count
+    coeff, bias = slice(3, 3 + 2 * count), slice(n - 3, n)
+    basis = np.eye(n)
+    basis[3 + count:3 + 2 * count, 3 + count:3 + 2 * count] = drag_basis(vehicle)
+    if loading == "torque-basis":
+        basis[3:3 + count, 3:3 + count] = thrust_torque_basis(vehicle)
+    terms = rate_row_terms(count)
+    rate_factor = VAR_LOADING * terms * max(terms, RATE_LOADING_MIN)
+    P = crlb.prior_covariance(config, count)
+    err = rng.normal(0.0, 1.0, (realisations, n)) * np.sqrt(P.diagonal())
+    if initial is not None:
+        err[:, 3:] = initial
+    last_bias = np.full(realisations, -1)
+    last_coeff = np.full(realisations, -1)
+    for k in range(t.size):
+        dt = dts[k - 1] if k > 0 else dts[0]
+        if k > 0:
+            G = steps[k - 1]
+            if loading != "none":
+                rate_scale = P.diagonal()[:3] + (G ** 2) @ P.diagonal()
+            P[0:3, :] += G @ P
+            P[:, 0:3] += P @ G.T
+            P = 0.5 * (P + P.T)
+            P[0:3, 0:3] += np.eye(3) * config.rate_process_noise ** 2 * dt
+            err[:, 0:3] += err @ G.T + rng.normal(0.0, config.rate_process_noise * math.sqrt(dt),
+                                                  (realisations, 3))
+            if loading != "none":
+                P[np.diag_indices(3)] += rate_factor * rate_scale
+                kept = basis @ P @ basis.T
+                load = np.full(n, VAR_LOADING)
+                load[:3] = 0.0
+                if k % 2:  # the drag coefficients every second step
+                    load[3 + count:3 + 2 * count] = 0.0
+                kept[np.diag_indices(n)] += load * kept.diagonal()
+                P = basis.T @ kept @ basis
+        noise_var = config.gyro_noise_density ** 2 / dt
+        for axis in range(3):
+            h = P[:, axis] + P[:, n - 3 + axis]
+            gain = h / (h[axis] + h[n - 3 + axis] + noise_var)
+            P -= np.outer(h, gain)
+            innovation = (rng.normal(0.0, math.sqrt(noise_var), realisations)
+                          - (err[:, axis] + err[:, n - 3 + axis]))
+            err += innovation[:, None] * gain[None, :]
+        P = 0.5 * (P + P.T)
+        last_bias[np.any(np.abs(err[:, bias]) > bands.bias, axis=1)] = k
+        last_coeff[np.any(np.abs(err[:, coeff]) > bands.coeff, axis=1)] = k
+    return Run(t=t, cov=P, errors=err, last_bias_outside=last_bias, last_coeff_outside=last_coeff)
+
+
+def initial_errors(columns: dict[str, np.ndarray], vehicle: Vehicle, count: int) -> np.ndarray:
+    """The flight's own initial errors: the filter starts at nominal (1) and zero bias."""
+    first = int(np.flatnonzero(np.isfinite(columns["gyro_x"]))[0])
+    kf_nom = np.asarray(vehicle.kf_nominal, dtype=float)
+    km_nom = np.asarray(vehicle.km_nominal, dtype=float)
+    true_rel = np.concatenate([[columns[f"true_kf_{i}"][first] for i in range(1, count + 1)] / kf_nom,
+                               [columns[f"true_km_{i}"][first] for i in range(1, count + 1)] / km_nom])
+    true_bias = np.array([columns[f"true_bg_{a}"][first] for a in "xyz"])
+    return np.concatenate([1.0 - true_rel, -true_bias])
+
+
+def check_flight(columns: dict[str, np.ndarray], vehicle: Vehicle, config: crlb.BoundConfig,
+                 bands: Bands, *, loadings: tuple[str, ...] = LOADINGS, realisations: int = 200,
+                 seed: int = 0, duration: float | None = None) -> dict:
+    """Each recursion's final bias std and Monte-Carlo criterion times on one flight
+    (the flight's own initial coefficient and bias errors, the noise drawn)."""
+    unknown = [name for name in loadings if name not in LOADINGS]
+    if unknown:
+        raise UserError(f"unknown loading(s) {', '.join(unknown)} (known: {', '.join(LOADINGS)})")
+    if realisations < 1:
+        raise UserError("realisations must be >= 1")
+    flight = crlb.flight_steps(columns, vehicle)
+    duration = float(flight.t[-1]) if duration is None else duration
+    initial = initial_errors(columns, vehicle, flight.count)
+    n = 6 + 2 * flight.count
+    out: dict = {}
+    for name in loadings:
+        run = propagate(flight, vehicle, config, bands, name, initial, realisations,
+                        np.random.default_rng(seed))
+        bias_std = np.sqrt(np.maximum(run.cov.diagonal()[n - 3:], 0.0))
+        t_bias, never_bias = criterion_times(run.t, run.last_bias_outside, duration)
+        t_coeff, never_coeff = criterion_times(run.t, run.last_coeff_outside, duration)
+        out[name] = {"final_bias_std_band": (bias_std / bands.bias).tolist(),
+                     "t_bias_s": t_bias, "never_bias": never_bias,
+                     "t_coeff_s": t_coeff, "never_coeff": never_coeff}
+    return out
+
+
+def filter_figures(columns: dict[str, np.ndarray], bands: Bands) -> dict:
+    """The flown C filter's bias time, final error and std (band units) from its log."""
+    err = np.vstack([columns[f"est_bg_{a}"] - columns[f"true_bg_{a}"] for a in "xyz"])
+    std = np.array([columns[f"std_bg_{a}"][-1] for a in "xyz"])
+    return {"t_bias_s": table1.convergence_time(columns["t"], np.any(~(np.abs(err) <= bands.bias), axis=0)),
+            "final_bias_err_band": (err[:, -1] / bands.bias).tolist(),
+            "final_bias_std_band": (std / bands.bias).tolist()}
+
+
+def campaign_logs(directory: Path, trajectory: str, mode: str) -> tuple[dict, list[tuple[int, Path]]]:
+    """(table1.json's _conditions, [(seed, log)]) of a `propid campaign --keep-logs` output."""
+    table_path = directory / "table1.json"
+    if not table_path.is_file():
+        raise UserError(f"{directory}: no table1.json (run `propid campaign --keep-logs --out {directory}`)")
+    conditions = table1.load_table(table_path).get("_conditions") or {}
+    logs = sorted((directory / "logs").glob(f"{trajectory}_{mode}_*.csv"))
+    if not logs:
+        raise UserError(f"{directory}/logs: no {trajectory}_{mode}_NN.csv (was the campaign run with --keep-logs?)")
+    base_seed = int(conditions.get("base_seed", 1))
+    return conditions, [(base_seed + int(path.stem.rsplit("_", 1)[1]), path) for path in logs]
+
+
+def check_campaign(directory: Path, trajectory: str, mode: str, *, loadings: tuple[str, ...] = LOADINGS,
+                   realisations: int = 200, progress: bool = True) -> dict:
+    from tqdm import tqdm
+
+    from propid.campaign import CampaignConfig, bound_config, convergence_spec
+
+    conditions, logs = campaign_logs(directory, trajectory, mode)
+    fields = set(CampaignConfig.__dataclass_fields__)
+    config = CampaignConfig(**{key: value for key, value in conditions.items()
+                               if key in fields and key not in ("out_dir", "sitl")},
+                            out_dir=directory, sitl=Path(conditions.get("sitl", "propid_sitl")))
+    config.extra_args = list(config.extra_args)
+    bound_cfg = bound_config(config)
+    spec = convergence_spec(config)
+    bands = Bands(coeff=spec.coeff_threshold_rel, bias=spec.bias_threshold)
+    flights = []
+    for seed, path in tqdm(logs, desc="bound-check", unit="flight", disable=not progress):
+        columns = table1.read_log_columns(path)
+        vehicle = read_vehicle(path.with_suffix(".vehicle.json"))
+        bound = crlb.bound_along_log(columns, vehicle, bound_cfg)
+        record = {"seed": seed, "log": path.name, "flown": filter_figures(columns, bands),
+                  **bound.bound_times(bands.coeff, bands.bias)}
+        record.update(check_flight(columns, vehicle, bound_cfg, bands, loadings=loadings,
+                                   realisations=realisations, seed=seed,
+                                   duration=float(config.duration_s)))
+        flights.append(record)
+    return {"directory": str(directory), "trajectory": trajectory, "mode": mode,
+            "realisations": realisations, "loadings": list(loadings),
+            "bias_band_rad_s": bands.bias, "coeff_band_rel": bands.coeff,
+            "summary": summarise(flights, loadings, float(config.duration_s)), "flights": flights}
+
+
+def summarise(flights: list[dict], loadings: tuple[str, ...], duration: float) -> dict:
+    def mean(values):
+        return float(np.mean(values)) if values else None
+    filt = [f["flown"]["t_bias_s"] for f in flights]
+    out = {"flights": len(flights),
+           "flown_t_bias_s": mean([duration if v is None else v for v in filt]),
+           "flown_never_bias": sum(1 for v in filt if v is None),
+           "bound_t_bias_s": mean([duration if f["t_bound_bias_s"] is None else f["t_bound_bias_s"]
+                                   for f in flights]),
+           "bound_never_bias": sum(1 for f in flights if f["t_bound_bias_s"] is None)}
+    for name in loadings:
+        out[name] = {"t_bias_s": mean([f[name]["t_bias_s"] for f in flights]),
+                     "expected_never_bias": float(sum(f[name]["never_bias"] for f in flights)),
+                     "t_coeff_s": mean([f[name]["t_coeff_s"] for f in flights]),
+                     "expected_never_coeff": float(sum(f[name]["never_coeff"] for f in flights)),
+                     "final_bias_std_band_max": mean([max(f[name]["final_bias_std_band"]) for f in flights])}
+    return out
+
+
+def render(result: dict) -> str:
+    s = result["summary"]
+    lines = [f"{result['trajectory']} / {result['mode']}: {s['flights']} flights, "
+             f"{result['realisations']} Monte-Carlo realisations each",
+             "",
+             "| estimator | b_g time (s) | never (of flights) | kf & km time (s) | final b_g std / band (largest axis) |",
+             "|---|---|---|---|---|",
+             f"| flown C filter | {s['flown_t_bias_s']:.2f} | {s['flown_never_bias']} | | |",
+             f"| bound 1-sigma time | {s['bound_t_bias_s']:.2f} | {s['bound_never_bias']} | | |"]
+    label = {"none": "efficient (the bound's recursion)", "filter": "filter's loadings",
+             "torque-basis": "filter's loadings, kf in a torque basis"}
+    for name in result["loadings"]:
+        r = s[name]
+        lines.append(f"| {label[name]} | {r['t_bias_s']:.2f} | {r['expected_never_bias']:.1f} expected | "
+                     f"{r['t_coeff_s']:.3f} | {r['final_bias_std_band_max']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_json(result: dict, path: Path) -> None:
+    from propid import outputs
+
+    outputs.write_text(path, json.dumps(result, indent=1) + "\n")
