@@ -94,10 +94,12 @@ class Run:
 
 
 def propagate(flight: crlb.FlightSteps, vehicle: Vehicle, config: crlb.BoundConfig, bands: Bands,
-              loading: str, initial: np.ndarray | None, realisations: int, rng: np.random.Generator) -> Run:
+              loading: str, initial: np.ndarray | None, realisations: int, rng: np.random.Generator,
+              record=None) -> Run:
     """The covariance recursion with ``loading`` and the errors of the linear filter with
     its gains, under the true noise. ``initial``: the (coefficient, bias) errors at the
-    start, or None to draw them from the prior (Gaussian)."""
+    start, or None to draw them from the prior (Gaussian). ``record(k, errors)`` sees the
+    errors after every sample's update."""
     if loading not in LOADINGS:
         raise UserError(f"unknown loading {loading} (known: {', '.join(LOADINGS)})")
     t, dts, steps, count = flight.t, flight.dts, flight.steps, flight.count
@@ -145,6 +147,8 @@ def propagate(flight: crlb.FlightSteps, vehicle: Vehicle, config: crlb.BoundConf
                           - (err[:, axis] + err[:, n - 3 + axis]))
             err += innovation[:, None] * gain[None, :]
         P = 0.5 * (P + P.T)
+        if record is not None:
+            record(k, err)
         last_bias[np.any(np.abs(err[:, bias]) > bands.bias, axis=1)] = k
         last_coeff[np.any(np.abs(err[:, coeff]) > bands.coeff, axis=1)] = k
     return Run(t=t, cov=P, errors=err, last_bias_outside=last_bias, last_coeff_outside=last_coeff)
@@ -188,6 +192,69 @@ def check_flight(columns: dict[str, np.ndarray], vehicle: Vehicle, config: crlb.
     return out
 
 
+# The SE(3) controller's z loop (sitl/control/controller.c: natural frequency, damping).
+Z_LOOP_NATURAL_FREQ = 4.0
+Z_LOOP_DAMPING = 0.9
+GRAVITY = 9.81
+
+
+def z_loop_response(t: np.ndarray, thrust_error: np.ndarray) -> np.ndarray:
+    """Height error of the closed z loop driven by a relative collective-thrust error
+    (allocation with kf too large by eps: the rotors make (1 - eps) of the thrust
+    asked): e'' = -wn^2 e - 2 zeta wn e' - g eps, from rest; columns are realisations."""
+    out = np.zeros_like(thrust_error)
+    height = np.zeros(thrust_error.shape[1:])
+    rate = np.zeros(thrust_error.shape[1:])
+    wn, zeta = Z_LOOP_NATURAL_FREQ, Z_LOOP_DAMPING
+    for k in range(1, t.size):
+        h = (t[k] - t[k - 1]) / 4.0
+        for _ in range(4):  # semi-implicit Euler at a quarter of the sample period
+            rate = rate + h * (-wn * wn * height - 2.0 * zeta * wn * rate - GRAVITY * thrust_error[k - 1])
+            height = height + h * rate
+        out[k] = height
+    return out
+
+
+def z_excess(filter_columns: dict[str, np.ndarray], oracle_columns: dict[str, np.ndarray],
+             vehicle: Vehicle, config: crlb.BoundConfig, bands: Bands, *, realisations: int = 200,
+             seed: int = 0, horizon_s: float = 2.0) -> dict:
+    """Height RMSE of the Oracle flight, of the Filter flight, of the Oracle's height error
+    plus the z loop's response to the flown filter's collective-thrust error (the model's
+    check), and the same with the efficient estimator's Monte-Carlo collective error (the
+    bound's linear filter over the first ``horizon_s``, held after it)."""
+    rows = np.flatnonzero(np.isfinite(filter_columns["gyro_x"]))
+    orows = np.flatnonzero(np.isfinite(oracle_columns["gyro_x"]))
+    if rows.size != orows.size:
+        raise UserError("the Filter and Oracle logs have different gyro samples")
+    count = table1.rotor_count(filter_columns)
+    t = filter_columns["t"][rows]
+    speed_sq = np.vstack([filter_columns[f"omega_{i}"][rows] for i in range(1, count + 1)]).T ** 2
+    kf_true = np.vstack([filter_columns[f"true_kf_{i}"][rows] for i in range(1, count + 1)]).T
+    kf_est = np.vstack([filter_columns[f"est_kf_{i}"][rows] for i in range(1, count + 1)]).T
+    thrust = np.sum(kf_true * speed_sq, axis=1)
+    flown_error = np.sum((kf_est - kf_true) * speed_sq, axis=1) / thrust
+    oracle_z = (oracle_columns["pz"] - oracle_columns["ref_pz"])[orows]
+    filter_z = (filter_columns["pz"] - filter_columns["ref_pz"])[rows]
+    model_z = oracle_z + z_loop_response(t, flown_error[:, None])[:, 0]
+    # efficient estimator's collective error: d(eps)/d(kf_rel_i) = kf_nominal_i u_i / thrust
+    flight = crlb.flight_steps(filter_columns, vehicle)
+    horizon = min(int(np.searchsorted(flight.t, horizon_s)) + 1, flight.t.size)
+    short = crlb.FlightSteps(t=flight.t[:horizon], dts=flight.dts[:horizon - 1],
+                             steps=flight.steps[:horizon - 1], count=count)
+    weights = np.asarray(vehicle.kf_nominal, dtype=float)[None, :] * speed_sq / thrust[:, None]
+    efficient = np.empty((t.size, realisations))
+    initial = initial_errors(filter_columns, vehicle, count)
+    propagate(short, vehicle, config, bands, "none", initial, realisations, np.random.default_rng(seed),
+              record=lambda k, err: efficient.__setitem__(k, err[:, 3:3 + count] @ weights[k]))
+    efficient[horizon:] = efficient[horizon - 1]
+    efficient_z = oracle_z[:, None] + z_loop_response(t, efficient)
+
+    def rms(values, axis=None):
+        return np.sqrt(np.mean(values ** 2, axis=axis))
+    return {"oracle_rmse_z": float(rms(oracle_z)), "filter_rmse_z": float(rms(filter_z)),
+            "model_rmse_z": float(rms(model_z)), "efficient_rmse_z": float(np.mean(rms(efficient_z, axis=0)))}
+
+
 def filter_figures(columns: dict[str, np.ndarray], bands: Bands) -> dict:
     """The flown C filter's bias time, final error and std (band units) from its log."""
     err = np.vstack([columns[f"est_bg_{a}"] - columns[f"true_bg_{a}"] for a in "xyz"])
@@ -214,14 +281,10 @@ def check_campaign(directory: Path, trajectory: str, mode: str, *, loadings: tup
                    realisations: int = 200, progress: bool = True) -> dict:
     from tqdm import tqdm
 
-    from propid.campaign import CampaignConfig, bound_config, convergence_spec
+    from propid.campaign import bound_config, convergence_spec
 
     conditions, logs = campaign_logs(directory, trajectory, mode)
-    fields = set(CampaignConfig.__dataclass_fields__)
-    config = CampaignConfig(**{key: value for key, value in conditions.items()
-                               if key in fields and key not in ("out_dir", "sitl")},
-                            out_dir=directory, sitl=Path(conditions.get("sitl", "propid_sitl")))
-    config.extra_args = list(config.extra_args)
+    config = campaign_config(conditions, directory)
     bound_cfg = bound_config(config)
     spec = convergence_spec(config)
     bands = Bands(coeff=spec.coeff_threshold_rel, bias=spec.bias_threshold)
@@ -240,6 +303,60 @@ def check_campaign(directory: Path, trajectory: str, mode: str, *, loadings: tup
             "realisations": realisations, "loadings": list(loadings),
             "bias_band_rad_s": bands.bias, "coeff_band_rel": bands.coeff,
             "summary": summarise(flights, loadings, float(config.duration_s)), "flights": flights}
+
+
+def campaign_config(conditions: dict, directory: Path):
+    """The CampaignConfig a table1.json's _conditions describe (for the filter's bound config)."""
+    from propid.campaign import CampaignConfig
+
+    fields = set(CampaignConfig.__dataclass_fields__)
+    config = CampaignConfig(**{key: value for key, value in conditions.items()
+                               if key in fields and key not in ("out_dir", "sitl")},
+                            out_dir=directory, sitl=Path(conditions.get("sitl", "propid_sitl")))
+    config.extra_args = list(config.extra_args)
+    return config
+
+
+def z_excess_campaign(directory: Path, trajectory: str, *, realisations: int = 200,
+                      progress: bool = True) -> dict:
+    """z_excess for every seed with both a Filter and an Oracle log; the cell's ratios of
+    mean height RMSE to the Oracle's (Table 1's Filter / Oracle ratio)."""
+    from tqdm import tqdm
+
+    from propid.campaign import bound_config, convergence_spec
+
+    conditions, filter_logs = campaign_logs(directory, trajectory, "filter")
+    _, oracle_logs = campaign_logs(directory, trajectory, "oracle")
+    oracle_by_seed = dict(oracle_logs)
+    config = campaign_config(conditions, directory)
+    spec = convergence_spec(config)
+    bands = Bands(coeff=spec.coeff_threshold_rel, bias=spec.bias_threshold)
+    flights = []
+    pairs = [(seed, path) for seed, path in filter_logs if seed in oracle_by_seed]
+    for seed, path in tqdm(pairs, desc="z excess", unit="flight", disable=not progress):
+        record = z_excess(table1.read_log_columns(path), table1.read_log_columns(oracle_by_seed[seed]),
+                          read_vehicle(path.with_suffix(".vehicle.json")), bound_config(config), bands,
+                          realisations=realisations, seed=seed)
+        flights.append({"seed": seed, **record})
+    if not flights:
+        raise UserError(f"{directory}/logs: no seed with both a Filter and an Oracle {trajectory} log")
+    means = {key: float(np.mean([f[key] for f in flights]))
+             for key in ("oracle_rmse_z", "filter_rmse_z", "model_rmse_z", "efficient_rmse_z")}
+    ratios = {key.replace("_rmse_z", "_ratio"): value / means["oracle_rmse_z"]
+              for key, value in means.items() if key != "oracle_rmse_z"}
+    return {"trajectory": trajectory, "realisations": realisations, "flights": flights,
+            "summary": {**means, **ratios}}
+
+
+def render_z_excess(result: dict) -> str:
+    s = result["summary"]
+    return (f"{result['trajectory']} height RMSE, mean of {len(result['flights'])} seeds "
+            f"(ratio to the Oracle's):\n\n"
+            "| Oracle | Filter flown | model: Oracle + z loop x filter's collective error | "
+            "model: Oracle + z loop x efficient estimator's |\n|---|---|---|---|\n"
+            f"| {s['oracle_rmse_z'] * 1e3:.3f} mm | {s['filter_rmse_z'] * 1e3:.3f} mm ({s['filter_ratio']:.3f}) | "
+            f"{s['model_rmse_z'] * 1e3:.3f} mm ({s['model_ratio']:.3f}) | "
+            f"{s['efficient_rmse_z'] * 1e3:.3f} mm ({s['efficient_ratio']:.3f}) |\n")
 
 
 def summarise(flights: list[dict], loadings: tuple[str, ...], duration: float) -> dict:

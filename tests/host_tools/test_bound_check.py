@@ -106,3 +106,23 @@ def test_cli_errors(tmp_path, capsys):
     assert main(["bound-check", str(tmp_path)]) == 1
     assert "--keep-logs" in capsys.readouterr().err
     assert main(["bound-check", str(tmp_path), "--realisations", "0"]) == 1
+
+
+def test_z_loop_settles_at_the_thrust_shortfall_over_its_stiffness():
+    """A constant relative thrust error eps leaves e = -g eps / wn^2 (no integral action),
+    reached without overshoot beyond the damping's few percent."""
+    t = np.arange(0, 5.0, 0.002)
+    eps = np.full((t.size, 2), [0.01, -0.02])
+    height = bound_check.z_loop_response(t, eps)
+    expected = -bound_check.GRAVITY * np.array([0.01, -0.02]) / bound_check.Z_LOOP_NATURAL_FREQ ** 2
+    assert np.allclose(height[-1], expected, rtol=1e-3)
+    assert np.all(np.abs(height) <= np.abs(expected) * 1.01)
+    assert np.all(height[0] == 0.0)
+
+
+def test_cli_z_excess_needs_oracle_logs(tmp_path, capsys):
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "table1.json").write_text('{"circle": {}, "_conditions": {"base_seed": 1}}')
+    (tmp_path / "logs" / "circle_filter_00.csv").write_text("t\n0\n")
+    assert main(["bound-check", str(tmp_path), "--z-excess"]) == 1
+    assert "no circle_oracle_NN.csv" in capsys.readouterr().err
