@@ -98,7 +98,7 @@ def propagate(flight: crlb.FlightSteps, vehicle: Vehicle, config: crlb.BoundConf
               record=None) -> Run:
     """The covariance recursion with ``loading`` and the errors of the linear filter with
     its gains, under the true noise. ``initial``: the (coefficient, bias) errors at the
-    start, or None to draw them from the prior (Gaussian). ``record(k, errors)`` sees the
+    start, or None to draw them from the prior (Gaussian). ``record(k, errors, cov)`` sees the
     errors after every sample's update."""
     if loading not in LOADINGS:
         raise UserError(f"unknown loading {loading} (known: {', '.join(LOADINGS)})")
@@ -148,7 +148,7 @@ def propagate(flight: crlb.FlightSteps, vehicle: Vehicle, config: crlb.BoundConf
             err += innovation[:, None] * gain[None, :]
         P = 0.5 * (P + P.T)
         if record is not None:
-            record(k, err)
+            record(k, err, P)
         last_bias[np.any(np.abs(err[:, bias]) > bands.bias, axis=1)] = k
         last_coeff[np.any(np.abs(err[:, coeff]) > bands.coeff, axis=1)] = k
     return Run(t=t, cov=P, errors=err, last_bias_outside=last_bias, last_coeff_outside=last_coeff)
@@ -198,6 +198,10 @@ Z_LOOP_DAMPING = 0.9
 GRAVITY = 9.81
 
 
+COLLECTIVE_TIMES_S = (0.05, 0.1, 0.2, 0.3, 0.5)  # where --z-excess reports the collective's std
+Z_WINDOWS_S = ((0.0, 0.5), (0.5, 2.0), (2.0, 5.0), (5.0, math.inf))  # and the height RMSE
+
+
 def z_loop_response(t: np.ndarray, thrust_error: np.ndarray) -> np.ndarray:
     """Height error of the closed z loop driven by a relative collective-thrust error
     (allocation with kf too large by eps: the rotors make (1 - eps) of the thrust
@@ -244,15 +248,26 @@ def z_excess(filter_columns: dict[str, np.ndarray], oracle_columns: dict[str, np
     weights = np.asarray(vehicle.kf_nominal, dtype=float)[None, :] * speed_sq / thrust[:, None]
     efficient = np.empty((t.size, realisations))
     initial = initial_errors(filter_columns, vehicle, count)
+    bound_std = np.full(t.size, np.nan)  # the bound's std of the collective thrust error
+
+    def record(k, err, cov):
+        efficient[k] = err[:, 3:3 + count] @ weights[k]
+        bound_std[k] = math.sqrt(max(float(weights[k] @ cov[3:3 + count, 3:3 + count] @ weights[k]), 0.0))
     propagate(short, vehicle, config, bands, "none", initial, realisations, np.random.default_rng(seed),
-              record=lambda k, err: efficient.__setitem__(k, err[:, 3:3 + count] @ weights[k]))
+              record=record)
     efficient[horizon:] = efficient[horizon - 1]
     efficient_z = oracle_z[:, None] + z_loop_response(t, efficient)
 
     def rms(values, axis=None):
         return np.sqrt(np.mean(values ** 2, axis=axis))
+    at = [int(np.searchsorted(t, when)) for when in COLLECTIVE_TIMES_S]
+    windows = [(t >= start) & (t < end) for start, end in Z_WINDOWS_S]
     return {"oracle_rmse_z": float(rms(oracle_z)), "filter_rmse_z": float(rms(filter_z)),
-            "model_rmse_z": float(rms(model_z)), "efficient_rmse_z": float(np.mean(rms(efficient_z, axis=0)))}
+            "model_rmse_z": float(rms(model_z)), "efficient_rmse_z": float(np.mean(rms(efficient_z, axis=0))),
+            "collective_bound_std": [float(bound_std[k]) for k in at],
+            "collective_filter_error": [float(flown_error[k]) for k in at],
+            "oracle_rmse_z_windows": [float(rms(oracle_z[w])) if w.any() else None for w in windows],
+            "filter_rmse_z_windows": [float(rms(filter_z[w])) if w.any() else None for w in windows]}
 
 
 def filter_figures(columns: dict[str, np.ndarray], bands: Bands) -> dict:
@@ -344,6 +359,16 @@ def z_excess_campaign(directory: Path, trajectory: str, *, realisations: int = 2
              for key in ("oracle_rmse_z", "filter_rmse_z", "model_rmse_z", "efficient_rmse_z")}
     ratios = {key.replace("_rmse_z", "_ratio"): value / means["oracle_rmse_z"]
               for key, value in means.items() if key != "oracle_rmse_z"}
+    bound_std = np.array([f["collective_bound_std"] for f in flights])
+    error = np.array([f["collective_filter_error"] for f in flights])
+    means["collective_times_s"] = list(COLLECTIVE_TIMES_S)
+    means["collective_bound_std_rms"] = np.sqrt(np.mean(bound_std ** 2, axis=0)).tolist()
+    means["collective_filter_error_rms"] = np.sqrt(np.mean(error ** 2, axis=0)).tolist()
+    means["collective_error_over_bound_rms"] = np.sqrt(np.mean((error / bound_std) ** 2, axis=0)).tolist()
+    for who in ("oracle", "filter"):
+        per_window = zip(*[f[f"{who}_rmse_z_windows"] for f in flights])
+        means[f"{who}_rmse_z_windows"] = [float(np.mean(values)) if None not in values else None
+                                          for values in per_window]
     return {"trajectory": trajectory, "realisations": realisations, "flights": flights,
             "summary": {**means, **ratios}}
 
@@ -356,7 +381,15 @@ def render_z_excess(result: dict) -> str:
             "model: Oracle + z loop x efficient estimator's |\n|---|---|---|---|\n"
             f"| {s['oracle_rmse_z'] * 1e3:.3f} mm | {s['filter_rmse_z'] * 1e3:.3f} mm ({s['filter_ratio']:.3f}) | "
             f"{s['model_rmse_z'] * 1e3:.3f} mm ({s['model_ratio']:.3f}) | "
-            f"{s['efficient_rmse_z'] * 1e3:.3f} mm ({s['efficient_ratio']:.3f}) |\n")
+            f"{s['efficient_rmse_z'] * 1e3:.3f} mm ({s['efficient_ratio']:.3f}) |\n\n"
+            "Height RMSE per window (mean of the seeds), Oracle / Filter [mm]: "
+            + ", ".join(f"{start:g}-{end:g} s {o * 1e3:.2f} / {f * 1e3:.2f}" for (start, end), o, f in
+                        zip(Z_WINDOWS_S, s["oracle_rmse_z_windows"], s["filter_rmse_z_windows"])
+                        if o is not None and f is not None) + "\n"
+            "Collective thrust at " + " / ".join(f"{x:g}" for x in s["collective_times_s"]) + " s, RMS over the seeds: "
+            "bound std " + " / ".join(f"{100 * x:.2f}" for x in s["collective_bound_std_rms"]) + " %, "
+            "filter error " + " / ".join(f"{100 * x:.2f}" for x in s["collective_filter_error_rms"]) + " %, "
+            "error / bound std " + " / ".join(f"{x:.2f}" for x in s["collective_error_over_bound_rms"]) + "\n")
 
 
 def summarise(flights: list[dict], loadings: tuple[str, ...], duration: float) -> dict:

@@ -126,3 +126,23 @@ def test_cli_z_excess_needs_oracle_logs(tmp_path, capsys):
     (tmp_path / "logs" / "circle_filter_00.csv").write_text("t\n0\n")
     assert main(["bound-check", str(tmp_path), "--z-excess"]) == 1
     assert "no circle_oracle_NN.csv" in capsys.readouterr().err
+
+
+def test_z_excess_model_is_the_oracle_when_the_filter_knows_the_thrust():
+    cols, veh = flight()
+    samples = cols["t"].size
+    oracle = dict(cols)
+    oracle["pz"] = 1.0 + 1e-3 * np.sin(3.0 * cols["t"])
+    oracle["ref_pz"] = np.ones(samples)
+    filt = dict(oracle)
+    for i in range(1, N + 1):
+        filt[f"est_kf_{i}"] = cols[f"true_kf_{i}"].copy()  # no collective error at all
+    filt["pz"] = oracle["pz"] + 2e-3
+    out = bound_check.z_excess(filt, oracle, veh, CONFIG, BANDS, realisations=30, horizon_s=1.0)
+    assert out["model_rmse_z"] == pytest.approx(out["oracle_rmse_z"], rel=1e-12)
+    assert out["filter_rmse_z"] > out["oracle_rmse_z"]
+    # the efficient estimator starts from the flight's (non-zero) coefficient errors
+    assert out["efficient_rmse_z"] != pytest.approx(out["oracle_rmse_z"], rel=1e-3)
+    assert out["oracle_rmse_z_windows"][-1] is None  # a 3 s flight has no 5 s- window
+    std = out["collective_bound_std"]
+    assert std[0] > std[-1] > 0.0
