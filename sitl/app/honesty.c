@@ -124,6 +124,33 @@ int sitl_honesty_truth(const propid_filter_t *filter, double true_torque_scale, 
     return 2 * n_rotor + 4;
 }
 
+/* 1 when the filter's whole stored P (every state, in its own basis: a
+ * reflection of the drag block does not change definiteness) is positive
+ * definite: Cholesky in double of the stored upper triangle. */
+static int full_cov_positive_definite(const propid_filter_t *filter)
+{
+    const int n = filter->derived.state_count;
+    double l[PROPID_MAX_STATES][PROPID_MAX_STATES];
+    for (int j = 0; j < n; j++) {
+        double d = (double)filter->core.cov[propid_cov_index((uint8_t)j, (uint8_t)j)];
+        for (int k = 0; k < j; k++) {
+            d -= l[j][k] * l[j][k];
+        }
+        if (!(d > 0.0)) {
+            return 0;
+        }
+        l[j][j] = sqrt(d);
+        for (int i = j + 1; i < n; i++) {
+            double v = (double)filter->core.cov[propid_cov_index((uint8_t)j, (uint8_t)i)];
+            for (int k = 0; k < j; k++) {
+                v -= l[i][k] * l[j][k];
+            }
+            l[i][j] = v / l[j][j];
+        }
+    }
+    return 1;
+}
+
 static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const double *true_kf,
                      const double *true_km, const double true_bias[3])
 {
@@ -241,6 +268,8 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
      * cost the simulator several per cent, and 50 Hz samples a 10 s flight
      * 500 times. */
     if (h->steps++ % HONESTY_NEES_EVERY == 0) {
+        h->cov_checks++;
+        h->cov_not_pd += !full_cov_positive_definite(filter);
         add_nees(h, filter, true_kf, true_km, true_bias);
     }
 }

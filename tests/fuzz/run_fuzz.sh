@@ -13,6 +13,9 @@
 #                 positive definite (make test's short run: the seed corpus
 #                 holds inputs that did, so a regression fails the run)
 #
+# FUZZ_CFLAGS (environment) adds compiler flags to the harness build, e.g.
+# -DPROPID_FUZZ_UPDATE_SIZED_LOADING=1 flies every input with that option.
+#
 # Starts from the committed seed corpus (tests/fuzz/corpus, read-only) plus the
 # working corpus in DIR/corpus. Exits non-zero on any crash, sanitizer report or
 # failed check (a crashing input is kept in DIR as crash-*).
@@ -56,7 +59,7 @@ for f in "$repo"/firmware/src/propid_*.c; do
     esac
 done
 binary=$out/fuzz_api
-"$clang" -std=c11 -g -O2 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all -DPROPID_FUZZ_CHOLESKY_ABORT=0 \
+"$clang" -std=c11 -g -O2 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all -DPROPID_FUZZ_CHOLESKY_ABORT=0 ${FUZZ_CFLAGS:-} \
     -I "$repo/firmware/include" "$here/fuzz_api.c" "${sources[@]}" -lm -o "$binary"
 
 cd "$out"

@@ -285,9 +285,51 @@ static void test_lost_rotor_recovery_is_asked_of_an_accurate_rotor(void)
     }
 }
 
+/* The definiteness check reads the filter's whole P, not only the NEES block: the prior
+ * passes; two body rates correlated beyond 1 (states the NEES does not read) fail it while
+ * the NEES is still taken; a coefficient pair correlated beyond 1 fails both (the NEES
+ * sample is skipped). */
+static void test_covariance_check_reads_the_whole_p(void)
+{
+    static propid_filter_t filter;
+    propid_config_t config;
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.17f, 0.785398f, 1.0f,
+                                                                 (float)nominal_kf, (float)nominal_km));
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    const double kf[4] = {nominal_kf, nominal_kf, nominal_kf, nominal_kf};
+    const double km[4] = {nominal_km, nominal_km, nominal_km, nominal_km};
+    const double bias[3] = {0.0, 0.0, 0.0};
+    propid_estimate_t estimate;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    sitl_honesty_t h;
+    sitl_honesty_init(&h, &filter, kf, km, 1.0);
+    sitl_honesty_add(&h, 0.0, &estimate, &filter, kf, km, bias);
+    TEST_ASSERT_EQUAL_INT(1, h.cov_checks);
+    TEST_ASSERT_EQUAL_INT(0, h.cov_not_pd);
+    TEST_ASSERT_EQUAL_INT(1, h.nees_samples);
+
+    const float rate_var = filter.core.cov[propid_cov_index(0u, 0u)];
+    filter.core.cov[propid_cov_index(0u, 1u)] = 1.5f * rate_var; /* correlation 1.5 */
+    sitl_honesty_init(&h, &filter, kf, km, 1.0);
+    sitl_honesty_add(&h, 0.0, &estimate, &filter, kf, km, bias);
+    TEST_ASSERT_EQUAL_INT(1, h.cov_not_pd);
+    TEST_ASSERT_EQUAL_INT(1, h.nees_samples);
+
+    filter.core.cov[propid_cov_index(0u, 1u)] = 0.0f;
+    const uint8_t kf0 = filter.derived.layout.thrust;
+    filter.core.cov[propid_cov_index(kf0, (uint8_t)(kf0 + 1u))] = 1.5f * filter.core.cov[propid_cov_index(kf0, kf0)];
+    sitl_honesty_init(&h, &filter, kf, km, 1.0);
+    sitl_honesty_add(&h, 0.0, &estimate, &filter, kf, km, bias);
+    TEST_ASSERT_EQUAL_INT(1, h.cov_not_pd);
+    TEST_ASSERT_EQUAL_INT(0, h.nees_samples);
+}
+
 int main(void)
 {
     UNITY_BEGIN();
+    RUN_TEST(test_covariance_check_reads_the_whole_p);
     RUN_TEST(test_true_torque_scale_is_the_file_over_the_true_inertia);
     RUN_TEST(test_truth_with_the_scale_state_is_s_kf_and_1_over_s);
     RUN_TEST(test_truth_without_the_scale_state_is_kf);

@@ -42,6 +42,9 @@ Figures:
   the RMS of the inertia scale error over the plan's flights
   (plan_inertia_rel_rms; --inertia-std overrides it for every flight);
 - cov_repairs: covariance repairs, summed;
+- cov_checks / cov_not_pd: the filter's whole covariance checked for positive
+  definiteness (Cholesky in double) at every NEES sample (every 10th control
+  step, every flight), and the checks it failed;
 - diverged_filter / diverged_oracle: flights the simulator stopped for
   divergence (exit 3) in each mode; `filter_only_diverged`: cases where the
   filter's flight diverged and the oracle's did not.
@@ -213,7 +216,7 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
            "lost_rotor_from_accurate": 0, "lost_rotor_recovered_from_accurate": 0, "nees_in_bounds_pct": None, "nees_samples": 0, "nees_by_group": {},
            "false_converged": 0, "converged_claims": 0, "false_converged_pct": None,
            "false_converged_by_group": {}, "false_converged_flights": [], "nees_flights": [],
-           "cov_repairs": 0, "model_mismatch_windows": 0, "diverged_filter": 0, "diverged_oracle": 0,
+           "cov_repairs": 0, "cov_checks": 0, "cov_not_pd": 0, "model_mismatch_windows": 0, "diverged_filter": 0, "diverged_oracle": 0,
            "filter_only_diverged": 0, "errors": []}
     nees_in = nees_all = 0
     groups: dict[str, list[int]] = {}
@@ -236,6 +239,8 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
             honesty = data.get("honesty", {})
             out["nan_count"] += int(honesty.get("nonfinite_estimates", 0))
             out["cov_repairs"] += int(data.get("cov_repairs", 0))
+            out["cov_checks"] += int(honesty.get("cov_checks", 0))
+            out["cov_not_pd"] += int(honesty.get("cov_not_pd", 0))
             out["model_mismatch_windows"] += int(data.get("model_mismatch_windows", 0))
             if data["exit"] == 3:
                 out["diverged_" + mode] += 1
