@@ -66,7 +66,6 @@ void propid_config_default(propid_config_t *config)
     config->motor_time_constant = 0.01f;
     config->input_error_compensation = 0u;
     config->rotor_speed_noise_hold = 0u;
-    config->update_sized_loading = 0u;
     config->motor_command_instrument = 0u;
     config->motor_command_lag = 0.03f;
     config->motor_command_memory = 10.0f;
@@ -233,11 +232,6 @@ static void derive_quad_layout(const propid_config_t *config, const geometry_t *
         propid_aero_damping_on(out)) {
         return; /* the fixed kernels know neither the optional states nor the rotor terms */
     }
-#if PROPID_GENERAL_VEHICLES
-    if (out->update_sized_loading) {
-        return; /* the fixed kernels carry the fixed loading */
-    }
-#endif
     for (uint8_t a = 0; a < 3u; ++a) {
         /* Gyroscopic block of a diagonal inertia: A_ab depends on the third rate only. */
         for (uint8_t b = 0; b < 3u; ++b) {
@@ -600,11 +594,6 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         (config->rotor_speed_noise_hold && (!(config->rotor_speed_noise > 0.0f) || config->input_error_compensation))) {
         PROPID_BAD("rotor_speed_noise_hold");
     }
-    /* The update-sized loading runs on the general path only (the quad build has
-     * the fixed loading in its kernels). */
-    if (config->update_sized_loading > 1u || (config->update_sized_loading && !PROPID_GENERAL_VEHICLES)) {
-        PROPID_BAD("update_sized_loading");
-    }
 
     /* The commands' first stage (propid_instrument.c): compiled out, only 0. A lag
      * or memory is needed only with it on; off, any finite non-negative value. */
@@ -630,9 +619,6 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     out.input_noise_time = config->rotor_speed_noise_time;
     out.input_compensation = config->input_error_compensation;
     out.input_noise_hold = config->rotor_speed_noise_hold;
-#endif
-#if PROPID_GENERAL_VEHICLES
-    out.update_sized_loading = config->update_sized_loading;
 #endif
     out.layout.rate = 0u;
     out.layout.thrust = propid_first_thrust();
@@ -723,11 +709,6 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     }
 #endif
     out.quad_core = (uint8_t)(rotor_count == 4u && out.state_count == PROPID_QUAD_STATES);
-#if PROPID_GENERAL_VEHICLES
-    if (out.update_sized_loading) {
-        out.quad_core = 0u; /* the one pass of the general path carries the update-sized loading */
-    }
-#endif
 
     out.gyro_var = config->gyro_noise_density * config->gyro_noise_density *
                    config->gyro_sample_rate_hz;

@@ -21,9 +21,6 @@ void propid_cov_set_prior(const propid_derived_t *derived, const propid_drag_bas
     const uint8_t n = derived->state_count;
     memset(core->state, 0, sizeof(core->state));
     memset(core->cov, 0, sizeof(core->cov));
-#if PROPID_GENERAL_VEHICLES
-    propid_cov_low_clear(core);
-#endif
     const uint8_t first_bias = propid_first_bias(rotor_count);
     for (uint8_t k = propid_first_thrust(); k < first_bias; ++k) {
         core->state[k] = 1.0f; /* coefficients start at their nominal */
@@ -61,9 +58,6 @@ void propid_cov_reset_state(const propid_derived_t *derived, propid_core_t *core
         core->cov[propid_cov_index(index, j)] = 0.0f;
     }
     core->cov[propid_cov_index(index, index)] = propid_prior_var(derived, index);
-#if PROPID_GENERAL_VEHICLES
-    propid_cov_low_clear(core);
-#endif
 }
 
 int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
@@ -102,11 +96,6 @@ int propid_cov_repair(const propid_derived_t *derived, propid_core_t *core)
             }
         }
     }
-#if PROPID_GENERAL_VEHICLES
-    if (changed) {
-        propid_cov_low_clear(core);
-    }
-#endif
     return changed;
 }
 
@@ -142,9 +131,6 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
             }
             *diagonal = propid_var_ceiling(derived, i);
         }
-#if PROPID_GENERAL_VEHICLES
-        propid_cov_low_clear(core); /* (rare: a bound was applied) */
-#endif
     }
     return repaired;
 }

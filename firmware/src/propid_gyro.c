@@ -414,55 +414,6 @@ fuse_usual_any(const float *restrict cov, propid_core_t *restrict core,
     return 1;
 }
 
-/* apply_three_any with the update-sized loading (propid_internal.h): the
- * non-rate block's elements P = cov + cov_low downdated by two-sums (no rounding
- * of the element's own size is committed), then each non-rate variance loaded by
- * PROPID_UPDATE_SIZED_LOADING of what the update removed from it. The rate rows
- * as in apply_three_any. */
-static __attribute__((noinline)) int
-apply_three_compensated(float *restrict cov, propid_core_t *restrict core,
-                        const pending_any_t *restrict pending, const propid_derived_t *restrict derived)
-{
-    float *state = core->state;
-    float *low = core->cov_low;
-    const float nu0 = core->innovation[0];
-    const float nu1 = core->innovation[1];
-    const float nu2 = core->innovation[2];
-    const uint8_t n = derived->state_count;
-    const float *h0 = pending->h[0];
-    const float *h1 = pending->h[1];
-    const float *h2 = pending->h[2];
-    uint32_t outside = 0u;
-    for (uint8_t i = 0; i < n; ++i) {
-        const float g0 = h0[i] * pending->inv_var[0];
-        const float g1 = h1[i] * pending->inv_var[1];
-        const float g2 = h2[i] * pending->inv_var[2];
-        state[i] += g0 * nu0 + g1 * nu1 + g2 * nu2;
-        const uint32_t first = propid_cov_index(i, i);
-        float *row = &cov[first] - i; /* row[j] = P_ij, j >= i */
-        float *row_low = &low[first] - i;
-        if (i < 3u) {
-            for (uint8_t j = i; j < n; ++j) {
-                row[j] = row[j] - g0 * h0[j] - g1 * h1[j] - g2 * h2[j];
-            }
-        } else {
-            for (uint8_t j = i; j < n; ++j) {
-                float value = row[j];
-                value = propid_two_sum(value, -(g0 * h0[j]), &row_low[j]);
-                value = propid_two_sum(value, -(g1 * h1[j]), &row_low[j]);
-                value = propid_two_sum(value, -(g2 * h2[j]), &row_low[j]);
-                row[j] = value;
-                propid_renormalise(&row[j], &row_low[j]);
-            }
-            const float removed = g0 * h0[i] + g1 * h1[i] + g2 * h2[i];
-            row[i] = propid_two_sum(row[i], PROPID_UPDATE_SIZED_LOADING * removed, &row_low[i]);
-            propid_renormalise(&row[i], &row_low[i]);
-        }
-        outside |= propid_outside_positive_range(row[i], propid_floor_bits(derived, i), propid_range_bits(derived, i));
-    }
-    return outside == 0u;
-}
-
 /* P_ij -= sum_k g_k,i h_k,j on the stored upper triangle, x += sum_k g_k nu_k, for
  * any n; returns 1 when every new variance is inside its floor and ceiling. */
 static __attribute__((noinline)) int
@@ -553,8 +504,7 @@ static PROPID_QUAD_INLINE int fuse_one_pass(propid_filter_t *filter, const float
         if (!fuse_usual_any(cov, core, derived, &pending, gyro)) {
             return 0;
         }
-        inside = derived->update_sized_loading ? apply_three_compensated(core->cov, core, &pending, derived)
-                                               : apply_three_any(core->cov, core, &pending, derived);
+        inside = apply_three_any(core->cov, core, &pending, derived);
     } else
 #endif
     {

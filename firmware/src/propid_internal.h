@@ -243,51 +243,6 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
  * P_hh (S += R_eff - R): float32 rounding treated as measurement noise. */
 #define PROPID_UPDATE_LOADING (64.0f * PROPID_VAR_LOADING)
 
-/* Update-sized loading (config.update_sized_loading; experimental, docs/reliability.md
- * "Honest sigma on exact speeds"): instead of the fixed (1 + PROPID_VAR_LOADING) per
- * prediction, every state but the rates gets PROPID_UPDATE_SIZED_LOADING times the
- * variance a fused update removed from it (g_i h_i = h_i^2 / S), added to its
- * diagonal after the downdate: the product g_i h_j is rounded by eps |g_i h_j| at
- * most, which a diagonal of n eps h_i^2 / S covers (Cauchy-Schwarz). The
- * subtraction's own rounding (eps |P_ij|, whatever the update's size) is not
- * committed: the non-rate elements are kept as cov + cov_low and downdated by
- * two-sums. The rate rows, which the prediction recomputes every step, are not
- * compensated; their loading (the rate block's loading above, l eps of the scale
- * m (P_aa + sum_p G_ap^2 P_pp)) is taken 64 times larger: PROPID_SIZED_RATE_LOADING
- * multiplies l m (...) where the fixed loading has PROPID_VAR_LOADING (8 times lost
- * definiteness on 47 SITL checks of soak plan 1, 64 times on none). */
-#define PROPID_UPDATE_SIZED_LOADING (256.0f * PROPID_VAR_LOADING)
-#define PROPID_SIZED_RATE_LOADING (64.0f * PROPID_VAR_LOADING)
-
-#if PROPID_GENERAL_VEHICLES
-/* a + b rounded, and its exact rounding error added to *low (Knuth's two-sum:
- * six float operations, no branch, exact in round-to-nearest without
- * reassociation). The update-sized loading's elements P = cov + cov_low keep
- * what the float32 sum drops, so the subtraction of an update commits no
- * rounding of the size of the element itself. */
-static inline float propid_two_sum(float a, float b, float *low)
-{
-    const float sum = a + b;
-    const float b_part = sum - a;
-    *low += (a - (sum - b_part)) + (b - b_part);
-    return sum;
-}
-
-/* cov + low renormalised: the sum into cov, what it drops back into low. */
-static inline void propid_renormalise(float *cov, float *low)
-{
-    const float low_in = *low;
-    *low = 0.0f;
-    *cov = propid_two_sum(*cov, low_in, low);
-}
-
-/* Forget the compensation (any writer of P without it: bounds, repair, resets). */
-static inline void propid_cov_low_clear(propid_core_t *core)
-{
-    memset(core->cov_low, 0, sizeof(core->cov_low));
-}
-#endif
-
 /* A "converged" claim (docs/reliability.md "Converged claims"): the coefficient's
  * relative error is below converged_rel_std. With an honest Gaussian std that
  * holds with 99.73 % when PROPID_CLAIM_SIGMAS std < converged_rel_std (the old

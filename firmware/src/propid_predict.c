@@ -311,8 +311,7 @@ __attribute__((noinline)) propid_status_t propid_predict_stage(const propid_filt
  * (plain loops, small code; the quad layout has its straight-line kernel below). */
 static __attribute__((noinline)) void predict_covariance_any(
                  const propid_derived_t *derived, float *cov, float dt,
-                 const float jacobian_dt[3][PROPID_JAC_ROW], const uint8_t n, float drag_factor,
-                 float other_factor, float *low)
+                 const float jacobian_dt[3][PROPID_JAC_ROW], const uint8_t n, float drag_factor)
 {
     /* T = rate rows of F P = P_a + sum_p G_ap P_(column p). */
     float rows[3][PROPID_MAX_STATES];
@@ -410,10 +409,8 @@ static __attribute__((noinline)) void predict_covariance_any(
             for (uint8_t p = 0; p < count; ++p) {
                 value += row[column[p]] * g[p];
             }
-            if (a == b) { /* Q dt and the rate block's rounding loading (above); with the
-                           * update-sized loading 64 times that (propid_internal.h) */
-                value += (low != NULL ? PROPID_SIZED_RATE_LOADING : PROPID_VAR_LOADING) * scale[b] +
-                         propid_process_psd(derived, b) * dt;
+            if (a == b) { /* Q dt and the rate block's rounding loading (above) */
+                value += PROPID_VAR_LOADING * scale[b] + propid_process_psd(derived, b) * dt;
             }
             cov[propid_cov_index(a, b)] = value;
         }
@@ -427,13 +424,8 @@ static __attribute__((noinline)) void predict_covariance_any(
         cov[propid_cov_index(1u, j)] = t1;
         cov[propid_cov_index(2u, j)] = t2;
         float *diagonal = &cov[propid_cov_index(j, j)];
-        if (low != NULL) { /* the update-sized loading: Q dt added exactly (propid_internal.h) */
-            float *diagonal_low = &low[propid_cov_index(j, j)];
-            *diagonal = propid_two_sum(*diagonal, propid_process_psd(derived, j) * dt, diagonal_low);
-            propid_renormalise(diagonal, diagonal_low);
-            continue;
-        }
-        const float factor = propid_state_kind(derived, j) == PROPID_KIND_DRAG ? drag_factor : other_factor;
+        const float factor = propid_state_kind(derived, j) == PROPID_KIND_DRAG ? drag_factor
+                                                                              : 1.0f + PROPID_VAR_LOADING;
         *diagonal = factor * *diagonal + propid_process_psd(derived, j) * dt;
     }
 }
@@ -619,10 +611,7 @@ __attribute__((noinline)) void propid_predict_covariance(const propid_derived_t 
     const float drag_factor = drag_loading_factor(core);
 #if PROPID_GENERAL_VEHICLES
     if (!derived->quad_layout) {
-        /* The update-sized loading (propid_internal.h) replaces the fixed one on every
-         * state but the rates, whose loading is their prediction's own rounding scale. */
-        predict_covariance_any(derived, core->cov, dt, jacobian_dt, derived->state_count, drag_factor,
-                               1.0f + PROPID_VAR_LOADING, derived->update_sized_loading ? core->cov_low : NULL);
+        predict_covariance_any(derived, core->cov, dt, jacobian_dt, derived->state_count, drag_factor);
 #if PROPID_WITH_ACCEL
         add_scale_walk(derived, core, dt); /* (the quad layout has no scale state) */
 #endif

@@ -88,18 +88,6 @@ propid_scalar_result_t propid_scalar_update(propid_filter_t *filter, const propi
         const float gain = ph[i] * inv_innovation_var;
         core->state[i] += ph[i] * step;
         float *cov_row = propid_cov_row(cov, i);
-#if PROPID_GENERAL_VEHICLES
-        if (derived->update_sized_loading && i >= 3u) { /* (propid_internal.h; apply_three_compensated) */
-            float *row_low = &core->cov_low[propid_cov_index(i, i)] - i;
-            for (uint8_t j = i; j < n; ++j) {
-                cov_row[j] = propid_two_sum(cov_row[j], -(gain * ph[j]), &row_low[j]);
-                propid_renormalise(&cov_row[j], &row_low[j]);
-            }
-            cov_row[i] = propid_two_sum(cov_row[i], PROPID_UPDATE_SIZED_LOADING * (gain * ph[i]), &row_low[i]);
-            propid_renormalise(&cov_row[i], &row_low[i]);
-            continue;
-        }
-#endif
         for (uint8_t j = i; j < n; ++j) {
             cov_row[j] -= gain * ph[j];
         }

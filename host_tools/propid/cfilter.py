@@ -162,7 +162,6 @@ _OPTIONAL_FIELDS = [
     ("input_error_compensation", ctypes.c_uint8),
     ("motor_command_instrument", ctypes.c_uint8),
     ("rotor_speed_noise_hold", ctypes.c_uint8),
-    ("update_sized_loading", ctypes.c_uint8),
     ("motor_command_lag", ctypes.c_float),
     ("motor_command_memory", ctypes.c_float),
     ("motor_command_min_f", ctypes.c_float),

@@ -318,10 +318,6 @@ static const opt_t options[] = {
          "filter: that error's correlation time per rotor from the telemetry,\n"
          "how long the rotor's value has stood (the configured time its\n"
          "ceiling; docs/math.md §14). Also with --filter-sensor-errors"),
-    FLAG(NULL, "filter-update-sized-loading", filter_update_sized_loading, 1,
-         "filter: the coefficients' and biases' rounding loading sized by\n"
-         "each update instead of a fixed (1 + eps) per step (docs/math.md\n"
-         "§2; experimental, off by default)"),
     NUMBER(NULL, "filter-inertia-std", filter_inertia_rel_std, 0.0, 1.0, "R",
            "filter: relative std of the vehicle file's inertia scale\n"
            "(inertia_rel_std): the data cannot see it, converged claims\n"

@@ -101,7 +101,6 @@ typedef struct {
     double filter_rotor_speed_noise_time; /* rotor_speed_noise_time [s] */
     double filter_inertia_rel_std;      /* inertia_rel_std: the vehicle file's inertia scale std; 0: exact */
     int filter_rotor_speed_noise_hold;    /* rotor_speed_noise_hold (docs/math.md §14); 0: off */
-    int filter_update_sized_loading;      /* update_sized_loading (docs/math.md §2); 0: off */
     int filter_input_error_compensation;  /* input_error_compensation (docs/math.md §14); 0: off */
     int filter_instrument;                /* motor_command_instrument: the commands pushed to the filter
                                              as its rotor input's instrument (docs/math.md §16); 0: off */

@@ -220,6 +220,5 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
     }
     /* After the sensor errors, which set the error's size and ceiling time. */
     c->rotor_speed_noise_hold = (uint8_t)(opts->filter_rotor_speed_noise_hold != 0);
-    c->update_sized_loading = (uint8_t)(opts->filter_update_sized_loading != 0);
     return propid_config_check(c, bad_field);
 }

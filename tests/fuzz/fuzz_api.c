@@ -157,11 +157,6 @@ static void make_config(reader_t *r, propid_config_t *config)
     if (guards & 16u) {
         config->rotor[read_u8(r) % PROPID_MAX_ROTORS].yaw_sign = raw_float(r);
     }
-#if defined(PROPID_FUZZ_UPDATE_SIZED_LOADING) && PROPID_FUZZ_UPDATE_SIZED_LOADING
-    /* A build of the harness that flies every input with the update-sized loading
-     * (docs/math.md §2): its definiteness under the same calls. */
-    config->update_sized_loading = 1u;
-#endif
 }
 
 /* Time step of a stream: usual periods, repeats, backward steps, jumps. */

@@ -182,12 +182,6 @@ typedef struct {
                                          the rotor's value has stood (renewed when it changes), with
                                          rotor_speed_noise_time its ceiling (docs/math.md §14). 0: the
                                          configured time for every rotor */
-    uint8_t update_sized_loading;     /* 1: the coefficients' and biases' float32 rounding loading
-                                         sized by each update instead of a fixed (1 + eps) per step:
-                                         a fused axis adds PROPID_UPDATE_SIZED_LOADING times the
-                                         variance it removed (docs/math.md §2, "Update-sized
-                                         loading"; experimental). Full build only. 0: the fixed
-                                         loading */
     float motor_command_lag;          /* [s] first-order lag of the rotor speed behind its command
                                          in the first stage (> 0 with the instrument on) */
     float motor_command_memory;       /* [s] forgetting time of the first stage's fit (battery sag);
@@ -248,12 +242,6 @@ typedef struct {
     float state[PROPID_MAX_STATES];
     float cov[PROPID_COV_SIZE];                       /* symmetric, kept in the scaled units: the
                                                          packed upper triangle (propid_cov_index) */
-#if PROPID_GENERAL_VEHICLES
-    float cov_low[PROPID_COV_SIZE];                   /* private: with update_sized_loading, the
-                                                         rounding error of each non-rate element
-                                                         (P = cov + cov_low; docs/math.md §2);
-                                                         0 otherwise */
-#endif
     float rotor_speed_sq[PROPID_MAX_ROTORS];          /* latest accepted rotor speeds squared */
     float input_speed_sq[PROPID_MAX_ROTORS];          /* rotor speeds squared in force at time_us
                                                          (start of the next prediction interval) */
@@ -414,9 +402,6 @@ typedef struct {
     float input_noise_time;                         /* rotor_speed_noise_time */
     uint8_t input_compensation;                     /* config.input_error_compensation */
     uint8_t input_noise_hold;                       /* config.rotor_speed_noise_hold */
-#endif
-#if PROPID_GENERAL_VEHICLES
-    uint8_t update_sized_loading;                   /* config.update_sized_loading */
 #endif
     float quad_gyro[3];                             /* quad layout only: A_ab = quad_gyro[a] omega_c for
                                                        both other axes b, c of row a (symmetric in b, c) */
