@@ -158,6 +158,22 @@ def test_out_json_has_the_issue_keys_and_shapes(flights):
     assert after["kf_roll"]["value"] == pytest.approx(after["kf_thrust"]["value"], rel=0.05)
 
 
+def test_library_floor_bounds_the_shrink_and_does_not_invent_room_on_an_effect_free_flight(flights):
+    """shrink.rms_library_in_sample: base model plus every testable candidate, in-sample on the
+    same rows. With an inertia error the floor lies far below the base model's residual and
+    the named effect's held-out residual comes down close to it; on an effect-free flight the
+    whole library fitted in-sample takes almost nothing (the residual is sensor noise)."""
+    _, _, effect = flights("inertia_error", "0.1")
+    for axis, v in effect["shrink"].items():
+        assert 0 < v["rms_library_in_sample"] <= min(v["rms_after"], v["rms_before"]) * 1.001, axis
+    roll = effect["shrink"]["roll"]
+    assert 1 - roll["rms_library_in_sample"] / roll["rms_before"] > 0.4
+    assert roll["rms_after"] < 1.2 * roll["rms_library_in_sample"]
+    _, _, clean = flights("none")
+    for axis, v in clean["shrink"].items():
+        assert 1 - v["rms_library_in_sample"] / v["rms_before"] < 0.1, axis
+
+
 # ------------------------------------------------------------------ CLI: vehicle-out, report, errors
 def test_cli_writes_json_report_and_a_corrected_vehicle_that_replays(flights, tmp_path):
     from propid.cli import main

@@ -90,6 +90,26 @@ def test_shrink_is_the_best_axis_reduction():
     assert shrink_of({"verdict": "none"}) is None
 
 
+def test_prediction_error_shrink_and_the_library_bound_are_scored_beside_the_rms():
+    r = result("com_offset", ["com_offset"], shrink={
+        "roll": {"rms_before": 2.0, "rms_after": 1.8, "rms_library_in_sample": 1.5,
+                 "pred_0.1s_before": 1.0, "pred_0.1s_after": 0.4, "pred_0.5s_before": 1.0, "pred_0.5s_after": 0.2},
+        "yaw": {"rms_before": 4.0, "rms_after": 3.8, "rms_library_in_sample": 3.0,
+                "pred_0.1s_before": 2.0, "pred_0.1s_after": 1.5, "pred_0.5s_before": 2.0, "pred_0.5s_after": 1.9}})
+    rec = score_flight(answer("a", "single", ["com_offset"]), r)
+    assert rec["shrink"] == pytest.approx(0.1)
+    assert rec["shrink_pred_0.1s"] == pytest.approx(0.6) and rec["shrink_pred_0.5s"] == pytest.approx(0.8)
+    assert rec["shrink_library_bound"] == pytest.approx(0.25)
+    missed = score_flight(answer("b", "single", ["com_offset"]), result("none", shrink={
+        "roll": {"rms_before": 2.0, "rms_after": 2.0, "rms_library_in_sample": 1.0}}))
+    assert missed["shrink_pred_0.1s"] is None and missed["shrink_library_bound"] == pytest.approx(0.5)
+    s = summarize([rec, missed])
+    # medians over the flights named right; the bound also over every effect flight
+    assert s["shrink_pred_0.5s_median"] == pytest.approx(0.8)
+    assert s["shrink_library_bound_median"] == pytest.approx(0.25)
+    assert s["shrink_library_bound_median_all"] == pytest.approx(0.375)
+
+
 def test_summary_counts_and_keeps_sub_limit_flights_out_of_the_headline():
     records = [
         score_flight(answer("a", "single", ["esc_delay"]), result("esc_delay", ["esc_delay"])),

@@ -414,10 +414,14 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         theta_base = scoring.solve(gr, base_cols, np.arange(design.n_blocks))
         before = scoring.residuals(hd, base_cols, theta_base)
         after = scoring.residuals(hd, final_cols, theta_final)
-        result["shrink"] = shrink.shrink_table(hd, before, after, inertia, vehicle.mass)
+        gr_hd = scoring.grams(hd)
+        gr_hd.weight = gr.weight
+        library = scoring.residuals(hd, all_cols, scoring.solve(gr_hd, all_cols, np.arange(hd.n_blocks)))
+        result["shrink"] = shrink.shrink_table(hd, before, after, inertia, vehicle.mass, library)
         result["shrink_on"] = "hold-out logs"
     else:
-        result["shrink"] = shrink.shrink_table(design, base_res, final_res, inertia, vehicle.mass)
+        # full_residual: base + every testable candidate, in-sample on these rows (the floor)
+        result["shrink"] = shrink.shrink_table(design, base_res, final_res, inertia, vehicle.mass, full_residual)
         result["shrink_on"] = "cross-validation held-out blocks" if len(flights) < 3 else "cross-validation held-out flights"
     corrected, carried = corrected_vehicle(original_vehicle, entries)
     result["vehicle_out"] = carried

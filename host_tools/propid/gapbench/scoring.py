@@ -22,7 +22,9 @@ Rules, fixed before any run (docs/gap-bench.md):
   accelerometer's zero-g offset) stays in the headline figures; the figures without such
   flights and their count are reported beside them (`above_floors`, `under_floor`);
 - shrink: per flight, the largest relative reduction of the per-axis residual RMS
-  (1 - rms_after / rms_before) over the axes the tool reports.
+  (1 - rms_after / rms_before) over the axes the tool reports; beside it (not the headline)
+  the same for the open-loop prediction errors at 0.1 s and 0.5 s and the bound, the most
+  the tool's whole library could shrink the RMS (1 - rms_library_in_sample / rms_before).
 A run that fails (no OUT.json, bad JSON) is wrong, counted as failed.
 """
 
@@ -80,7 +82,10 @@ def _ambiguous_ids(result: dict) -> set[str]:
     return set().union(*_ambiguous_groups(result))
 
 
-def shrink_of(result: dict) -> float | None:
+def shrink_of(result: dict, before_key: str = "rms_before", after_key: str = "rms_after") -> float | None:
+    """Largest relative reduction over the axes of OUT.json's `shrink`, 1 - after / before
+    (default the residual RMS; the prediction errors with their keys, the library's floor
+    with "rms_library_in_sample")."""
     shrink = result.get("shrink")
     if not isinstance(shrink, dict):
         return None
@@ -88,12 +93,19 @@ def shrink_of(result: dict) -> float | None:
     for values in shrink.values():
         if not isinstance(values, dict):
             continue
-        before, after = values.get("rms_before"), values.get("rms_after")
+        before, after = values.get(before_key), values.get(after_key)
         if (isinstance(before, (int, float)) and isinstance(after, (int, float))
                 and math.isfinite(before) and math.isfinite(after) and before > 0):
             value = 1.0 - after / before
             best = value if best is None else max(best, value)
     return best
+
+
+# the other shrink figures a record carries: name -> (before key, after key) in OUT.json's shrink
+SHRINK_FIGURES = {"shrink_pred_0.1s": ("pred_0.1s_before", "pred_0.1s_after"),
+                  "shrink_pred_0.5s": ("pred_0.5s_before", "pred_0.5s_after"),
+                  # the most the whole library could shrink the RMS (gap/shrink.py): what bounds shrink
+                  "shrink_library_bound": ("rms_before", "rms_library_in_sample")}
 
 
 def score_flight(answer: dict, result: dict | None) -> dict:
@@ -108,7 +120,7 @@ def score_flight(answer: dict, result: dict | None) -> dict:
     if not isinstance(result, dict) or "verdict" not in result:
         record.update(failed=True, right=False, false_effect=False, false_effect_strict=False,
                       ambiguous_named=[], verdict=None, named=[],
-                      ambiguous_hit=False, shrink=None)
+                      ambiguous_hit=False, shrink=None, **{k: None for k in SHRINK_FIGURES})
         return record
     verdict = result.get("verdict")
     named = significant_ids(result)
@@ -127,7 +139,8 @@ def score_flight(answer: dict, result: dict | None) -> dict:
     record.update(failed=False, right=bool(right), verdict=verdict, named=named,
                   false_effect=bool(false_named), false_named=false_named,
                   ambiguous_named=ambiguous_named, false_effect_strict=bool(wrong),
-                  ambiguous_hit=ambiguous_hit, shrink=shrink_of(result))
+                  ambiguous_hit=ambiguous_hit, shrink=shrink_of(result),
+                  **{k: shrink_of(result, *keys) for k, keys in SHRINK_FIGURES.items()})
     return record
 
 
@@ -191,6 +204,10 @@ def summarize(records: list[dict]) -> dict:
             for kind, rows in (("overall", above), ("singles", [r for r in above if r["kind"] == "single"]),
                                ("pairs", [r for r in above if r["kind"] == "pair"]))},
         "shrink_median": _median([r["shrink"] for r in effectful if r["right"]]),
+        # the same median for the prediction errors and for the library's bound (flights right)
+        **{k + "_median": _median([r.get(k) for r in effectful if r["right"]]) for k in SHRINK_FIGURES},
+        # the bound over every effect flight, named right or not
+        "shrink_library_bound_median_all": _median([r.get("shrink_library_bound") for r in effectful]),
         "per_effect": per_effect,
         "by_detectability": {
             f"{lo:g}-{hi:g}": {"n": len(rows), "accuracy": _fraction(sum(r["right"] for r in rows), len(rows))}

@@ -44,6 +44,11 @@ def render(result: dict) -> str:
                  str(base.get("ambiguous_hits"))))
     rows.append(("shrink, median best axis", "", _cell(tool, lambda s: _pct(s["shrink_median"])),
                  _pct(base["shrink_median"])))
+    for label, key in (("  prediction error at 0.1 s", "shrink_pred_0.1s_median"),
+                       ("  prediction error at 0.5 s", "shrink_pred_0.5s_median"),
+                       ("  bound: the whole library in-sample", "shrink_library_bound_median"),
+                       ("  bound, every effect flight", "shrink_library_bound_median_all")):
+        rows.append((label, "", _cell(tool, lambda s, k=key: _pct(s.get(k))), _pct(base.get(key))))
     for band, stats in base["by_detectability"].items():
         rows.append((f"detectability {band}", str(stats["n"]),
                      _cell(tool, lambda s, b=band: _pct(s["by_detectability"][b]["accuracy"])),
