@@ -3,6 +3,8 @@ the way `propid replay` takes them (docs/gap.md, "How far")."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from propid.gap import filtercheck
@@ -20,7 +22,7 @@ def test_filter_check_carries_the_files_model_keys(monkeypatch):
         return _Result()
 
     monkeypatch.setattr("propid.replay.replay", fake_replay)
-    log = object()
+    log = SimpleNamespace(path="log.csv")
     kf = filtercheck._replay_kf(log, object.__new__(_Vehicle), "default")
     assert np.isclose(kf, 3.1e-8)
     (passed_log, options), = seen
@@ -29,6 +31,14 @@ def test_filter_check_carries_the_files_model_keys(monkeypatch):
     assert options.aero_damping == "auto"
     assert options.gyro_scale == "auto"
     assert options.aiding == "gyro" and options.torque_scale == "off" and options.disturbance == "off"
+    assert not options.skip_repeats
+    # filter_before_after skips the logger's repeated rows unless told they are samples
+    seen.clear()
+    filtercheck.filter_before_after([log], object.__new__(_Vehicle), object.__new__(_Vehicle))
+    assert [options.skip_repeats for _, options in seen] == [True, True]
+    seen.clear()
+    filtercheck.filter_before_after([log], object.__new__(_Vehicle), object.__new__(_Vehicle), repeats="samples")
+    assert [options.skip_repeats for _, options in seen] == [False, False]
 
 
 class _Vehicle:

@@ -34,6 +34,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="upper band edge (default 25 Hz, at most a quarter of the sample rate)")
     parser.add_argument("--no-filter", action="store_true",
                         help="skip the firmware-filter replay before/after (faster)")
+    parser.add_argument("--repeats", choices=("missing", "samples"), default="missing",
+                        help="rows whose gyro triple (rotor speeds) equal the previous row's bit for bit, a logger's "
+                             "copies of lost packets: missing samples (default; the filter check replays with "
+                             "--skip-repeats), or fused as samples (the earlier rule)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -72,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
     vehicle = read_vehicle(vehicle_path)
     logs = [read_flightlog(p, vehicle) for p in args.log]
     holdout = [read_flightlog(p, vehicle) for p in args.holdout]
-    options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto)
+    options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
+                               repeats=args.repeats)
     try:
         result = analysis.run(logs, vehicle, holdout, options)
     except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
@@ -84,7 +89,8 @@ def run(args: argparse.Namespace) -> int:
         from propid.gap.filtercheck import filter_before_after
 
         try:
-            result["filter"] = filter_before_after(holdout or logs, vehicle, corrected, progress=lambda: progress(1))
+            result["filter"] = filter_before_after(holdout or logs, vehicle, corrected, progress=lambda: progress(1),
+                                                   repeats=args.repeats)
         except UserError as exc:
             result["filter"] = {"error": str(exc)}
     progress.close()

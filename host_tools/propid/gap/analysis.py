@@ -35,6 +35,7 @@ class Options:
     band: Band
     progress: bool = True
     auto_highpass: bool = False
+    repeats: str = "missing"  # copies of the previous row: missing samples, or "samples" (prep.repeated_rows)
 
 
 HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0, 5.0)
@@ -187,7 +188,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         vehicle = copy.deepcopy(vehicle)
         vehicle.inertia = np.eye(3)
     progress = Progress(options.progress, total=60 + 12 * 6)
-    flights = [prepare_flight(log, vehicle, options.band) for log in logs]
+    flights = [prepare_flight(log, vehicle, options.band, repeats=options.repeats) for log in logs]
     band_rule = None
     requested_band = options.band
     if options.auto_highpass:  # the band the stream lag is searched in (the rule on unaligned logs)
@@ -195,7 +196,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         flights = [replace(f, band=search_band.for_rate(f.rate_hz)) for f in flights]
     else:
         search_band = options.band
-    held_flights = [prepare_flight(log, vehicle, search_band) for log in holdout]
+    held_flights = [prepare_flight(log, vehicle, search_band, repeats=options.repeats) for log in holdout]
     progress(5)
     present = columns_present(logs + holdout, vehicle)
     with_thrust = bool(present["acc"] and present["mass"])
@@ -225,7 +226,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     # rise above its bandwidth
     if options.auto_highpass:
         band, band_rule = choose_highpass(work, vehicle, requested_band)
-        options = Options(band, options.progress, False)
+        options = replace(options, band=band, auto_highpass=False)
         flights, held_flights, work, work_held = ([replace(f, band=band.for_rate(f.rate_hz)) for f in group]
                                                   for group in (flights, held_flights, work, work_held))
 
@@ -326,6 +327,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                    "inertia": ("unit: the vehicle file has no inertia, so torque coefficients (kf_roll, kf_pitch, "
                                "km_yaw, rotor_inertia, damping) are divided by the axis inertia [1/(kg m^2)]"
                                if unit_inertia else "vehicle file")},
+        "stream_quality": stream_quality(flights, held_flights, options.repeats),
         "alignment": {k: v for k, v in align.items() if k not in ("held_zero", "held_best")},
         "base_model": {"kf_per_rotor": kf_rotor.tolist(), "km_per_rotor": km_rotor.tolist(),
                        "axis_sigma": dict(zip(design.axes, (1 / np.sqrt(gr.weight)).tolist()))},
@@ -428,6 +430,25 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     result["_internal"] = {"corrected": corrected, "design": design, "base_res": base_res, "final_res": final_res,
                            "progress": progress}
     return result
+
+
+REPEATED_ROWS_NOTABLE = 0.05  # above this share of a stream's rows the report names the copies
+
+
+def stream_quality(flights: list[Flight], held: list[Flight], repeats: str) -> dict:
+    """Per log and stream, the rows that repeat the previous row bit for bit (a logger's copies of
+    lost packets, prep.repeated_rows) among the flying rows analysed, and how they were treated."""
+    per_log = {f.name: {"gyro": f.repeated_rows["gyro"], "rotor": f.repeated_rows["rotor"],
+                        "role": "fit" if k < len(flights) else "holdout"}
+               for k, f in enumerate(flights + held)}
+    notable = sorted(name for name, v in per_log.items()
+                     if max(v["gyro"]["share"], v["rotor"]["share"]) > REPEATED_ROWS_NOTABLE)
+    return {"repeated_rows": {
+        "treated_as": repeats, "per_log": per_log, "logs_above_5_percent": notable,
+        "rule": "a row whose gyro triple (rotor speeds) equals the previous row's bit for bit is a copy of a lost "
+                "packet, not a sample (all-zero rotor rows excepted); treated_as 'missing': interpolated for the "
+                "fits like any missing sample, and the firmware-filter check replays with --skip-repeats; "
+                "'samples': fused as measurements (biases torque and filter coefficients low)"}}
 
 
 def closed_loop_entry(flights: list[Flight], band_rule: dict | None, requested: Band, vehicle: Vehicle,

@@ -8,7 +8,9 @@ other model key a file carries goes in the way `propid replay` takes it (replay/
 replay/config.py): `gyro_scale` undone on the gyro at the boundary, `rotor_inertia` and
 `aero_damping` into the filter's model, and `loop_bandwidth_hz` (the closed loop's bandwidth, from
 `closed_loop_cancellation`) with the disturbance states on at that bandwidth, so they take the
-torque the loop cancels and kf learns above it. Fleet kf = mean over rotors of each run's
+torque the loop cancels and kf learns above it. Rows that repeat the previous row bit for bit (a
+logger's copies of lost packets) are no samples for the filter either (`--skip-repeats`) unless the
+diagnosis was told to take them as samples (`--repeats samples`). Fleet kf = mean over rotors of each run's
 converged kf; run-to-run CV = std/mean over runs.
 """
 
@@ -27,12 +29,12 @@ def _fleet(values: list[float]) -> dict:
             "cv": float(np.std(v) / mean) if v.size > 1 and mean else None}
 
 
-def _replay_kf(log: FlightLog, vehicle: Vehicle, delay) -> float:
+def _replay_kf(log: FlightLog, vehicle: Vehicle, delay, skip_repeats: bool = False) -> float:
     from propid.replay import ReplayOptions, replay
 
     disturbance = "on" if vehicle.loop_bandwidth_hz is not None else "off"  # the file's bandwidth (replay/config.py)
     gyro_only = dict(esc_delay=delay, aiding="gyro", rotor_inertia="auto", aero_damping="auto", gyro_scale="auto",
-                     torque_scale="off", disturbance=disturbance, progress=False)
+                     torque_scale="off", disturbance=disturbance, skip_repeats=skip_repeats, progress=False)
     try:
         result = replay(log, vehicle, ReplayOptions(segment="flying", **gyro_only))
     except UserError:  # the replay's flying detector found nothing (e.g. a log that starts airborne)
@@ -40,17 +42,21 @@ def _replay_kf(log: FlightLog, vehicle: Vehicle, delay) -> float:
     return float(np.mean(result.summary["kf_mean"]))
 
 
-def filter_before_after(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progress=None) -> dict:
+def filter_before_after(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progress=None,
+                        repeats: str = "missing") -> dict:
     before, after = [], []
+    skip = repeats == "missing"
     for log in logs:
         # each file's esc_delay_s when it has one, else the replay's per-log rule
-        before.append(_replay_kf(log, vehicle, "default"))
-        after.append(_replay_kf(log, corrected, "default"))
+        before.append(_replay_kf(log, vehicle, "default", skip))
+        after.append(_replay_kf(log, corrected, "default", skip))
         if progress:
             progress()
     return {"logs": [str(l.path) for l in logs], "kf_before": _fleet(before), "kf_after": _fleet(after),
+            "skip_repeats": skip,
             "mode": "gyro only (no accelerometer aiding), --segment flying, the file's rotor_inertia, "
-                    "aero_damping and gyro_scale carried as propid replay takes them" + "".join(
+                    "aero_damping and gyro_scale carried as propid replay takes them"
+                    + ("; rows repeating the previous row skipped (--skip-repeats)" if skip else "") + "".join(
                 f"; {name}: disturbance states at its loop_bandwidth_hz {v.loop_bandwidth_hz:g} Hz"
                 for name, v in (("vehicle file", vehicle), ("corrected vehicle", corrected))
                 if v.loop_bandwidth_hz is not None)}

@@ -10,6 +10,10 @@ Rules (docs/gap.md, "Data preparation"):
   gyro rows, rows without a gyro sample are dropped;
 - missing or absurd rotor speeds (above 2x the 99.9th percentile) and isolated
   missing gyro samples are interpolated for the fits;
+- repeated rows: a row whose gyro triple (or rotor speeds) equals the previous row's bit for
+  bit is a logger's copy of a lost packet, not a sample; with `repeats="missing"` (the
+  default) such samples are missing and interpolated like other missing samples (the
+  replay's `--skip-repeats`); their shares are reported per log and stream;
 - a sample-and-held rotor stream (more than 20 % of the rows repeat the previous row's
   rotor speeds exactly) is interpolated between its report instants;
 - derivatives by central differences on the log's time stamps; torque-axis regressors
@@ -72,6 +76,7 @@ class Flight:
     band: Band
     repaired_rotor_samples: int = 0
     held_rotor_fraction: float = 0.0
+    repeated_rows: dict = field(default_factory=dict)  # stream quality: copies of the previous row (repeated_row_stats)
     blocks: list[tuple[int, int]] = field(default_factory=list)  # [start, stop) inside segments
 
     @property
@@ -157,18 +162,48 @@ def unhold_rotor_stream(t: np.ndarray, speeds: np.ndarray) -> tuple[np.ndarray, 
     return out, fraction
 
 
-def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | None = None) -> Flight:
+REPEATS = ("missing", "samples")  # copies of the previous row: missing samples (default), or fused as samples
+
+
+def repeated_rows(values: np.ndarray) -> np.ndarray:
+    """Rows whose every column equals the previous row's bit for bit (NaN never does): a logger that
+    samples separately streamed blocks by sample-and-hold writes a lost packet as such a copy. Rotor
+    rows that are all zero (motors stopped) are genuine and not counted."""
+    same = np.zeros(len(values), dtype=bool)
+    same[1:] = np.all(values[1:] == values[:-1], axis=1)
+    return same & np.any(values != 0.0, axis=1)
+
+
+def repeated_row_stats(copy: np.ndarray, rows: np.ndarray) -> dict:
+    """Share and count of copies among `rows` (indices), and the longest run of consecutive copies."""
+    inside = copy[rows]
+    longest, run = 0, 0
+    for c in inside:
+        run = run + 1 if c else 0
+        longest = max(longest, run)
+    return {"share": float(inside.mean()) if inside.size else 0.0, "count": int(inside.sum()),
+            "longest_run": int(longest)}
+
+
+def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | None = None,
+                   repeats: str = "missing") -> Flight:
     """Build a Flight from a validated log. Raises UserError if nothing usable. What the
     vehicle file already models (gyro_scale, aero_damping, esc_delay_s) is applied here, so
-    the base model includes it."""
+    the base model includes it. `repeats`: "missing" treats copies of the previous row (per
+    stream) as missing samples, "samples" fuses them as measurements (the earlier rule)."""
+    if repeats not in REPEATS:
+        raise UserError(f"repeats {repeats!r}: choose one of {', '.join(REPEATS)}")
     where = str(log.path) if log.path else (name or "log")
     if vehicle.inertia is None:
         raise UserError(f"{vehicle.path or 'vehicle'}: 'inertia' is null (the caller runs unit inertia)")
+    # copies on the log's own rows, as the replay's --skip-repeats finds them (before the hold below)
+    gyro_copy, rotor_copy = repeated_rows(log.gyro), repeated_rows(log.rotor_speed)
     speeds = _hold_rotor_rows(log.rotor_speed)
     has_gyro = np.any(np.isfinite(log.gyro), axis=1)
     if not has_gyro.all():
         log = log.select(has_gyro)
         speeds = speeds[has_gyro]
+        gyro_copy, rotor_copy = gyro_copy[has_gyro], rotor_copy[has_gyro]
     if len(log) < 10:
         raise UserError(f"{where}: fewer than 10 gyro samples")
     dt = np.diff(log.t)
@@ -180,14 +215,35 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
     limit = absurd_speed_limit(speeds)
     speeds, repaired = clean_rotor_speeds(speeds, limit)
     speeds = _interp_missing(speeds)
+    logged_speeds = speeds
+    gyro = log.gyro
+    # Rows whose torque or rotor speeds a copy leaves unmeasured: the rotor copies, and the rows beside
+    # a gyro copy (their central difference uses it). Both sides of every fit are interpolated across
+    # all of them with the same weights: interpolation is linear, so an interpolated torque still
+    # equals the model at the interpolated speeds, where one side interpolated against the other
+    # measured would read the interpolation's attenuation as a coefficient (+2-3 % on the synthetic
+    # flights of test_gap_repeats.py).
+    unmeasured = np.zeros(len(log), dtype=bool)
+    if repeats == "missing" and (gyro_copy.any() or rotor_copy.any()):
+        unmeasured = rotor_copy.copy()
+        unmeasured[:-1] |= gyro_copy[1:]
+        unmeasured[1:] |= gyro_copy[:-1]
+        # the flying rows are still found on the speeds as logged (a held idle speed is no ramp)
+        # interpolated as Omega^2, the model's input, so that the pair is matched term by term
+        squared = np.array(speeds, dtype=float, copy=True) ** 2
+        squared[unmeasured] = np.nan
+        speeds = np.sqrt(np.maximum(_interp_missing(squared), 0.0))
+        gyro = np.array(gyro, dtype=float, copy=True)
+        gyro[gyro_copy] = np.nan
     speeds, held_fraction = unhold_rotor_stream(log.t, speeds)
-    gyro = _interp_missing(log.gyro)
+    flying_speeds = logged_speeds if repeats == "missing" and rotor_copy.any() else speeds
+    gyro = _interp_missing(gyro)
     if vehicle.gyro_scale is not None:
         gyro = gyro / np.asarray(vehicle.gyro_scale)[None, :]
     # flying: is_flying column, else every rotor spinning; off the ground where the height is
     # logged (pz is height above flat ground: contact below GROUND_CONTACT_M)
     no_height = {k: v for k, v in log.extra.items() if k != "pz"}
-    fly = flying_mask(FlightLog(t=log.t, gyro=gyro, rotor_speed=speeds, extra=no_height, path=log.path))
+    fly = flying_mask(FlightLog(t=log.t, gyro=gyro, rotor_speed=flying_speeds, extra=no_height, path=log.path))
     if "pz" in log.extra:
         fly &= np.nan_to_num(log.extra["pz"], nan=np.inf) > GROUND_CONTACT_M
     uniform = np.ones(len(log), dtype=bool)
@@ -200,6 +256,9 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
     inertia = np.asarray(vehicle.inertia, dtype=float)
     rate_dot = np.gradient(gyro, log.t, axis=0)
     torque = measured_torque(gyro, rate_dot, inertia)
+    if unmeasured.any():
+        torque[unmeasured] = np.nan
+        torque = _interp_missing(torque)
     if vehicle.aero_damping is not None:
         torque = torque + gyro * np.asarray(vehicle.aero_damping)[None, :]  # the model's -D w moved to the left
     speed_dot = np.gradient(speeds, log.t, axis=0)
@@ -218,6 +277,9 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
         specific_force_z=None if acc is None else acc[:, 2], acc=acc, body_velocity=vel, height=height,
         cmd=cmd, vbat=vbat, segs=segs, band=band.for_rate(rate), repaired_rotor_samples=repaired,
         held_rotor_fraction=held_fraction)
+    in_segments = np.concatenate([np.arange(a, b) for a, b in segs])
+    flight.repeated_rows = {"gyro": repeated_row_stats(gyro_copy, in_segments),
+                            "rotor": repeated_row_stats(rotor_copy, in_segments), "treated_as": repeats}
     block = max(int(round(BLOCK_S * rate)), 20)
     for a, b in segs:
         starts = list(range(a, b, block))
