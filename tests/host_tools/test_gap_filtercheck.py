@@ -32,12 +32,12 @@ def test_filter_check_carries_the_files_model_keys(monkeypatch):
     assert options.gyro_scale == "auto"
     assert options.aiding == "gyro" and options.torque_scale == "off" and options.disturbance == "off"
     assert not options.skip_repeats
-    # filter_before_after skips the logger's repeated rows unless told they are samples
+    # filter_before_after skips the logger's repeated rows unless told not to
     seen.clear()
     filtercheck.filter_before_after([log], object.__new__(_Vehicle), object.__new__(_Vehicle))
     assert [options.skip_repeats for _, options in seen] == [True, True]
     seen.clear()
-    filtercheck.filter_before_after([log], object.__new__(_Vehicle), object.__new__(_Vehicle), repeats="samples")
+    filtercheck.filter_before_after([log], object.__new__(_Vehicle), object.__new__(_Vehicle), skip_repeats=False)
     assert [options.skip_repeats for _, options in seen] == [False, False]
 
 

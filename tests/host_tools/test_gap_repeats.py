@@ -1,7 +1,7 @@
 """`propid gap` and the logger's repeated rows (docs/gap.md "Data preparation", "Stream quality"): a row
 whose gyro triple (rotor speeds) equals the previous row's bit for bit is a copy of a lost packet, not a
-sample. gap reports the copies per log and stream, treats them as missing samples in its fits, and its
-firmware-filter check skips them (`--skip-repeats`)."""
+sample. gap reports the copies per log and stream; its firmware-filter check skips them (`--skip-repeats`);
+`--repeats missing` (evaluated, not the default) treats them as missing samples in its fits."""
 
 from __future__ import annotations
 
@@ -59,7 +59,7 @@ def test_copies_are_reported_and_treated_as_missing_samples():
     clean = synthetic_log(duration=40.0, rate=100.0, seed=7)
     lossy, gyro_rows, rotor_rows = with_lost_packets(clean, seed=107)
     vehicle = parse_vehicle(VEHICLE)
-    flight = prepare_flight(lossy, vehicle, Band())
+    flight = prepare_flight(lossy, vehicle, Band(), repeats="missing")
     # the synthetic log's NaN rotor rows are never copies (NaN equals nothing)
     nan_copies = int(np.sum(~np.isfinite(lossy.rotor_speed[rotor_rows]).all(axis=1)))
     assert flight.repeated_rows["gyro"]["count"] == gyro_rows.size  # every row of this log flies
@@ -97,7 +97,7 @@ def test_the_filter_check_skips_the_copies(cfilter_available):
     vehicle = parse_vehicle(VEHICLE)
     truth = float(np.mean(KF_TRUE))
     skipped = filter_before_after([lossy], vehicle, vehicle)
-    fused = filter_before_after([lossy], vehicle, vehicle, repeats="samples")
+    fused = filter_before_after([lossy], vehicle, vehicle, skip_repeats=False)
     assert skipped["skip_repeats"] and not fused["skip_repeats"]
     kf_skipped = skipped["kf_before"]["mean"] / truth
     kf_fused = fused["kf_before"]["mean"] / truth

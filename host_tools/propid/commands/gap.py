@@ -34,10 +34,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="upper band edge (default 25 Hz, at most a quarter of the sample rate)")
     parser.add_argument("--no-filter", action="store_true",
                         help="skip the firmware-filter replay before/after (faster)")
-    parser.add_argument("--repeats", choices=("missing", "samples"), default="missing",
+    parser.add_argument("--repeats", choices=("samples", "missing"), default="samples",
                         help="rows whose gyro triple (rotor speeds) equal the previous row's bit for bit, a logger's "
-                             "copies of lost packets: missing samples (default; the filter check replays with "
-                             "--skip-repeats), or fused as samples (the earlier rule)")
+                             "copies of lost packets, in the fits: samples (default) or missing (torque and Omega^2 "
+                             "interpolated across them; evaluated, not the default). Reported either way; the "
+                             "filter check always skips them (--skip-repeats)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -89,8 +90,7 @@ def run(args: argparse.Namespace) -> int:
         from propid.gap.filtercheck import filter_before_after
 
         try:
-            result["filter"] = filter_before_after(holdout or logs, vehicle, corrected, progress=lambda: progress(1),
-                                                   repeats=args.repeats)
+            result["filter"] = filter_before_after(holdout or logs, vehicle, corrected, progress=lambda: progress(1))
         except UserError as exc:
             result["filter"] = {"error": str(exc)}
     progress.close()

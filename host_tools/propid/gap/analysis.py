@@ -35,7 +35,7 @@ class Options:
     band: Band
     progress: bool = True
     auto_highpass: bool = False
-    repeats: str = "missing"  # copies of the previous row: missing samples, or "samples" (prep.repeated_rows)
+    repeats: str = "samples"  # copies of the previous row in the fits: "samples", or "missing" (evaluated; prep.py)
 
 
 HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0, 5.0)
@@ -446,9 +446,9 @@ def stream_quality(flights: list[Flight], held: list[Flight], repeats: str) -> d
     return {"repeated_rows": {
         "treated_as": repeats, "per_log": per_log, "logs_above_5_percent": notable,
         "rule": "a row whose gyro triple (rotor speeds) equals the previous row's bit for bit is a copy of a lost "
-                "packet, not a sample (all-zero rotor rows excepted); treated_as 'missing': interpolated for the "
-                "fits like any missing sample, and the firmware-filter check replays with --skip-repeats; "
-                "'samples': fused as measurements (biases torque and filter coefficients low)"}}
+                "packet, not a sample (all-zero rotor rows excepted); treated_as: how the fits took them "
+                "('samples' as measurements, the default; 'missing': torque and Omega^2 interpolated across the "
+                "rows they leave unmeasured); the firmware-filter check skips them (--skip-repeats) either way"}}
 
 
 def closed_loop_entry(flights: list[Flight], band_rule: dict | None, requested: Band, vehicle: Vehicle,

@@ -9,8 +9,8 @@ replay/config.py): `gyro_scale` undone on the gyro at the boundary, `rotor_inert
 `aero_damping` into the filter's model, and `loop_bandwidth_hz` (the closed loop's bandwidth, from
 `closed_loop_cancellation`) with the disturbance states on at that bandwidth, so they take the
 torque the loop cancels and kf learns above it. Rows that repeat the previous row bit for bit (a
-logger's copies of lost packets) are no samples for the filter either (`--skip-repeats`) unless the
-diagnosis was told to take them as samples (`--repeats samples`). Fleet kf = mean over rotors of each run's
+logger's copies of lost packets) are no samples for the filter (`--skip-repeats`, the replay's
+recommended gyro-only chain on rows logs, docs/real-data.md "Repeated rows"). Fleet kf = mean over rotors of each run's
 converged kf; run-to-run CV = std/mean over runs.
 """
 
@@ -43,9 +43,9 @@ def _replay_kf(log: FlightLog, vehicle: Vehicle, delay, skip_repeats: bool = Fal
 
 
 def filter_before_after(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progress=None,
-                        repeats: str = "missing") -> dict:
+                        skip_repeats: bool = True) -> dict:
     before, after = [], []
-    skip = repeats == "missing"
+    skip = skip_repeats
     for log in logs:
         # each file's esc_delay_s when it has one, else the replay's per-log rule
         before.append(_replay_kf(log, vehicle, "default", skip))

@@ -11,11 +11,12 @@ Rules (docs/gap.md, "Data preparation"):
 - missing or absurd rotor speeds (above 2x the 99.9th percentile) and isolated
   missing gyro samples are interpolated for the fits;
 - repeated rows: a row whose gyro triple (or rotor speeds) equals the previous row's bit for
-  bit is a logger's copy of a lost packet, not a sample; with `repeats="missing"` (the
-  default) such samples are missing and interpolated like other missing samples (the
-  replay's `--skip-repeats`); their shares are reported per log and stream;
-- a sample-and-held rotor stream (more than 20 % of the rows repeat the previous row's
-  rotor speeds exactly) is interpolated between its report instants;
+  bit is a logger's copy of a lost packet, not a sample; their shares are reported per log
+  and stream; with `repeats="missing"` (evaluated, not the default) they are missing: Omega^2 and the measured torque are both interpolated
+  across every row a copy leaves unmeasured;
+- otherwise (event-style logs, `repeats="samples"`) a sample-and-held rotor stream (more
+  than 20 % of the rows repeat the previous row's rotor speeds exactly) is interpolated
+  between its report instants;
 - derivatives by central differences on the log's time stamps; torque-axis regressors
   that are not central differences themselves get the difference's response
   (`difference_response`), so they are compared like with like;
@@ -186,11 +187,12 @@ def repeated_row_stats(copy: np.ndarray, rows: np.ndarray) -> dict:
 
 
 def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | None = None,
-                   repeats: str = "missing") -> Flight:
+                   repeats: str = "samples") -> Flight:
     """Build a Flight from a validated log. Raises UserError if nothing usable. What the
     vehicle file already models (gyro_scale, aero_damping, esc_delay_s) is applied here, so
     the base model includes it. `repeats`: "missing" treats copies of the previous row (per
-    stream) as missing samples, "samples" fuses them as measurements (the earlier rule)."""
+    stream) as missing samples (evaluated, not the default: docs/gap.md), "samples" fuses them
+    as measurements."""
     if repeats not in REPEATS:
         raise UserError(f"repeats {repeats!r}: choose one of {', '.join(REPEATS)}")
     where = str(log.path) if log.path else (name or "log")

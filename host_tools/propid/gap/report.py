@@ -166,11 +166,11 @@ def write_report(result: dict, directory: str | Path) -> Path:
             f"{u['id']} ({', '.join(u['missing'])})" for u in result["untestable"]) + "</p>")
     repeated = (result.get("stream_quality") or {}).get("repeated_rows")
     if repeated:
-        how = ("missing samples (interpolated for the fits; the filter check skips them)"
-               if repeated["treated_as"] == "missing" else "samples (fused as measurements)")
+        how = ("missing samples in the fits (torque and Omega^2 interpolated across them)"
+               if repeated["treated_as"] == "missing" else "samples in the fits")
         parts.append("<h2>Stream quality: repeated rows</h2><p>Rows repeating the previous row's gyro triple or "
                      "rotor speeds bit for bit (a logger's copies of lost packets) among the flying rows analysed; "
-                     f"treated as {how}. Logs above 5 %: {_fmt(repeated['logs_above_5_percent']) or 'none'}.</p>")
+                     f"treated as {how}; the firmware-filter check skips them. Logs above 5 %: {_fmt(repeated['logs_above_5_percent']) or 'none'}.</p>")
         parts.append(_table(["log", "role", "gyro share", "gyro longest run", "rotor share", "rotor longest run"],
                             [[name, v["role"], v["gyro"]["share"], v["gyro"]["longest_run"], v["rotor"]["share"],
                               v["rotor"]["longest_run"]] for name, v in repeated["per_log"].items()]))
