@@ -47,7 +47,8 @@ Figures:
   step, every flight), and the checks it failed;
 - diverged_filter / diverged_oracle: flights the simulator stopped for
   divergence (exit 3) in each mode; `filter_only_diverged`: cases where the
-  filter's flight diverged and the oracle's did not.
+  filter's flight diverged and the oracle's did not (`filter_only_diverged_cases`:
+  their configurations, to fly again).
 """
 
 from __future__ import annotations
@@ -217,7 +218,7 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
            "false_converged": 0, "converged_claims": 0, "false_converged_pct": None,
            "false_converged_by_group": {}, "false_converged_flights": [], "nees_flights": [],
            "cov_repairs": 0, "cov_checks": 0, "cov_not_pd": 0, "model_mismatch_windows": 0, "diverged_filter": 0, "diverged_oracle": 0,
-           "filter_only_diverged": 0, "errors": []}
+           "filter_only_diverged": 0, "filter_only_diverged_cases": [], "errors": []}
     nees_in = nees_all = 0
     groups: dict[str, list[int]] = {}
     false_groups: dict[str, list[int]] = {}
@@ -293,6 +294,9 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
                     "converged_claims": int(honesty.get("converged_claims", 0))})
         if pair.get("filter", {}).get("exit") == 3 and pair.get("oracle", {}).get("exit") == 0:
             out["filter_only_diverged"] += 1
+            out["filter_only_diverged_cases"].append({
+                key: case[key] for key in ("case", "seed", "vehicle", "trajectory", "duration_s", "sensors",
+                                           "tuning", "effects", "faults", "damage")})
     # The same clean flights with the inputs taken as exact, flown in the same run.
     exact: dict[str, list[int]] = {}
     for case in cases:
@@ -415,7 +419,7 @@ def main(argv: list[str] | None = None) -> int:
     Path(args.out).write_text(json.dumps(figures, indent=2) + "\n", encoding="utf-8")
     width = max(len(k) for k in figures)
     for key, value in figures.items():
-        if key in ("errors", "nees_flights", "false_converged_flights"):
+        if key in ("errors", "nees_flights", "false_converged_flights", "filter_only_diverged_cases"):
             value = len(value)
         print(f"{key:<{width}}  {json.dumps(value) if isinstance(value, (dict, list)) else value}")
     print(f"soak: {args.out}")
