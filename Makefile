@@ -190,10 +190,12 @@ SOAK_STEPS ?= 10000000
 SOAK_SEED ?= 1
 SOAK_NEES_TUNING ?= matched
 SOAK_INERTIA_STD ?=
+SOAK_GYRO_STUCK ?= 0
 soak: setup host
 	@cd $(REPO) && nice -n 10 $(VENV_PYTHON) tests/soak/soak.py --sitl $(BUILD_HOST)/sitl/propid_sitl \
 	    --steps $(SOAK_STEPS) --seed $(SOAK_SEED) --jobs $(JOBS) --nees-tuning $(SOAK_NEES_TUNING) \
-	    $(if $(SOAK_INERTIA_STD),--inertia-std $(SOAK_INERTIA_STD)) --out $(BUILD)/results/soak.json
+	    $(if $(SOAK_INERTIA_STD),--inertia-std $(SOAK_INERTIA_STD)) --gyro-stuck $(SOAK_GYRO_STUCK) \
+	    --out $(BUILD)/results/soak.json
 
 cppcheck: setup
 	@cppcheck --error-exitcode=1 --enable=warning,style,performance,portability --std=c11 \

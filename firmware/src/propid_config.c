@@ -612,6 +612,10 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         config->motor_command_min_f > 1.0e6f) {
         PROPID_BAD("motor_command_min_f");
     }
+    /* One reading is no repeat: 1 would refuse every sample after the first. */
+    if (config->gyro_stuck_samples == 1u || (config->gyro_stuck_samples != 0u && !PROPID_WITH_GYRO_STUCK_CHECK)) {
+        PROPID_BAD("gyro_stuck_samples");
+    }
 
 #if PROPID_WITH_INPUT_NOISE
     /* Var(Omega^2) = (2 Omega sigma)^2 = input_noise_var Omega^2 (docs/math.md §14). */
@@ -619,6 +623,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     out.input_noise_time = config->rotor_speed_noise_time;
     out.input_compensation = config->input_error_compensation;
     out.input_noise_hold = config->rotor_speed_noise_hold;
+#endif
+#if PROPID_WITH_INPUT_NOISE || PROPID_WITH_GYRO_STUCK_CHECK
+    out.gyro_stuck_samples = PROPID_WITH_GYRO_STUCK_CHECK ? config->gyro_stuck_samples : 0u;
+    out.rare_gyro_update = (uint8_t)((PROPID_WITH_INPUT_NOISE && config->input_error_compensation) ||
+                                     out.gyro_stuck_samples != 0u);
 #endif
     out.layout.rate = 0u;
     out.layout.thrust = propid_first_thrust();

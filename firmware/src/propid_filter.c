@@ -404,16 +404,38 @@ propid_status_t propid_fuse_gyro(propid_filter_t *filter, uint64_t time_us, cons
     return fuse_gyro_timed(filter, time_us, gyro_rad_s);
 }
 
-#if PROPID_WITH_INPUT_NOISE
-/* The gyro update with the errors-in-variables compensation (docs/math.md §14):
- * the corrections are formed from the predicted P, added for the fused axes. */
-static __attribute__((noinline)) uint32_t update_gyro_compensated(propid_filter_t *filter, float dt,
-                                                                  const float gyro_rad_s[3])
+#if PROPID_WITH_INPUT_NOISE || PROPID_WITH_GYRO_STUCK_CHECK
+/* The gyro update with either rare option (one test in the step for both): the
+ * stuck-axis check (config.gyro_stuck_samples: a repeated reading is not fused)
+ * and the errors-in-variables compensation (docs/math.md §14: the corrections
+ * are formed from the predicted P, added for the fused axes). */
+static __attribute__((noinline)) uint32_t update_gyro_rare(propid_filter_t *filter, float dt,
+                                                           const float gyro_rad_s[3])
 {
-    propid_input_compensation_prepare(filter, dt);
-    const uint32_t gated_mask = propid_update_gyro(filter, gyro_rad_s);
-    propid_input_compensation_apply(filter, gated_mask);
-    return gated_mask;
+    uint32_t skip_mask = 0u;
+#if PROPID_WITH_GYRO_STUCK_CHECK
+    if (filter->derived.gyro_stuck_samples != 0u) {
+        skip_mask = propid_gyro_stuck_mask(filter, gyro_rad_s);
+    }
+#endif
+#if PROPID_WITH_INPUT_NOISE
+    if (filter->derived.input_compensation) {
+        propid_input_compensation_prepare(filter, dt);
+    }
+#else
+    (void)dt;
+#endif
+#if PROPID_WITH_GYRO_STUCK_CHECK
+    const uint32_t not_fused = propid_update_gyro_skipping(filter, gyro_rad_s, skip_mask);
+#else
+    const uint32_t not_fused = propid_update_gyro(filter, gyro_rad_s) | skip_mask;
+#endif
+#if PROPID_WITH_INPUT_NOISE
+    if (filter->derived.input_compensation) {
+        propid_input_compensation_apply(filter, not_fused);
+    }
+#endif
+    return not_fused;
 }
 #endif
 
@@ -447,9 +469,9 @@ static __attribute__((noinline)) propid_status_t fuse_gyro_timed(propid_filter_t
         return reject(filter, PROPID_ERR_NUMERIC);
     }
     /* Accepted: the filter has changed (prediction); now the measurement. */
-#if PROPID_WITH_INPUT_NOISE
-    const uint32_t gated_mask = !anchor && filter->derived.input_compensation
-                                    ? update_gyro_compensated(filter, dt, gyro_rad_s)
+#if PROPID_WITH_INPUT_NOISE || PROPID_WITH_GYRO_STUCK_CHECK
+    const uint32_t gated_mask = !anchor && filter->derived.rare_gyro_update
+                                    ? update_gyro_rare(filter, dt, gyro_rad_s)
                                     : propid_update_gyro(filter, gyro_rad_s);
 #else
     const uint32_t gated_mask = propid_update_gyro(filter, gyro_rad_s);

@@ -530,3 +530,52 @@ uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
     }
     return fuse_generic(filter, gyro);
 }
+
+#if PROPID_WITH_GYRO_STUCK_CHECK
+uint32_t propid_gyro_stuck_mask(propid_filter_t *filter, const float gyro[3])
+{
+    propid_core_t *core = &filter->core;
+    const uint16_t limit = filter->derived.gyro_stuck_samples;
+    uint32_t mask = 0u;
+    for (uint8_t a = 0; a < 3u; ++a) {
+        /* Bits, not values: a stuck source repeats its word exactly. */
+        uint32_t bits;
+        memcpy(&bits, &gyro[a], sizeof(bits));
+        if (bits == core->gyro_last_bits[a] && core->gyro_repeat_run[a] != 0u) {
+            if (core->gyro_repeat_run[a] < UINT16_MAX) {
+                core->gyro_repeat_run[a]++;
+            }
+        } else {
+            core->gyro_last_bits[a] = bits;
+            core->gyro_repeat_run[a] = 1u;
+        }
+        if (core->gyro_repeat_run[a] >= limit) {
+            mask |= 1u << a;
+        }
+    }
+    return mask;
+}
+
+uint32_t propid_update_gyro_skipping(propid_filter_t *filter, const float gyro[3], uint32_t skip_mask)
+{
+    if (skip_mask == 0u) {
+        return propid_update_gyro(filter, gyro);
+    }
+    /* As fuse_generic, with the stuck axes left out: their reading says nothing
+     * about the rate, so neither the gate nor its re-anchor may see it. */
+    if (propid_cov_enforce_bounds(&filter->derived, &filter->core)) {
+        filter->core.health |= PROPID_HEALTH_COV_REPAIRED;
+        filter->counters.cov_repairs++;
+    }
+    uint32_t not_fused = skip_mask;
+    for (uint8_t axis = 0; axis < 3u; ++axis) {
+        if ((skip_mask >> axis) & 1u) {
+            filter->core.innovation_test_ratio[axis] = 0.0f;
+            filter->counters.gyro_stuck++;
+        } else {
+            not_fused |= fuse_axis(filter, axis, gyro[axis]) << axis;
+        }
+    }
+    return not_fused;
+}
+#endif

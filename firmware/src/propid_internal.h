@@ -554,6 +554,15 @@ static inline __attribute__((always_inline)) void propid_check_next_row(propid_f
 /* propid_gyro.c: fuse one gyro sample, three scalar updates (x, y, z; H = e_rate +
  * e_bias each). Returns the mask of axes gated out (bit a). */
 uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3]);
+#if PROPID_WITH_GYRO_STUCK_CHECK
+/* config.gyro_stuck_samples: counts each axis' bit-identical readings in a row and
+ * returns the mask of the axes whose reading has repeated gyro_stuck_samples times
+ * or more (docs/reliability.md "A stuck gyro axis"). */
+uint32_t propid_gyro_stuck_mask(propid_filter_t *filter, const float gyro[3]);
+/* propid_update_gyro with the axes of skip_mask not fused (counted in
+ * counters.gyro_stuck); returns the mask of the axes not fused (skipped or gated). */
+uint32_t propid_update_gyro_skipping(propid_filter_t *filter, const float gyro[3], uint32_t skip_mask);
+#endif
 #if PROPID_WITH_INPUT_NOISE
 /* propid_input_compensation.c (config.input_error_compensation, docs/math.md §14):
  * each axis' correction of the coefficients, formed from the predicted P before

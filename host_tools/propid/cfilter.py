@@ -176,7 +176,7 @@ def _config_struct(max_rotors: int) -> type:
         ("rotor", RotorConfigStruct * max_rotors),
         ("inertia", (ctypes.c_float * 3) * 3),
     ] + _TUNING_FIELDS + [("rotor_inertia", ctypes.c_float * max_rotors)] + _OPTIONAL_FIELDS
-        + [("aero_damping", ctypes.c_float * 3)]})
+        + [("aero_damping", ctypes.c_float * 3), ("gyro_stuck_samples", ctypes.c_uint16)]})
 
 
 def _estimate_struct(max_rotors: int) -> type:
@@ -241,6 +241,7 @@ class CountersStruct(ctypes.Structure):
         ("accel_reanchored", ctypes.c_uint32),
         ("delay_overflows", ctypes.c_uint32),
         ("model_mismatch", ctypes.c_uint32),
+        ("gyro_stuck", ctypes.c_uint32),
     ]
 
 
@@ -765,6 +766,7 @@ class CFilter:
             "accel_reanchored": int(c.accel_reanchored),
             "delay_overflows": int(c.delay_overflows),
             "model_mismatch": int(c.model_mismatch),
+            "gyro_stuck": int(c.gyro_stuck),
             "command_accepted": int(counts[0]),
             "instrument_inputs": int(counts[1]),
             "instrument_guarded": int(counts[2]),

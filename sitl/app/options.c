@@ -322,6 +322,10 @@ static const opt_t options[] = {
            "filter: relative std of the vehicle file's inertia scale\n"
            "(inertia_rel_std): the data cannot see it, converged claims\n"
            "count it. Default 0 (the file's inertia is exact)"),
+    NUMBER(NULL, "filter-gyro-stuck", filter_gyro_stuck_samples, 0.0, 65535.0, "N",
+           "filter: a gyro axis whose reading repeats bit for bit N samples\n"
+           "in a row is not fused until it changes (gyro_stuck_samples,\n"
+           "docs/reliability.md). Default 0 (off); >= 2 when on"),
     FLAG(NULL, "filter-input-error-compensation", filter_input_error_compensation, 1,
          "filter: with --filter-rotor-speed-noise, remove the average part of\n"
          "each coefficient update that error explains (errors in variables,\n"

@@ -99,6 +99,7 @@ typedef struct {
     double filter_esc_delay_s;          /* telemetry delay the filter holds [s]: > 0 rotor speeds lag */
     double filter_rotor_speed_noise;    /* rotor_speed_noise [rad/s] (docs/math.md §14); 0: off */
     double filter_rotor_speed_noise_time; /* rotor_speed_noise_time [s] */
+    double filter_gyro_stuck_samples;   /* gyro_stuck_samples (whole number; 0: off) */
     double filter_inertia_rel_std;      /* inertia_rel_std: the vehicle file's inertia scale std; 0: exact */
     int filter_rotor_speed_noise_hold;    /* rotor_speed_noise_hold (docs/math.md §14); 0: off */
     int filter_input_error_compensation;  /* input_error_compensation (docs/math.md §14); 0: off */

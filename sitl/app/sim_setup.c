@@ -193,6 +193,7 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
     c->rotor_speed_noise = (float)opts->filter_rotor_speed_noise;
     c->rotor_speed_noise_time = (float)opts->filter_rotor_speed_noise_time;
     c->inertia_rel_std = (float)opts->filter_inertia_rel_std;
+    c->gyro_stuck_samples = (uint16_t)lround(opts->filter_gyro_stuck_samples);
     c->input_error_compensation = (uint8_t)(opts->filter_input_error_compensation != 0);
     if (opts->filter_aero_damping) {
         double damping[3];

@@ -150,6 +150,7 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
     cJSON_AddNumberToObject(root, "axis_gated", (double)(r->counters.axis_gated[0] + r->counters.axis_gated[1] +
                                                         r->counters.axis_gated[2]));
     cJSON_AddNumberToObject(root, "gate_reopened", (double)r->counters.gate_reopened);
+    cJSON_AddNumberToObject(root, "gyro_stuck", (double)r->counters.gyro_stuck);
     cJSON_AddNumberToObject(root, "cov_repairs", (double)r->counters.cov_repairs);
     cJSON_AddNumberToObject(root, "resyncs", (double)r->counters.resyncs);
     cJSON_AddNumberToObject(root, "model_mismatch_windows", (double)r->counters.model_mismatch);

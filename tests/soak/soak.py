@@ -162,9 +162,10 @@ def plan_case(rng: random.Random, index: int, nees_tuning: str = "matched") -> d
 
 
 def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool = True,
-            inertia_std: float | None = None) -> list[str]:
+            inertia_std: float | None = None, gyro_stuck: int = 0) -> list[str]:
     """The propid_sitl command of one flight. inertia_std: the inertia
-    uncertainty every flight declares (default plan_inertia_rel_rms())."""
+    uncertainty every flight declares (default plan_inertia_rel_rms());
+    gyro_stuck: the filter's gyro_stuck_samples (0: off)."""
     cmd = [sitl, "--vehicle", case["vehicle"], "--trajectory", case["trajectory"], "--mode", mode,
            "--seed", str(case["seed"]), "--duration", str(case["duration_s"]), "--quiet",
            "--summary-json", summary]
@@ -186,13 +187,15 @@ def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool 
         cmd += ["--damage", case["damage"]]
     if detect_damage:
         cmd.append("--detect-damage")
+    if gyro_stuck:
+        cmd += ["--filter-gyro-stuck", str(gyro_stuck)]
     return cmd
 
 
 def fly(sitl: str, case: dict, mode: str, workdir: str, detect_damage: bool = True,
-        inertia_std: float | None = None) -> dict:
+        inertia_std: float | None = None, gyro_stuck: int = 0) -> dict:
     summary = os.path.join(workdir, f"case{case['case']}-{mode}-{case['tuning']}.json")
-    cmd = command(sitl, case, mode, summary, detect_damage, inertia_std)
+    cmd = command(sitl, case, mode, summary, detect_damage, inertia_std, gyro_stuck)
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800)
     if proc.returncode not in (0, 3) or not os.path.exists(summary):
         return {"error": f"exit {proc.returncode}: {proc.stderr.strip()[-300:]}", "command": " ".join(cmd)}
@@ -342,7 +345,9 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
                                             else args.inertia_std, 6)
     out["command"] = (f"make soak SOAK_STEPS={args.steps:g} SOAK_SEED={args.seed} JOBS={args.jobs}"
                       + (f" SOAK_NEES_TUNING={args.nees_tuning}" if args.nees_tuning != "matched" else "")
-                      + (f" SOAK_INERTIA_STD={args.inertia_std:g}" if args.inertia_std is not None else ""))
+                      + (f" SOAK_INERTIA_STD={args.inertia_std:g}" if args.inertia_std is not None else "")
+                      + f" SOAK_GYRO_STUCK={args.gyro_stuck}")
+    out["gyro_stuck_samples"] = args.gyro_stuck
     return out
 
 
@@ -362,12 +367,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--inertia-std", type=float, default=None,
                         help="inertia_rel_std declared by every flight (default: the RMS inertia scale error "
                              f"over the plan's flights, {plan_inertia_rel_rms():.4f})")
+    parser.add_argument("--gyro-stuck", type=int, default=0, metavar="N",
+                        help="the filter's gyro_stuck_samples on every flight: a gyro axis repeating its "
+                             "reading bit for bit N times in a row is not fused (0: off, default; >= 2 on; "
+                             "docs/reliability.md 'A stuck gyro axis')")
     args = parser.parse_args(argv)
     if not os.access(args.sitl, os.X_OK):
         print(f"soak: {args.sitl}: not an executable (run make host)", file=sys.stderr)
         return 2
-    if args.steps <= 0 or args.jobs < 1 or (args.inertia_std is not None and not 0.0 <= args.inertia_std <= 1.0):
-        print("soak: --steps must be > 0, --jobs >= 1 and --inertia-std in [0, 1]", file=sys.stderr)
+    if args.steps <= 0 or args.jobs < 1 or (args.inertia_std is not None and not 0.0 <= args.inertia_std <= 1.0) \
+            or args.gyro_stuck == 1 or not 0 <= args.gyro_stuck <= 65535:
+        print("soak: --steps must be > 0, --jobs >= 1, --inertia-std in [0, 1] and --gyro-stuck 0 or 2..65535",
+              file=sys.stderr)
         return 2
 
     rng = random.Random(args.seed)
@@ -389,7 +400,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="propid-soak-") as workdir, \
             ThreadPoolExecutor(max_workers=args.jobs) as pool:
         futures = {pool.submit(fly, args.sitl, case, mode, workdir, not args.no_detect_damage,
-                               args.inertia_std): (case, mode)
+                               args.inertia_std, args.gyro_stuck): (case, mode)
                    for case in cases for mode in ("filter", "oracle")}
         if args.nees_tuning == "matched":
             # Side by side: each NEES flight again with its inputs taken as exact
@@ -398,7 +409,7 @@ def main(argv: list[str] | None = None) -> int:
                 if case["clean"]:
                     twin = {**case, "tuning": "matched-exact-inputs"}
                     futures[pool.submit(fly, args.sitl, twin, "filter", workdir, not args.no_detect_damage,
-                                        args.inertia_std)] = (case, "exact-inputs")
+                                        args.inertia_std, args.gyro_stuck)] = (case, "exact-inputs")
         try:
             for future in as_completed(futures):
                 case, mode = futures[future]

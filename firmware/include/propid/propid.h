@@ -194,6 +194,12 @@ typedef struct {
                                          body torque -aero_damping[a] omega_a (docs/math.md §17; the
                                          vehicle file's key of that name). 0: not modelled. Full build
                                          only (the quad build refuses a nonzero value) */
+    uint16_t gyro_stuck_samples;      /* >= 2: a gyro axis whose reading repeats bit for bit this many
+                                         samples in a row (a stuck sensor, bus or FIFO) is not fused
+                                         from that sample on until it changes (counters.gyro_stuck,
+                                         flag GATED): its constant reading would otherwise be explained
+                                         by the coefficients (docs/reliability.md "A stuck gyro axis").
+                                         0: off. Full build only (the quad build refuses a nonzero value) */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -267,6 +273,12 @@ typedef struct {
     float accel_innovation_test_ratio;
 #endif
     uint8_t check_row;                                /* next covariance row of the round-robin integrity check */
+#if PROPID_WITH_GYRO_STUCK_CHECK
+    /* Private (config.gyro_stuck_samples): per axis the last fused-or-skipped
+     * reading's bits and how many readings in a row had them. */
+    uint32_t gyro_last_bits[3];
+    uint16_t gyro_repeat_run[3];
+#endif
 #if PROPID_WITH_INPUT_NOISE
     /* Private: the input-error compensation's memory per gyro axis (propid_input_compensation.c),
      * in units of one sample's error variance: E[x^2] and E[x e] of the error x the rate
@@ -310,6 +322,7 @@ typedef struct {
     uint32_t delay_overflows;         /* samples released early because the delay buffer was full */
     uint32_t model_mismatch;          /* NIS windows above their chi-square bound (0 when
                                          PROPID_CONSISTENCY is 0) */
+    uint32_t gyro_stuck;              /* axis-samples not fused as stuck (config.gyro_stuck_samples) */
 } propid_counters_t;
 
 /* State layout: the first index of each block of the scaled state. Fixed blocks
@@ -402,6 +415,11 @@ typedef struct {
     float input_noise_time;                         /* rotor_speed_noise_time */
     uint8_t input_compensation;                     /* config.input_error_compensation */
     uint8_t input_noise_hold;                       /* config.rotor_speed_noise_hold */
+#endif
+#if PROPID_WITH_INPUT_NOISE || PROPID_WITH_GYRO_STUCK_CHECK
+    uint8_t rare_gyro_update;                       /* input compensation on or gyro_stuck_samples > 0:
+                                                       the step's one test for either */
+    uint16_t gyro_stuck_samples;                    /* config.gyro_stuck_samples (0: off) */
 #endif
     float quad_gyro[3];                             /* quad layout only: A_ab = quad_gyro[a] omega_c for
                                                        both other axes b, c of row a (symmetric in b, c) */

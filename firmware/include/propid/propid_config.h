@@ -45,6 +45,9 @@
 #ifndef PROPID_WITH_INSTRUMENT          /* propid_push_motor_command(): the commands' first stage */
 #define PROPID_WITH_INSTRUMENT PROPID_DEFAULT_FEATURES
 #endif
+#ifndef PROPID_WITH_GYRO_STUCK_CHECK    /* config.gyro_stuck_samples: bit-identical repeats not fused */
+#define PROPID_WITH_GYRO_STUCK_CHECK PROPID_DEFAULT_FEATURES
+#endif
 #ifndef PROPID_WITH_AERO_DAMPING        /* a known aerodynamic rate damping -D omega in the rate dynamics */
 #define PROPID_WITH_AERO_DAMPING PROPID_DEFAULT_FEATURES
 #endif
@@ -59,11 +62,11 @@
 #ifndef PROPID_GENERAL_VEHICLES
 #define PROPID_GENERAL_VEHICLES (PROPID_DEFAULT_FEATURES || PROPID_WITH_ACCEL || PROPID_WITH_DISTURBANCE || \
                                  PROPID_WITH_ROTOR_INERTIA || PROPID_WITH_INPUT_NOISE || PROPID_WITH_INSTRUMENT || \
-                                 PROPID_WITH_AERO_DAMPING)
+                                 PROPID_WITH_AERO_DAMPING || PROPID_WITH_GYRO_STUCK_CHECK)
 #endif
 #if !PROPID_GENERAL_VEHICLES && (PROPID_MAX_ROTORS != 4 || PROPID_WITH_ACCEL || PROPID_WITH_DISTURBANCE || \
                                  PROPID_WITH_ROTOR_INERTIA || PROPID_WITH_INPUT_NOISE || PROPID_WITH_INSTRUMENT || \
-                                 PROPID_WITH_AERO_DAMPING)
+                                 PROPID_WITH_AERO_DAMPING || PROPID_WITH_GYRO_STUCK_CHECK)
 #error "PROPID_GENERAL_VEHICLES 0 needs PROPID_MAX_ROTORS 4 and every optional model term off"
 #endif
 
