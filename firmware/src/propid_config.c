@@ -625,9 +625,8 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     out.input_noise_hold = config->rotor_speed_noise_hold;
 #endif
 #if PROPID_WITH_INPUT_NOISE || PROPID_WITH_GYRO_STUCK_CHECK
-    out.gyro_stuck_samples = PROPID_WITH_GYRO_STUCK_CHECK ? config->gyro_stuck_samples : 0u;
     out.rare_gyro_update = (uint8_t)((PROPID_WITH_INPUT_NOISE && config->input_error_compensation) ||
-                                     out.gyro_stuck_samples != 0u);
+                                     (PROPID_WITH_GYRO_STUCK_CHECK && config->gyro_stuck_samples != 0u));
 #endif
     out.layout.rate = 0u;
     out.layout.thrust = propid_first_thrust();

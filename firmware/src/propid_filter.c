@@ -414,7 +414,7 @@ static __attribute__((noinline)) uint32_t update_gyro_rare(propid_filter_t *filt
 {
     uint32_t skip_mask = 0u;
 #if PROPID_WITH_GYRO_STUCK_CHECK
-    if (filter->derived.gyro_stuck_samples != 0u) {
+    if (filter->config.gyro_stuck_samples != 0u) {
         skip_mask = propid_gyro_stuck_mask(filter, gyro_rad_s);
     }
 #endif

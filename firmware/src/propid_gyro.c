@@ -535,7 +535,7 @@ uint32_t propid_update_gyro(propid_filter_t *filter, const float gyro[3])
 uint32_t propid_gyro_stuck_mask(propid_filter_t *filter, const float gyro[3])
 {
     propid_core_t *core = &filter->core;
-    const uint16_t limit = filter->derived.gyro_stuck_samples;
+    const uint16_t limit = filter->config.gyro_stuck_samples; /* (the full build keeps the whole config) */
     uint32_t mask = 0u;
     for (uint8_t a = 0; a < 3u; ++a) {
         /* Bits, not values: a stuck source repeats its word exactly. */

@@ -132,6 +132,7 @@ _TUNING_FIELDS = [
     ("gyro_bias_walk", ctypes.c_float),
     ("gate_sigma", ctypes.c_float),
     ("gate_max_consecutive", ctypes.c_uint16),
+    ("gyro_stuck_samples", ctypes.c_uint16),
     ("max_rotor_speed", ctypes.c_float),
     ("gyro_range", ctypes.c_float),
     ("rotor_stale_us", ctypes.c_uint32),
@@ -176,7 +177,7 @@ def _config_struct(max_rotors: int) -> type:
         ("rotor", RotorConfigStruct * max_rotors),
         ("inertia", (ctypes.c_float * 3) * 3),
     ] + _TUNING_FIELDS + [("rotor_inertia", ctypes.c_float * max_rotors)] + _OPTIONAL_FIELDS
-        + [("aero_damping", ctypes.c_float * 3), ("gyro_stuck_samples", ctypes.c_uint16)]})
+        + [("aero_damping", ctypes.c_float * 3)]})
 
 
 def _estimate_struct(max_rotors: int) -> type:
@@ -263,6 +264,7 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "gyro_bias_walk": 1.0e-4,
     "gate_sigma": 5.0,
     "gate_max_consecutive": 25,
+    "gyro_stuck_samples": 0,
     "max_rotor_speed": 6000.0,
     "gyro_range": 34.0,
     "rotor_stale_us": 50000,
@@ -334,6 +336,7 @@ class FilterConfig:
     gyro_bias_walk: float = DEFAULT_TUNING["gyro_bias_walk"]
     gate_sigma: float = DEFAULT_TUNING["gate_sigma"]
     gate_max_consecutive: int = DEFAULT_TUNING["gate_max_consecutive"]
+    gyro_stuck_samples: int = DEFAULT_TUNING["gyro_stuck_samples"]
     max_rotor_speed: float = DEFAULT_TUNING["max_rotor_speed"]
     gyro_range: float = DEFAULT_TUNING["gyro_range"]
     rotor_stale_us: int = DEFAULT_TUNING["rotor_stale_us"]

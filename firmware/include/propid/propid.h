@@ -115,6 +115,13 @@ typedef struct {
     float gate_sigma;                 /* innovation gate in standard deviations, >= 1; <= 0 disables it
                                          (innovations beyond 1e15 sigma are still gated) */
     uint16_t gate_max_consecutive;    /* gated samples in a row before an axis is re-opened */
+    uint16_t gyro_stuck_samples;      /* >= 2: a gyro axis whose reading repeats bit for bit this many
+                                         samples in a row (a stuck sensor, bus or FIFO) is not fused
+                                         from that sample on until it changes (counters.gyro_stuck,
+                                         flag GATED): its constant reading would otherwise be explained
+                                         by the coefficients (docs/reliability.md "A stuck gyro axis").
+                                         0: off. Full build only (the quad build refuses a nonzero
+                                         value). (In the padding after gate_max_consecutive.) */
     float max_rotor_speed;            /* larger rotor speeds are absurd [rad/s] */
     float gyro_range;                 /* larger |gyro| is a saturated sensor [rad/s] */
     uint32_t rotor_stale_us;          /* rotor data older than this at a gyro sample is stale */
@@ -194,12 +201,6 @@ typedef struct {
                                          body torque -aero_damping[a] omega_a (docs/math.md §17; the
                                          vehicle file's key of that name). 0: not modelled. Full build
                                          only (the quad build refuses a nonzero value) */
-    uint16_t gyro_stuck_samples;      /* >= 2: a gyro axis whose reading repeats bit for bit this many
-                                         samples in a row (a stuck sensor, bus or FIFO) is not fused
-                                         from that sample on until it changes (counters.gyro_stuck,
-                                         flag GATED): its constant reading would otherwise be explained
-                                         by the coefficients (docs/reliability.md "A stuck gyro axis").
-                                         0: off. Full build only (the quad build refuses a nonzero value) */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -273,12 +274,6 @@ typedef struct {
     float accel_innovation_test_ratio;
 #endif
     uint8_t check_row;                                /* next covariance row of the round-robin integrity check */
-#if PROPID_WITH_GYRO_STUCK_CHECK
-    /* Private (config.gyro_stuck_samples): per axis the last fused-or-skipped
-     * reading's bits and how many readings in a row had them. */
-    uint32_t gyro_last_bits[3];
-    uint16_t gyro_repeat_run[3];
-#endif
 #if PROPID_WITH_INPUT_NOISE
     /* Private: the input-error compensation's memory per gyro axis (propid_input_compensation.c),
      * in units of one sample's error variance: E[x^2] and E[x e] of the error x the rate
@@ -304,6 +299,12 @@ typedef struct {
     /* Per rotor, how long its input value has stood before the current step [s]
      * (rotor_speed_noise_hold; 0 after init, reset and a change). */
     float input_hold_age[PROPID_MAX_ROTORS];
+#endif
+#if PROPID_WITH_GYRO_STUCK_CHECK
+    /* Private (config.gyro_stuck_samples): per axis the last reading's bits and
+     * how many readings in a row had them. Last: the step's offsets unchanged. */
+    uint32_t gyro_last_bits[3];
+    uint16_t gyro_repeat_run[3];
 #endif
 } propid_core_t;
 
@@ -418,8 +419,8 @@ typedef struct {
 #endif
 #if PROPID_WITH_INPUT_NOISE || PROPID_WITH_GYRO_STUCK_CHECK
     uint8_t rare_gyro_update;                       /* input compensation on or gyro_stuck_samples > 0:
-                                                       the step's one test for either */
-    uint16_t gyro_stuck_samples;                    /* config.gyro_stuck_samples (0: off) */
+                                                       the step's one test for either (in the padding
+                                                       before quad_gyro: the step's offsets unchanged) */
 #endif
     float quad_gyro[3];                             /* quad layout only: A_ab = quad_gyro[a] omega_c for
                                                        both other axes b, c of row a (symmetric in b, c) */
