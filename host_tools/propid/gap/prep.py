@@ -163,7 +163,7 @@ def unhold_rotor_stream(t: np.ndarray, speeds: np.ndarray) -> tuple[np.ndarray, 
     return out, fraction
 
 
-REPEATS = ("missing", "samples")  # copies of the previous row: missing samples (default), or fused as samples
+REPEATS = ("missing", "samples")  # copies of the previous row: missing samples, or fused as samples (the default, analysis.Options)
 
 
 def repeated_rows(values: np.ndarray) -> np.ndarray:
