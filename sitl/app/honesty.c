@@ -268,8 +268,10 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
      * cost the simulator several per cent, and 50 Hz samples a 10 s flight
      * 500 times. */
     if (h->steps++ % HONESTY_NEES_EVERY == 0) {
-        h->cov_checks++;
-        h->cov_not_pd += !full_cov_positive_definite(filter);
+        if (h->check_cov) {
+            h->cov_checks++;
+            h->cov_not_pd += !full_cov_positive_definite(filter);
+        }
         add_nees(h, filter, true_kf, true_km, true_bias);
     }
 }

@@ -18,6 +18,8 @@ typedef struct {
     long nees_samples;          /* NEES samples (every 10th step) with a usable covariance block */
     long nees_in_bounds;        /* ... whose NEES lay in the 95 % chi-square interval */
     double nees_sum;
+    int check_cov;              /* check the whole P for definiteness at every NEES sample (set after
+                                   init; --honesty-cov-check: +3 % of a flight's instructions) */
     long cov_checks;            /* full covariance P checked for definiteness (at every NEES sample) */
     long cov_not_pd;            /* ... of them not positive definite (Cholesky in double) */
     int nees_dof;               /* 2 N + 3, 2 N + 4 with the thrust-torque scale state */

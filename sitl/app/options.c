@@ -260,6 +260,9 @@ static const opt_t options[] = {
          "start on the trajectory's trim: the attitude, body rate\nand thrust its feed-forward asks "
          "for at t = 0\n(default: level, hover rotor speeds)"),
     FLAG(NULL, "no-ground", ground_enabled, 0, "no ground plane"),
+    FLAG(NULL, "honesty-cov-check", honesty_cov_check, 1,
+         "check the filter's whole covariance for positive\ndefiniteness at every NEES sample (summary honesty.\n"
+         "cov_checks / cov_not_pd; make soak sets it; ~ 3 % of\nthe flight's instructions)"),
     NUMBER(NULL, "physics-rate", physics_rate_hz, 1.0, 1e6, "HZ", "RK4 rate (default 2000, >= control rate)"),
     NUMBER(NULL, "control-rate", control_rate_hz, 1.0, 1e5, "HZ", "controller/allocation rate (default 500)"),
     NUMBER(NULL, "realtime", realtime, 0.0, 1e6, "FACTOR",

@@ -308,6 +308,7 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
     sitl_metrics_init(&f->metrics, n, kf_std, km_std, (double)f->filter_config.gyro_bias_std0);
     sitl_honesty_init(&f->honesty, &f->filter, f->true_kf, f->true_km,
                       sitl_setup_true_torque_scale(&o->effects));
+    f->honesty.check_cov = o->honesty_cov_check;
     for (int k = 0; k < o->damage_count; k++) {
         if (o->damage[k].rotor >= n) {
             snprintf(err, sizeof(err), "--damage: rotor %d but the vehicle has %d", o->damage[k].rotor + 1, n);

@@ -304,7 +304,11 @@ static void test_covariance_check_reads_the_whole_p(void)
     propid_estimate_t estimate;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
     sitl_honesty_t h;
+    sitl_honesty_init(&h, &filter, kf, km, 1.0); /* off unless asked (--honesty-cov-check) */
+    sitl_honesty_add(&h, 0.0, &estimate, &filter, kf, km, bias);
+    TEST_ASSERT_EQUAL_INT(0, h.cov_checks);
     sitl_honesty_init(&h, &filter, kf, km, 1.0);
+    h.check_cov = 1;
     sitl_honesty_add(&h, 0.0, &estimate, &filter, kf, km, bias);
     TEST_ASSERT_EQUAL_INT(1, h.cov_checks);
     TEST_ASSERT_EQUAL_INT(0, h.cov_not_pd);
@@ -313,6 +317,7 @@ static void test_covariance_check_reads_the_whole_p(void)
     const float rate_var = filter.core.cov[propid_cov_index(0u, 0u)];
     filter.core.cov[propid_cov_index(0u, 1u)] = 1.5f * rate_var; /* correlation 1.5 */
     sitl_honesty_init(&h, &filter, kf, km, 1.0);
+    h.check_cov = 1;
     sitl_honesty_add(&h, 0.0, &estimate, &filter, kf, km, bias);
     TEST_ASSERT_EQUAL_INT(1, h.cov_not_pd);
     TEST_ASSERT_EQUAL_INT(1, h.nees_samples);
@@ -321,6 +326,7 @@ static void test_covariance_check_reads_the_whole_p(void)
     const uint8_t kf0 = filter.derived.layout.thrust;
     filter.core.cov[propid_cov_index(kf0, (uint8_t)(kf0 + 1u))] = 1.5f * filter.core.cov[propid_cov_index(kf0, kf0)];
     sitl_honesty_init(&h, &filter, kf, km, 1.0);
+    h.check_cov = 1;
     sitl_honesty_add(&h, 0.0, &estimate, &filter, kf, km, bias);
     TEST_ASSERT_EQUAL_INT(1, h.cov_not_pd);
     TEST_ASSERT_EQUAL_INT(0, h.nees_samples);

@@ -168,7 +168,7 @@ def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool 
     gyro_stuck: the filter's gyro_stuck_samples (0: off)."""
     cmd = [sitl, "--vehicle", case["vehicle"], "--trajectory", case["trajectory"], "--mode", mode,
            "--seed", str(case["seed"]), "--duration", str(case["duration_s"]), "--quiet",
-           "--summary-json", summary]
+           "--summary-json", summary, "--honesty-cov-check"]
     if case["sensors"] == "paper":
         cmd.append("--paper")
     if case["tuning"] == "campaign":
