@@ -33,7 +33,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
-from propid.signals import measured_torque, segments
+from propid.signals import measured_torque, repeats_previous_row, segments
 
 GRAVITY = 9.80665
 
@@ -385,10 +385,7 @@ def _commands(log: FlightLog, rotors: int) -> np.ndarray | None:
 def repeated_row_shares(log: FlightLog, rows: np.ndarray) -> dict:
     """Share of `rows` (a mask) whose gyro triple, or rotor-speed set, equals the previous row's bit for bit:
     a logger's sample-and-hold copy of a lost packet, not a new sample (docs/real-data.md "Repeated rows")."""
-    same_gyro = np.zeros(len(log), dtype=bool)
-    same_gyro[1:] = np.all(log.gyro[1:] == log.gyro[:-1], axis=1)
-    same_rotor = np.zeros(len(log), dtype=bool)
-    same_rotor[1:] = np.all(log.rotor_speed[1:] == log.rotor_speed[:-1], axis=1)
+    same_gyro, same_rotor = repeats_previous_row(log.gyro), repeats_previous_row(log.rotor_speed)
     count = int(rows.sum())
     if count == 0:
         return {"gyro": float("nan"), "rotor": float("nan")}

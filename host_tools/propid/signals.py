@@ -52,3 +52,12 @@ def segment_starts(mask: np.ndarray, t: np.ndarray, dt: float) -> np.ndarray:
     steps = np.diff(t)
     gap = np.concatenate([[True], (steps > 1.5 * dt)])
     return np.flatnonzero(mask & (gap | ~np.concatenate([[False], mask[:-1]])))
+
+
+def repeats_previous_row(values: np.ndarray) -> np.ndarray:
+    """Mask of the rows whose every column equals the previous row's bit for bit (NaN never does): a
+    logger that samples separately streamed blocks by sample-and-hold writes a lost packet as such a
+    copy (docs/real-data.md "Repeated rows")."""
+    same = np.zeros(len(values), dtype=bool)
+    same[1:] = np.all(values[1:] == values[:-1], axis=1)
+    return same

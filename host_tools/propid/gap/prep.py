@@ -39,7 +39,7 @@ from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.realdata_checks import _body_velocity, _hold_rotor_rows, absurd_speed_limit, bandpass, \
     clean_rotor_speeds, flying_mask
-from propid.signals import measured_torque, segments
+from propid.signals import measured_torque, repeats_previous_row, segments
 
 MIN_SEGMENT_S = 2.0
 BLOCK_S = 2.0
@@ -170,9 +170,7 @@ def repeated_rows(values: np.ndarray) -> np.ndarray:
     """Rows whose every column equals the previous row's bit for bit (NaN never does): a logger that
     samples separately streamed blocks by sample-and-hold writes a lost packet as such a copy. Rotor
     rows that are all zero (motors stopped) are genuine and not counted."""
-    same = np.zeros(len(values), dtype=bool)
-    same[1:] = np.all(values[1:] == values[:-1], axis=1)
-    return same & np.any(values != 0.0, axis=1)
+    return repeats_previous_row(values) & np.any(values != 0.0, axis=1)
 
 
 def repeated_row_stats(copy: np.ndarray, rows: np.ndarray) -> dict:

@@ -18,7 +18,7 @@ from propid.replay.options import US, ReplayOptions, ReplayResult
 from propid.replay.prefilter import highpass_emulation_log, prefilter_log
 from propid.replay.session import FilterSession, segment_mask
 from propid.replay.vehicle_terms import undo_gyro_scale
-from propid.signals import median_dt
+from propid.signals import median_dt, repeats_previous_row
 
 
 def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = None) -> ReplayResult:
@@ -81,10 +81,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     has_rotor = np.any(np.isfinite(log.rotor_speed), axis=1)
     repeats = {"gyro": 0, "rotor": 0}
     if options.skip_repeats:
-        same_gyro = np.zeros(len(log), dtype=bool)
-        same_gyro[1:] = np.all(log.gyro[1:] == log.gyro[:-1], axis=1)
-        same_rotor = np.zeros(len(log), dtype=bool)
-        same_rotor[1:] = np.all(log.rotor_speed[1:] == log.rotor_speed[:-1], axis=1)
+        same_gyro, same_rotor = repeats_previous_row(log.gyro), repeats_previous_row(log.rotor_speed)
         repeats = {"gyro": int(np.sum(same_gyro[mask])), "rotor": int(np.sum(same_rotor[mask]))}
         has_gyro &= ~same_gyro
         has_rotor &= ~same_rotor
@@ -349,8 +346,7 @@ def repeated_gyro_share(log: FlightLog, rows: np.ndarray) -> float:
     rows = rows[rows > 0]
     if rows.size == 0:
         return 0.0
-    same = np.all(log.gyro[rows] == log.gyro[rows - 1], axis=1)
-    return float(np.sum(same)) / rows.size
+    return float(np.sum(repeats_previous_row(log.gyro)[rows])) / rows.size
 
 
 def replay_warnings(rates: dict, accepted: int, pushed: int, repeated_gyro: float | None = None) -> list[str]:
