@@ -11,6 +11,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import read_flightlog, read_vehicle, vehicle_path_for, write_vehicle
+from propid.outputs import check_writable
 
 NAME = "gap"
 HELP = ("diagnose the sim-to-real gap: base fit, where the model misses, which unmodelled effect, "
@@ -27,6 +28,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--report", metavar="DIR", help="write DIR/index.html with plots")
     parser.add_argument("--vehicle-out", metavar="CORRECTED.json",
                         help="write the vehicle file corrected with the significant effects' parameters")
+    parser.add_argument("--calibration", choices=("auto", "on", "off"), default="auto",
+                        help="with --vehicle-out: replay the fit logs through the firmware filter gyro only and with "
+                             "the accelerometer, in the chain the file is meant for, and scale Jxx, Jyy so the "
+                             "gyro-only filter reads the accelerometer's kf (docs/gap.md, Corrected vehicle); auto "
+                             "(default): when the fit logs have accelerometer columns and the vehicle a mass and "
+                             "inertia, else the file is gap's effects alone and OUT.json says why; on: an error "
+                             "instead; off: never")
     parser.add_argument("--highpass", default="auto", metavar="HZ|auto",
                         help="torque axes: slow disturbance torques below this are a nuisance; auto (default): the "
                              "lowest of 0.2/0.5/1/2 Hz at which the roll/pitch kf no longer depends on the band")
@@ -75,6 +83,13 @@ def run(args: argparse.Namespace) -> int:
     if not vehicle_path.exists():
         raise UserError(f"no vehicle file: {vehicle_path} (give --vehicle V.json)")
     vehicle = read_vehicle(vehicle_path)
+    if args.calibration == "on" and not args.vehicle_out:
+        raise UserError("--calibration on needs --vehicle-out (the calibration is of the written file)")
+    if args.vehicle_out:
+        check_writable(args.vehicle_out, "--vehicle-out")
+    if args.vehicle_out and Path(args.vehicle_out).resolve() in {Path(p).resolve() for p in
+                                                                 [vehicle_path, *args.log, *args.holdout]}:
+        raise UserError(f"--vehicle-out {args.vehicle_out} is one of the input files")
     logs = [read_flightlog(p, vehicle) for p in args.log]
     holdout = [read_flightlog(p, vehicle) for p in args.holdout]
     options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
@@ -86,11 +101,25 @@ def run(args: argparse.Namespace) -> int:
     internal = result.pop("_internal")
     corrected = internal["corrected"]
     progress = internal["progress"]
+    if args.vehicle_out:
+        from propid.gap.calibration import calibrate_or_fall_back
+
+        if progress.bar is not None:  # the calibration's replays, one step per fit log
+            progress.bar.total += len(logs)
+            progress.bar.refresh()
+        corrected, result["calibration"] = calibrate_or_fall_back(args.calibration, logs, vehicle, corrected,
+                                                                  progress=lambda: progress(1))
+    else:
+        from propid.gap.calibration import not_calibrated
+
+        result["calibration"] = not_calibrated("no --vehicle-out: the calibration runs only when a file is written")
     if not args.no_filter:
         from propid.gap.filtercheck import filter_before_after
 
+        walk = bool(result["calibration"]["calibrated"])  # the chain the calibrated file is meant for
         try:
-            result["filter"] = filter_before_after(holdout or logs, vehicle, corrected, progress=lambda: progress(1))
+            result["filter"] = filter_before_after(holdout or logs, vehicle, corrected, progress=lambda: progress(1),
+                                                   walk=walk)
         except UserError as exc:
             result["filter"] = {"error": str(exc)}
     progress.close()
@@ -106,6 +135,13 @@ def run(args: argparse.Namespace) -> int:
         write_report(result, args.report)
     if args.json:
         print(f"verdict: {result['verdict']} (significant: {', '.join(result['significant']) or 'none'})")
+        if args.vehicle_out:
+            cal = result["calibration"]
+            if cal["calibrated"]:
+                print(f"calibrated with the filter on {len(cal['logs'])} fit log(s): Jxx, Jyy x {cal['torque_gain']:.4g}; "
+                      f"wrote {args.vehicle_out}; replay it with: {cal['replay_options']['command']}")
+            else:
+                print(f"not calibrated with the filter ({cal['why']}); wrote {args.vehicle_out}")
     else:
         print(text)
     return 0

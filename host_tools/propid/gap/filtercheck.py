@@ -29,34 +29,56 @@ def _fleet(values: list[float]) -> dict:
             "cv": float(np.std(v) / mean) if v.size > 1 and mean else None}
 
 
-def _replay_kf(log: FlightLog, vehicle: Vehicle, delay, skip_repeats: bool = False) -> float:
-    from propid.replay import ReplayOptions, replay
+def chain_options(vehicle: Vehicle, delay="default", skip_repeats: bool = True, walk: bool = False,
+                  segment: str = "flying") -> "ReplayOptions":
+    """The gyro-only replay gap's files are checked (and calibrated) with: every model key the file carries
+    taken as `propid replay` takes it, the disturbance states at its loop_bandwidth_hz when it has one;
+    `walk`: the coefficient walk by the per-log torque-gain rule (`--thrust-coeff-rel-walk auto`)."""
+    from propid.replay import ReplayOptions
 
     disturbance = "on" if vehicle.loop_bandwidth_hz is not None else "off"  # the file's bandwidth (replay/config.py)
-    gyro_only = dict(esc_delay=delay, aiding="gyro", rotor_inertia="auto", aero_damping="auto", gyro_scale="auto",
-                     torque_scale="off", disturbance=disturbance, skip_repeats=skip_repeats, progress=False)
+    return ReplayOptions(segment=segment, esc_delay=delay, aiding="gyro", rotor_inertia="auto", aero_damping="auto",
+                         gyro_scale="auto", torque_scale="off", disturbance=disturbance, skip_repeats=skip_repeats,
+                         thrust_coeff_walk="auto" if walk else None, progress=False)
+
+
+def replay_summary(log: FlightLog, vehicle: Vehicle, options: "ReplayOptions") -> dict:
+    """The replay's summary of the flying rows, or of every row when its flying detector finds none
+    (e.g. a log that starts airborne)."""
+    from dataclasses import replace
+
+    from propid.replay import replay
+
     try:
-        result = replay(log, vehicle, ReplayOptions(segment="flying", **gyro_only))
-    except UserError:  # the replay's flying detector found nothing (e.g. a log that starts airborne)
-        result = replay(log, vehicle, ReplayOptions(segment="all", **gyro_only))
-    return float(np.mean(result.summary["kf_mean"]))
+        return replay(log, vehicle, options).summary
+    except UserError:
+        if options.segment != "flying":
+            raise
+        return replay(log, vehicle, replace(options, segment="all")).summary
+
+
+def _replay_kf(log: FlightLog, vehicle: Vehicle, delay, skip_repeats: bool = False, walk: bool = False) -> float:
+    summary = replay_summary(log, vehicle, chain_options(vehicle, delay, skip_repeats, walk))
+    return float(np.mean(summary["kf_mean"]))
 
 
 def filter_before_after(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progress=None,
-                        skip_repeats: bool = True) -> dict:
+                        skip_repeats: bool = True, walk: bool = False) -> dict:
     before, after = [], []
     skip = skip_repeats
     for log in logs:
         # each file's esc_delay_s when it has one, else the replay's per-log rule
-        before.append(_replay_kf(log, vehicle, "default", skip))
-        after.append(_replay_kf(log, corrected, "default", skip))
+        before.append(_replay_kf(log, vehicle, "default", skip, walk))
+        after.append(_replay_kf(log, corrected, "default", skip, walk))
         if progress:
             progress()
     return {"logs": [str(l.path) for l in logs], "kf_before": _fleet(before), "kf_after": _fleet(after),
-            "skip_repeats": skip,
+            "skip_repeats": skip, "walk_rule": walk,
             "mode": "gyro only (no accelerometer aiding), --segment flying, the file's rotor_inertia, "
                     "aero_damping and gyro_scale carried as propid replay takes them"
-                    + ("; rows repeating the previous row skipped (--skip-repeats)" if skip else "") + "".join(
+                    + ("; rows repeating the previous row skipped (--skip-repeats)" if skip else "")
+                    + ("; coefficient walk by the per-log rule (--thrust-coeff-rel-walk auto), the chain the "
+                       "calibrated file is meant for" if walk else "") + "".join(
                 f"; {name}: disturbance states at its loop_bandwidth_hz {v.loop_bandwidth_hz:g} Hz"
                 for name, v in (("vehicle file", vehicle), ("corrected vehicle", corrected))
                 if v.loop_bandwidth_hz is not None)}

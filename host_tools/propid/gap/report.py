@@ -230,6 +230,15 @@ def write_report(result: dict, directory: str | Path) -> Path:
             [["vehicle file", f["kf_before"]["mean"], f["kf_before"]["cv"], f["kf_before"]["per_run"]],
              ["corrected vehicle", f["kf_after"]["mean"], f["kf_after"]["cv"], f["kf_after"]["per_run"]]]))
     parts.append("<h2>Corrected vehicle</h2><pre>" + html.escape(json.dumps(result["vehicle_out"], indent=1)) + "</pre>")
+    cal = result.get("calibration")
+    if cal and cal.get("calibrated"):
+        parts.append("<h3>Calibrated with the filter</h3><p>" + html.escape(
+            f"The fit logs ({len(cal['logs'])}) replayed gyro only and with the accelerometer, with the corrected file: "
+            f"fleet kf {cal['kf_gyro_only']:.4g} and {cal['kf_with_accelerometer']:.4g}; Jxx, Jyy x "
+            f"{cal['torque_gain']:.4g} on top of the effects. Replay the file with: {cal['replay_options']['command']}")
+            + "</p>")
+    elif cal:
+        parts.append("<h3>Not calibrated with the filter</h3><p>" + html.escape(str(cal["why"])) + "</p>")
     parts.append("<p>Method and every rule: docs/gap.md in the propid repository.</p></body></html>")
     index = d / "index.html"
     index.write_text("\n".join(parts), encoding="utf-8")

@@ -1,0 +1,137 @@
+"""The corrected vehicle file calibrated for the filter that will use it (`propid gap --vehicle-out`,
+docs/gap.md "Corrected vehicle").
+
+gap's carried effects come from its own fits (least squares, the instrument above the loop's band).
+A torque scale measured that way does not transfer to the gyro-only filter, whose reading depends on
+its memory and on the model terms it runs with (docs/real-data.md "Why the larger J moves kf so
+little"): the correction must be measured with the estimator that uses it. So, after the fits:
+
+- the fit logs with accelerometer columns, of a vehicle with a mass and an inertia, are replayed
+  through the firmware filter with gap's corrected file in the chain the file is meant for
+  (`chain_options`: gyro only, `--segment flying`, the file's rotor_inertia, aero_damping and
+  gyro_scale as `propid replay` takes them, the disturbance states at its loop_bandwidth_hz, the
+  per-log delay rule unless the file keeps an esc_delay_s, the walk rule, `--skip-repeats`), and
+  again with the accelerometer (replay/calibration.accelerometer_options of the same options: the
+  same model terms, so the two replays differ only in the aiding);
+- replay/calibration.torque_gain_correction turns the two into c = accelerometer fleet kf /
+  gyro-only fleet kf, applied on top of gap's effects (Jxx, Jyy x c, kf_nominal's mean = the
+  accelerometer fleet kf).
+
+The fit logs' own accelerometer kf is the reference; the hold-out logs are never used. Without an
+accelerometer, a mass or an inertia the file is gap's corrected file as before, and `calibration`
+says why.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from propid.errors import UserError
+from propid.flightlog import FlightLog, Vehicle
+from propid.gap.filtercheck import chain_options, replay_summary
+from propid.replay.calibration import accelerometer_options, torque_gain_correction
+
+RULE = ("c = fleet kf with the accelerometer / fleet kf gyro only, both replays of the fit logs with gap's corrected "
+        "file in the chain below; Jxx, Jyy x c on top of gap's effects, kf_nominal's mean = the accelerometer fleet kf")
+
+
+def chain_command(vehicle: Vehicle) -> str:
+    """The `propid replay` options of the chain (the CLI's defaults cover rotor inertia, gyro scale, delay)."""
+    disturbance = " --disturbance on" if vehicle.loop_bandwidth_hz is not None else ""
+    return ("--segment flying --aiding gyro --aero-damping auto" + disturbance
+            + " --thrust-coeff-rel-walk auto --skip-repeats")
+
+
+def _options_record(options) -> dict:
+    keep = ("segment", "aiding", "esc_delay", "rotor_inertia", "aero_damping", "gyro_scale", "torque_scale",
+            "disturbance", "thrust_coeff_walk", "skip_repeats", "torque_scale_walk")
+    return {k: getattr(options, k) for k in keep}
+
+
+def _has_accelerometer(log: FlightLog) -> bool:
+    return log.acc is not None and bool(np.isfinite(log.acc).any())
+
+
+def unavailable(vehicle: Vehicle, logs: list[FlightLog]) -> str | None:
+    """Why the calibration cannot run on these logs and this vehicle, or None."""
+    if vehicle.mass is None:
+        return "the vehicle file has no mass (the accelerometer measures thrust / mass)"
+    if vehicle.inertia is None:
+        return "the vehicle file has no inertia (nothing to scale)"
+    if not any(_has_accelerometer(log) for log in logs):
+        return "no fit log has accelerometer columns (acc_x..acc_z)"
+    return None
+
+
+def calibrate(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progress=None) -> tuple[Vehicle, dict]:
+    """gap's corrected file calibrated with the filter on the fit logs: (the file, what was done).
+    Raises UserError when it cannot be done; the caller decides whether that falls back."""
+    why = unavailable(vehicle, logs)
+    if why:
+        raise UserError(f"gap calibration: {why}")
+    gyro_options = chain_options(corrected, skip_repeats=True, walk=True)
+    accel_options = accelerometer_options(gyro_options)
+    used, skipped, gyro, accel = [], [], [], []
+    for log in logs:
+        name = log.path.name if log.path else "log"
+        if not _has_accelerometer(log):
+            skipped.append({"log": name, "why": "no accelerometer columns"})
+        else:
+            try:
+                g = replay_summary(log, corrected, gyro_options)
+                a = replay_summary(log, corrected, accel_options)
+            except UserError as exc:
+                skipped.append({"log": name, "why": str(exc)})
+            else:
+                used.append(name)
+                gyro.append(g)
+                accel.append(a)
+        if progress:
+            progress()
+    if not used:
+        raise UserError("gap calibration: no fit log could be replayed with the accelerometer: "
+                        + "; ".join(f"{s['log']}: {s['why']}" for s in skipped))
+    calibrated, found = torque_gain_correction(corrected, gyro, accel)
+    calibrated.notes = ((corrected.notes or "") + f" Calibrated by propid gap with the filter on {len(used)} fit "
+                        f"log(s): Jxx, Jyy x {found['torque_gain']:.4g} on top of the effects above, kf_nominal mean "
+                        f"{found['kf_with_accelerometer']:.4g}; replay with: {chain_command(calibrated)}.").strip()
+    info = {
+        "calibrated": True,
+        "logs": used,
+        "skipped": skipped,
+        "torque_gain": found["torque_gain"],
+        "kf_gyro_only": found["kf_gyro_only"],
+        "kf_with_accelerometer": found["kf_with_accelerometer"],
+        "per_log_kf_gyro_only": [float(np.mean(s["kf_mean"])) for s in gyro],
+        "per_log_kf_with_accelerometer": [float(np.mean(s["kf_mean"])) for s in accel],
+        "inertia_before": [float(v) for v in np.diag(np.asarray(corrected.inertia, dtype=float))],
+        "inertia": found["inertia"],
+        "kf_nominal": found["kf_nominal"],
+        "calibration_replay": {"gyro_only": _options_record(gyro_options),
+                               "with_accelerometer": _options_record(accel_options)},
+        "replay_options": dict(_options_record(gyro_options), command=chain_command(calibrated)),
+        "rule": RULE,
+    }
+    return calibrated, info
+
+
+def not_calibrated(why: str) -> dict:
+    """What `calibration` says when the file is gap's corrected file as before."""
+    return {"calibrated": False, "why": why,
+            "replay_options": {"command": "--segment flying --aiding gyro --aero-damping auto "
+                               "[--disturbance on when the file has loop_bandwidth_hz]",
+                               "note": "not calibrated with the filter: gap's own torque scale"}}
+
+
+def calibrate_or_fall_back(mode: str, logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle,
+                           progress=None) -> tuple[Vehicle, dict]:
+    """mode: auto (calibrate when possible, else gap's file and why), on (must calibrate), off."""
+    if mode == "off":
+        return corrected, not_calibrated("--calibration off")
+    try:
+        return calibrate(logs, vehicle, corrected, progress)
+    except UserError as exc:
+        if mode == "on":
+            raise
+        return corrected, not_calibrated(str(exc).removeprefix("gap calibration: "))
+
