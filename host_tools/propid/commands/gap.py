@@ -109,6 +109,11 @@ def run(args: argparse.Namespace) -> int:
             progress.bar.refresh()
         corrected, result["calibration"] = calibrate_or_fall_back(args.calibration, logs, vehicle, corrected,
                                                                   progress=lambda: progress(1))
+        if result["calibration"]["calibrated"] and result.get("base_fit_after"):
+            from propid.gap.calibration import base_fit_with_calibrated_inertia
+
+            result["calibration"]["base_fit_after_with_calibrated_inertia"] = base_fit_with_calibrated_inertia(
+                result["base_fit_after"], result["calibration"]["torque_gain"])
     else:
         from propid.gap.calibration import not_calibrated
 

@@ -135,3 +135,17 @@ def calibrate_or_fall_back(mode: str, logs: list[FlightLog], vehicle: Vehicle, c
             raise
         return corrected, not_calibrated(str(exc).removeprefix("gap calibration: "))
 
+
+
+def base_fit_with_calibrated_inertia(base_fit_after: dict, gain: float) -> dict:
+    """gap's after-fit read with the calibrated Jxx, Jyy: the roll/pitch torque kf is linear in the axis
+    inertia, so it is the after-fit's times c (thrust and yaw unchanged). Shown beside the after-fit: the
+    filter's torque scale and the fits' are different estimators' and need not agree."""
+    out = {}
+    for key, entry in base_fit_after.items():
+        if key in ("kf_roll", "kf_pitch") and isinstance(entry, dict) and entry.get("value") is not None:
+            out[key] = {"value": entry["value"] * gain,
+                        "ci": [v * gain if v is not None else None for v in entry.get("ci") or []]}
+        else:
+            out[key] = entry
+    return out

@@ -10,8 +10,10 @@ replay/config.py): `gyro_scale` undone on the gyro at the boundary, `rotor_inert
 `closed_loop_cancellation`) with the disturbance states on at that bandwidth, so they take the
 torque the loop cancels and kf learns above it. Rows that repeat the previous row bit for bit (a
 logger's copies of lost packets) are no samples for the filter (`--skip-repeats`, the replay's
-recommended gyro-only chain on rows logs, docs/real-data.md "Repeated rows"). Fleet kf = mean over rotors of each run's
-converged kf; run-to-run CV = std/mean over runs.
+recommended gyro-only chain on rows logs, docs/real-data.md "Repeated rows"). When the corrected file
+was calibrated with the filter (gap/calibration.py) both runs use the chain it was calibrated in, which
+adds the coefficient walk by the per-log rule (`--thrust-coeff-rel-walk auto`). Fleet kf = mean over
+rotors of each run's converged kf; run-to-run CV = std/mean over runs.
 """
 
 from __future__ import annotations
