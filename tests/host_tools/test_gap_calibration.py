@@ -109,6 +109,11 @@ def test_gap_cli_calibrates_on_top_of_its_effects_and_records_it(flights, tmp_pa
     assert check["walk_rule"] and check["skip_repeats"]
     assert abs(check["kf_after"]["mean"] / _true_kf(held) - 1) < 0.10
     assert abs(check["kf_before"]["mean"] / _true_kf(held) - 1) > 0.15
+    # the recorded command line is that chain: `propid replay` with it reads what the check read
+    replayed = tmp_path / "replay.json"
+    assert main(["replay", "--log", str(held), "--vehicle", str(corrected), "--json", str(replayed), "--no-progress",
+                 *cal["replay_options"]["command"].split()]) == 0
+    assert np.mean(json.loads(replayed.read_text())["kf_mean"]) == check["kf_after"]["per_run"][0]
 
 
 def _without_columns(src, dst, drop_prefix: str):
@@ -145,6 +150,7 @@ def test_without_accelerometer_or_mass_the_file_is_gaps_and_says_why(flights, tm
                  "--vehicle-out", str(corrected), "--no-filter", "--quiet"]) == 0
     cal = json.loads(out.read_text())["calibration"]
     assert not cal["calibrated"] and "accelerometer" in cal["why"]
+    assert "--thrust-coeff-rel-walk" not in cal["replay_options"]["command"]  # gap's own chain, as before
     assert "not calibrated" in capsys.readouterr().out
     assert main(["gap", "--log", str(path), "--vehicle", str(vehicle_path), "--json", str(out),
                  "--vehicle-out", str(corrected), "--no-filter", "--quiet", "--calibration", "on"]) == 1

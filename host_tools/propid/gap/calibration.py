@@ -35,11 +35,11 @@ RULE = ("c = fleet kf with the accelerometer / fleet kf gyro only, both replays 
         "file in the chain below; Jxx, Jyy x c on top of gap's effects, kf_nominal's mean = the accelerometer fleet kf")
 
 
-def chain_command(vehicle: Vehicle) -> str:
+def chain_command(vehicle: Vehicle, walk: bool = True) -> str:
     """The `propid replay` options of the chain (the CLI's defaults cover rotor inertia, gyro scale, delay)."""
     disturbance = " --disturbance on" if vehicle.loop_bandwidth_hz is not None else ""
     return ("--segment flying --aiding gyro --aero-damping auto" + disturbance
-            + " --thrust-coeff-rel-walk auto --skip-repeats")
+            + (" --thrust-coeff-rel-walk auto" if walk else "") + " --skip-repeats")
 
 
 def _options_record(options) -> dict:
@@ -115,25 +115,27 @@ def calibrate(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progr
     return calibrated, info
 
 
-def not_calibrated(why: str) -> dict:
-    """What `calibration` says when the file is gap's corrected file as before."""
-    return {"calibrated": False, "why": why,
-            "replay_options": {"command": "--segment flying --aiding gyro --aero-damping auto "
-                               "[--disturbance on when the file has loop_bandwidth_hz]",
-                               "note": "not calibrated with the filter: gap's own torque scale"}}
+def not_calibrated(why: str, vehicle: Vehicle | None = None) -> dict:
+    """What `calibration` says when the file is gap's corrected file as before; the replay options are
+    those of gap's firmware check (no walk rule), with which such a file was evaluated."""
+    out = {"calibrated": False, "why": why}
+    if vehicle is not None:
+        out["replay_options"] = {"command": chain_command(vehicle, walk=False),
+                                 "note": "not calibrated with the filter: the torque scale is gap's fits'"}
+    return out
 
 
 def calibrate_or_fall_back(mode: str, logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle,
                            progress=None) -> tuple[Vehicle, dict]:
     """mode: auto (calibrate when possible, else gap's file and why), on (must calibrate), off."""
     if mode == "off":
-        return corrected, not_calibrated("--calibration off")
+        return corrected, not_calibrated("--calibration off", corrected)
     try:
         return calibrate(logs, vehicle, corrected, progress)
     except UserError as exc:
         if mode == "on":
             raise
-        return corrected, not_calibrated(str(exc).removeprefix("gap calibration: "))
+        return corrected, not_calibrated(str(exc).removeprefix("gap calibration: "), corrected)
 
 
 
