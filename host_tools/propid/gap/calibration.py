@@ -138,7 +138,6 @@ def calibrate_or_fall_back(mode: str, logs: list[FlightLog], vehicle: Vehicle, c
         return corrected, not_calibrated(str(exc).removeprefix("gap calibration: "), corrected)
 
 
-
 def base_fit_with_calibrated_inertia(base_fit_after: dict, gain: float) -> dict:
     """gap's after-fit read with the calibrated Jxx, Jyy: the roll/pitch torque kf is linear in the axis
     inertia, so it is the after-fit's times c (thrust and yaw unchanged). Shown beside the after-fit: the
