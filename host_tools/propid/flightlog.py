@@ -64,6 +64,10 @@ class Vehicle:
     aero_damping: list[float] | None = None  # body torque -d_a * omega_a [N m s/rad]
     com_offset: list[float] | None = None  # CoM offset already applied to the rotor positions [m]
     loop_bandwidth_hz: float | None = None  # the attitude loop cancels body torques below this [Hz]
+    # Airspeed terms of the rotor thrust (replay/thrust_aero.py): per rotor, d Omega v_z,b [N/(rad/s m/s)]
+    # and c v_h^2 [N/(m/s)^2], body-frame velocity.
+    thrust_climb_coeff: float | None = None
+    thrust_translational_coeff: float | None = None
     notes: str = ""
     path: Path | None = None
 
@@ -119,7 +123,8 @@ class Vehicle:
         return data
 
 
-EXTENSION_KEYS = ("esc_delay_s", "gyro_scale", "aero_damping", "com_offset", "loop_bandwidth_hz")
+EXTENSION_KEYS = ("esc_delay_s", "gyro_scale", "aero_damping", "com_offset", "loop_bandwidth_hz",
+                  "thrust_climb_coeff", "thrust_translational_coeff")
 
 
 def _is_number(value) -> bool:
@@ -215,6 +220,8 @@ def parse_vehicle(data: dict, where: str = "vehicle") -> Vehicle:
         aero_damping=_vector3_or_null(data, "aero_damping", where, " [N m s/rad]"),
         com_offset=_vector3_or_null(data, "com_offset", where, " [m]"),
         loop_bandwidth_hz=_positive_or_null(data, "loop_bandwidth_hz", where),
+        thrust_climb_coeff=_number_or_null(data, "thrust_climb_coeff", where, limit=1.0),
+        thrust_translational_coeff=_number_or_null(data, "thrust_translational_coeff", where, limit=1.0),
         notes=str(data.get("notes", "") or ""),
     )
 

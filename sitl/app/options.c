@@ -36,6 +36,7 @@ void sitl_options_default(sitl_options_t *o)
     o->trajectory_period_s = SITL_TRAJ_DEFAULT_PERIOD_S;
     o->yaw_amplitude_rad = -1.0;
     o->yaw_cycles = -1.0;
+    o->lissajous_climb_m = -1.0;
     o->physics_rate_hz = 2000.0;
     o->control_rate_hz = 500.0;
     o->coeff_spread = 0.2;
@@ -250,6 +251,9 @@ static const opt_t options[] = {
     NUMBER(NULL, "yaw-amplitude", yaw_amplitude_rad, 0.0, 3.0, "RAD",
            "circle/lissajous back-and-forth yaw A sin(2 pi N t / T)\n(default 1.5 rad)"),
     NUMBER(NULL, "yaw-cycles", yaw_cycles, 0.0, 1e3, "N", "N of that yaw (default 1.5 cycles)"),
+    NUMBER(NULL, "lissajous-climb", lissajous_climb_m, 0.0, 1.0, "M",
+           "lissajous: vertical amplitude of its fast part (8 cycles per T;\n"
+           "default 0): climb and descent for the thrust's climb term"),
     NUMBER(NULL, "start-height", start_height_m, 0.0, 1e4, "M",
            "trajectory origin height [m] (default 1)"),
     FLAG(NULL, "start-on-ground", start_on_ground, 1, "start at rest on the ground, rotors stopped"),

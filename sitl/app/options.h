@@ -47,6 +47,7 @@ typedef struct {
     double trajectory_period_s;         /* the trajectory's period T (independent of it) */
     double yaw_amplitude_rad;           /* < 0 = the trajectory's default */
     double yaw_cycles;                  /* < 0 = the trajectory's default */
+    double lissajous_climb_m;           /* vertical amplitude of the fast Lissajous; < 0 = default (0) */
     char log_path[SITL_PATH_MAX];       /* "" = no log */
     double log_rate_hz;                 /* 0 = every control step */
     char mavlink_url[SITL_PATH_MAX];    /* "" = no link */

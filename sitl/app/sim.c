@@ -245,6 +245,9 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
             f->trajectory.yaw_cycles = o->yaw_cycles;
         }
     }
+    if (o->trajectory == SITL_TRAJ_LISSAJOUS && o->lissajous_climb_m >= 0.0) {
+        f->trajectory.lissajous_fast.amplitude_m[2] = o->lissajous_climb_m;
+    }
     sitl_flat_output_t flat0;
     sitl_trajectory_eval(&f->trajectory, 0.0, &flat0);
     if (o->start_on_ground) {

@@ -26,16 +26,17 @@ def test_missing_data_is_skipped_cleanly(tmp_path):
 
 def test_mode_summary_statistics():
     runs = {"square_a": dict(kf_over_reference=1.0, rotor_spread=0.02, km=1e-10, km_converged=True,
-                             accel_bias=0.1, finite=True),
+                             accel_bias=0.1, finite=True, p_every_rotor_within_5pct=0.9),
             "random_b": dict(kf_over_reference=0.8, rotor_spread=0.10, km=2e-10, km_converged=False,
-                             accel_bias=0.3, finite=True),
+                             accel_bias=0.3, finite=True, p_every_rotor_within_5pct=0.5),
             "random_c": dict(kf_over_reference=0.6, rotor_spread=0.04, km=3e-10, km_converged=False,
-                             accel_bias=0.5, finite=True)}
+                             accel_bias=0.5, finite=True, p_every_rotor_within_5pct=0.25)}
     s = real_data.mode_summary(runs)
     assert s["kf_fleet_over_reference"] == pytest.approx(0.8) and s["kf_run_cv"] == pytest.approx(0.25)
     assert s["square_kf"] == 1.0 and s["other_kf"] == pytest.approx(0.7) and s["other_runs"] == 2
     assert s["worst_rotor_spread"] == 0.10 and s["runs_every_rotor_within_5pct"] == 2
     assert s["runs_km_converged"] == 1 and s["accel_bias_median"] == 0.3
+    assert s["runs_every_rotor_within_5pct_if_equal"] == pytest.approx(1.65)  # the sum of the runs' chances
 
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason="real logs (../shared) not present")
@@ -75,3 +76,28 @@ def test_calibrated_mode_uses_the_other_half_of_the_runs():
     assert len(infos) == 2
     with pytest.raises(Exception, match="two logs"):
         real_data._cross_calibrated("gyro_walk_calibrated", logs[:1], vehicle, raw)
+
+
+def test_thrust_terms_are_fitted_on_the_other_half_of_the_runs():
+    """accel_scale_walk_climb: the climb coefficient of the odd runs goes to the even ones and vice versa."""
+    import numpy as np
+    from propid.flightlog import parse_vehicle
+    from test_thrust_aero import VEHICLE, table_log
+
+    vehicle = parse_vehicle(VEHICLE)
+    rng = np.random.default_rng(8)
+    logs = [Path(f"run{k}.csv") for k in range(1, 5)]
+    loaded = {}
+    for k, p in enumerate(logs, start=1):
+        n = 800
+        velocity = rng.normal(0.0, 0.6, size=(n, 3))
+        speeds = rng.uniform(1500.0, 2000.0, size=(n, 4))
+        climb = -1e-6 if k % 2 else -3e-6  # odd runs -1e-6, even runs -3e-6
+        force = 3.7e-8 * (speeds**2).sum(axis=1) + climb * speeds.sum(axis=1) * velocity[:, 2]
+        loaded[p] = table_log(n, rng, np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)), velocity, force / vehicle.mass, speeds)
+    vehicles, infos = real_data._cross_fitted_thrust("accel_scale_walk_climb", logs, vehicle, loaded)
+    for k, p in enumerate(logs, start=1):
+        fitted = vehicles[("accel_scale_walk_climb", p)]
+        assert fitted.thrust_climb_coeff == pytest.approx(-3e-6 if k % 2 else -1e-6, rel=1e-6)
+        assert fitted.thrust_translational_coeff is None  # the climb mode fits the climb term only
+    assert len(infos) == 2

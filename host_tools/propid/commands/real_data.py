@@ -23,6 +23,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="comma list of modes (default all: " + ",".join(m[0] for m in real_data.MODES) + ")")
     parser.add_argument("--skip-missing", action="store_true",
                         help="exit 0 with a note when DIR does not exist (for make real-data without ../shared)")
+    parser.add_argument("--thrust-evidence", action="store_true",
+                        help="instead of the replays: per-log least-squares fits of m acc_z on sum Omega^2 with a free "
+                             "bias and candidate airspeed/attitude terms (climb, translational, z drag, misalignment, "
+                             "ground effect); print the table, write thrust_evidence.json (docs/real-data.md)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -40,6 +44,8 @@ def run(args: argparse.Namespace) -> int:
         if len(found) != 1:
             raise UserError(f"{data}: {len(found)} *.vehicle.json files; give --vehicle")
         vehicle = found[0]
+    if args.thrust_evidence:
+        return _thrust_evidence(data, vehicle, args)
     known = {m[0] for m in real_data.MODES}
     modes = tuple(m for m in args.modes.split(",") if m)
     unknown = sorted(set(modes) - known)
@@ -52,4 +58,31 @@ def run(args: argparse.Namespace) -> int:
     result = real_data.run_real_data(config, progress=not args.no_progress)
     print(real_data.render(result), end="")
     print(f"wrote {config.out_dir / 'real_data.json'}")
+    return 0
+
+
+def _thrust_evidence(data: Path, vehicle_path: Path, args: argparse.Namespace) -> int:
+    import json
+
+    from propid.flightlog import read_flightlog, read_vehicle
+    from propid.outputs import write_text
+    from propid.thrust_evidence import render_evidence, thrust_evidence
+
+    if not args.reference_kf > 0:
+        raise UserError("--reference-kf must be positive")
+    vehicle = read_vehicle(vehicle_path)
+    paths = sorted(data.glob("*.csv"))
+    if not paths:
+        raise UserError(f"no *.csv logs in {data}")
+    logs = {p.stem.replace("_20251017", ""): read_flightlog(p, vehicle) for p in paths}
+    try:
+        entries = thrust_evidence(logs, vehicle, args.reference_kf)
+    except ValueError as exc:
+        raise UserError(f"--thrust-evidence: {exc}") from None
+    print(f"slope kf over the reference {args.reference_kf:.3g} (display only); {len(logs)} runs")
+    print(render_evidence(entries), end="")
+    out = Path(args.out) / "thrust_evidence.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_text(str(out), json.dumps(entries, indent=2) + "\n")
+    print(f"wrote {out}")
     return 0

@@ -149,6 +149,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "replay every log with the accelerometer and write the vehicle file whose Jxx, Jyy are "
                              "scaled so this gyro-only replay reads the accelerometer's fleet kf (kf_nominal = that "
                              "kf); replay other logs of the vehicle with it and the same options (docs/real-data.md)")
+    parser.add_argument("--thrust-aero", choices=["on", "off"], default="off",
+                        help="on: remove the vehicle file's airspeed terms of the rotor thrust (thrust_climb_coeff: "
+                             "d sum_i Omega_i v_z, thrust_translational_coeff: c N v_h^2, body-frame mocap velocity) "
+                             "from acc_z before the filter (docs/real-data.md). Default off")
+    parser.add_argument("--thrust-aero-out", metavar="OUT.json",
+                        help="fit those two coefficients by least squares on the given logs (m acc_z = kf sum "
+                             "Omega^2 + terms + one intercept per log, flying rows) and write the vehicle file with "
+                             "them; needs acc_*, vx..vz and qw..qz columns and the vehicle's mass")
     parser.add_argument("--unit-inertia", action="store_true",
                         help="run with J = identity: estimates are kf/J and km/Jzz ratios (for vehicles without inertia)")
     parser.add_argument("--kf-nominal", type=float, help="prior mean of kf (overrides the vehicle file)")
@@ -246,10 +254,12 @@ def check_arguments(args: argparse.Namespace, log_paths: list[Path]) -> None:
         raise UserError("--prefilter/--diagnostic-highpass need a rows log, not --streams events")
     if args.reference_kf is not None and not args.reference_kf > 0:
         raise UserError("--reference-kf must be positive")
-    if args.vehicle_out and args.vehicle and Path(args.vehicle_out).resolve() == Path(args.vehicle).resolve():
-        raise UserError("--vehicle-out must not overwrite the input vehicle file")
+    for option in ("vehicle_out", "thrust_aero_out"):
+        value = getattr(args, option)
+        if value and args.vehicle and Path(value).resolve() == Path(args.vehicle).resolve():
+            raise UserError(f"--{option.replace('_', '-')} must not overwrite the input vehicle file")
     for option, value in (("--json", args.json), ("--plot", args.plot), ("--table", args.table),
-                          ("--vehicle-out", args.vehicle_out),
+                          ("--vehicle-out", args.vehicle_out), ("--thrust-aero-out", args.thrust_aero_out),
                           ("--band-table", args.band_table), ("--band-plot", args.band_plot)):
         if value and value != "-":
             check_writable(value, option)
@@ -333,6 +343,7 @@ def run(args: argparse.Namespace) -> int:
         rotor_inertia=args.rotor_inertia,
         aero_damping=args.aero_damping,
         gyro_scale=args.gyro_scale,
+        thrust_aero=args.thrust_aero,
         torque_scale=args.torque_scale,
         torque_scale_walk=args.torque_scale_walk,
         thrust_coeff_walk=thrust_coeff_walk,
@@ -346,6 +357,18 @@ def run(args: argparse.Namespace) -> int:
 
         check_calibration_inputs(vehicle, logs, options)
     text_out = sys.stderr if args.json == "-" else sys.stdout
+    if args.thrust_aero_out:
+        from dataclasses import replace as with_fields
+
+        from propid.flightlog import write_vehicle
+        from propid.replay.thrust_aero import VEHICLE_KEYS, fit_thrust_aero
+
+        fit = fit_thrust_aero(logs, vehicle)
+        vehicle_fitted = with_fields(vehicle, **{VEHICLE_KEYS[t]: c for t, c in fit["coefficients"].items()})
+        write_vehicle(args.thrust_aero_out, vehicle_fitted)
+        print(f"thrust terms over {fit['logs']} logs ({fit['rows']} flying rows): "
+              + ", ".join(f"{VEHICLE_KEYS[t]} {c:.4g}" for t, c in fit["coefficients"].items())
+              + f" (kf {fit['kf']:.4g}); wrote {args.thrust_aero_out}", file=text_out)
     runs = logs
     if len(logs) > 1 and not args.no_progress:
         from tqdm import tqdm

@@ -40,6 +40,9 @@ class ReplayOptions:
     # Off for library callers by default (a caller may have undone it on its log already); the CLI's default
     # is auto.
     gyro_scale: str = "off"
+    # The vehicle file's airspeed terms of the rotor thrust (thrust_climb_coeff, thrust_translational_coeff;
+    # replay/thrust_aero.py) removed from the accelerometer's z before it is pushed: "on" or "off".
+    thrust_aero: str = "off"
     torque_scale: str = "auto"  # "auto"/"on": estimate the thrust-torque scale when the accelerometer is fused; "off"
     # Its random walk [1/sqrt(s)]: None (the library default, a constant), a number, or "auto" (replay/scale_walk.py).
     torque_scale_walk: float | str | None = None

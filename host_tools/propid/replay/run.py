@@ -16,7 +16,9 @@ from propid.replay.instrument import resolve_instrument
 from propid.replay.noise import nis_mean, replay_nis
 from propid.replay.options import US, ReplayOptions, ReplayResult
 from propid.replay.prefilter import highpass_emulation_log, prefilter_log
+from propid.replay.rotor_spread import spread_bound
 from propid.replay.session import FilterSession, segment_mask
+from propid.replay.thrust_aero import carry_thrust_aero
 from propid.replay.vehicle_terms import undo_gyro_scale
 from propid.signals import median_dt, repeats_previous_row
 
@@ -27,8 +29,11 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     if log.rotor_count != vehicle.rotor_count:
         raise UserError(f"the log has {log.rotor_count} rotors, the vehicle file {vehicle.rotor_count}")
     log, gyro_scale_note = undo_gyro_scale(log, vehicle, options)  # the boundary: true rates from here on
+    log, thrust_aero_note = carry_thrust_aero(log, vehicle, options.thrust_aero)  # and the filter's thrust row
     if options.noise == "nis":
-        return replay_nis(log, vehicle, replace(options, gyro_scale="off"))
+        result = replay_nis(log, vehicle, replace(options, gyro_scale="off", thrust_aero="off"))  # both done above
+        result.summary["config_notes"]["thrust_aero"] = thrust_aero_note
+        return result
     streams = detect_streams(log) if options.streams == "auto" else options.streams
     logged_streams = streams  # --skip-repeats turns a rows log into events below; the time base stays the rows'
     mask = segment_mask(log, options.segment)
@@ -56,6 +61,9 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         log, highpass_info = highpass_emulation_log(log, vehicle, mask, float(options.diagnostic_highpass_hz))
     config_fields, notes = build_config(vehicle, log, options)
     notes["gyro_scale"] = gyro_scale_note
+    notes["thrust_aero"] = thrust_aero_note
+    if options.thrust_aero == "on" and notes.get("aiding") != "gyro+accel":
+        raise UserError("--thrust-aero on corrects the accelerometer: it needs --aiding gyro+accel")
     esc_delay_s, delay_rule = resolve_esc_delay(log, vehicle, mask, options, logged_streams)
     delay_us = int(round(esc_delay_s * US))
     config_fields["rotor_delay_us"] = delay_us  # the firmware holds the leading stream (docs/math.md §12)
@@ -231,6 +239,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "km_std": [float(v) for v in final["drag_coeff_std"][:n]],
         "kf_mean": kf_mean,
         "km_mean": km_mean,
+        "kf_rotor_spread_bound": spread_bound(np.asarray(kf_mean), filt.thrust_coeff_covariance()),
         "kf_converged_from_s": kf_start,
         "km_converged_from_s": km_start,
         "converged": {"kf": kf_conv, "km": km_conv},
@@ -264,6 +273,9 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "definitions": {
             "kf_mean": "mean of the estimate from the first sample with rel std < converged_rel_std to the end; "
                        "second half of the replay if never below",
+            "kf_rotor_spread_bound": "each rotor's std of kf_i / mean(kf) - 1 from the final covariance, and the "
+                                     "probability that every rotor is within the tolerance of the run mean if the "
+                                     "rotors were equal (replay/rotor_spread.py)",
             "finite": "every recorded kf, km, their stds, gyro bias and body rate is finite",
             "torque_scale_mean": "mean of the thrust-torque scale from the last rotor's kf convergence (the second "
                                  "half if one never converges) to the end; 1 without the scale state",

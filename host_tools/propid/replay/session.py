@@ -70,6 +70,21 @@ class FilterSession:
                  "torque_scale", "torque_scale_std")
         return {name: _field(est, name) for name in names}
 
+    def thrust_coeff_covariance(self) -> np.ndarray:
+        """Covariance of the rotors' kf [(N/(rad/s)^2)^2] now, to first order: kf_i = kf_nominal_i kf_rel_i, and
+        with the thrust-torque scale kf_rel_i = r g_i, r the last state (docs/math.md §6, §9)."""
+        state, cov = self._filter.scaled_state()
+        n = self.rotor_count
+        jac = np.zeros((n, state.size))
+        scaled = bool(self._filter.config.torque_scale)
+        r = state[-1] if scaled else 1.0
+        for i in range(n):
+            jac[i, 3 + i] = r
+            if scaled:
+                jac[i, -1] = state[3 + i]
+        jac *= np.asarray(self.vehicle.kf_nominal, dtype=float)[:, None]
+        return jac @ cov @ jac.T
+
     def counters(self) -> dict:
         return dict(self._filter.counters())
 
