@@ -4,8 +4,10 @@
 Per log, over its flying rows: m acc_z = kf sum_i Omega_i^2 + b + sum_k c_k x_k, with the accelerometer bias b
 free, as the filter's accelerometer row has it. Reported per set of candidate terms: the run-to-run CV of that
 slope kf and its mean over the square runs and the other runs (the split the filter shows), and per term its
-median coefficient, how many runs have it positive, and its CV over runs. A physical term keeps one sign and
-a similar size on every run; a term whose sign follows the trajectory is not a property of the rotor.
+median coefficient, how many runs have it positive, and its CV over runs; in the JSON also each run's
+coefficient and its moving-block bootstrap std (blocks of BLOCK_S, the residual is coloured). A physical term
+keeps one sign and a similar size on every run; a term whose sign follows the trajectory is not a property of
+the rotor.
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ CANDIDATES = {
     "leak_y": ("horizontal specific force into z (misalignment): m acc_y", 0),
     "ground": ("ground effect: sum_i Omega_i^2 (R / 4 h)^2, h above the lowest logged height", +1),
 }
+BLOCK_S = 2.0  # bootstrap block [s]: longer than the slow (0.5-2 Hz) content the terms explain
+BOOTSTRAP_DRAWS = 200
 SETS = [(), ("climb",), ("translational",), ("translational_u",), ("drag_z",), ("leak_x", "leak_y"), ("ground",),
         ("climb", "translational"), ("climb", "translational_u"), ("climb", "translational", "drag_z")]
 
@@ -71,6 +75,20 @@ def _cv(values: list[float]) -> float:
     return statistics.stdev(values) / abs(mean) if len(values) > 1 and mean != 0.0 else float("nan")
 
 
+def _block_bootstrap_std(design: np.ndarray, response: np.ndarray, block: int) -> np.ndarray:
+    """Std of the least-squares coefficients over moving-block resamples of the rows (fixed seed)."""
+    rows = design.shape[0]
+    block = max(1, min(block, rows))
+    count = max(1, rows // block)
+    rng = np.random.default_rng(0)
+    draws = []
+    for _ in range(BOOTSTRAP_DRAWS):
+        starts = rng.integers(0, rows - block + 1, count)
+        pick = (starts[:, None] + np.arange(block)[None, :]).ravel()
+        draws.append(np.linalg.lstsq(design[pick], response[pick], rcond=None)[0])
+    return np.std(np.array(draws), axis=0)
+
+
 def thrust_evidence(logs: dict[str, FlightLog], vehicle: Vehicle, reference_kf: float) -> list[dict]:
     """One entry per candidate set in SETS that every log can carry (see the module text)."""
     data = {name: candidate_columns(log, vehicle) for name, log in logs.items()}
@@ -78,13 +96,16 @@ def thrust_evidence(logs: dict[str, FlightLog], vehicle: Vehicle, reference_kf: 
     for terms in SETS:
         if any(t not in data[name][2] for name in data for t in terms):
             continue  # e.g. no height logged: no ground term
-        slopes, coefficients = {}, {t: [] for t in terms}
+        slopes, coefficients, per_run = {}, {t: [] for t in terms}, {t: {} for t in terms}
         for name, (force, sum_u, columns, rows) in data.items():
             design = np.column_stack([sum_u[rows], np.ones(int(rows.sum()))] + [columns[t][rows] for t in terms])
             coeffs, *_ = np.linalg.lstsq(design, force[rows], rcond=None)
+            spread = _block_bootstrap_std(design, force[rows], int(BLOCK_S / float(np.median(np.diff(
+                logs[name].t))))) if terms else None
             slopes[name] = float(coeffs[0]) / reference_kf
             for j, t in enumerate(terms):
                 coefficients[t].append(float(coeffs[2 + j]))
+                per_run[t][name] = {"coefficient": float(coeffs[2 + j]), "bootstrap_std": float(spread[2 + j])}
         square = [v for n, v in slopes.items() if n.startswith("square")]
         other = [v for n, v in slopes.items() if not n.startswith("square")]
         out.append({
@@ -92,7 +113,8 @@ def thrust_evidence(logs: dict[str, FlightLog], vehicle: Vehicle, reference_kf: 
             "square": statistics.fmean(square) if square else float("nan"),
             "other": statistics.fmean(other) if other else float("nan"),
             "coefficients": {t: {"median": float(np.median(c)), "positive": int(np.sum(np.array(c) > 0)),
-                                 "runs": len(c), "cv": _cv(c), "predicted_sign": CANDIDATES[t][1]}
+                                 "runs": len(c), "cv": _cv(c), "predicted_sign": CANDIDATES[t][1],
+                                 "per_run": per_run[t]}
                              for t, c in coefficients.items()},
         })
     return out

@@ -176,4 +176,7 @@ def test_thrust_evidence_finds_the_term_the_logs_carry():
     assert with_climb["coefficients"]["climb"]["positive"] == 0
     assert with_climb["coefficients"]["climb"]["median"] == pytest.approx(climb, rel=1e-6)
     assert entries[()]["slope_cv"] > with_climb["slope_cv"]  # without the term the slope scatters
+    run = with_climb["coefficients"]["climb"]["per_run"]["square_run1"]
+    # white noise-free data: the resampled fits agree to rounding, far inside the coefficient
+    assert run["coefficient"] == pytest.approx(climb, rel=1e-6) and 0.0 <= run["bootstrap_std"] < 1e-3 * abs(climb)
     assert ("ground",) in entries and "| climb |" in render_evidence(list(entries.values()))
