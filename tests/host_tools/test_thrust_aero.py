@@ -135,6 +135,11 @@ def test_sitl_flight_with_climb_and_translational_thrust(cfilter_available, sitl
     assert main(["replay", "--log", str(log_path), "--thrust-aero-out", str(fitted_path), "--aiding", "gyro+accel",
                  "--no-progress", "--json", str(tmp_path / "plain.json")]) == 0
     fitted = read_vehicle(fitted_path)
+    climb_only = tmp_path / "climb_only.vehicle.json"
+    assert main(["replay", "--log", str(log_path), "--thrust-aero-out", str(climb_only), "--thrust-aero-terms",
+                 "climb", "--aiding", "gyro+accel", "--no-progress", "--json", str(tmp_path / "again.json")]) == 0
+    assert read_vehicle(climb_only).thrust_translational_coeff is None
+    assert read_vehicle(climb_only).thrust_climb_coeff < 0
     assert fitted.thrust_climb_coeff == pytest.approx(-STRENGTH * SITL_INFLOW_COEFF, rel=0.10)
     assert fitted.thrust_translational_coeff == pytest.approx(STRENGTH * SITL_TRANSLATIONAL_COEFF, rel=0.20)
 

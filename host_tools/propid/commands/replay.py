@@ -157,6 +157,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fit those two coefficients by least squares on the given logs (m acc_z = kf sum "
                              "Omega^2 + terms + one intercept per log, flying rows) and write the vehicle file with "
                              "them; needs acc_*, vx..vz and qw..qz columns and the vehicle's mass")
+    parser.add_argument("--thrust-aero-terms", default="climb,translational", metavar="TERMS",
+                        help="with --thrust-aero-out: the terms to fit, a comma list of climb, translational "
+                             "(default both)")
     parser.add_argument("--unit-inertia", action="store_true",
                         help="run with J = identity: estimates are kf/J and km/Jzz ratios (for vehicles without inertia)")
     parser.add_argument("--kf-nominal", type=float, help="prior mean of kf (overrides the vehicle file)")
@@ -363,7 +366,8 @@ def run(args: argparse.Namespace) -> int:
         from propid.flightlog import write_vehicle
         from propid.replay.thrust_aero import VEHICLE_KEYS, fit_thrust_aero
 
-        fit = fit_thrust_aero(logs, vehicle)
+        terms = tuple(t for t in args.thrust_aero_terms.split(",") if t)
+        fit = fit_thrust_aero(logs, vehicle, terms)
         vehicle_fitted = with_fields(vehicle, **{VEHICLE_KEYS[t]: c for t, c in fit["coefficients"].items()})
         write_vehicle(args.thrust_aero_out, vehicle_fitted)
         print(f"thrust terms over {fit['logs']} logs ({fit['rows']} flying rows): "
