@@ -17,9 +17,16 @@ little"): the correction must be measured with the estimator that uses it. So, a
   gyro-only fleet kf, applied on top of gap's effects (Jxx, Jyy x c, kf_nominal's mean = the
   accelerometer fleet kf).
 
-The fit logs' own accelerometer kf is the reference; the hold-out logs are never used. Without an
-accelerometer, a mass or an inertia the file is gap's corrected file as before, and `calibration`
-says why.
+The fit logs' own accelerometer kf is the reference; the hold-out logs are never used. It is a
+reference only where the accelerometer pinned it: at a nearly constant collective thrust (a hover,
+a level circle) the accelerometer cannot tell kf from its own bias, and the accelerometer-aided kf
+follows the gyro or wanders (SITL: 1.48x the truth on a step flight, docs/gap.md). The guard uses the
+filter's own claimed uncertainty: per log the mean over rotors of kf's final relative std (an upper
+bound on the rotor mean's, the rotors' errors being correlated along the weakly seen scale), over
+logs sqrt(sum of squares) / n; the calibration runs only if that is at most 5 %, so that the
+reference's 95 % interval lies inside the 10 % the file is meant to deliver. Without an
+accelerometer, a mass or an inertia, or with an unpinned reference, the file is gap's corrected
+file as before, and `calibration` says why.
 """
 
 from __future__ import annotations
@@ -30,6 +37,27 @@ from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.gap.filtercheck import chain_options, replay_summary
 from propid.replay.calibration import accelerometer_options, torque_gain_correction
+
+REFERENCE_MAX_REL_STD = 0.05  # the reference's 95 % interval (1.96 std) inside the 10 % target
+
+
+class UnpinnedReference(UserError):
+    """The accelerometer-aided kf is not known well enough to calibrate with; `details` says how well."""
+
+    def __init__(self, message: str, details: dict):
+        super().__init__(message)
+        self.details = details
+
+
+def reference_rel_std(accel_summaries: list[dict]) -> float:
+    """The accelerometer-aided fleet kf's relative std, from the filter's own final stds (module text)."""
+    per_log = []
+    for s in accel_summaries:
+        std, mean = np.asarray(s["kf_std"], dtype=float), np.asarray(s["kf_mean"], dtype=float)
+        per_log.append(float(np.mean(std / mean)) if np.all(mean > 0) else float("inf"))
+    value = float(np.sqrt(np.sum(np.square(per_log))) / len(per_log))
+    return value if np.isfinite(value) else float("inf")
+
 
 RULE = ("c = fleet kf with the accelerometer / fleet kf gyro only, both replays of the fit logs with gap's corrected "
         "file in the chain below; Jxx, Jyy x c on top of gap's effects, kf_nominal's mean = the accelerometer fleet kf")
@@ -91,6 +119,16 @@ def calibrate(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progr
     if not used:
         raise UserError("gap calibration: no fit log could be replayed with the accelerometer: "
                         + "; ".join(f"{s['log']}: {s['why']}" for s in skipped))
+    sigma = reference_rel_std(accel)
+    if sigma > REFERENCE_MAX_REL_STD:
+        kf_gyro = float(np.mean([np.mean(s["kf_mean"]) for s in gyro]))
+        kf_accel = float(np.mean([np.mean(s["kf_mean"]) for s in accel]))
+        raise UnpinnedReference(
+            f"gap calibration: the accelerometer did not pin kf on the fit logs (its fleet kf's relative std "
+            f"{100 * sigma:.1f} % > {100 * REFERENCE_MAX_REL_STD:.0f} %: too little change of the collective thrust "
+            f"to tell kf from the accelerometer bias)",
+            {"reference_rel_std": sigma, "reference_max_rel_std": REFERENCE_MAX_REL_STD, "logs": used,
+             "kf_gyro_only": kf_gyro, "kf_with_accelerometer": kf_accel, "torque_gain_not_applied": kf_accel / kf_gyro})
     calibrated, found = torque_gain_correction(corrected, gyro, accel)
     calibrated.notes = ((corrected.notes or "") + f" Calibrated by propid gap with the filter on {len(used)} fit "
                         f"log(s): Jxx, Jyy x {found['torque_gain']:.4g} on top of the effects above, kf_nominal mean "
@@ -102,6 +140,8 @@ def calibrate(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progr
         "torque_gain": found["torque_gain"],
         "kf_gyro_only": found["kf_gyro_only"],
         "kf_with_accelerometer": found["kf_with_accelerometer"],
+        "reference_rel_std": sigma,
+        "reference_max_rel_std": REFERENCE_MAX_REL_STD,
         "per_log_kf_gyro_only": [float(np.mean(s["kf_mean"])) for s in gyro],
         "per_log_kf_with_accelerometer": [float(np.mean(s["kf_mean"])) for s in accel],
         "inertia_before": [float(v) for v in np.diag(np.asarray(corrected.inertia, dtype=float))],
@@ -110,7 +150,8 @@ def calibrate(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progr
         "calibration_replay": {"gyro_only": _options_record(gyro_options),
                                "with_accelerometer": _options_record(accel_options)},
         "replay_options": dict(_options_record(gyro_options), command=chain_command(calibrated)),
-        "rule": RULE,
+        "rule": RULE + f"; only when the accelerometer-aided fleet kf's relative std is at most "
+                       f"{100 * REFERENCE_MAX_REL_STD:.0f} %",
     }
     return calibrated, info
 
@@ -135,7 +176,8 @@ def calibrate_or_fall_back(mode: str, logs: list[FlightLog], vehicle: Vehicle, c
     except UserError as exc:
         if mode == "on":
             raise
-        return corrected, not_calibrated(str(exc).removeprefix("gap calibration: "), corrected)
+        out = not_calibrated(str(exc).removeprefix("gap calibration: "), corrected)
+        return corrected, dict(out, **getattr(exc, "details", {}))
 
 
 def base_fit_with_calibrated_inertia(base_fit_after: dict, gain: float) -> dict:
