@@ -94,6 +94,28 @@ def test_each_log_is_aligned_by_its_own_stream_lag(tmp_path, sitl_binary):
     assert per_log["lag_5"] == pytest.approx(0.007, abs=0.004)
     assert per_log["lag_6"] == pytest.approx(0.022, abs=0.004)
 
+def test_a_lag_on_a_single_block_has_no_held_out_evidence(tmp_path, sitl_binary):
+    """A 2.6 s flight has one 2 s block: every cross-validation fold would choose its lag on
+    the block it is scored on. The rule before scored that in-sample fit as held out (a 30 ms
+    lag 'explained 99 %' with a point interval) and named esc_delay; with nothing held out
+    the interval is undefined and the lag is neither applied nor reported."""
+    from propid.gap import analysis
+    from propid.gap.prep import Band
+
+    path = tmp_path / "short.csv"
+    subprocess.run([str(sitl_binary), "--quiet", "--duration", "2.6", "--seed", "5", "--log", str(path),
+                    "--effect", "esc_delay=0.03"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                   timeout=120, check=True)
+    vehicle = read_vehicle(path.with_name(path.stem + ".vehicle.json"))
+    result = analysis.run([read_flightlog(path, vehicle)], vehicle, [],
+                          analysis.Options(Band(), progress=False, auto_highpass=True))
+    alignment = result["alignment"]
+    assert len(alignment["fold_delays_s"]) == 1
+    assert alignment["delay_s"] == pytest.approx(0.032, abs=0.004)  # the fit itself still finds the lag
+    assert all(np.isnan(alignment["ci"]))
+    assert "esc_delay" not in result["significant"]
+
+
 def test_inertia_error_gives_the_true_to_file_inertia_ratio(flights):
     """SITL: J_true = 1.1 J_file; the accelerometer's zero-g offset (up to 2 %) limits it."""
     _, _, result = flights("inertia_error", "0.1")

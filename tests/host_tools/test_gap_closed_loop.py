@@ -96,3 +96,41 @@ def test_without_a_cancelled_torque_nothing_is_named_and_the_band_stays_low():
     assert result["inputs"]["band_hz"][0] <= 1.0
     assert result["base_fit"]["kf_roll"]["value"] == pytest.approx(KF, rel=0.05)
     assert corrected_vehicle(vehicle, result["effects"])[0].loop_bandwidth_hz is None
+
+
+def _reversed_band_log(seed: int, rate: float = 200.0, duration: float = 40.0):
+    """An X quad whose rotor torque above 5 Hz reaches the gyro reversed (-0.3x; what a rotor
+    stream lagging by more than half a period does): the 5-25 Hz torque kf is negative, while
+    below 4 Hz rotors and gyro agree. No slow torque is cancelled."""
+    rng = np.random.default_rng(seed)
+    n = int(duration * rate)
+    t = np.arange(n) / rate
+    pos = np.array([[ARM, -ARM, 0], [-ARM, -ARM, 0], [-ARM, ARM, 0], [ARM, ARM, 0]]) / np.sqrt(2)
+    signs = np.array([-1, 1, -1, 1.0])
+    slow = np.column_stack([_band_noise(rng, n, rate, 0.3, 4.0, 6e-5) for _ in range(2)])
+    fast = np.column_stack([_band_noise(rng, n, rate, 5.0, 30.0, 3e-5) for _ in range(2)])
+    seen = slow - 0.3 * fast
+    to_torque = np.column_stack([pos[:, 1], -pos[:, 0]]).T
+    u = MASS * 9.81 / (4 * KF) + (np.linalg.pinv(to_torque) @ ((slow + fast).T / KF)).T
+    rates = np.column_stack([np.cumsum(seen[:, 0] / INERTIA[0, 0]) / rate,
+                             np.cumsum(seen[:, 1] / INERTIA[1, 1]) / rate, np.zeros(n)])
+    extra = {"acc_x": np.zeros(n), "acc_y": np.zeros(n),
+             "acc_z": KF * u.sum(axis=1) / MASS + 0.05 * rng.standard_normal(n), "is_flying": np.ones(n)}
+    log = FlightLog(t=t, gyro=rates + 2e-4 * rng.standard_normal((n, 3)), rotor_speed=np.sqrt(u), extra=extra)
+    vehicle = Vehicle(name="synthetic-x", rotors=[Rotor(tuple(p), int(s)) for p, s in zip(pos, signs)],
+                      mass=MASS, inertia=INERTIA)
+    return log, vehicle
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_band_whose_torque_kf_is_not_shown_positive_does_not_judge_the_bands_below(seed):
+    # Fieller: kf(low) / kf(5 Hz) has no bounded interval when kf(5 Hz) may be 0 or below; the
+    # rule before took the negative ratios for "the low bands read > 10 % low" and gave every
+    # lower band up for 5 Hz (a closed-loop cancellation that is not there)
+    from propid.gap.prep import prepare_flight
+
+    log, vehicle = _reversed_band_log(seed)
+    band, rule = analysis.choose_highpass([prepare_flight(log, vehicle, Band())], vehicle, Band())
+    assert rule["roll_pitch_kf"][-1] < 0 and not rule["kf_shown_positive"][-1]
+    assert all(rule["kf_shown_positive"][:-1])
+    assert band.highpass_hz == rule["candidates_hz"][0]

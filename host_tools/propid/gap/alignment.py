@@ -5,7 +5,9 @@ Rule (docs/gap.md): the torque base model (per-rotor kf, km) is fitted with the 
 stream shifted by d on a grid from -MAX_LEAD_S to +MAX_LAG_S (step: one sample, at
 most 2 ms; sub-sample by a parabola through the best three). Cross-validated: each
 fold picks its own d on its training blocks and is scored on its held-out blocks,
-against d = 0 (the vehicle file's esc_delay_s, if any, is already applied).
+against d = 0 (the vehicle file's esc_delay_s, if any, is already applied). With a single
+block nothing is held out: the interval is undefined (NaN), so the lag is neither applied nor
+reported.
 All three torque axes; yaw with per-rotor km and the rotor-acceleration term J_r sum s_i
 dOmega_i/dt (both shifted with the stream: a lag and rotor inertia look alike on yaw, so
 they are fitted together). Rate damping (-D w) and the roll/pitch columns of the effects that do
@@ -146,6 +148,8 @@ def search(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, prog
         if denom > 0:
             delay += 0.5 * (y0 - y2) / denom * (grid[1] - grid[0])
     frac, ci = scoring.explained(held_zero, held_best, [0, 1, 2])
+    if folds.size < 2:  # one block: each fold's lag was chosen on the block it is scored on, nothing is held out
+        ci = [float("nan"), float("nan")]
     return {"delay_s": delay, "grid_s": [float(grid[0]), float(grid[-1]), float(grid[1] - grid[0])],
             "explained_fraction": frac, "ci": ci, "fold_delays_s": fold_delay,
             "sse_curve": {"delay_s": grid.tolist(), "weighted_sse": (total / total[zero]).tolist()},

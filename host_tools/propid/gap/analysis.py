@@ -62,7 +62,10 @@ def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band,
     the 95 % paired block-bootstrap interval of the ratio kf(low)/kf(high) lies entirely
     below 1 - BAND_STABILITY (a noisy short log must not lose its slow content to scatter,
     and a low band reading MORE than a high one is not the closed-loop signature: a narrow
-    high band is the attenuated one then); the highest candidate otherwise."""
+    high band is the attenuated one then); the highest candidate otherwise. Only a higher
+    candidate whose own kf is shown > 0 (its 95 % bootstrap interval above 0) judges the lower
+    ones (Fieller: a ratio to a denominator that may be 0 has no bounded interval; a rotor stream
+    lagging by more than half a period reverses a high band's torque fit)."""
     candidates = highpass_candidates(flights, band, candidates)
     values, boots = {}, {}
     for hp in candidates:
@@ -83,7 +86,15 @@ def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band,
             intervals[(hp, h)] = ([float(np.percentile(ratio, 2.5)), float(np.percentile(ratio, 97.5))]
                                   if ratio.size else [float("nan")] * 2)
 
+    # Fieller: a ratio whose denominator's interval reaches 0 has no bounded interval, so a
+    # band whose kf is not shown > 0 (a lag or noise reversing its torque) cannot judge the
+    # bands below it
+    kf_ci = {h: [float(np.percentile(boots[h], 2.5)), float(np.percentile(boots[h], 97.5))] for h in candidates}
+    positive = {h: bool(np.isfinite(kf_ci[h][0]) and kf_ci[h][0] > 0) for h in candidates}
+
     def differs(lo_hp, hi_hp):
+        if not positive[hi_hp]:
+            return False
         lo, hi = intervals[(lo_hp, hi_hp)]
         if not (np.isfinite(lo) and np.isfinite(hi)):
             return True
@@ -97,11 +108,14 @@ def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band,
     return Band(chosen, band.lowpass_hz), {
         "candidates_hz": list(candidates),
         "roll_pitch_kf": [values[h] for h in candidates],
+        "roll_pitch_kf_ci": [kf_ci[h] for h in candidates],
+        "kf_shown_positive": [positive[h] for h in candidates],
         "ratio_boot": {h: boots[h] / np.where(boots[chosen] != 0, boots[chosen], np.nan) for h in candidates},
         "ratio_ci_to_higher": {f"{a:g}/{b:g}": v for (a, b), v in intervals.items()},
         "chosen_hz": chosen,
         "rule": "lowest high-pass whose roll/pitch kf is not shown (95 % paired block bootstrap of the "
-                "ratio) to be more than 10 % below the kf at a higher candidate; run on the aligned logs; "
+                "ratio) to be more than 10 % below the kf at a higher candidate whose own kf is shown > 0 "
+                "(Fieller: a ratio to a kf that may be 0 is unbounded); run on the aligned logs; "
                 "candidates leave two octaves below the low-pass"}
 
 
@@ -506,7 +520,9 @@ def closed_loop_entry(flights: list[Flight], band_rule: dict | None, requested: 
     boot = np.asarray(boot)
     boot = boot[np.isfinite(boot)]
     ci = [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))] if boot.size else [float("nan")] * 2
-    significant = bool(chosen > req and ratio.size and fit_blocks >= MIN_CANCELLATION_BLOCKS
+    # the chosen band's kf must be shown > 0 for the ratio to it to be bounded (Fieller)
+    chosen_positive = band_rule.get("kf_shown_positive", [True] * len(cands))[cands.index(chosen)]
+    significant = bool(chosen > req and ratio.size and fit_blocks >= MIN_CANCELLATION_BLOCKS and chosen_positive
                        and np.percentile(ratio, 97.5) < 1.0 - BAND_STABILITY)
     return {"id": CLOSED_LOOP, "explained_fraction": frac, "ci": ci, "axes": ["roll", "pitch"],
             "params": {"loop_bandwidth_hz": chosen,

@@ -77,8 +77,15 @@ def plot_effects(result: dict, path: Path) -> None:
     effects = result["effects"]
     fig, ax = plt.subplots(figsize=(7, 0.3 * len(effects) + 1), dpi=80)
     y = np.arange(len(effects))[::-1]
-    vals = [e["explained_fraction"] for e in effects]
-    err = [[e["explained_fraction"] - e["ci"][0] for e in effects], [e["ci"][1] - e["explained_fraction"] for e in effects]]
+
+    def reach(e, k):  # an interval that is undefined (null: e.g. no held-out block) draws no bar
+        v, lo_hi = e["explained_fraction"], e.get("ci") or [None, None]
+        if v is None or lo_hi[k] is None:
+            return 0.0
+        return abs(v - lo_hi[k])
+
+    vals = [e["explained_fraction"] or 0.0 for e in effects]
+    err = [[reach(e, 0) for e in effects], [reach(e, 1) for e in effects]]
     colors = ["C3" if e["significant"] else "C7" for e in effects]
     ax.barh(y, vals, xerr=err, color=colors, capsize=2)
     ax.set_yticks(y)
