@@ -27,7 +27,7 @@ SCALE_LIKE = ("inertia_error", "gyro_scale", "thrust_nonlinearity")  # effects a
 # A lag up to one log sample is the logging convention (each stream's latest sample in a
 # row), not a telemetry delay; below 5 ms the sensor chain's own lags (gyro filtering) rule.
 MIN_REPORTED_DELAY_S = MIN_REPORTED_LAG_S
-MIN_DELAY_EXPLAINED = 0.02  # the alignment is scored on the raw rows (not whitened): 2 % of the torque residual
+MIN_DELAY_EXPLAINED = 0.02  # 2 % of the whitened torque residual (held out), as before on the raw rows
 
 
 @dataclass
@@ -183,7 +183,7 @@ def per_log_delays(flights: list[Flight], held: list[Flight], vehicle: Vehicle, 
     for f in flights + held:
         ctx = make_context([f], vehicle, np.ones(vehicle.rotor_count), np.ones(vehicle.rotor_count))
         one = alignment.search([f], vehicle.positions, vehicle.yaw_signs,
-                               nuisance=[_alignment_nuisance(f, ctx, candidates)])
+                               nuisance=[_alignment_nuisance(f, ctx, candidates)], evidence=False)
         out.append(float(one["delay_s"]))
     return out
 
@@ -225,9 +225,11 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     # the alignment is always applied (stream misalignment is part of the base fit); it is
     # reported as esc_delay when it is significant and longer than the log's sample period
     sample_period = 1.0 / min(f.rate_hz for f in flights)
-    delay_significant = bool(align["ci"][0] > 0 and align["explained_fraction"] >= MIN_DELAY_EXPLAINED
+    # the lag's held-out evidence on whitened rows, as the effects' (alignment.whitened_evidence)
+    shown = bool(align["whitened"]["p_value"] <= alignment.EVIDENCE_LEVEL)
+    delay_significant = bool(shown and align["whitened"]["explained_fraction"] >= MIN_DELAY_EXPLAINED
                              and abs(align["delay_s"]) > max(sample_period, MIN_REPORTED_DELAY_S))
-    delay = align["delay_s"] if align["ci"][0] > 0 else 0.0
+    delay = align["delay_s"] if shown else 0.0
     # several logs: each log aligned by its own lag when the pooled one is applied
     delays = [delay] * (len(flights) + len(held_flights))
     if delay and len(flights) + len(held_flights) > 1:
@@ -286,7 +288,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     pos_of = {c: k for k, c in enumerate(final_cols)}
 
     entries = []
-    esc_entry = {"id": ESC_DELAY, "explained_fraction": align["explained_fraction"], "ci": align["ci"],
+    esc_entry = {"id": ESC_DELAY, "explained_fraction": align["whitened"]["explained_fraction"],
+                 "ci": align["whitened"]["ci"], "held_out_p_value": align["whitened"]["p_value"],
                  "axes": ["roll", "pitch", "yaw"], "params": {"delay_s": align["delay_s"],
                             **({"per_log_delay_s": align["per_log_delay_s"]} if "per_log_delay_s" in align else {})},
                  "significant": delay_significant}

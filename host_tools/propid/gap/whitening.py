@@ -109,12 +109,18 @@ def whiten(design: Design, residual: dict[str, np.ndarray], rates: list[float],
     spectrum of `residual` (the base model's residual on the same rows). `rates` and
     `bands` (high-pass, low-pass) per flight; the thrust axis is low-passed only. Axes or
     flights without a usable spectrum are left as they are."""
+    filters = whitening_filters(design, residual, rates, bands)
+    return apply_filters(design, filters, rates), filters["info"]
+
+
+def whitening_filters(design: Design, residual: dict[str, np.ndarray], rates: list[float],
+                      bands: list[tuple[float | None, float]]) -> dict:
+    """The filters whiten() applies: per axis and flight (freqs, gain) from the spectrum of
+    `residual`, scaled to a unit-variance whitened residual, and the test-block length. Several
+    designs on the same rows (alignment.py: one per rotor-stream lag) share them."""
     bounds = segment_bounds(design)
     seg_flight = [int(design.flight[a]) for a, _ in bounds]
-    x = {a: np.array(v, copy=True) for a, v in design.x.items()}
-    y = {a: np.array(v, copy=True) for a, v in design.y.items()}
-    info = {}
-    taus = []
+    gains, info, taus = {}, {}, []
     for a in design.axes:
         for fi in sorted(set(seg_flight)):
             segs = [(s, e) for (s, e), f in zip(bounds, seg_flight) if f == fi]
@@ -127,17 +133,34 @@ def whiten(design: Design, residual: dict[str, np.ndarray], rates: list[float],
             white = np.concatenate([_apply(residual[a][s:e], rates[fi], freqs, w) for s, e in segs])
             w = w / max(float(np.sqrt(np.mean(white**2))), 1e-300)
             taus += [autocorrelation_time(_apply(residual[a][s:e], rates[fi], freqs, w)) for s, e in segs]
-            for s, e in segs:
-                y[a][s:e] = _apply(design.y[a][s:e], rates[fi], freqs, w)
-                x[a][s:e] = _apply(design.x[a][s:e], rates[fi], freqs, w)
+            gains[(a, fi)] = (freqs, w)
             info.setdefault(a, {})[fi] = {"freqs_hz": freqs.tolist(), "gain": w.tolist()}
-    block, block_flight = split_blocks(design, SCORE_BLOCK_S)
     tau = max(taus) if taus else 1.0
     rows = max(int(math.ceil(TEST_BLOCK_TAUS * tau)), 2)
-    test_block, test_flight, parent = split_rows(block, block_flight, rows)
     info["test_block_rows"] = rows
     info["autocorrelation_time_rows"] = tau
-    return replace(design, x=x, y=y, block=test_block, block_flight=test_flight, fold_group=parent), info
+    return {"gains": gains, "test_block_rows": rows, "info": info}
+
+
+def apply_filters(design: Design, filters: dict, rates: list[float]) -> Design:
+    """whiten() with given filters (whitening_filters): every axis's response and columns
+    filtered per flying segment, the rows cut into 1 s fold blocks and short test blocks."""
+    bounds = segment_bounds(design)
+    seg_flight = [int(design.flight[a]) for a, _ in bounds]
+    x = {a: np.array(v, copy=True) for a, v in design.x.items()}
+    y = {a: np.array(v, copy=True) for a, v in design.y.items()}
+    for (a, fi), (freqs, w) in filters["gains"].items():
+        live = np.flatnonzero(np.any(design.x[a] != 0, axis=0))  # an all-zero column stays zero
+        for (s, e), f in zip(bounds, seg_flight):
+            if f != fi:
+                continue
+            y[a][s:e] = _apply(design.y[a][s:e], rates[fi], freqs, w)
+            x[a][s:e] = 0.0
+            if live.size:
+                x[a][s:e, live] = _apply(design.x[a][s:e, live], rates[fi], freqs, w)
+    block, block_flight = split_blocks(design, SCORE_BLOCK_S)
+    test_block, test_flight, parent = split_rows(block, block_flight, filters["test_block_rows"])
+    return replace(design, x=x, y=y, block=test_block, block_flight=test_flight, fold_group=parent)
 
 
 def autocorrelation_time(r: np.ndarray) -> float:
