@@ -47,6 +47,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "copies of lost packets, in the fits: samples (default) or missing (torque and Omega^2 "
                              "interpolated across them; evaluated, not the default). Reported either way; the "
                              "filter check always skips them (--skip-repeats)")
+    parser.add_argument("--lag-evidence", choices=("raw", "whitened"), default="raw",
+                        help="the stream lag's held-out evidence: 'raw' (2 s blocks of the band-passed rows, the "
+                             "default) or 'whitened' (the effects' replication test on whitened rows; evaluated, "
+                             "docs/gap.md 'Stream alignment')")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -93,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     logs = [read_flightlog(p, vehicle) for p in args.log]
     holdout = [read_flightlog(p, vehicle) for p in args.holdout]
     options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
-                               repeats=args.repeats)
+                               repeats=args.repeats, lag_evidence=args.lag_evidence)
     try:
         result = analysis.run(logs, vehicle, holdout, options)
     except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:

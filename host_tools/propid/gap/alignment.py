@@ -3,11 +3,12 @@
 
 Rule (docs/gap.md): the torque base model (per-rotor kf, km) is fitted with the rotor
 stream shifted by d on a grid from -MAX_LEAD_S to +MAX_LAG_S (step: one sample, at
-most 2 ms; sub-sample by a parabola through the best three). Cross-validated: each
-fold picks its own d on its training blocks and is scored on its held-out blocks,
-against d = 0 (the vehicle file's esc_delay_s, if any, is already applied). With a single
-block nothing is held out: the interval is undefined (NaN), so the lag is neither applied nor
-reported.
+most 2 ms; sub-sample by a parabola through the best three). Held-out evidence
+(whitened_evidence): on whitened rows, as the effects are scored, each fold picks its own d
+on its training blocks and is scored on its held-out blocks against d = 0 (the vehicle
+file's esc_delay_s, if any, is already applied), by the effects' replication test. The same
+cross-validation on the raw rows' 2 s blocks is kept for reference; with a single such block
+nothing is held out there, and its interval is undefined (NaN).
 All three torque axes; yaw with per-rotor km and the rotor-acceleration term J_r sum s_i
 dOmega_i/dt (both shifted with the stream: a lag and rotor inertia look alike on yaw, so
 they are fitted together). Rate damping (-D w) and the roll/pitch columns of the effects that do
@@ -183,7 +184,6 @@ def whitened_evidence(flights: list[Flight], designs: list[Design], grid: np.nda
     wd = [whitening.apply_filters(d, filters, rates) for d in designs]
     grs = [scoring.grams(d) for d in wd]
     cols = list(range(len(wd[0].names)))
-    zero = int(np.argmin(np.abs(grid)))
     all_blocks = np.arange(grs[zero].s.shape[0])
     weight = scoring.axis_weights(wd[zero], cols)
     for gr in grs:

@@ -27,7 +27,7 @@ SCALE_LIKE = ("inertia_error", "gyro_scale", "thrust_nonlinearity")  # effects a
 # A lag up to one log sample is the logging convention (each stream's latest sample in a
 # row), not a telemetry delay; below 5 ms the sensor chain's own lags (gyro filtering) rule.
 MIN_REPORTED_DELAY_S = MIN_REPORTED_LAG_S
-MIN_DELAY_EXPLAINED = 0.02  # 2 % of the whitened torque residual (held out), as before on the raw rows
+MIN_DELAY_EXPLAINED = 0.02  # 2 % of the torque residual held out (raw rows; whitened with lag_evidence "whitened")
 
 
 @dataclass
@@ -36,6 +36,9 @@ class Options:
     progress: bool = True
     auto_highpass: bool = False
     repeats: str = "samples"  # copies of the previous row in the fits: "samples", or "missing" (evaluated; prep.py)
+    # the stream lag's held-out evidence: "raw" (2 s blocks of the band-passed rows, the default) or
+    # "whitened" (the effects' replication test on whitened rows; evaluated, docs/gap.md "Stream alignment")
+    lag_evidence: str = "raw"
 
 
 HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0, 5.0)
@@ -220,14 +223,18 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     # 1. stream alignment (esc_delay)
     ctx_align = make_context(flights, vehicle, np.ones(vehicle.rotor_count), np.ones(vehicle.rotor_count))
     nuisance = [_alignment_nuisance(f, ctx_align, candidates) for f in flights]
-    align = alignment.search(flights, vehicle.positions, vehicle.yaw_signs, progress=lambda: progress(0), nuisance=nuisance)
+    whitened = options.lag_evidence == "whitened"
+    align = alignment.search(flights, vehicle.positions, vehicle.yaw_signs, progress=lambda: progress(0), nuisance=nuisance,
+                             evidence=whitened)
     progress(20)
     # the alignment is always applied (stream misalignment is part of the base fit); it is
     # reported as esc_delay when it is significant and longer than the log's sample period
     sample_period = 1.0 / min(f.rate_hz for f in flights)
-    # the lag's held-out evidence on whitened rows, as the effects' (alignment.whitened_evidence)
-    shown = bool(align["whitened"]["p_value"] <= alignment.EVIDENCE_LEVEL)
-    delay_significant = bool(shown and align["whitened"]["explained_fraction"] >= MIN_DELAY_EXPLAINED
+    # the lag's held-out evidence: the raw rows' interval above 0, or (lag_evidence "whitened") the
+    # effects' replication test on whitened rows (alignment.whitened_evidence)
+    evidence = align["whitened"] if whitened else {"explained_fraction": align["explained_fraction"], "ci": align["ci"]}
+    shown = bool(evidence["p_value"] <= alignment.EVIDENCE_LEVEL) if whitened else bool(align["ci"][0] > 0)
+    delay_significant = bool(shown and evidence["explained_fraction"] >= MIN_DELAY_EXPLAINED
                              and abs(align["delay_s"]) > max(sample_period, MIN_REPORTED_DELAY_S))
     delay = align["delay_s"] if shown else 0.0
     # several logs: each log aligned by its own lag when the pooled one is applied
@@ -288,8 +295,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     pos_of = {c: k for k, c in enumerate(final_cols)}
 
     entries = []
-    esc_entry = {"id": ESC_DELAY, "explained_fraction": align["whitened"]["explained_fraction"],
-                 "ci": align["whitened"]["ci"], "held_out_p_value": align["whitened"]["p_value"],
+    esc_entry = {"id": ESC_DELAY, "explained_fraction": evidence["explained_fraction"], "ci": evidence["ci"],
+                 **({"held_out_p_value": evidence["p_value"]} if whitened else {}),
                  "axes": ["roll", "pitch", "yaw"], "params": {"delay_s": align["delay_s"],
                             **({"per_log_delay_s": align["per_log_delay_s"]} if "per_log_delay_s" in align else {})},
                  "significant": delay_significant}
