@@ -52,11 +52,10 @@ void propid_abi_copy_state(const propid_filter_t *filter, float *state, float *c
     if (filter == NULL) {
         return;
     }
-    /* Per rotor, as the reference keeps them: the drag block back from its yaw basis. */
+    /* Per rotor, as the reference keeps them: the coefficient blocks back from their bases. */
     propid_core_t core = filter->core;
     if (filter->config.rotor_count > 0u && filter->config.rotor_count <= PROPID_MAX_ROTORS) {
-        const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
-        propid_drag_basis_flip(&basis, &core);
+        propid_coeff_flip(&filter->derived, &filter->config, &core, 1);
     }
     for (uint32_t i = 0; i < PROPID_MAX_STATES; ++i) {
         if (state != NULL) {

@@ -121,12 +121,19 @@ propid_status_t propid_fuse_accel(propid_filter_t *filter, uint64_t time_us, con
     propid_sparse_row_t row;
     row.count = (uint8_t)(rotor_count + 1u);
     float thrust_states = 0.0f; /* sum_i (kf_nominal_i / m) u_i x_i over the thrust states */
+    /* The row per rotor times Q^T: over the torque-basis states (propid_internal.h). */
+    float per_state[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        per_state[i] = derived->thrust_per_mass[i] * core->rotor_speed_sq[i];
+    }
+    propid_thrust_basis_t thrust_basis;
+    propid_thrust_basis_init(&thrust_basis, derived, config);
+    propid_thrust_to_basis(&thrust_basis, per_state);
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const uint8_t k = (uint8_t)(derived->layout.thrust + i);
-        const float per_state = derived->thrust_per_mass[i] * core->rotor_speed_sq[i];
         row.index[i] = k;
-        row.value[i] = inverse_scale * per_state;
-        thrust_states += per_state * core->state[k];
+        row.value[i] = inverse_scale * per_state[i];
+        thrust_states += per_state[i] * core->state[k];
     }
     row.index[rotor_count] = bias;
     row.value[rotor_count] = 1.0f;

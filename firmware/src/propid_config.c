@@ -288,6 +288,23 @@ static void derive_drag_basis(const propid_config_t *config, propid_derived_t *o
 }
 #endif
 
+#if PROPID_GENERAL_VEHICLES
+/* The thrust coefficients' torque basis (propid_internal.h, propid_coeff_basis.c)
+ * from the roll- and pitch-torque rows per unit kf_rel (J^-1 (r_i x z)
+ * kf_nominal_i): the quad build derives it from the same values (its jac_torque
+ * rows) when it needs it. */
+static void derive_thrust_basis(const propid_config_t *config, const geometry_t *geo, propid_derived_t *out)
+{
+    float roll[PROPID_MAX_ROTORS];
+    float pitch[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < PROPID_MAX_ROTORS; ++i) {
+        roll[i] = geo->thrust_torque[i][0];
+        pitch[i] = geo->thrust_torque[i][1];
+    }
+    propid_thrust_basis_derive(roll, pitch, config->rotor_count, out->thrust_basis, out->thrust_basis_scale);
+}
+#endif
+
 static void derive_gyro_jacobian(const propid_config_t *config, geometry_t *geo)
 {
     for (uint8_t b = 0; b < 3u; ++b) {
@@ -329,16 +346,21 @@ static void derive_sparsity(const propid_config_t *config, const geometry_t *geo
             }
         }
         out->jac_rate_count[a] = count;
+        /* All of a row's thrust columns or none: the torque basis makes any of
+         * them a combination of all (the same for the drag columns below). */
+        int thrust_row = 0;
         for (uint8_t i = 0; i < rotor_count; ++i) {
-            if (geo->thrust_torque[i][a] != 0.0f) {
+            thrust_row |= geo->thrust_torque[i][a] != 0.0f;
+        }
+        for (uint8_t i = 0; i < rotor_count; ++i) {
+            if (thrust_row) {
                 out->jac_column[a][count] = (uint8_t)(PROPID_RATE_STATES + i);
                 out->jac_rotor[a][count] = i;
                 out->jac_torque[a][count] = geo->thrust_torque[i][a];
                 count++;
             }
         }
-        /* All of a row's drag columns or none: the yaw basis (propid_internal.h)
-         * makes any of them a combination of all. */
+        /* All of a row's drag columns or none: the yaw basis (propid_internal.h). */
         int drag_row = 0;
         for (uint8_t i = 0; i < rotor_count; ++i) {
             drag_row |= geo->drag_torque[i][a] != 0.0f;
@@ -702,6 +724,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 #if PROPID_GENERAL_VEHICLES
     derive_drag_basis(config, &out);
 #endif
+#if PROPID_GENERAL_VEHICLES
+    derive_thrust_basis(config, &geo, &out);
+#endif
     derive_gyro_jacobian(config, &geo);
 #if PROPID_GENERAL_VEHICLES
     derive_sparsity(config, &geo, &out);
@@ -792,7 +817,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             kind = PROPID_KIND_THRUST;
             prior = config->thrust_coeff_rel_std0 * config->thrust_coeff_rel_std0;
             psd = config->thrust_coeff_rel_walk * config->thrust_coeff_rel_walk;
-            floor_var = 1.0e-10f;
+            /* The torque basis' roll and pitch elements are learnt far below the
+             * individual kf (std ~1e-6 on agile flights): a floor at 1e-10 would be
+             * a loading of them (docs/math.md §2). 1e-14 is float32's resolution of
+             * a relative coefficient near 1 (2^-24 ~ 6e-8) squared, about. */
+            floor_var = 1.0e-14f;
             ceiling = coeff_ceiling;
         } else if (k < first_bias) {
             kind = PROPID_KIND_DRAG;

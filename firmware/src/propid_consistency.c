@@ -74,17 +74,15 @@ static uint8_t coefficient_count(const propid_filter_t *filter)
 }
 
 /* Coefficient c (kf of every rotor, then km) and its variance, per rotor (the
- * drag block is kept in its yaw basis: propid_internal.h). */
+ * coefficient blocks are kept in their bases: propid_internal.h). */
 static void per_rotor_coefficients(const propid_filter_t *filter, float *value, float *var)
 {
     const propid_core_t *core = &filter->core;
     const uint8_t rotor_count = filter->config.rotor_count;
-    for (uint8_t i = 0; i < rotor_count; ++i) {
-        const uint8_t k = (uint8_t)(propid_first_thrust() + i);
-        value[i] = core->state[k];
-        var[i] = core->cov[propid_cov_index(k, k)];
-    }
-    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter->derived, &filter->config);
+    propid_thrust_per_rotor(&thrust, core, value, var);
+    const propid_reflection_t basis = propid_drag_basis(&filter->derived, &filter->config);
     propid_drag_per_rotor(&basis, core, value + rotor_count, var + rotor_count);
 }
 
@@ -245,7 +243,7 @@ void propid_consistency_observe(propid_filter_t *filter, uint32_t gated_mask)
             return;
         }
     }
-    /* The coefficients per rotor once for both (the drag block is kept in its yaw basis). */
+    /* The coefficients per rotor once for both (the blocks are kept in their bases). */
     float value[2u * PROPID_MAX_ROTORS];
     float var[2u * PROPID_MAX_ROTORS];
     per_rotor_coefficients(filter, value, var);

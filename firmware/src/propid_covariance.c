@@ -15,9 +15,9 @@ const uint8_t propid_quad_state_kind[PROPID_MAX_STATES] = {
     PROPID_KIND_DRAG,   PROPID_KIND_BIAS,   PROPID_KIND_BIAS,   PROPID_KIND_BIAS};
 #endif
 
-void propid_cov_set_prior(const propid_derived_t *derived, const propid_drag_basis_t *basis, propid_core_t *core)
+void propid_cov_set_prior(const propid_derived_t *derived, const propid_kept_config_t *config, propid_core_t *core)
 {
-    const uint8_t rotor_count = basis->rotor_count;
+    const uint8_t rotor_count = config->rotor_count;
     const uint8_t n = derived->state_count;
     memset(core->state, 0, sizeof(core->state));
     memset(core->cov, 0, sizeof(core->cov));
@@ -29,9 +29,14 @@ void propid_cov_set_prior(const propid_derived_t *derived, const propid_drag_bas
     if (scale != PROPID_NO_STATE) {
         core->state[scale] = 1.0f; /* r = 1/s: the configured J and arms */
     }
-    /* The drag block in the yaw basis (propid_internal.h): H applied to the nominal.
-     * Its prior variances are equal, so the prior P is the same in either basis. */
-    propid_drag_basis_transform(basis, &core->state[propid_first_drag(rotor_count)]);
+    /* The coefficient blocks in their bases (propid_internal.h): the nominal
+     * mapped. Their prior variances are equal, so the prior P is the same in
+     * either basis. */
+    const propid_reflection_t drag = propid_drag_basis(derived, config);
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, derived, config);
+    propid_reflection_transform(&drag, &core->state[drag.first]);
+    propid_thrust_to_basis(&thrust, &core->state[propid_first_thrust()]);
     for (uint8_t k = 0; k < n; ++k) {
         core->cov[propid_cov_index(k, k)] = propid_prior_var(derived, k);
     }
@@ -39,14 +44,15 @@ void propid_cov_set_prior(const propid_derived_t *derived, const propid_drag_bas
         /* The thrust states carry g_i = s kf_i and the scale state r = 1/s
          * (docs/math.md §9): independent priors on kf_i and s, carried to first
          * order at the nominal, give var g_i = P_kf + P_s, cov(g_i, g_j) = P_s and
-         * cov(g_i, r) = -P_s. */
+         * cov(g_i, r) = -P_s per rotor; in the torque basis P_s c c^T and -P_s c
+         * with c = Q 1, the nominal's image (the state just set). */
         const float scale_var = propid_prior_var(derived, scale);
         const uint8_t first_drag = propid_first_drag(rotor_count);
         for (uint8_t i = propid_first_thrust(); i < first_drag; ++i) {
             for (uint8_t j = i; j < first_drag; ++j) {
-                core->cov[propid_cov_index(i, j)] += scale_var;
+                core->cov[propid_cov_index(i, j)] += scale_var * core->state[i] * core->state[j];
             }
-            core->cov[propid_cov_index(i, scale)] = -scale_var;
+            core->cov[propid_cov_index(i, scale)] = -scale_var * core->state[i];
         }
     }
 }
@@ -137,37 +143,33 @@ int propid_cov_enforce_bounds(const propid_derived_t *derived, propid_core_t *co
 
 /* The coefficients found outside the range: the estimate projected onto each
  * one's bound (propid_bound_projection.c), per rotor. Only the state is mapped
- * out of the yaw basis and back (N values); P stays in it and each projection
- * reads its column per rotor (propid_drag_per_rotor_column; P's drag columns
- * times the basis vector once, N x n products), so a coefficient riding its bound costs little per sample and P is
- * not rounded through the reflections. Apart, so the usual sample's test stays
- * lean. */
+ * out of the bases and back (2N values); P stays in them and each projection
+ * reads its column per rotor (propid_coeff_per_rotor_column: N columns of P
+ * times the basis' column, N x n products), so a coefficient riding its bound
+ * costs little per sample and P is not rounded through the reflections. Apart,
+ * so the usual sample's test stays lean. */
 static __attribute__((noinline)) PROPID_RARE uint32_t project_outside(propid_filter_t *filter)
 {
     const propid_kept_config_t *config = &filter->config;
     propid_core_t *core = &filter->core;
-    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, config);
+    const propid_reflection_t basis = propid_drag_basis(&filter->derived, config);
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter->derived, config);
     const uint8_t n = filter->derived.state_count;
     const uint8_t first = propid_first_thrust();
     const uint8_t end = propid_first_bias(config->rotor_count);
-    const uint8_t first_drag = propid_first_drag(config->rotor_count);
-    float *per_rotor = &core->state[first_drag];
-    /* The step's work area, free after the update: P's column, and P's drag
-     * columns times the basis vector (computed at the first drag coefficient). */
+    /* The step's work area, free after the update: P's column and one column
+     * of the block it is formed from. */
     float *column = core->update_vector[0];
-    float *along = core->update_vector[1];
-    int have_along = 0;
-    propid_drag_basis_transform(&basis, per_rotor);
+    float *scratch = core->update_vector[1];
+    propid_reflection_transform(&basis, &core->state[basis.first]);
+    propid_thrust_to_rotor(&thrust, &core->state[first]);
     uint32_t clamped = 0u;
     for (uint8_t k = first; k < end; ++k) {
         const float x = core->state[k];
         if (x < config->coeff_rel_min || x > config->coeff_rel_max) {
             const float bound = x < config->coeff_rel_min ? config->coeff_rel_min : config->coeff_rel_max;
-            if (k >= first_drag && !have_along) {
-                propid_drag_along_basis(&basis, core, n, column, along);
-                have_along = 1;
-            }
-            propid_drag_per_rotor_column(&basis, core, n, k, along, column);
+            propid_coeff_per_rotor_column(&filter->derived, config, core, n, k, scratch, column);
             (void)propid_project_onto_bound(n, column, core->state, k, bound);
             clamped++;
         }
@@ -182,7 +184,8 @@ static __attribute__((noinline)) PROPID_RARE uint32_t project_outside(propid_fil
                                                          : x;
         }
     }
-    propid_drag_basis_transform(&basis, per_rotor);
+    propid_reflection_transform(&basis, &core->state[basis.first]);
+    propid_thrust_to_basis(&thrust, &core->state[first]);
     return clamped;
 }
 
@@ -199,28 +202,47 @@ uint32_t propid_clamp_coefficients(propid_filter_t *filter)
     memcpy(&min_bits, &config->coeff_rel_min, sizeof(min_bits));
     memcpy(&max_bits, &config->coeff_rel_max, sizeof(max_bits));
     const uint32_t range_bits = max_bits - min_bits;
-    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, config);
+    const propid_reflection_t basis = propid_drag_basis(&filter->derived, config);
     float km_rel[PROPID_MAX_ROTORS];
+    float kf_rel[PROPID_MAX_ROTORS];
     uint32_t outside = 0u;
     /* The quad build has 4 rotors only (its configuration check): no other
-     * branch, so km_rel and the basis stay in registers (14 instructions less). */
+     * branch, so the values and the bases stay in registers (14 instructions less). */
     if (!PROPID_GENERAL_VEHICLES || rotor_count == 4u) {
         /* The quad: straight-line tests of the 8 coefficients' bit patterns. */
         const float *z = &core->state[PROPID_QUAD_FIRST_DRAG];
         const float *v = basis.vector;
         const float along = basis.scale * (z[0] * v[0] + z[1] * v[1] + z[2] * v[2] + z[3] * v[3]);
+        /* kf_rel = Q^T z = H_0 H_1 z. */
+        propid_thrust_basis_t thrust;
+        propid_thrust_basis_init(&thrust, &filter->derived, config);
+        const float *y = &core->state[PROPID_QUAD_FIRST_THRUST];
+        const float *v1 = thrust.vector[1];
+        const float along1 = thrust.scale[1] * (y[1] * v1[1] + y[2] * v1[2] + y[3] * v1[3]);
+        kf_rel[0] = y[0];
+PROPID_UNROLL(3)
+        for (uint8_t i = 1; i < 4u; ++i) {
+            kf_rel[i] = y[i] - along1 * v1[i];
+        }
+        const float *v0 = thrust.vector[0];
+        const float along0 = thrust.scale[0] *
+                             (kf_rel[0] * v0[0] + kf_rel[1] * v0[1] + kf_rel[2] * v0[2] + kf_rel[3] * v0[3]);
 PROPID_UNROLL(4)
         for (uint8_t i = 0; i < 4u; ++i) {
             km_rel[i] = z[i] - along * v[i];
-            outside |= propid_outside_positive_range(core->state[PROPID_QUAD_FIRST_THRUST + i], min_bits, range_bits);
+            kf_rel[i] -= along0 * v0[i];
+            outside |= propid_outside_positive_range(kf_rel[i], min_bits, range_bits);
             outside |= propid_outside_positive_range(km_rel[i], min_bits, range_bits);
         }
     }
 #if PROPID_GENERAL_VEHICLES
     else {
+        propid_thrust_basis_t thrust;
+        propid_thrust_basis_init(&thrust, &filter->derived, config);
         propid_drag_per_rotor(&basis, core, km_rel, NULL);
+        propid_thrust_per_rotor(&thrust, core, kf_rel, NULL);
         for (uint8_t i = 0; i < rotor_count; ++i) {
-            outside |= propid_outside_positive_range(core->state[PROPID_RATE_STATES + i], min_bits, range_bits);
+            outside |= propid_outside_positive_range(kf_rel[i], min_bits, range_bits);
             outside |= propid_outside_positive_range(km_rel[i], min_bits, range_bits);
         }
     }

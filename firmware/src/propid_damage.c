@@ -187,8 +187,7 @@ static void reopen_rotor(propid_filter_t *filter, uint8_t rotor)
         filter->core.cov[propid_cov_index(a, a)] += nu * nu;
         filter->core.gated_run[a] = 0u;
     }
-    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
-    propid_cov_reset_rotor(&filter->derived, &basis, &filter->core, rotor, 0);
+    propid_cov_reset_rotor(&filter->derived, &filter->config, &filter->core, rotor, 0);
     filter->core.health |= PROPID_HEALTH_ROTOR_DAMAGE;
 }
 
@@ -248,8 +247,12 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
 
     const uint8_t rotor_count = detector->rotor_count;
     float km_rel[PROPID_MAX_ROTORS];
-    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    const propid_reflection_t basis = propid_drag_basis(&filter->derived, &filter->config);
     propid_drag_per_rotor(&basis, core, km_rel, NULL);
+    float kf_state[PROPID_MAX_ROTORS];
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter->derived, &filter->config);
+    propid_thrust_per_rotor(&thrust, core, kf_state, NULL);
     const float adapt = detector->config.adapt_time_s;
     const float alpha = dt < adapt ? dt / adapt : 1.0f;
     detector->armed_s += dt;
@@ -261,7 +264,7 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
     int8_t best = -1;
     float best_excess = 1.0f; /* statistic / its threshold */
     for (uint8_t i = 0; i < rotor_count; ++i) {
-        const float kf_rel = core->state[propid_first_thrust() + i];
+        const float kf_rel = kf_state[i];
         const float weight = dt * core->rotor_speed_sq[i];
         float g[3];
         float norm_sq = 0.0f;

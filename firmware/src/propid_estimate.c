@@ -51,8 +51,14 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     /* The drag coefficients per rotor from their yaw basis (propid_internal.h). */
     float km_rel[PROPID_MAX_ROTORS];
     float km_rel_var[PROPID_MAX_ROTORS];
-    const propid_drag_basis_t basis = propid_drag_basis(derived, config);
+    const propid_reflection_t basis = propid_drag_basis(derived, config);
     propid_drag_per_rotor(&basis, core, km_rel, km_rel_var);
+    /* The thrust coefficients per rotor from their torque basis. */
+    float kf_state[PROPID_MAX_ROTORS];
+    float kf_state_var[PROPID_MAX_ROTORS];
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, derived, config);
+    propid_thrust_per_rotor(&thrust, core, kf_state, kf_state_var);
     /* With the thrust-torque scale the thrust states carry g_i = s kf_rel_i and the
      * scale state r = 1/s (docs/math.md §9): kf_rel_i = r g_i, its variance to first
      * order r^2 P_gg + g^2 P_rr + 2 r g P_gr. */
@@ -60,16 +66,23 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     const int scaled = PROPID_WITH_ACCEL && scale != PROPID_NO_STATE;
     const float inverse_scale = scaled ? core->state[scale] : 1.0f;
     const float inverse_scale_var = scaled ? core->cov[propid_cov_index(scale, scale)] : 0.0f;
+    float kf_scale_cov[PROPID_MAX_ROTORS] = {0.0f}; /* cov(g_i, r) per rotor */
+    if (scaled) {
+        for (uint8_t i = 0; i < rotor_count; ++i) {
+            kf_scale_cov[i] = core->cov[propid_cov_index((uint8_t)(propid_first_thrust() + i), scale)];
+        }
+        propid_thrust_to_rotor(&thrust, kf_scale_cov);
+    }
     for (uint8_t i = 0; i < rotor_count; ++i) {
         const uint8_t kf = (uint8_t)(propid_first_thrust() + i);
         const uint8_t km = (uint8_t)(first_drag + i);
         const float kf_nominal = config->rotor[i].thrust_coeff_nominal;
         const float km_nominal = config->rotor[i].drag_coeff_nominal;
-        const float gain = core->state[kf];
-        float kf_var = core->cov[propid_cov_index(kf, kf)];
+        const float gain = kf_state[i];
+        float kf_var = kf_state_var[i];
         if (scaled) {
             kf_var = inverse_scale * inverse_scale * kf_var + gain * gain * inverse_scale_var +
-                     2.0f * inverse_scale * gain * core->cov[propid_cov_index(kf, scale)];
+                     2.0f * inverse_scale * gain * kf_scale_cov[i];
         }
         const float km_var = km_rel_var[i];
         const uint16_t bit = (uint16_t)(1u << i);

@@ -25,8 +25,7 @@ static void core_to_prior(propid_filter_t *filter)
 {
     propid_core_t *core = &filter->core;
     memset(core, 0, sizeof(*core));
-    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
-    propid_cov_set_prior(&filter->derived, &basis, core);
+    propid_cov_set_prior(&filter->derived, &filter->config, core);
     core->stale_mark = filter->counters.rejected[-(int)PROPID_ERR_ROTOR_STALE];
 #if PROPID_DELAY_SLOTS > 0
     propid_delay_clear(filter);
@@ -109,8 +108,7 @@ propid_status_t propid_reset_rotor(propid_filter_t *filter, uint8_t rotor)
     if (rotor >= rotor_count) {
         return reject(filter, PROPID_ERR_ROTOR_INDEX);
     }
-    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
-    propid_cov_reset_rotor(&filter->derived, &basis, &filter->core, rotor, 1);
+    propid_cov_reset_rotor(&filter->derived, &filter->config, &filter->core, rotor, 1);
 #if PROPID_CONSISTENCY
     propid_consistency_restart(filter);
 #endif

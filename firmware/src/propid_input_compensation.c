@@ -77,13 +77,13 @@ void propid_input_compensation_prepare(propid_filter_t *filter, float dt)
     for (uint8_t i = 0; i < rotor_count; ++i) {
         input_var[i] = 0.5f * derived->input_noise_var * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
     }
-    /* The coefficients per rotor (the drag block is kept in its yaw basis:
+    /* The coefficients per rotor (the blocks are kept in their bases:
      * propid_internal.h). */
     float coefficient[2u * PROPID_MAX_ROTORS];
-    for (uint8_t i = 0; i < rotor_count; ++i) {
-        coefficient[i] = state[first + i];
-    }
-    const propid_drag_basis_t basis = propid_drag_basis(derived, &filter->config);
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, derived, &filter->config);
+    propid_thrust_per_rotor(&thrust, core, coefficient, NULL);
+    const propid_reflection_t basis = propid_drag_basis(derived, &filter->config);
     propid_drag_per_rotor(&basis, core, coefficient + rotor_count, NULL);
     float innovation_var[3];
     float weight[3];
@@ -117,9 +117,10 @@ void propid_input_compensation_prepare(propid_filter_t *filter, float dt)
                     weight[a] * input_var[rotor] * gain[rotor] * derived->jac_torque[a][p];
             }
         }
-        /* The factors per coefficient to the yaw basis of P's drag block, so that
-         * P times them is the correction of the states as kept. */
-        propid_drag_basis_apply(&basis, factor + rotor_count);
+        /* The factors per coefficient to the bases of P's coefficient blocks, so
+         * that P times them is the correction of the states as kept. */
+        propid_thrust_to_basis(&thrust, factor);
+        propid_reflection_apply(&basis, factor + rotor_count);
     }
     coefficient_products(core, first, coefficients);
     /* P theta per rotor (the products are in the basis the states are kept in). */
@@ -127,7 +128,8 @@ void propid_input_compensation_prepare(propid_filter_t *filter, float dt)
     for (uint8_t k = 0; k < coefficients; ++k) {
         direction[k] = core->input_product[0][k];
     }
-    propid_drag_basis_apply(&basis, direction + rotor_count);
+    propid_thrust_to_rotor(&thrust, direction);
+    propid_reflection_apply(&basis, direction + rotor_count);
     core->input_information_time += dt;
     const float share = dt / core->input_information_time;
     for (uint8_t a = 0; a < 3u; ++a) {

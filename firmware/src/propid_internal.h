@@ -216,7 +216,9 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
  * best-determined combination, the yaw torque, every step; every second step
  * needed no covariance repair on the design flights, every fourth did:
  * math.md). In the drag block's yaw basis (below) that combination is loaded
- * by its own variance; the schedule was kept. A fraction of epsilon per step
+ * by its own variance; the schedule was kept. The thrust coefficients are kept
+ * in a torque basis (below) for the same reason: their roll- and pitch-torque
+ * combinations are loaded by their own variances. A fraction of epsilon per step
  * is no option: 1 + eps/2 rounds to 1 in float32.
  * PROPID_ROUNDING_TOL is the rounding of the integrity tests themselves (a
  * product or a three-term sum of float32 values): differences within it are
@@ -331,32 +333,43 @@ static inline uint8_t propid_first_bias(uint8_t rotor_count)
     return (uint8_t)(PROPID_RATE_STATES + 2u * rotor_count);
 }
 
-/* The drag coefficients' yaw basis (docs/math.md §2, "The drag coefficients'
- * basis"). The state and P hold the km block as z = H km_rel, H the reflection
- * I - scale v v^T (symmetric, orthogonal, its own inverse) with v = e_0 + s_0 s /
- * sqrt(N), s the yaw signs, whose first row is -s_0 s / sqrt(N): z_0 is the
- * yaw-torque combination every yaw update measures, an element of its own,
- * rounded (and loaded) relative to its own variance instead of the km's far
- * larger ones. Every reader of a per-rotor km maps at the boundary; the rate
- * rows' drag entries are multiplied by H (a row times H is again a row over the
- * same N columns). The general build derives v at init; the quad build (N = 4:
- * v = (3/2, +-1/2, +-1/2, +-1/2), scale 2/3) reads it from a table in flash by
- * the relative yaw signs (config.yaw_sign_flips). */
+/* The coefficients' bases (docs/math.md §2, "The coefficients' bases"). The
+ * state and P keep each coefficient block in an orthonormal basis whose first
+ * elements are the torque combinations the gyro measures best, so those are
+ * rounded (and loaded) relative to their own variances instead of the
+ * individual coefficients' far larger ones:
+ * - km: z = H km_rel, H the reflection I - scale v v^T with v = e_0 + s_0 s /
+ *   sqrt(N), s the yaw signs: its first row is -s_0 s / sqrt(N), the yaw torque;
+ * - kf: z = Q kf_rel, Q = H_1 H_0 two reflections, H_0 on the whole block with
+ *   first row the roll-torque direction, H_1 on elements 1..N-1 with (H_1 H_0)'s
+ *   second row the pitch-torque direction orthogonalised against it (the thrust
+ *   torques per unit kf_rel at equal rotor speeds: propid_config.c).
+ * Every reader of a per-rotor coefficient maps at the boundary; the rate rows'
+ * coefficient entries are multiplied by the basis (a row times an orthonormal
+ * matrix is again a row over the same N columns).
+ *
+ * One reflection H = I - scale v v^T (symmetric, orthogonal, its own inverse)
+ * acting on the `count` states from `first` (scale 0: the identity). The general
+ * build derives the vectors at init; the quad build reads the km's from a table
+ * in flash by the relative yaw signs (config.yaw_sign_flips: v = (3/2, +-1/2,
+ * +-1/2, +-1/2), scale 2/3) and the kf's from its derived data. */
 typedef struct {
-    const float *vector; /* v, rotor_count entries */
-    float scale;         /* 2 / v.v */
-    uint8_t rotor_count;
-} propid_drag_basis_t;
+    const float *vector; /* v, count entries */
+    float scale;         /* 2 / v.v, or 0 */
+    uint8_t first;       /* state index of v[0] */
+    uint8_t count;
+} propid_reflection_t;
 
 #if !PROPID_GENERAL_VEHICLES
-/* v for each pattern of rotors 1..3's yaw signs relative to rotor 0's (propid_drag_basis.c). */
+/* v for each pattern of rotors 1..3's yaw signs relative to rotor 0's (propid_coeff_basis.c). */
 extern const float propid_quad_drag_basis[8][4];
 #endif
 
-static inline propid_drag_basis_t propid_drag_basis(const propid_derived_t *derived,
+/* The km block's reflection. */
+static inline propid_reflection_t propid_drag_basis(const propid_derived_t *derived,
                                                     const propid_kept_config_t *config)
 {
-    propid_drag_basis_t basis;
+    propid_reflection_t basis;
 #if PROPID_GENERAL_VEHICLES
     basis.vector = derived->drag_basis;
     basis.scale = derived->drag_basis_scale;
@@ -365,54 +378,109 @@ static inline propid_drag_basis_t propid_drag_basis(const propid_derived_t *deri
     basis.vector = propid_quad_drag_basis[(config->yaw_sign_flips >> 1) & 7u];
     basis.scale = 2.0f / 3.0f;
 #endif
-    basis.rotor_count = config->rotor_count;
+    basis.first = propid_first_drag(config->rotor_count);
+    basis.count = config->rotor_count;
     return basis;
 }
 
-/* x := H x for an N-vector. */
-static inline void propid_drag_basis_apply(const propid_drag_basis_t *basis, float *x)
+/* The kf block's two reflections: H_0 over the whole block, H_1 over elements
+ * 1..N-1 (its vector[1][0] is 0). The general build derives them at init into its
+ * derived data and points there; the quad build, whose filter object has no room
+ * left (1 KiB), derives them from its thrust-torque rows into `own` when it needs
+ * them (the same function on the same values: the same basis to the bit). */
+typedef struct {
+    const float (*vector)[PROPID_MAX_ROTORS]; /* vector[k]: v of H_k */
+    const float *scale;                      /* scale[k]: 2 / v.v of H_k, or 0 */
+    uint8_t rotor_count;
+#if !PROPID_GENERAL_VEHICLES
+    float own_vector[2][PROPID_MAX_ROTORS];
+    float own_scale[2];
+#endif
+} propid_thrust_basis_t;
+
+/* propid_coeff_basis.c: the reflections from the roll- and pitch-torque rows per
+ * unit kf_rel (rotor order; docs/math.md §2). */
+void propid_thrust_basis_derive(const float *roll, const float *pitch, uint8_t rotor_count,
+                                float vector[2][PROPID_MAX_ROTORS], float scale[2]);
+
+static inline void propid_thrust_basis_init(propid_thrust_basis_t *basis, const propid_derived_t *derived,
+                                            const propid_kept_config_t *config)
+{
+    basis->rotor_count = config->rotor_count;
+#if PROPID_GENERAL_VEHICLES
+    basis->vector = (const float (*)[PROPID_MAX_ROTORS])derived->thrust_basis;
+    basis->scale = derived->thrust_basis_scale;
+#else
+    propid_thrust_basis_derive(derived->jac_torque[0], derived->jac_torque[1], 4u, basis->own_vector,
+                               basis->own_scale);
+    basis->vector = (const float (*)[PROPID_MAX_ROTORS])basis->own_vector;
+    basis->scale = basis->own_scale;
+#endif
+}
+
+/* Reflection k (0: H_0, 1: H_1) of the kf basis. */
+static inline propid_reflection_t propid_thrust_reflection(const propid_thrust_basis_t *basis, uint8_t k)
+{
+    propid_reflection_t reflection;
+    reflection.vector = &basis->vector[k][k];
+    reflection.scale = basis->scale[k];
+    reflection.first = (uint8_t)(propid_first_thrust() + k);
+    reflection.count = basis->rotor_count > k ? (uint8_t)(basis->rotor_count - k) : 0u;
+    return reflection;
+}
+
+/* x := H x for the reflection's `count` values from x[0]. */
+static inline void propid_reflection_apply(const propid_reflection_t *basis, float *x)
 {
     const float *v = basis->vector;
     float dot = 0.0f;
-    for (uint8_t i = 0; i < basis->rotor_count; ++i) {
+    for (uint8_t i = 0; i < basis->count; ++i) {
         dot += v[i] * x[i];
     }
     dot *= basis->scale;
-    for (uint8_t i = 0; i < basis->rotor_count; ++i) {
+    for (uint8_t i = 0; i < basis->count; ++i) {
         x[i] -= dot * v[i];
     }
 }
-/* The same, as one out-of-line function (propid_drag_basis.c) for the callers
+/* The same, as one out-of-line function (propid_coeff_basis.c) for the callers
  * outside the prediction's loops: the files that call it from several places
  * share this copy instead of each keeping its own (80 B of flash each). */
-void propid_drag_basis_transform(const propid_drag_basis_t *basis, float *x);
+void propid_reflection_transform(const propid_reflection_t *basis, float *x);
 
-/* propid_drag_basis.c. The state's and P's drag block between the yaw basis and
- * the per-rotor one (either way: H is its own inverse). */
-PROPID_RARE void propid_drag_basis_flip(const propid_drag_basis_t *basis, propid_core_t *core);
-/* Its two parts: one cross-covariance column j (a state outside the drag block), and the
- * drag block itself, both sides (H B H). The SITL's NEES maps only the columns it reads. */
-PROPID_RARE void propid_drag_basis_flip_column(const propid_drag_basis_t *basis, propid_core_t *core,
+/* An N-vector over the kf block, rotor order (x[0] is rotor 0's): into the basis
+ * (z = Q x) or back per rotor (x = Q^T z). */
+void propid_thrust_to_basis(const propid_thrust_basis_t *basis, float *x);
+void propid_thrust_to_rotor(const propid_thrust_basis_t *basis, float *x);
+
+/* propid_coeff_basis.c. The state's and P's block of one reflection between its
+ * two bases (either way: H is its own inverse). */
+PROPID_RARE void propid_reflection_flip(const propid_reflection_t *basis, propid_core_t *core);
+/* Its two parts: one cross-covariance column j (a state outside the block), and the
+ * block itself, both sides (H B H). The SITL's NEES maps only the columns it reads. */
+PROPID_RARE void propid_reflection_flip_column(const propid_reflection_t *basis, propid_core_t *core,
                                                uint8_t column_index);
-PROPID_RARE void propid_drag_basis_flip_block(const propid_drag_basis_t *basis, propid_core_t *core);
+PROPID_RARE void propid_reflection_flip_block(const propid_reflection_t *basis, propid_core_t *core);
+/* Both coefficient blocks of the state and P per rotor (to_rotor 1) or into the
+ * kept bases (to_rotor 0). */
+PROPID_RARE void propid_coeff_flip(const propid_derived_t *derived, const propid_kept_config_t *config,
+                                   propid_core_t *core, int to_rotor);
 /* Per-rotor km_rel (H z) and, when km_var is not NULL, their variances (H P_zz H)_ii. */
-void propid_drag_per_rotor(const propid_drag_basis_t *basis, const propid_core_t *core, float *km_rel,
+void propid_drag_per_rotor(const propid_reflection_t *basis, const propid_core_t *core, float *km_rel,
                            float *km_var);
-/* Column k of P as the per-rotor state's (T P T e_k, T = H on the drag block and
- * the identity elsewhere; state_count entries), P left in the yaw basis; `along`
- * is propid_drag_along_basis's (read for a drag coefficient only). */
-PROPID_RARE void propid_drag_per_rotor_column(const propid_drag_basis_t *basis, const propid_core_t *core,
-                                              uint8_t state_count, uint8_t k, const float *along,
-                                              float *column);
-/* along_j = sum_d P_j,(first drag + d) v_d for every state j (P's drag columns times
- * the basis vector), shared by the drag coefficients' columns; `scratch` holds
- * one column at a time (state_count entries). */
-PROPID_RARE void propid_drag_along_basis(const propid_drag_basis_t *basis, const propid_core_t *core,
-                                         uint8_t state_count, float *scratch, float *along);
+/* Per-rotor kf_rel (Q^T z) and, when kf_var is not NULL, their variances
+ * (Q^T P_zz Q)_ii. */
+void propid_thrust_per_rotor(const propid_thrust_basis_t *basis, const propid_core_t *core, float *kf_rel,
+                             float *kf_var);
+/* Column k of P as the per-rotor state's (T^T P T e_k, T the kept bases on the
+ * coefficient blocks and the identity elsewhere; state_count entries), P left in
+ * the kept bases; `scratch` holds state_count values. */
+PROPID_RARE void propid_coeff_per_rotor_column(const propid_derived_t *derived, const propid_kept_config_t *config,
+                                               const propid_core_t *core, uint8_t state_count, uint8_t k,
+                                               float *scratch, float *column);
 /* Rotor `rotor`'s coefficients back to their prior variance, uncorrelated, and
- * with to_nominal also their value to nominal (per-rotor meaning: the basis is
+ * with to_nominal also their value to nominal (per-rotor meaning: the bases are
  * flipped around the reset). */
-PROPID_RARE void propid_cov_reset_rotor(const propid_derived_t *derived, const propid_drag_basis_t *basis,
+PROPID_RARE void propid_cov_reset_rotor(const propid_derived_t *derived, const propid_kept_config_t *config,
                                         propid_core_t *core, uint8_t rotor, int to_nominal);
 
 /* The fixed indices of the plain quad (4 rotors, no optional state): the
@@ -466,7 +534,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 
 /* propid_covariance.c */
 /* State to nominal, covariance to the diagonal prior. */
-PROPID_RARE void propid_cov_set_prior(const propid_derived_t *derived, const propid_drag_basis_t *basis,
+PROPID_RARE void propid_cov_set_prior(const propid_derived_t *derived, const propid_kept_config_t *config,
                                       propid_core_t *core);
 /* Zero row and column `index`, put its prior variance on the diagonal. */
 PROPID_RARE void propid_cov_reset_state(const propid_derived_t *derived, propid_core_t *core, uint8_t index);

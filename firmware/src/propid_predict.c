@@ -63,7 +63,9 @@ static PROPID_QUAD_INLINE propid_status_t
 predict_stage_quad(const float *restrict state, const float *restrict input_speed_sq,
                    const float *restrict latest_speed_sq, const float *restrict quad_gyro,
                    const float (*restrict jac_torque)[PROPID_JAC_TORQUE_ROW],
-                   const float *restrict drag_basis, float drag_basis_scale, float dt,
+                   const float *restrict drag_basis, float drag_basis_scale,
+                   const float (*restrict thrust_basis)[PROPID_MAX_ROTORS], const float *restrict thrust_basis_scale,
+                   float dt,
                    float rate_limit, float *restrict rate_next,
                    float (*restrict jacobian_dt)[PROPID_JAC_ROW])
 {
@@ -97,9 +99,25 @@ PROPID_UNROLL(4)
         for (uint8_t i = 0; i < 4u; ++i) {
             entry[i] = torque[PROPID_QUAD_TORQUE_FIRST + i] * speed_sq_dt[i];
         }
-        if (a == 2u) {
+        if (a < 2u) {
+            /* The thrust entries times Q^T (Q e = H_1 H_0 e): the row over the
+             * torque-basis states (propid_internal.h, "The coefficients' bases"). */
+            const float *v = thrust_basis[0];
+            const float along0 = thrust_basis_scale[0] *
+                                 (entry[0] * v[0] + entry[1] * v[1] + entry[2] * v[2] + entry[3] * v[3]);
+PROPID_UNROLL(4)
+            for (uint8_t i = 0; i < 4u; ++i) {
+                entry[i] -= along0 * v[i];
+            }
+            v = thrust_basis[1];
+            const float along1 = thrust_basis_scale[1] * (entry[1] * v[1] + entry[2] * v[2] + entry[3] * v[3]);
+PROPID_UNROLL(3)
+            for (uint8_t i = 1; i < 4u; ++i) {
+                entry[i] -= along1 * v[i];
+            }
+        } else {
             /* The drag entries times H: the yaw row over the yaw-basis states
-             * (propid_internal.h, propid_drag_basis_apply). */
+             * (propid_internal.h, propid_reflection_apply). */
             const float along = drag_basis_scale * (entry[0] * drag_basis[0] + entry[1] * drag_basis[1] +
                                                     entry[2] * drag_basis[2] + entry[3] * drag_basis[3]);
 PROPID_UNROLL(4)
@@ -188,7 +206,9 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
      * rows' rate entries (propid_config.c lists them). */
     const float damping_dt = propid_aero_damping_on(derived) ? dt : 0.0f;
     const uint8_t n = derived->state_count;
-    const propid_drag_basis_t basis = propid_drag_basis(derived, &filter->config);
+    const propid_reflection_t basis = propid_drag_basis(derived, &filter->config);
+    propid_thrust_basis_t thrust_basis;
+    propid_thrust_basis_init(&thrust_basis, derived, &filter->config);
     float check = 0.0f;
     float rotors[3];
     float gyroscopic[3];
@@ -224,6 +244,7 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
          * (With the thrust-torque scale the thrust states carry s kf: math.md §9.) */
         sum = 0.0f;
         uint8_t drag_entry = count;
+        uint8_t thrust_entry = count;
         const float *torque = derived->jac_torque[a];
         const uint8_t *rotor = derived->jac_rotor[a];
         for (uint8_t p = rate_count; p < count; ++p) {
@@ -233,12 +254,25 @@ predict_stage_any(const propid_filter_t *filter, float dt, float rate_next[3],
                 drag_entry = drag_entry < p ? drag_entry : p; /* summed in the yaw basis below */
                 continue;
             }
+            if (column[p] >= derived->layout.thrust && column[p] < derived->layout.drag) {
+                thrust_entry = thrust_entry < p ? thrust_entry : p; /* in the torque basis below */
+                continue;
+            }
             sum += entry * state[column[p]];
+        }
+        /* The row's thrust entries (all N, contiguous, rotor order: propid_config.c)
+         * times Q^T: the row over the torque-basis states. */
+        if (thrust_entry < count) {
+            propid_thrust_to_basis(&thrust_basis, &g[thrust_entry]);
+            const float *z = &state[derived->layout.thrust];
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                sum += g[thrust_entry + i] * z[i];
+            }
         }
         /* The row's drag entries (all N, contiguous, rotor order: propid_config.c)
          * times H: the row over the yaw-basis states z (propid_internal.h). */
         if (drag_entry < count) {
-            propid_drag_basis_apply(&basis, &g[drag_entry]);
+            propid_reflection_apply(&basis, &g[drag_entry]);
             const float *z = &state[derived->layout.drag];
             for (uint8_t i = 0; i < rotor_count; ++i) {
                 sum += g[drag_entry + i] * z[i];
@@ -299,11 +333,14 @@ __attribute__((noinline)) propid_status_t propid_predict_stage(const propid_filt
         return predict_stage_any(filter, dt, rate_next, jacobian_dt);
     }
 #endif
-    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    const propid_reflection_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter->derived, &filter->config);
     return predict_stage_quad(filter->core.state, filter->core.input_speed_sq,
                               filter->core.rotor_speed_sq, filter->derived.quad_gyro,
-                              filter->derived.jac_torque, basis.vector, basis.scale, dt, propid_rate_limit(filter),
-                              rate_next, jacobian_dt);
+                              filter->derived.jac_torque, basis.vector, basis.scale,
+                              thrust.vector, thrust.scale, dt,
+                              propid_rate_limit(filter), rate_next, jacobian_dt);
 }
 
 #if PROPID_GENERAL_VEHICLES
@@ -469,17 +506,16 @@ static void add_input_block(float *cov, const float (*gain)[PROPID_MAX_ROTORS], 
  * thrust columns in the roll and pitch rows, drag columns in the yaw row;
  * straight-line. */
 static __attribute__((noinline)) void add_input_noise_quad(const propid_derived_t *derived,
-                                                           propid_core_t *core, const float *km_rel,
-                                                           const float *weight)
+                                                           propid_core_t *core, const float *kf_rel,
+                                                           const float *km_rel, const float *weight)
 {
-    const float *state = core->state;
     float input_var[4];
     float gain[3][4];
 PROPID_UNROLL(4)
     for (uint8_t i = 0; i < 4u; ++i) {
         input_var[i] = weight[i] * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
-        gain[0][i] = derived->jac_torque[0][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_THRUST + i];
-        gain[1][i] = derived->jac_torque[1][PROPID_QUAD_TORQUE_FIRST + i] * state[PROPID_QUAD_FIRST_THRUST + i];
+        gain[0][i] = derived->jac_torque[0][PROPID_QUAD_TORQUE_FIRST + i] * kf_rel[i];
+        gain[1][i] = derived->jac_torque[1][PROPID_QUAD_TORQUE_FIRST + i] * kf_rel[i];
         gain[2][i] = derived->jac_torque[2][PROPID_QUAD_TORQUE_FIRST + i] * km_rel[i];
     }
     float *cov = core->cov;
@@ -497,10 +533,9 @@ PROPID_UNROLL(3)
 
 /* Any vehicle, over the sparsity lists. */
 static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t *derived,
-                                                          propid_core_t *core, const float *km_rel,
-                                                          const float *weight)
+                                                          propid_core_t *core, const float *kf_rel,
+                                                          const float *km_rel, const float *weight)
 {
-    const float *state = core->state;
     const uint8_t rotor_count = (uint8_t)(derived->layout.drag - derived->layout.thrust);
     float input_var[PROPID_MAX_ROTORS];
     for (uint8_t i = 0; i < rotor_count; ++i) {
@@ -516,7 +551,7 @@ static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t
             }
             const uint8_t column = derived->jac_column[a][p];
             const int thrust = column < derived->layout.drag;
-            gain[a][rotor] += derived->jac_torque[a][p] * (thrust ? state[column] : km_rel[rotor]);
+            gain[a][rotor] += derived->jac_torque[a][p] * (thrust ? kf_rel[rotor] : km_rel[rotor]);
         }
     }
     add_input_block(core->cov, (const float (*)[PROPID_MAX_ROTORS])gain, input_var, rotor_count);
@@ -556,13 +591,21 @@ static __attribute__((noinline)) void add_input_noise(const propid_derived_t *de
     }
     /* B at the drag coefficients per rotor (kept in their yaw basis; this term is
      * in the general build only, whose derived data holds the basis). */
-    const propid_drag_basis_t basis = {derived->drag_basis, derived->drag_basis_scale, rotor_count};
+    const propid_reflection_t basis = {derived->drag_basis, derived->drag_basis_scale,
+                                       derived->layout.drag, rotor_count};
     float km_rel[PROPID_MAX_ROTORS];
     propid_drag_per_rotor(&basis, core, km_rel, NULL);
+    /* B at the thrust coefficients per rotor too (kept in their torque basis). */
+    propid_thrust_basis_t thrust_basis;
+    thrust_basis.vector = (const float (*)[PROPID_MAX_ROTORS])derived->thrust_basis;
+    thrust_basis.scale = derived->thrust_basis_scale;
+    thrust_basis.rotor_count = rotor_count;
+    float kf_rel[PROPID_MAX_ROTORS];
+    propid_thrust_per_rotor(&thrust_basis, core, kf_rel, NULL);
     if (derived->quad_layout) {
-        add_input_noise_quad(derived, core, km_rel, weight);
+        add_input_noise_quad(derived, core, kf_rel, km_rel, weight);
     } else {
-        add_input_noise_any(derived, core, km_rel, weight);
+        add_input_noise_any(derived, core, kf_rel, km_rel, weight);
     }
 }
 #endif
@@ -646,11 +689,13 @@ __attribute__((noinline)) propid_status_t propid_predict_step(propid_filter_t *f
     float rate_jacobian_dt[3][PROPID_JAC_ROW];
 #endif
 #if PROPID_FAST_QUAD_PREDICT
-    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    const propid_reflection_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter->derived, &filter->config);
     const propid_status_t staged = predict_stage_quad(
         core->state, core->input_speed_sq, core->rotor_speed_sq, filter->derived.quad_gyro,
-        filter->derived.jac_torque, basis.vector, basis.scale, dt, propid_rate_limit(filter), rate_next,
-        rate_jacobian_dt);
+        filter->derived.jac_torque, basis.vector, basis.scale, thrust.vector,
+        thrust.scale, dt, propid_rate_limit(filter), rate_next, rate_jacobian_dt);
 #else
     const propid_status_t staged = propid_predict_stage(filter, dt, rate_next, rate_jacobian_dt);
 #endif

@@ -64,9 +64,12 @@ class ReferenceFilter:
         if int(config.torque_scale):
             self.torque_scale, nxt = nxt, nxt + 1
         self.n = nxt
-        # The drag coefficients' yaw basis (C: propid_drag_basis, docs/math.md §2): the state
-        # and P keep the km block as z = H km_rel, H = I - 2 v v^T / v.v, v = e_0 + s_0 s / sqrt(N),
-        # H symmetric and its own inverse; `basis` is H on that block, identity elsewhere.
+        # The coefficients' bases (C: propid_internal.h, docs/math.md §2): the state and P keep
+        # the kf block as z = Q kf_rel (Q = H_1 H_0: first rows the roll- and pitch-torque
+        # directions, thrust_torque_basis below) and the km block as z = H km_rel (H = I - 2 v v^T
+        # / v.v, v = e_0 + s_0 s / sqrt(N): first row the yaw torque). `basis` is T, the kept
+        # state T x of the per-rotor x (Q and H on their blocks, identity elsewhere); T is
+        # orthogonal: per rotor x = T^T z.
         yaw_signs = np.array([_f32(v) for v in config.yaw_signs])
         v = yaw_signs[0] * yaw_signs / math.sqrt(n_rot)
         v[0] += 1.0
@@ -102,6 +105,8 @@ class ReferenceFilter:
         arm = np.stack([positions[:, 1], -positions[:, 0], np.zeros(n_rot)], axis=1)
         self.thrust_torque = (arm @ self.inertia_inv.T) * self.kf_nominal[:, None]
         self.drag_torque = np.outer(yaw * self.km_nominal, self.inertia_inv[:, 2])
+        self.basis[3:self.first_drag, 3:self.first_drag] = thrust_torque_basis(
+            self.thrust_torque[:, 0], self.thrust_torque[:, 1])
         # Rotor inertia (docs/math.md §8): h = sum_i yaw_sign_i J_r,i Omega_i; yaw reaction
         # J^-1 z yaw_sign_i J_r,i dOmega_i/dt; gyroscopic torque h (omega_y, -omega_x, 0).
         rotor_inertia = np.array([_f32(v) for v in (config.rotor_inertia or [0.0] * n_rot)])
@@ -148,7 +153,7 @@ class ReferenceFilter:
                                               1e-12, 4.0 * c["gyro_range"] ** 2)
             elif k < self.first_drag:
                 prior, psd, floor, ceiling = (c["thrust_coeff_rel_std0"] ** 2,
-                                              c["thrust_coeff_rel_walk"] ** 2, 1e-10, coeff_ceiling)
+                                              c["thrust_coeff_rel_walk"] ** 2, 1e-14, coeff_ceiling)
             elif k < self.first_bias:
                 prior, psd, floor, ceiling = (c["drag_coeff_rel_std0"] ** 2,
                                               c["drag_coeff_rel_walk"] ** 2, 1e-10, coeff_ceiling)
@@ -226,7 +231,6 @@ class ReferenceFilter:
         self.state[3:self.first_bias] = 1.0
         if self.torque_scale is not None:
             self.state[self.torque_scale] = 1.0  # r = 1/s
-        self.state = self.basis @ self.state  # (equal km priors: P's prior is the same in either basis)
         self.cov = np.diag(self.prior_var.copy())
         if self.torque_scale is not None:
             # C (propid_cov_set_prior): g = s kf, r = 1/s from independent kf and s priors, to first order
@@ -234,6 +238,9 @@ class ReferenceFilter:
             p_s = self.prior_var[r]
             self.cov[g, g] += p_s
             self.cov[g, r] = self.cov[r, g] = -p_s
+        # Into the kept bases (equal priors within a block: only the torque scale's terms move).
+        self.state = self.basis @ self.state
+        self.cov = self.basis @ self.cov @ self.basis.T
         self.rotor_speed_sq = np.zeros(self.rotor_count)
         self.input_speed_sq = np.zeros(self.rotor_count)
         self.rotor_time_us = 0
@@ -275,22 +282,26 @@ class ReferenceFilter:
     def reset_rotor(self, rotor: int) -> int:
         if not 0 <= rotor < self.rotor_count:
             return self._reject("PROPID_ERR_ROTOR_INDEX")
-        self._flip_basis()  # per rotor around the reset (C: propid_cov_reset_rotor)
+        self._flip_basis(to_rotor=True)  # per rotor around the reset (C: propid_cov_reset_rotor)
         for k in (3 + rotor, self.first_drag + rotor):
             self.state[k] = 1.0
             self._reset_state(k)
         if self.torque_scale is not None:  # the nominal kf is g = 1/r
             self.state[3 + rotor] = 1.0 / self.state[self.torque_scale]
-        self._flip_basis()
+        self._flip_basis(to_rotor=False)
         return STATUS["PROPID_OK"]
 
-    def _flip_basis(self) -> None:
-        """State and P between the drag block's yaw basis and per rotor (either way)."""
-        self.state = self.basis @ self.state
-        self.cov = self.basis @ self.cov @ self.basis
+    def _flip_basis(self, to_rotor: bool) -> None:
+        """State and P between the kept bases and per rotor."""
+        t = self.basis.T if to_rotor else self.basis
+        self.state = t @ self.state
+        self.cov = t @ self.cov @ t.T
 
     def _per_rotor_state(self) -> np.ndarray:
-        return self.basis @ self.state
+        return self.basis.T @ self.state
+
+    def _per_rotor_cov(self) -> np.ndarray:
+        return self.basis.T @ self.cov @ self.basis
 
     def resync(self, t_us: int) -> int:
         for a in range(3):
@@ -555,7 +566,7 @@ class ReferenceFilter:
             predicted[:3] = self.state[:3] + dt * rate_dot + reaction
             rate_dot_next, rows_next = self.rate_derivative_and_jacobian(predicted, speed_sq, momentum_z)
             rate_next = self.state[:3] + dt * 0.5 * (rate_dot + rate_dot_next) + reaction
-            jac_dt = dt * 0.5 * (rows + rows_next) @ self.basis
+            jac_dt = dt * 0.5 * (rows + rows_next) @ self.basis.T
             if not (np.all(np.isfinite(rate_next)) and np.all(np.isfinite(jac_dt))
                     and np.all(np.isfinite(self.state))):
                 return self._reject("PROPID_ERR_NUMERIC")
@@ -652,7 +663,7 @@ class ReferenceFilter:
         rotor_of = np.concatenate([np.arange(n_rot), np.arange(n_rot)])
         # Per rotor (the kept drag block is in its yaw basis); the corrections go back below.
         state = self._per_rotor_state()
-        cov = self.basis @ self.cov @ self.basis
+        cov = self._per_rotor_cov()
         _, unit_rows = self.rate_derivative_and_jacobian(state, np.ones(n_rot))
         entry = unit_rows[:, coeff]  # d(omega_dot_a)/d(u_i) per unit coefficient, thrust then drag columns
         theta = state[coeff]
@@ -776,7 +787,8 @@ class ReferenceFilter:
         n_rot, b = self.rotor_count, self.accel_bias
         # C: with the torque scale r = 1/s multiplies the thrust states g = s kf here only
         r = float(self.state[self.torque_scale]) if self.torque_scale is not None else 1.0
-        per_state = self.thrust_per_mass * self.rotor_speed_sq
+        # The row per rotor times Q^T: over the kept torque-basis states.
+        per_state = self.basis[3:3 + n_rot, 3:3 + n_rot] @ (self.thrust_per_mass * self.rotor_speed_sq)
         h = np.zeros(self.n)
         h[3:3 + n_rot] = r * per_state
         h[b] = 1.0
@@ -829,11 +841,11 @@ class ReferenceFilter:
         lo, hi = self.c["coeff_rel_min"], self.c["coeff_rel_max"]
         clamped = extra
         # C: propid_clamp_coefficients, in index order, per rotor: the state mapped out of the
-        # drag block's yaw basis and back, each projection with P's column per rotor (P kept).
+        # kept bases and back, each projection with P's column per rotor (P kept).
         coeffs = self._per_rotor_state()[3:self.first_bias]
         if np.any(coeffs < lo) or np.any(coeffs > hi):
             state = self._per_rotor_state()
-            cov = self.basis @ self.cov @ self.basis
+            cov = self._per_rotor_cov()
             for k in range(3, self.first_bias):
                 if state[k] < lo:
                     self._project(state, cov[:, k], k, lo)
@@ -948,13 +960,46 @@ class ReferenceFilter:
         return d
 
     def scaled_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """(state, P) per rotor (C: propid_abi_copy_state maps the drag block back too)."""
-        return self.basis @ self.state, self.basis @ self.cov @ self.basis
+        """(state, P) per rotor (C: propid_abi_copy_state maps the coefficient blocks back too)."""
+        return self._per_rotor_state(), self._per_rotor_cov()
 
     @staticmethod
     def status_name(code: int) -> str:
         from propid.cfilter import STATUS_NAME
         return STATUS_NAME.get(int(code), f"PROPID_UNKNOWN_STATUS({int(code)})")
+
+
+def thrust_torque_basis(roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    """Q of the kf block (C: propid_thrust_basis_derive, docs/math.md §2): Q = H_1 H_0, H_0 the
+    reflection whose first row is the roll-torque direction (up to sign), H_1 on elements
+    1..N-1 making the second row the pitch-torque direction orthogonalised against it; a
+    direction that vanishes (or is parallel to the roll one) leaves its reflection out."""
+    n = roll.size
+    size = [float(roll @ roll), float(pitch @ pitch)]
+    reflections = []
+    r_hat = None
+    for k, d in enumerate((np.array(roll, dtype=float), np.array(pitch, dtype=float))):
+        if k >= n:
+            break
+        if k == 1 and r_hat is not None:
+            d = d - (d @ r_hat) * r_hat
+            d = reflections[0] @ d
+            d[0] = 0.0
+        norm_sq = float(d[k:] @ d[k:])
+        if not (norm_sq > 1.0e-6 * size[k]) or not math.isfinite(norm_sq):
+            reflections.append(np.eye(n))
+            continue
+        d = d / math.sqrt(norm_sq)
+        if k == 0:
+            r_hat = d.copy()
+        v = np.zeros(n)
+        v[k:] = d[k:]
+        v[k] += 1.0 if d[k] >= 0.0 else -1.0
+        reflections.append(np.eye(n) - 2.0 * np.outer(v, v) / float(v @ v))
+    q = np.eye(n)
+    for h in reflections:
+        q = h @ q
+    return q
 
 
 def _skew(v: np.ndarray) -> np.ndarray:

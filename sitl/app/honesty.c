@@ -4,7 +4,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "../../firmware/src/propid_internal.h" /* the drag block's yaw basis */
+#include "../../firmware/src/propid_internal.h" /* the coefficient blocks' bases */
 
 #define HONESTY_CONVERGED_TOL 0.05  /* a "converged" coefficient more than this off is a false claim */
 #define HONESTY_RECOVERED_TOL 0.10  /* recovered: every coefficient within this of the truth */
@@ -86,15 +86,22 @@ static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const do
 
 /* See honesty.h. The whole flip maps every column of P: 3 % of a flight at one NEES sample
  * per 10 control steps. */
-void sitl_honesty_drag_per_rotor(const propid_filter_t *filter, const uint8_t *columns,
+void sitl_honesty_coeff_per_rotor(const propid_filter_t *filter, const uint8_t *columns,
                                  int column_count, propid_core_t *core)
 {
-    const propid_drag_basis_t basis = propid_drag_basis(&filter->derived, &filter->config);
-    propid_drag_basis_apply(&basis, &core->state[propid_first_drag(basis.rotor_count)]);
+    /* The thrust block whole (state, every column, block: its two reflections, H_1 first). */
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter->derived, &filter->config);
+    const propid_reflection_t second = propid_thrust_reflection(&thrust, 1u);
+    const propid_reflection_t first = propid_thrust_reflection(&thrust, 0u);
+    propid_reflection_flip(&second, core);
+    propid_reflection_flip(&first, core);
+    const propid_reflection_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    propid_reflection_apply(&basis, &core->state[basis.first]);
     for (int c = 0; c < column_count; c++) {
-        propid_drag_basis_flip_column(&basis, core, columns[c]);
+        propid_reflection_flip_column(&basis, core, columns[c]);
     }
-    propid_drag_basis_flip_block(&basis, core);
+    propid_reflection_flip_block(&basis, core);
 }
 
 int sitl_honesty_truth(const propid_filter_t *filter, double true_torque_scale, const double *true_kf,
@@ -158,8 +165,8 @@ static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const dou
     int index[HONESTY_MAX_DOF];
     double truth[HONESTY_MAX_DOF];
     const int n = sitl_honesty_truth(filter, h->true_torque_scale, true_kf, true_km, true_bias, index, truth);
-    /* The filter keeps its drag block in the yaw basis (propid_internal.h): per rotor here,
-     * for the entries read below only. */
+    /* The filter keeps its coefficient blocks in their bases (propid_internal.h): per rotor
+     * here, the drag block's for the entries read below only. */
     propid_core_t core = filter->core;
     uint8_t columns[HONESTY_MAX_DOF];
     for (int i = 0; i < n_rotor; i++) {
@@ -168,7 +175,7 @@ static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const dou
     for (int a = 2 * n_rotor; a < n; a++) { /* the biases, and the scale when there is one */
         columns[a - n_rotor] = (uint8_t)index[a];
     }
-    sitl_honesty_drag_per_rotor(filter, columns, n - n_rotor, &core);
+    sitl_honesty_coeff_per_rotor(filter, columns, n - n_rotor, &core);
     double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF];
     double e[HONESTY_MAX_DOF];
     for (int i = 0; i < n; i++) {

@@ -58,7 +58,7 @@ TARGET_CFLAGS = CPU + ["-std=c11", "-O2", "-DNDEBUG", "-fno-math-errno", "-ffp-c
 # Init-only sources compiled for size, as firmware/CMakeLists.txt does on the target.
 INIT_ONLY_CFLAGS = {"propid_config.c": ["-Os"], "propid_setup.c": ["-Os"]}
 # And in the size-lean quad build (firmware/CMakeLists.txt, PROPID_SIZE_LEAN_OS_SOURCES).
-SIZE_LEAN_OS_SOURCES = ("propid_predict.c", "propid_filter.c", "propid_estimate.c", "propid_drag_basis.c")
+SIZE_LEAN_OS_SOURCES = ("propid_predict.c", "propid_filter.c", "propid_estimate.c", "propid_coeff_basis.c")
 PER_SAMPLE_CALLS = ("propid_push_gyro", "propid_push_rotor_speeds", "propid_get_estimate")
 # Cycles-per-instruction assumptions for the CPU-load estimate (docs/performance.md):
 # Cortex-M4F at 168 MHz from flash with the ART/prefetch (FPU multiply-add 3 cycles,

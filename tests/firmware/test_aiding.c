@@ -17,6 +17,7 @@
 #include <string.h>
 
 #include "propid/propid.h"
+#include "per_rotor_view.h"
 #include "unity.h"
 #include "test_rng.h"
 
@@ -509,9 +510,10 @@ static void test_torque_scale_prior_keeps_the_configured_meaning(void)
     }
     const uint8_t scale = filter.derived.layout.torque_scale;
     const float p_s = config.torque_scale_std0 * config.torque_scale_std0;
-    TEST_ASSERT_FLOAT_WITHIN(1.0e-6f, -p_s, filter.core.cov[propid_cov_index(PROPID_RATE_STATES, scale)]);
+    const propid_core_t per_rotor = per_rotor_core(&filter); /* (the kf are kept in their torque basis) */
+    TEST_ASSERT_FLOAT_WITHIN(1.0e-6f, -p_s, per_rotor.cov[propid_cov_index(PROPID_RATE_STATES, scale)]);
     TEST_ASSERT_FLOAT_WITHIN(1.0e-6f, p_s,
-                             filter.core.cov[propid_cov_index(PROPID_RATE_STATES, PROPID_RATE_STATES + 1u)]);
+                             per_rotor.cov[propid_cov_index(PROPID_RATE_STATES, PROPID_RATE_STATES + 1u)]);
 }
 
 /* ---- rotor inertia: the yaw reaction in one step ------------------------ */

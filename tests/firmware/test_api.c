@@ -192,7 +192,7 @@ static void test_reset_rotor_touches_only_that_rotor(void)
 
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_reset_rotor(&filter, rotor));
 
-    /* Per rotor (the drag block is kept in its yaw basis): equal up to the
+    /* Per rotor (the coefficients are kept in their bases): equal up to the
      * rounding of the maps between the bases. */
     const propid_core_t before = per_rotor_core(&snapshot);
     const propid_core_t after = per_rotor_core(&filter);
@@ -275,17 +275,19 @@ static void test_estimate_is_consistent_with_state(void)
         const uint8_t kf = propid_index_thrust_coeff(i);
         const uint8_t km = propid_index_drag_coeff(&filter, i);
         TEST_ASSERT_FLOAT_WITHIN(1e-6f * config.rotor[i].thrust_coeff_nominal,
-                                 filter.core.state[kf] * config.rotor[i].thrust_coeff_nominal,
+                                 per_rotor.state[kf] * config.rotor[i].thrust_coeff_nominal,
                                  estimate.thrust_coeff[i]);
         TEST_ASSERT_FLOAT_WITHIN(1e-6f * config.rotor[i].drag_coeff_nominal,
                                  per_rotor.state[km] * config.rotor[i].drag_coeff_nominal,
                                  estimate.drag_coeff[i]);
         TEST_ASSERT_TRUE(estimate.thrust_coeff_std[i] > 0.0f);
         TEST_ASSERT_TRUE(estimate.drag_coeff_std[i] > 0.0f);
-        /* The drag std is the per-rotor one (the yaw basis mapped back), not the
-         * kept block's diagonal. */
+        /* The stds are the per-rotor ones (the bases mapped back), not the kept
+         * blocks' diagonals. */
         const float km_std = sqrtf(per_rotor.cov[propid_cov_index(km, km)]) * config.rotor[i].drag_coeff_nominal;
         TEST_ASSERT_FLOAT_WITHIN(1e-3f * km_std, km_std, estimate.drag_coeff_std[i]);
+        const float kf_std = sqrtf(per_rotor.cov[propid_cov_index(kf, kf)]) * config.rotor[i].thrust_coeff_nominal;
+        TEST_ASSERT_FLOAT_WITHIN(1e-3f * kf_std, kf_std, estimate.thrust_coeff_std[i]);
         /* "converged" implies "converging" */
         TEST_ASSERT_EQUAL_UINT16(estimate.thrust_coeff_converged,
                                  estimate.thrust_coeff_converged & estimate.thrust_coeff_converging);

@@ -72,9 +72,9 @@ static void check_dense(uint8_t rotors, int full_inertia, float time)
 
     /* Dense: E_a,col = d(omega_dot_a)/d(x_col) at unit speeds, B_ai from it. */
     const propid_filter_t *f = &compensated;
-    /* Per rotor (the filter keeps the drag block in its yaw basis). */
+    /* Per rotor (the filter keeps the coefficient blocks in their bases). */
     const propid_core_t per_rotor = per_rotor_core(f);
-    const propid_drag_basis_t basis = propid_drag_basis(&f->derived, &f->config);
+    const propid_reflection_t basis = propid_drag_basis(&f->derived, &f->config);
     const float *x = per_rotor.state;
     const uint8_t first = PROPID_RATE_STATES;
     const uint8_t coefficients = (uint8_t)(2u * rotors);
@@ -95,7 +95,10 @@ static void check_dense(uint8_t rotors, int full_inertia, float time)
         for (uint8_t k = 0; k < 2u * rotors; ++k) {
             correction[k] = out->input_product[1u + a][k];
         }
-        propid_drag_basis_apply(&basis, correction + rotors);
+        propid_reflection_apply(&basis, correction + rotors);
+        propid_thrust_basis_t thrust;
+        propid_thrust_basis_init(&thrust, &f->derived, &f->config);
+        propid_thrust_to_rotor(&thrust, correction);
         const float carried = carried_before[a] + 2.0f * rho * cross_before[a] + 1.0f;
         TEST_ASSERT_FLOAT_WITHIN(1.0e-5f * carried, carried, out->input_step_carried[a]);
         TEST_ASSERT_FLOAT_WITHIN(1.0e-5f, gain_rate, out->input_rate_gain[a]);

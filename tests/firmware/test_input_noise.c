@@ -51,7 +51,7 @@ static void check_block(const propid_filter_t *with, const propid_filter_t *plai
     for (uint8_t i = 0; i < rotors; ++i) {
         unit_speed_sq[i] = 1.0f;
     }
-    /* The model per rotor (the filter keeps the drag block in its yaw basis). */
+    /* The model per rotor (the filter keeps the coefficient blocks in their bases). */
     const propid_core_t per_rotor = per_rotor_core(with);
     const float *x = per_rotor.state;
     propid_model_rate_jacobian(&with->config, &with->derived, x, unit_speed_sq, rows);

@@ -72,21 +72,27 @@ static void symmetric_view(float out[N_MAX][N_MAX])
 
 static float view[N_MAX][N_MAX];
 
-/* The filter keeps the drag block of its state and P in the yaw basis
+/* The filter keeps the coefficient blocks of its state and P in their bases
  * (propid_internal.h): the model's (per-rotor) state from the kept one, and the
- * model's Jacobian rows with their drag columns times H (the rows over the kept
- * states). */
+ * model's Jacobian rows with their thrust columns times Q^T and drag columns
+ * times H (the rows over the kept states). */
 static void model_state(const float *kept, float *out)
 {
-    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    const propid_reflection_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter.derived, &filter.config);
     memcpy(out, kept, N_MAX * sizeof(float));
-    propid_drag_basis_apply(&basis, out + propid_first_drag(filter.config.rotor_count));
+    propid_reflection_apply(&basis, out + propid_first_drag(filter.config.rotor_count));
+    propid_thrust_to_rotor(&thrust, out + propid_first_thrust());
 }
 static void rows_to_kept_basis(float rows[3][N_MAX])
 {
-    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    const propid_reflection_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter.derived, &filter.config);
     for (uint8_t a = 0; a < 3u; ++a) {
-        propid_drag_basis_apply(&basis, rows[a] + propid_first_drag(filter.config.rotor_count));
+        propid_reflection_apply(&basis, rows[a] + propid_first_drag(filter.config.rotor_count));
+        propid_thrust_to_basis(&thrust, rows[a] + propid_first_thrust());
     }
 }
 
@@ -557,9 +563,13 @@ static void test_corrupted_covariance_is_repaired(void)
     uint64_t t_us = 1000u;
     run_steps(7u, 50u, &t_us);
     const uint8_t n = filter.derived.state_count;
-    /* A NaN off-diagonal and a correlation above one, in coefficient rows. */
+    /* A NaN off-diagonal and a correlation pushed beyond one (its sign kept: the
+     * drift a rounding fault makes; the repair pulls it back to 0.99, which is
+     * close to the truth only when the pair was that correlated), in coefficient rows. */
     filter.core.cov[propid_cov_index(4, 9)] = NAN;
-    filter.core.cov[propid_cov_index(5, 6)] = 2.0f * sqrtf(filter.core.cov[propid_cov_index(5, 5)] * filter.core.cov[propid_cov_index(6, 6)]);
+    const float p56 = filter.core.cov[propid_cov_index(5, 6)];
+    filter.core.cov[propid_cov_index(5, 6)] = (p56 < 0.0f ? -2.0f : 2.0f) *
+        sqrtf(filter.core.cov[propid_cov_index(5, 5)] * filter.core.cov[propid_cov_index(6, 6)]);
     run_steps(8u, n, &t_us); /* the round-robin check visits every row within n samples */
     propid_estimate_t est;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &est));
@@ -647,7 +657,10 @@ static void test_rank_deficient_covariance_needs_no_repair(void)
     TEST_ASSERT_EQUAL_UINT32(0u, counters.gate_reopened);
     symmetric_view(view);
     TEST_ASSERT_TRUE(positive_definite(view, filter.derived.state_count));
-    /* It is the rank-deficient case: an opposite pair's kf correlation near 1. */
+    /* It is the rank-deficient case: an opposite pair's kf correlation near 1
+     * (per rotor: the filter keeps the kf in their torque basis). */
+    propid_coeff_flip(&filter.derived, &filter.config, &filter.core, 1);
+    symmetric_view(view);
     const float rho = view[4][6] / sqrtf(view[4][4] * view[6][6]);
     TEST_ASSERT_TRUE(rho > 0.999f);
     /* And still an estimator: the observed kf difference is right. */
@@ -733,16 +746,22 @@ static void test_coefficients_are_clamped(void)
     init_quad();
     uint64_t t_us = 1000u;
     run_steps(3u, 5u, &t_us);
-    filter.core.state[3] = 100.0f; /* far above coeff_rel_max */
-    /* km of rotor 1 below coeff_rel_min (per rotor: the state keeps the km in
-     * their yaw basis, propid_internal.h). */
-    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    /* kf of rotor 0 far above coeff_rel_max, km of rotor 1 below coeff_rel_min
+     * (per rotor: the state keeps the coefficients in their bases, propid_internal.h). */
+    const propid_reflection_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter.derived, &filter.config);
+    float *kf = &filter.core.state[3];
+    propid_thrust_to_rotor(&thrust, kf);
+    kf[0] = 100.0f;
+    propid_thrust_to_basis(&thrust, kf);
     float *km = &filter.core.state[7];
-    propid_drag_basis_apply(&basis, km);
+    propid_reflection_apply(&basis, km);
     km[1] = -1.0f;
-    propid_drag_basis_apply(&basis, km);
+    propid_reflection_apply(&basis, km);
     run_steps(4u, 1u, &t_us);
-    TEST_ASSERT_TRUE(filter.core.state[3] <= filter.config.coeff_rel_max);
+    float kf_rel[4];
+    propid_thrust_per_rotor(&thrust, &filter.core, kf_rel, NULL);
     float km_rel[4];
     propid_drag_per_rotor(&basis, &filter.core, km_rel, NULL);
     /* The clamp holds the per-rotor values exactly; the state keeps them in the
@@ -753,6 +772,14 @@ static void test_coefficients_are_clamped(void)
         norm += fabsf(km_rel[i]);
     }
     const float round_trip = 4.0f * FLT_EPSILON * norm;
+    float kf_norm = 0.0f;
+    for (uint8_t i = 0; i < 4u; ++i) {
+        kf_norm += fabsf(kf_rel[i]);
+    }
+    for (uint8_t i = 0; i < 4u; ++i) { /* two reflections: twice the round trip */
+        TEST_ASSERT_TRUE(kf_rel[i] >= filter.config.coeff_rel_min - 8.0f * FLT_EPSILON * kf_norm);
+        TEST_ASSERT_TRUE(kf_rel[i] <= filter.config.coeff_rel_max + 8.0f * FLT_EPSILON * kf_norm);
+    }
     for (uint8_t i = 0; i < 4u; ++i) {
         TEST_ASSERT_TRUE(km_rel[i] >= filter.config.coeff_rel_min - round_trip);
         TEST_ASSERT_TRUE(km_rel[i] <= filter.config.coeff_rel_max + round_trip);
@@ -782,12 +809,11 @@ static void check_projection(uint8_t k, float alpha, int below)
     filter.core.state[k] = bound + (below ? -alpha : alpha) * s;
     symmetric_view(before);
     memcpy(x, filter.core.state, sizeof(x));
-    /* Set up and checked per rotor; the filter keeps the drag block in its yaw
-     * basis (propid_internal.h): flipped into it for the call and back. */
-    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
-    propid_drag_basis_flip(&basis, &filter.core);
+    /* Set up and checked per rotor; the filter keeps the coefficient blocks in
+     * their bases (propid_internal.h): flipped into them for the call and back. */
+    propid_coeff_flip(&filter.derived, &filter.config, &filter.core, 0);
     TEST_ASSERT_EQUAL_UINT32(1u, propid_clamp_coefficients(&filter));
-    propid_drag_basis_flip(&basis, &filter.core);
+    propid_coeff_flip(&filter.derived, &filter.config, &filter.core, 1);
     symmetric_view(after);
     const float shift = bound - x[k];
     TEST_ASSERT_FLOAT_WITHIN(1.0e-5f * s, bound, filter.core.state[k]);
@@ -816,14 +842,13 @@ static void test_clamp_projects_the_estimate(void)
      * coefficient with a rate and with another rotor's coefficient; positive
      * definite: the correlation blocks are diagonally dominant). */
     init_quad();
-    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
-    propid_drag_basis_flip(&basis, &filter.core); /* per rotor (check_projection) */
+    propid_coeff_flip(&filter.derived, &filter.config, &filter.core, 1); /* per rotor (check_projection) */
     const uint8_t drag = (uint8_t)(propid_first_drag(4u) + 1u);
     correlate(0u, drag, 0.5f);
     correlate(drag, (uint8_t)(drag + 1u), -0.3f);
     check_projection(drag, 1.0f, 1);
     init_quad();
-    propid_drag_basis_flip(&basis, &filter.core);
+    propid_coeff_flip(&filter.derived, &filter.config, &filter.core, 1);
     const uint8_t thrust = propid_first_thrust();
     correlate(1u, thrust, 0.4f);
     correlate(thrust, (uint8_t)(thrust + 1u), 0.2f);

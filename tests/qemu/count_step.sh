@@ -63,7 +63,7 @@ case " ${extra[*]:-} " in
         kept=()
         for f in "${sources[@]}"; do
             case "$(basename "$f")" in
-                propid_predict.c|propid_filter.c|propid_estimate.c|propid_drag_basis.c)
+                propid_predict.c|propid_filter.c|propid_estimate.c|propid_coeff_basis.c)
                     object="$out/$(basename "$f" .c).os.o"
                     "$gcc" "${cflags[@]}" -Os -I "$src/firmware/include" -I "$src/firmware/src" -I "$here" \
                         -c "$f" -o "$object"

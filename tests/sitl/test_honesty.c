@@ -6,10 +6,10 @@
  * that truth has a NEES of zero. s_true (sitl_setup_true_torque_scale) is the
  * file's inertia over the plant's true one.
  *
- * The NEES's per-rotor drag entries (sitl_honesty_drag_per_rotor) against the
- * filter's own map of the whole state and covariance (propid_drag_basis_flip):
- * bit for bit on every entry the NEES reads, quad and hexa, and the columns it
- * is not asked for left in the yaw basis.
+ * The NEES's per-rotor coefficient entries (sitl_honesty_coeff_per_rotor) against
+ * the filter's own map of the whole state and covariance (propid_coeff_flip):
+ * bit for bit on every entry the NEES reads, quad and hexa, and the drag columns
+ * it is not asked for left in the yaw basis.
  *
  * The lost rotor's recovery (sitl_honesty_add / _finish): asked of a loss whose
  * rotor was within 10 % just before it (changed_rotor_from_inside), and counted
@@ -67,9 +67,20 @@ static void check_rotors(uint8_t rotors)
         columns[count++] = (uint8_t)(layout->gyro_bias + a);
     }
     propid_core_t whole = filter.core, part = filter.core;
-    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
-    propid_drag_basis_flip(&basis, &whole);
-    sitl_honesty_drag_per_rotor(&filter, columns, count, &part);
+    propid_coeff_flip(&filter.derived, &filter.config, &whole, 1);
+    sitl_honesty_coeff_per_rotor(&filter, columns, count, &part);
+    /* The thrust block whole: state, block and its columns as the whole flip's. */
+    for (uint8_t i = 0; i < rotors; ++i) {
+        const uint8_t t = (uint8_t)(layout->thrust + i);
+        TEST_ASSERT_EQUAL_UINT32(0, memcmp(&whole.state[t], &part.state[t], sizeof(float)));
+        for (uint8_t j = 0; j < filter.derived.state_count; ++j) {
+            if (j >= layout->drag && j < layout->gyro_bias) {
+                continue; /* the drag rows: below */
+            }
+            const uint32_t k = propid_cov_index(t, j);
+            TEST_ASSERT_EQUAL_UINT32(0, memcmp(&whole.cov[k], &part.cov[k], sizeof(float)));
+        }
+    }
 
     const uint8_t first = (uint8_t)layout->drag;
     int changed = 0;
@@ -181,9 +192,12 @@ static void test_filter_on_the_scaled_truth_has_a_zero_nees(void)
     for (uint32_t k = 0; k < PROPID_COV_SIZE; k++) {
         filter.core.cov[k] *= 1e-3f;
     }
-    /* The filter keeps the drag block in its yaw basis; the map is its own inverse. */
-    const propid_drag_basis_t basis = propid_drag_basis(&filter.derived, &filter.config);
-    propid_drag_basis_apply(&basis, &filter.core.state[filter.derived.layout.drag]);
+    /* The filter keeps the coefficient blocks in their bases (propid_internal.h). */
+    const propid_reflection_t basis = propid_drag_basis(&filter.derived, &filter.config);
+    propid_reflection_apply(&basis, &filter.core.state[filter.derived.layout.drag]);
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter.derived, &filter.config);
+    propid_thrust_to_basis(&thrust, &filter.core.state[filter.derived.layout.thrust]);
     propid_estimate_t estimate;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
     for (int i = 0; i < 4; i++) { /* the firmware reads those states as kf = r g kf_nominal = kf_true */

@@ -244,8 +244,9 @@ typedef struct {
      * rows. First, so the update kernels reach it and the state from one base
      * register. */
     float update_vector[2][PROPID_MAX_STATES];
-    /* Scaled state: body rate [rad/s], kf/kf_nominal, km/km_nominal in the yaw basis
-     * (H km/km_nominal, propid_drag_basis_apply; P's drag rows too), gyro bias [rad/s]. */
+    /* Scaled state: body rate [rad/s], kf/kf_nominal in the torque basis (Q kf/kf_nominal),
+     * km/km_nominal in the yaw basis (H km/km_nominal; P's coefficient rows too:
+     * propid_internal.h, "The coefficients' bases"), gyro bias [rad/s]. */
     float state[PROPID_MAX_STATES];
     float cov[PROPID_COV_SIZE];                       /* symmetric, kept in the scaled units: the
                                                          packed upper triangle (propid_cov_index) */
@@ -424,7 +425,12 @@ typedef struct {
 #endif
     float quad_gyro[3];                             /* quad layout only: A_ab = quad_gyro[a] omega_c for
                                                        both other axes b, c of row a (symmetric in b, c) */
-#if PROPID_GENERAL_VEHICLES /* (the quad build: a table in flash, propid_internal.h) */
+#if PROPID_GENERAL_VEHICLES /* (the quad build: from jac_torque / a table in flash, propid_internal.h) */
+    /* Private: the thrust coefficients' torque basis (propid_internal.h,
+     * propid_thrust_basis): Q = H_1 H_0, H_k = I - thrust_basis_scale[k] v v^T with
+     * v = thrust_basis[k] (H_1's v[0] is 0: it acts on elements 1..N-1). */
+    float thrust_basis[2][PROPID_MAX_ROTORS];
+    float thrust_basis_scale[2];
     /* Private: the drag coefficients' yaw basis (propid_internal.h, propid_drag_basis):
      * the reflection H = I - drag_basis_scale v v^T with v = drag_basis. */
     float drag_basis[PROPID_MAX_ROTORS];

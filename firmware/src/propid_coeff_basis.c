@@ -1,0 +1,309 @@
+/* The coefficients' bases (propid_internal.h, docs/math.md §2): the maps of the
+ * state's and P's coefficient blocks between the kept bases (km: z = H km_rel,
+ * kf: z = Q kf_rel = H_1 H_0 kf_rel) and per rotor. One reflection H = I - scale
+ * v v^T on a block B = P_zz, with u = B v and beta = v . u:
+ *   H B H = B - scale (v u^T + u v^T) + scale^2 beta v v^T. */
+#include <math.h>
+
+#include "propid_internal.h"
+
+#if !PROPID_GENERAL_VEHICLES
+/* N = 4: v = e_0 + s_0 s / 2, row k for rotors 1..3 opposite to rotor 0 where bit
+ * k - 1 of the row index is set. */
+const float propid_quad_drag_basis[8][4] = {
+    {1.5f, 0.5f, 0.5f, 0.5f},  {1.5f, -0.5f, 0.5f, 0.5f},  {1.5f, 0.5f, -0.5f, 0.5f},
+    {1.5f, -0.5f, -0.5f, 0.5f}, {1.5f, 0.5f, 0.5f, -0.5f},  {1.5f, -0.5f, 0.5f, -0.5f},
+    {1.5f, 0.5f, -0.5f, -0.5f}, {1.5f, -0.5f, -0.5f, -0.5f},
+};
+#endif
+
+__attribute__((noinline)) void propid_reflection_transform(const propid_reflection_t *basis, float *x)
+{
+    propid_reflection_apply(basis, x);
+}
+
+/* u = B v over the packed drag block, and beta = v . u. */
+static float block_times_basis(const propid_reflection_t *basis, const float *cov, float *u)
+{
+    const uint8_t rotor_count = basis->count;
+    const uint8_t first = basis->first;
+    const float *v = basis->vector;
+    float beta = 0.0f;
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        float sum = 0.0f;
+        for (uint8_t j = 0; j < rotor_count; ++j) {
+            sum += propid_cov_at(cov, (uint8_t)(first + i), (uint8_t)(first + j)) * v[j];
+        }
+        u[i] = sum;
+        beta += v[i] * sum;
+    }
+    return beta;
+}
+
+void propid_reflection_flip_column(const propid_reflection_t *basis, propid_core_t *core, uint8_t column_index)
+{
+    const uint8_t rotor_count = basis->count;
+    const uint8_t first = basis->first;
+    float column[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        column[i] = propid_cov_at(core->cov, (uint8_t)(first + i), column_index);
+    }
+    propid_reflection_transform(basis, column);
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        core->cov[propid_cov_index((uint8_t)(first + i), column_index)] = column[i];
+    }
+}
+
+void propid_reflection_flip_block(const propid_reflection_t *basis, propid_core_t *core)
+{
+    const uint8_t rotor_count = basis->count;
+    const uint8_t first = basis->first;
+    const float *v = basis->vector;
+    const float scale = basis->scale;
+    float u[PROPID_MAX_ROTORS];
+    const float beta = block_times_basis(basis, core->cov, u);
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        for (uint8_t j = i; j < rotor_count; ++j) {
+            core->cov[propid_cov_index((uint8_t)(first + i), (uint8_t)(first + j))] -=
+                scale * (v[i] * u[j] + u[i] * v[j]) - scale * scale * beta * v[i] * v[j];
+        }
+    }
+}
+
+void propid_reflection_flip(const propid_reflection_t *basis, propid_core_t *core)
+{
+    const uint8_t first = basis->first;
+    const uint8_t end = (uint8_t)(first + basis->count);
+    propid_reflection_transform(basis, &core->state[first]);
+    /* The cross-covariances with every other state: a column of N values each
+     * (state_count is not needed: the unused part of the triangle is zero). */
+    for (uint8_t j = 0; j < PROPID_MAX_STATES; ++j) {
+        if (j < first || j >= end) {
+            propid_reflection_flip_column(basis, core, j);
+        }
+    }
+    propid_reflection_flip_block(basis, core);
+}
+
+void propid_drag_per_rotor(const propid_reflection_t *basis, const propid_core_t *core, float *km_rel,
+                           float *km_var)
+{
+    const uint8_t rotor_count = basis->count;
+    const uint8_t first = basis->first;
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        km_rel[i] = core->state[first + i];
+    }
+    propid_reflection_transform(basis, km_rel);
+    if (km_var == NULL) {
+        return;
+    }
+    const float *v = basis->vector;
+    const float scale = basis->scale;
+    float u[PROPID_MAX_ROTORS];
+    const float beta = block_times_basis(basis, core->cov, u);
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        const uint8_t k = (uint8_t)(first + i);
+        km_var[i] = propid_cov_at(core->cov, k, k) - scale * v[i] * (2.0f * u[i] - scale * beta * v[i]);
+    }
+}
+
+void propid_thrust_to_basis(const propid_thrust_basis_t *basis, float *x)
+{
+    const propid_reflection_t first = propid_thrust_reflection(basis, 0u);
+    const propid_reflection_t second = propid_thrust_reflection(basis, 1u);
+    propid_reflection_apply(&first, x);
+    propid_reflection_apply(&second, x + 1);
+}
+
+void propid_thrust_to_rotor(const propid_thrust_basis_t *basis, float *x)
+{
+    const propid_reflection_t first = propid_thrust_reflection(basis, 0u);
+    const propid_reflection_t second = propid_thrust_reflection(basis, 1u);
+    propid_reflection_apply(&second, x + 1);
+    propid_reflection_apply(&first, x);
+}
+
+/* r and p the roll- and pitch-torque directions, r normalised, p orthogonalised
+ * against it and normalised. H_0 = I - scale v v^T with v = r + sigma e_0 (sigma
+ * the sign of r_0, v.v = 2 (1 + |r_0|)) has first row -sigma r; H_0 p then has no
+ * element 0, and H_1 built the same way from it on elements 1..N-1 makes the
+ * second row of H_1 H_0 -sigma' p. A direction that vanishes (one rotor, rotors
+ * on one line) or is parallel to r leaves its reflection the identity (scale 0). */
+void propid_thrust_basis_derive(const float *roll, const float *pitch, uint8_t rotor_count,
+                                float vector[2][PROPID_MAX_ROTORS], float scale[2])
+{
+    float direction[2][PROPID_MAX_ROTORS];
+    float size[2] = {0.0f, 0.0f};
+    for (uint8_t k = 0; k < 2u; ++k) {
+        const float *source = k == 0u ? roll : pitch;
+        for (uint8_t i = 0; i < PROPID_MAX_ROTORS; ++i) {
+            direction[k][i] = i < rotor_count ? source[i] : 0.0f;
+            vector[k][i] = 0.0f;
+            size[k] += direction[k][i] * direction[k][i];
+        }
+        scale[k] = 0.0f;
+    }
+    for (uint8_t k = 0; k < 2u && k < rotor_count; ++k) {
+        float *d = direction[k];
+        if (k == 1u && scale[0] > 0.0f) {
+            /* p - (p.r) r, then H_0 applied (its element 0 is zero up to rounding). */
+            const float *r = direction[0];
+            float along = 0.0f;
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                along += d[i] * r[i];
+            }
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                d[i] -= along * r[i];
+            }
+            const float *v = vector[0];
+            float dot = 0.0f;
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                dot += v[i] * d[i];
+            }
+            dot *= scale[0];
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                d[i] -= dot * v[i];
+            }
+            d[0] = 0.0f;
+        }
+        float norm_sq = 0.0f;
+        for (uint8_t i = k; i < rotor_count; ++i) {
+            norm_sq += d[i] * d[i];
+        }
+        /* Kept only when it keeps more than 1e-6 of its squared size (a pitch
+         * direction nearly parallel to the roll one is not a direction of its own). */
+        if (!(norm_sq > 1.0e-6f * size[k]) || !(norm_sq <= FLT_MAX)) {
+            continue;
+        }
+        const float inv_norm = 1.0f / sqrtf(norm_sq);
+        for (uint8_t i = k; i < rotor_count; ++i) {
+            d[i] *= inv_norm;
+        }
+        const float sigma = d[k] >= 0.0f ? 1.0f : -1.0f;
+        for (uint8_t i = k; i < rotor_count; ++i) {
+            vector[k][i] = d[i];
+        }
+        vector[k][k] += sigma;
+        scale[k] = 1.0f / (1.0f + fabsf(d[k]));
+    }
+}
+
+void propid_coeff_flip(const propid_derived_t *derived, const propid_kept_config_t *config, propid_core_t *core,
+                       int to_rotor)
+{
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, derived, config);
+    const propid_reflection_t drag = propid_drag_basis(derived, config);
+    /* P_x = Q^T P_z Q = H_0 H_1 P_z H_1 H_0: H_1 first on the way out, last on the way in. */
+    const propid_reflection_t first = propid_thrust_reflection(&thrust, (uint8_t)(to_rotor ? 1u : 0u));
+    const propid_reflection_t second = propid_thrust_reflection(&thrust, (uint8_t)(to_rotor ? 0u : 1u));
+    propid_reflection_flip(&first, core);
+    propid_reflection_flip(&second, core);
+    propid_reflection_flip(&drag, core);
+}
+
+void propid_thrust_per_rotor(const propid_thrust_basis_t *basis, const propid_core_t *core, float *kf_rel,
+                             float *kf_var)
+{
+    const uint8_t rotor_count = basis->rotor_count;
+    const uint8_t first = propid_first_thrust();
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        kf_rel[i] = core->state[first + i];
+    }
+    propid_thrust_to_rotor(basis, kf_rel);
+    if (kf_var == NULL) {
+        return;
+    }
+    /* kf_rel_i = a_i . z with a_i = Q e_i: variance a_i^T P_zz a_i. */
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        float a[PROPID_MAX_ROTORS];
+        for (uint8_t j = 0; j < rotor_count; ++j) {
+            a[j] = j == i ? 1.0f : 0.0f;
+        }
+        propid_thrust_to_basis(basis, a);
+        float var = 0.0f;
+        for (uint8_t j = 0; j < rotor_count; ++j) {
+            float sum = 0.0f;
+            for (uint8_t k = 0; k < rotor_count; ++k) {
+                sum += propid_cov_at(core->cov, (uint8_t)(first + j), (uint8_t)(first + k)) * a[k];
+            }
+            var += a[j] * sum;
+        }
+        kf_var[i] = var;
+    }
+}
+
+/* P_jk for every j < state_count: down column k to the diagonal, then along row k. */
+static void cov_column(const float *cov, uint8_t state_count, uint8_t k, float *column)
+{
+    const float *p = cov + k; /* P_0k; row j's start moves by PROPID_MAX_STATES - 1 - j */
+    for (uint8_t j = 0; j < k; ++j) {
+        column[j] = *p;
+        p += PROPID_MAX_STATES - 1u - j;
+    }
+    const float *row = propid_cov_row_const(cov, k);
+    for (uint8_t j = k; j < state_count; ++j) {
+        column[j] = row[j];
+    }
+}
+
+void propid_coeff_per_rotor_column(const propid_derived_t *derived, const propid_kept_config_t *config,
+                                   const propid_core_t *core, uint8_t state_count, uint8_t k, float *scratch,
+                                   float *column)
+{
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, derived, config);
+    const propid_reflection_t drag = propid_drag_basis(derived, config);
+    const uint8_t rotor_count = config->rotor_count;
+    const uint8_t first_thrust = propid_first_thrust();
+    const uint8_t first_drag = drag.first;
+    /* t = T e_k: zero outside k's block, Q e_i or H e_i within it. */
+    float t[PROPID_MAX_ROTORS];
+    uint8_t block = PROPID_NO_STATE;
+    if (k >= first_thrust && k < first_drag) {
+        block = first_thrust;
+    } else if (k >= first_drag && k < first_drag + rotor_count) {
+        block = first_drag;
+    }
+    if (block == PROPID_NO_STATE) {
+        cov_column(core->cov, state_count, k, column); /* T e_k = e_k */
+    } else {
+        for (uint8_t i = 0; i < rotor_count; ++i) {
+            t[i] = i == k - block ? 1.0f : 0.0f;
+        }
+        if (block == first_thrust) {
+            propid_thrust_to_basis(&thrust, t);
+        } else {
+            propid_reflection_transform(&drag, t);
+        }
+        for (uint8_t j = 0; j < state_count; ++j) {
+            column[j] = 0.0f;
+        }
+        for (uint8_t m = 0; m < rotor_count; ++m) {
+            cov_column(core->cov, state_count, (uint8_t)(block + m), scratch);
+            for (uint8_t j = 0; j < state_count; ++j) {
+                column[j] += scratch[j] * t[m];
+            }
+        }
+    }
+    /* T^T on the left. */
+    propid_thrust_to_rotor(&thrust, &column[first_thrust]);
+    propid_reflection_transform(&drag, &column[first_drag]);
+}
+
+void propid_cov_reset_rotor(const propid_derived_t *derived, const propid_kept_config_t *config, propid_core_t *core,
+                            uint8_t rotor, int to_nominal)
+{
+    const uint8_t thrust = (uint8_t)(propid_first_thrust() + rotor);
+    const uint8_t drag = (uint8_t)(propid_first_drag(config->rotor_count) + rotor);
+    propid_coeff_flip(derived, config, core, 1);
+    if (to_nominal) {
+        /* With the torque scale the state is g = s kf = kf / r (docs/math.md §9). */
+        const uint8_t scale = derived->layout.torque_scale;
+        core->state[thrust] = PROPID_WITH_ACCEL && scale != PROPID_NO_STATE ? 1.0f / core->state[scale] : 1.0f;
+        core->state[drag] = 1.0f;
+    }
+    propid_cov_reset_state(derived, core, thrust);
+    propid_cov_reset_state(derived, core, drag);
+    propid_coeff_flip(derived, config, core, 0);
+}
