@@ -3,8 +3,6 @@
  * kf: z = Q kf_rel = H_1 H_0 kf_rel) and per rotor. One reflection H = I - scale
  * v v^T on a block B = P_zz, with u = B v and beta = v . u:
  *   H B H = B - scale (v u^T + u v^T) + scale^2 beta v v^T. */
-#include <math.h>
-
 #include "propid_internal.h"
 
 #if !PROPID_GENERAL_VEHICLES
@@ -121,71 +119,6 @@ void propid_thrust_to_rotor(const propid_thrust_basis_t *basis, float *x)
     const propid_reflection_t second = propid_thrust_reflection(basis, 1u);
     propid_reflection_apply(&second, x + 1);
     propid_reflection_apply(&first, x);
-}
-
-/* r and p the roll- and pitch-torque directions, r normalised, p orthogonalised
- * against it and normalised. H_0 = I - scale v v^T with v = r + sigma e_0 (sigma
- * the sign of r_0, v.v = 2 (1 + |r_0|)) has first row -sigma r; H_0 p then has no
- * element 0, and H_1 built the same way from it on elements 1..N-1 makes the
- * second row of H_1 H_0 -sigma' p. A direction that vanishes (one rotor, rotors
- * on one line) or is parallel to r leaves its reflection the identity (scale 0). */
-void propid_thrust_basis_derive(const float *roll, const float *pitch, uint8_t rotor_count,
-                                float vector[2][PROPID_MAX_ROTORS], float scale[2])
-{
-    float direction[2][PROPID_MAX_ROTORS];
-    float size[2] = {0.0f, 0.0f};
-    for (uint8_t k = 0; k < 2u; ++k) {
-        const float *source = k == 0u ? roll : pitch;
-        for (uint8_t i = 0; i < PROPID_MAX_ROTORS; ++i) {
-            direction[k][i] = i < rotor_count ? source[i] : 0.0f;
-            vector[k][i] = 0.0f;
-            size[k] += direction[k][i] * direction[k][i];
-        }
-        scale[k] = 0.0f;
-    }
-    for (uint8_t k = 0; k < 2u && k < rotor_count; ++k) {
-        float *d = direction[k];
-        if (k == 1u && scale[0] > 0.0f) {
-            /* p - (p.r) r, then H_0 applied (its element 0 is zero up to rounding). */
-            const float *r = direction[0];
-            float along = 0.0f;
-            for (uint8_t i = 0; i < rotor_count; ++i) {
-                along += d[i] * r[i];
-            }
-            for (uint8_t i = 0; i < rotor_count; ++i) {
-                d[i] -= along * r[i];
-            }
-            const float *v = vector[0];
-            float dot = 0.0f;
-            for (uint8_t i = 0; i < rotor_count; ++i) {
-                dot += v[i] * d[i];
-            }
-            dot *= scale[0];
-            for (uint8_t i = 0; i < rotor_count; ++i) {
-                d[i] -= dot * v[i];
-            }
-            d[0] = 0.0f;
-        }
-        float norm_sq = 0.0f;
-        for (uint8_t i = k; i < rotor_count; ++i) {
-            norm_sq += d[i] * d[i];
-        }
-        /* Kept only when it keeps more than 1e-6 of its squared size (a pitch
-         * direction nearly parallel to the roll one is not a direction of its own). */
-        if (!(norm_sq > 1.0e-6f * size[k]) || !(norm_sq <= FLT_MAX)) {
-            continue;
-        }
-        const float inv_norm = 1.0f / sqrtf(norm_sq);
-        for (uint8_t i = k; i < rotor_count; ++i) {
-            d[i] *= inv_norm;
-        }
-        const float sigma = d[k] >= 0.0f ? 1.0f : -1.0f;
-        for (uint8_t i = k; i < rotor_count; ++i) {
-            vector[k][i] = d[i];
-        }
-        vector[k][k] += sigma;
-        scale[k] = 1.0f / (1.0f + fabsf(d[k]));
-    }
 }
 
 void propid_coeff_flip(const propid_derived_t *derived, const propid_kept_config_t *config, propid_core_t *core,

@@ -288,11 +288,74 @@ static void derive_drag_basis(const propid_config_t *config, propid_derived_t *o
 }
 #endif
 
-#if PROPID_GENERAL_VEHICLES
-/* The thrust coefficients' torque basis (propid_internal.h, propid_coeff_basis.c)
- * from the roll- and pitch-torque rows per unit kf_rel (J^-1 (r_i x z)
- * kf_nominal_i): the quad build derives it from the same values (its jac_torque
- * rows) when it needs it. */
+/* r and p the roll- and pitch-torque directions, r normalised, p orthogonalised
+ * against it and normalised. H_0 = I - scale v v^T with v = r + sigma e_0 (sigma
+ * the sign of r_0, v.v = 2 (1 + |r_0|)) has first row -sigma r; H_0 p then has no
+ * element 0, and H_1 built the same way from it on elements 1..N-1 makes the
+ * second row of H_1 H_0 -sigma' p. A direction that vanishes (one rotor, rotors
+ * on one line) or is parallel to r leaves its reflection the identity (scale 0). */
+static void thrust_basis_from_torques(const float *roll, const float *pitch, uint8_t rotor_count,
+                                      float vector[2][PROPID_MAX_ROTORS], float scale[2])
+{
+    float direction[2][PROPID_MAX_ROTORS];
+    float size[2] = {0.0f, 0.0f};
+    for (uint8_t k = 0; k < 2u; ++k) {
+        const float *source = k == 0u ? roll : pitch;
+        for (uint8_t i = 0; i < PROPID_MAX_ROTORS; ++i) {
+            direction[k][i] = i < rotor_count ? source[i] : 0.0f;
+            vector[k][i] = 0.0f;
+            size[k] += direction[k][i] * direction[k][i];
+        }
+        scale[k] = 0.0f;
+    }
+    for (uint8_t k = 0; k < 2u && k < rotor_count; ++k) {
+        float *d = direction[k];
+        if (k == 1u && scale[0] > 0.0f) {
+            /* p - (p.r) r, then H_0 applied (its element 0 is zero up to rounding). */
+            const float *r = direction[0];
+            float along = 0.0f;
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                along += d[i] * r[i];
+            }
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                d[i] -= along * r[i];
+            }
+            const float *v = vector[0];
+            float dot = 0.0f;
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                dot += v[i] * d[i];
+            }
+            dot *= scale[0];
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                d[i] -= dot * v[i];
+            }
+            d[0] = 0.0f;
+        }
+        float norm_sq = 0.0f;
+        for (uint8_t i = k; i < rotor_count; ++i) {
+            norm_sq += d[i] * d[i];
+        }
+        /* Kept only when it keeps more than 1e-6 of its squared size (a pitch
+         * direction nearly parallel to the roll one is not a direction of its own). */
+        if (!(norm_sq > 1.0e-6f * size[k]) || !(norm_sq <= FLT_MAX)) {
+            continue;
+        }
+        const float inv_norm = 1.0f / sqrtf(norm_sq);
+        for (uint8_t i = k; i < rotor_count; ++i) {
+            d[i] *= inv_norm;
+        }
+        const float sigma = d[k] >= 0.0f ? 1.0f : -1.0f;
+        for (uint8_t i = k; i < rotor_count; ++i) {
+            vector[k][i] = d[i];
+        }
+        vector[k][k] += sigma;
+        scale[k] = 1.0f / (1.0f + fabsf(d[k]));
+    }
+}
+
+/* The thrust coefficients' torque basis (propid_internal.h) from the roll- and
+ * pitch-torque rows per unit kf_rel (J^-1 (r_i x z)
+ * kf_nominal_i). */
 static void derive_thrust_basis(const propid_config_t *config, const geometry_t *geo, propid_derived_t *out)
 {
     float roll[PROPID_MAX_ROTORS];
@@ -301,9 +364,8 @@ static void derive_thrust_basis(const propid_config_t *config, const geometry_t 
         roll[i] = geo->thrust_torque[i][0];
         pitch[i] = geo->thrust_torque[i][1];
     }
-    propid_thrust_basis_derive(roll, pitch, config->rotor_count, out->thrust_basis, out->thrust_basis_scale);
+    thrust_basis_from_torques(roll, pitch, config->rotor_count, out->thrust_basis, out->thrust_basis_scale);
 }
-#endif
 
 static void derive_gyro_jacobian(const propid_config_t *config, geometry_t *geo)
 {
@@ -724,9 +786,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 #if PROPID_GENERAL_VEHICLES
     derive_drag_basis(config, &out);
 #endif
-#if PROPID_GENERAL_VEHICLES
     derive_thrust_basis(config, &geo, &out);
-#endif
     derive_gyro_jacobian(config, &geo);
 #if PROPID_GENERAL_VEHICLES
     derive_sparsity(config, &geo, &out);
@@ -811,29 +871,25 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             kind = PROPID_KIND_RATE;
             prior = config->rate_std0 * config->rate_std0;
             psd = config->rate_process_noise * config->rate_process_noise;
-            floor_var = 1.0e-12f;
+            floor_var = PROPID_FLOOR_RATE;
             ceiling = 4.0f * config->gyro_range * config->gyro_range;
         } else if (k < first_drag) {
             kind = PROPID_KIND_THRUST;
             prior = config->thrust_coeff_rel_std0 * config->thrust_coeff_rel_std0;
             psd = config->thrust_coeff_rel_walk * config->thrust_coeff_rel_walk;
-            /* The torque basis' roll and pitch elements are learnt far below the
-             * individual kf (std ~1e-6 on agile flights): a floor at 1e-10 would be
-             * a loading of them (docs/math.md §2). 1e-14 is float32's resolution of
-             * a relative coefficient near 1 (2^-24 ~ 6e-8) squared, about. */
-            floor_var = 1.0e-14f;
+            floor_var = PROPID_FLOOR_THRUST; /* (far below the drag's: propid_internal.h) */
             ceiling = coeff_ceiling;
         } else if (k < first_bias) {
             kind = PROPID_KIND_DRAG;
             prior = config->drag_coeff_rel_std0 * config->drag_coeff_rel_std0;
             psd = config->drag_coeff_rel_walk * config->drag_coeff_rel_walk;
-            floor_var = 1.0e-10f;
+            floor_var = PROPID_FLOOR_DRAG;
             ceiling = coeff_ceiling;
         } else if (k < first_bias + PROPID_BIAS_STATES) {
             kind = PROPID_KIND_BIAS;
             prior = config->gyro_bias_std0 * config->gyro_bias_std0;
             psd = config->gyro_bias_walk * config->gyro_bias_walk;
-            floor_var = 1.0e-14f;
+            floor_var = PROPID_FLOOR_BIAS;
             ceiling = config->gyro_range * config->gyro_range;
         } else if (PROPID_WITH_ACCEL && k == out.layout.accel_bias) {
             kind = PROPID_KIND_ACCEL_BIAS;
@@ -915,7 +971,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         uint32_t ceiling_bits;
         memcpy(&floor_bits, &floor_var, sizeof(floor_bits));
         memcpy(&ceiling_bits, &ceiling, sizeof(ceiling_bits));
+#if PROPID_GENERAL_VEHICLES
         out.kind_floor_bits[kind] = floor_bits;
+#else
+        (void)floor_bits; /* the quad build's are constants (propid_quad_floor) */
+#endif
         out.kind_range_bits[kind] = ceiling_bits - floor_bits;
     }
 

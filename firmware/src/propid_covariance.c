@@ -9,6 +9,8 @@
 #include "propid_internal.h"
 
 #if !PROPID_GENERAL_VEHICLES
+const float propid_quad_floor[PROPID_STATE_KINDS] = {PROPID_FLOOR_RATE, PROPID_FLOOR_THRUST, PROPID_FLOOR_DRAG,
+                                                     PROPID_FLOOR_BIAS};
 const uint8_t propid_quad_state_kind[PROPID_MAX_STATES] = {
     PROPID_KIND_RATE,   PROPID_KIND_RATE,   PROPID_KIND_RATE,   PROPID_KIND_THRUST, PROPID_KIND_THRUST,
     PROPID_KIND_THRUST, PROPID_KIND_THRUST, PROPID_KIND_DRAG,   PROPID_KIND_DRAG,   PROPID_KIND_DRAG,

@@ -188,6 +188,20 @@ propid_status_t propid_get_counters(const propid_filter_t *filter, propid_counte
     if (filter->magic != PROPID_MAGIC) {
         return PROPID_ERR_NOT_INITIALISED;
     }
+#if PROPID_GENERAL_VEHICLES
     *counters = filter->counters;
+#else
+    /* The quad build keeps only the counters it can move (propid.h). */
+    const propid_kept_counters_t *kept = &filter->counters;
+    memset(counters, 0, sizeof(*counters));
+    counters->gyro_accepted = kept->gyro_accepted;
+    counters->rotor_accepted = kept->rotor_accepted;
+    memcpy(counters->axis_gated, kept->axis_gated, sizeof(counters->axis_gated));
+    counters->gate_reopened = kept->gate_reopened;
+    counters->cov_repairs = kept->cov_repairs;
+    counters->state_clamps = kept->state_clamps;
+    counters->resyncs = kept->resyncs;
+    memcpy(counters->rejected, kept->rejected, sizeof(counters->rejected));
+#endif
     return PROPID_OK;
 }

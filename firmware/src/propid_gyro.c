@@ -112,7 +112,7 @@ PROPID_UNROLL(5)
         const uint8_t kind = i < PROPID_QUAD_FIRST_THRUST ? PROPID_KIND_RATE
                              : (i < PROPID_QUAD_FIRST_DRAG ? PROPID_KIND_THRUST
                                 : (i < PROPID_QUAD_FIRST_BIAS ? PROPID_KIND_DRAG : PROPID_KIND_BIAS));
-        outside |= propid_outside_positive_range(cov[propid_cov_index(i, i)], derived->kind_floor_bits[kind],
+        outside |= propid_outside_positive_range(cov[propid_cov_index(i, i)], propid_kind_floor_bits(derived, kind),
                                                  derived->kind_range_bits[kind]);
     }
 PROPID_UNROLL(10)
@@ -476,7 +476,7 @@ static __attribute__((noinline)) PROPID_RARE uint32_t fuse_generic(propid_filter
 static inline int rate_variances_inside(const propid_derived_t *derived, const float *cov)
 {
     /* (The rates are the first three states of every layout: fixed offsets.) */
-    const uint32_t floor_bits = derived->kind_floor_bits[PROPID_KIND_RATE];
+    const uint32_t floor_bits = propid_kind_floor_bits(derived, PROPID_KIND_RATE);
     const uint32_t range_bits = derived->kind_range_bits[PROPID_KIND_RATE];
     return (propid_outside_positive_range(cov[propid_cov_index(0u, 0u)], floor_bits, range_bits) |
             propid_outside_positive_range(cov[propid_cov_index(1u, 1u)], floor_bits, range_bits) |

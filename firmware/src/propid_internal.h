@@ -251,6 +251,17 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
  * rule, 1 std, failed 32 % of the claims it could make at the threshold). */
 #define PROPID_CLAIM_SIGMAS 3.0f
 
+/* Variance floors per kind of state (docs/design.md "Variance floors"): they keep
+ * rounding from driving a variance to zero. The thrust coefficients' is far below
+ * the drag coefficients': their torque basis' roll and pitch elements are learnt
+ * to std ~1e-6 on agile flights, and a floor above that is a loading of them
+ * (docs/math.md §2); 1e-14 is about float32's resolution of a relative
+ * coefficient near 1 (2^-24 ~ 6e-8), squared. */
+#define PROPID_FLOOR_RATE 1.0e-12f
+#define PROPID_FLOOR_THRUST 1.0e-14f
+#define PROPID_FLOOR_DRAG 1.0e-10f
+#define PROPID_FLOOR_BIAS 1.0e-14f
+
 /* Rotor-speed slew test (propid_filter.c): the motor is taken up to this many
  * times faster than its configured time constant says (spread between motors
  * and with the battery's voltage, the stamps' jitter, an ESC's own filter). */
@@ -384,38 +395,20 @@ static inline propid_reflection_t propid_drag_basis(const propid_derived_t *deri
 }
 
 /* The kf block's two reflections: H_0 over the whole block, H_1 over elements
- * 1..N-1 (its vector[1][0] is 0). The general build derives them at init into its
- * derived data and points there; the quad build, whose filter object has no room
- * left (1 KiB), derives them from its thrust-torque rows into `own` when it needs
- * them (the same function on the same values: the same basis to the bit). */
+ * 1..N-1 (its vector[1][0] is 0), derived at init (derived->thrust_basis; the
+ * quad build's room for them: its kept counters and constant floors, propid.h). */
 typedef struct {
     const float (*vector)[PROPID_MAX_ROTORS]; /* vector[k]: v of H_k */
     const float *scale;                      /* scale[k]: 2 / v.v of H_k, or 0 */
     uint8_t rotor_count;
-#if !PROPID_GENERAL_VEHICLES
-    float own_vector[2][PROPID_MAX_ROTORS];
-    float own_scale[2];
-#endif
 } propid_thrust_basis_t;
-
-/* propid_coeff_basis.c: the reflections from the roll- and pitch-torque rows per
- * unit kf_rel (rotor order; docs/math.md §2). */
-void propid_thrust_basis_derive(const float *roll, const float *pitch, uint8_t rotor_count,
-                                float vector[2][PROPID_MAX_ROTORS], float scale[2]);
 
 static inline void propid_thrust_basis_init(propid_thrust_basis_t *basis, const propid_derived_t *derived,
                                             const propid_kept_config_t *config)
 {
     basis->rotor_count = config->rotor_count;
-#if PROPID_GENERAL_VEHICLES
     basis->vector = (const float (*)[PROPID_MAX_ROTORS])derived->thrust_basis;
     basis->scale = derived->thrust_basis_scale;
-#else
-    propid_thrust_basis_derive(derived->jac_torque[0], derived->jac_torque[1], 4u, basis->own_vector,
-                               basis->own_scale);
-    basis->vector = (const float (*)[PROPID_MAX_ROTORS])basis->own_vector;
-    basis->scale = basis->own_scale;
-#endif
 }
 
 /* Reflection k (0: H_0, 1: H_1) of the kf basis. */
@@ -729,9 +722,26 @@ static inline float propid_prior_var(const propid_derived_t *derived, uint8_t i)
 {
     return derived->kind_prior_var[propid_state_kind(derived, i)];
 }
+/* Bit pattern of kind `kind`'s variance floor: derived at init in the general
+ * build, constants in the quad build (its four kinds' floors do not depend on
+ * the configuration: propid_config.c). */
+#if !PROPID_GENERAL_VEHICLES
+extern const float propid_quad_floor[PROPID_STATE_KINDS];
+#endif
+static inline uint32_t propid_kind_floor_bits(const propid_derived_t *derived, uint8_t kind)
+{
+#if PROPID_GENERAL_VEHICLES
+    return derived->kind_floor_bits[kind];
+#else
+    (void)derived;
+    uint32_t bits;
+    memcpy(&bits, &propid_quad_floor[kind], sizeof(bits));
+    return bits;
+#endif
+}
 static inline uint32_t propid_floor_bits(const propid_derived_t *derived, uint8_t i)
 {
-    return derived->kind_floor_bits[propid_state_kind(derived, i)];
+    return propid_kind_floor_bits(derived, propid_state_kind(derived, i));
 }
 static inline uint32_t propid_range_bits(const propid_derived_t *derived, uint8_t i)
 {

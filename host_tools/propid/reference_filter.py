@@ -970,7 +970,7 @@ class ReferenceFilter:
 
 
 def thrust_torque_basis(roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
-    """Q of the kf block (C: propid_thrust_basis_derive, docs/math.md §2): Q = H_1 H_0, H_0 the
+    """Q of the kf block (C: propid_config.c, thrust_basis_from_torques, docs/math.md §2): Q = H_1 H_0, H_0 the
     reflection whose first row is the roll-torque direction (up to sign), H_1 on elements
     1..N-1 making the second row the pitch-torque direction orthogonalised against it; a
     direction that vanishes (or is parallel to the roll one) leaves its reflection out."""

@@ -380,7 +380,9 @@ typedef struct {
 #endif
     float kind_process_psd[PROPID_STATE_KINDS];     /* Q rate: Q_ii = psd * dt */
     float kind_prior_var[PROPID_STATE_KINDS];       /* prior variance */
+#if PROPID_GENERAL_VEHICLES /* (the quad build: constants in flash, propid_internal.h) */
     uint32_t kind_floor_bits[PROPID_STATE_KINDS];   /* bit pattern of the variance floor */
+#endif
     uint32_t kind_range_bits[PROPID_STATE_KINDS];   /* bits(ceiling) - bits(floor): the ceiling's
                                                        value follows (propid_var_ceiling) */
     /* Sparsity of the 3 rate rows of A = df/dx (structurally non-zero entries only,
@@ -425,12 +427,12 @@ typedef struct {
 #endif
     float quad_gyro[3];                             /* quad layout only: A_ab = quad_gyro[a] omega_c for
                                                        both other axes b, c of row a (symmetric in b, c) */
-#if PROPID_GENERAL_VEHICLES /* (the quad build: from jac_torque / a table in flash, propid_internal.h) */
     /* Private: the thrust coefficients' torque basis (propid_internal.h,
      * propid_thrust_basis): Q = H_1 H_0, H_k = I - thrust_basis_scale[k] v v^T with
      * v = thrust_basis[k] (H_1's v[0] is 0: it acts on elements 1..N-1). */
     float thrust_basis[2][PROPID_MAX_ROTORS];
     float thrust_basis_scale[2];
+#if PROPID_GENERAL_VEHICLES /* (the quad build: a table in flash, propid_internal.h) */
     /* Private: the drag coefficients' yaw basis (propid_internal.h, propid_drag_basis):
      * the reflection H = I - drag_basis_scale v v^T with v = drag_basis. */
     float drag_basis[PROPID_MAX_ROTORS];
@@ -526,11 +528,29 @@ typedef struct {
 } propid_kept_config_t;
 #endif
 
+/* The counters the filter keeps (private): all of them, or in the quad build only
+ * those its calls can move (no accelerometer, delay buffer, consistency monitor
+ * or stuck-gyro check there: propid_get_counters reports theirs as 0). */
+#if PROPID_GENERAL_VEHICLES
+typedef propid_counters_t propid_kept_counters_t;
+#else
+typedef struct {
+    uint32_t gyro_accepted;
+    uint32_t rotor_accepted;
+    uint32_t axis_gated[3];
+    uint32_t gate_reopened;
+    uint32_t cov_repairs;
+    uint32_t state_clamps;
+    uint32_t resyncs;
+    uint32_t rejected[PROPID_REJECT_SLOTS];
+} propid_kept_counters_t;
+#endif
+
 typedef struct {
     propid_kept_config_t config;
     propid_derived_t derived;
     propid_core_t core;
-    propid_counters_t counters;
+    propid_kept_counters_t counters;
 #if PROPID_DELAY_SLOTS > 0
     propid_delay_t delay;
 #endif
