@@ -24,7 +24,7 @@
 
 static propid_status_t reject(propid_filter_t *filter, propid_status_t status)
 {
-    filter->counters.rejected[-(int)status]++;
+    filter->counters.rejected[PROPID_REJECT_SLOT(status)]++;
     return status;
 }
 

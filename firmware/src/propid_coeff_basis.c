@@ -105,20 +105,34 @@ void propid_drag_per_rotor(const propid_reflection_t *basis, const propid_core_t
     }
 }
 
+/* x := (I - w w^T) x over `count` values (a kf reflection, its scale folded into w). */
+static inline void reflect_folded(const float *w, uint8_t count, float *x)
+{
+    float dot = 0.0f;
+    for (uint8_t i = 0; i < count; ++i) {
+        dot += w[i] * x[i];
+    }
+    for (uint8_t i = 0; i < count; ++i) {
+        x[i] -= dot * w[i];
+    }
+}
+
 void propid_thrust_to_basis(const propid_thrust_basis_t *basis, float *x)
 {
-    const propid_reflection_t first = propid_thrust_reflection(basis, 0u);
-    const propid_reflection_t second = propid_thrust_reflection(basis, 1u);
-    propid_reflection_apply(&first, x);
-    propid_reflection_apply(&second, x + 1);
+    const uint8_t count = basis->rotor_count;
+    reflect_folded(basis->vector[0], count, x);
+    if (count > 1u) {
+        reflect_folded(basis->vector[1], (uint8_t)(count - 1u), x + 1);
+    }
 }
 
 void propid_thrust_to_rotor(const propid_thrust_basis_t *basis, float *x)
 {
-    const propid_reflection_t first = propid_thrust_reflection(basis, 0u);
-    const propid_reflection_t second = propid_thrust_reflection(basis, 1u);
-    propid_reflection_apply(&second, x + 1);
-    propid_reflection_apply(&first, x);
+    const uint8_t count = basis->rotor_count;
+    if (count > 1u) {
+        reflect_folded(basis->vector[1], (uint8_t)(count - 1u), x + 1);
+    }
+    reflect_folded(basis->vector[0], count, x);
 }
 
 void propid_coeff_flip(const propid_derived_t *derived, const propid_kept_config_t *config, propid_core_t *core,

@@ -289,28 +289,31 @@ static void derive_drag_basis(const propid_config_t *config, propid_derived_t *o
 #endif
 
 /* r and p the roll- and pitch-torque directions, r normalised, p orthogonalised
- * against it and normalised. H_0 = I - scale v v^T with v = r + sigma e_0 (sigma
- * the sign of r_0, v.v = 2 (1 + |r_0|)) has first row -sigma r; H_0 p then has no
- * element 0, and H_1 built the same way from it on elements 1..N-1 makes the
- * second row of H_1 H_0 -sigma' p. A direction that vanishes (one rotor, rotors
- * on one line) or is parallel to r leaves its reflection the identity (scale 0). */
+ * against it and normalised. H_0 = I - (2 / v.v) v v^T with v = r + sigma e_0
+ * (sigma the sign of r_0, v.v = 2 (1 + |r_0|)) has first row -sigma r; H_0 p then
+ * has no element 0, and H_1 built the same way from it on elements 1..N-1 makes
+ * the second row of H_1 H_0 -sigma' p. Each kept as w = v / sqrt(1 + |d_k|)
+ * (H = I - w w^T). A direction that vanishes (one rotor, rotors on one line) or
+ * is parallel to r leaves its reflection the identity (w = 0). Into
+ * basis[0 .. N) (H_0) and basis[PROPID_MAX_ROTORS + i - 1] for element i of H_1. */
 static void thrust_basis_from_torques(const float *roll, const float *pitch, uint8_t rotor_count,
-                                      float vector[2][PROPID_MAX_ROTORS], float scale[2])
+                                      float basis[2 * PROPID_MAX_ROTORS - 1])
 {
     float direction[2][PROPID_MAX_ROTORS];
+    float w[2][PROPID_MAX_ROTORS];
     float size[2] = {0.0f, 0.0f};
     for (uint8_t k = 0; k < 2u; ++k) {
         const float *source = k == 0u ? roll : pitch;
         for (uint8_t i = 0; i < PROPID_MAX_ROTORS; ++i) {
             direction[k][i] = i < rotor_count ? source[i] : 0.0f;
-            vector[k][i] = 0.0f;
+            w[k][i] = 0.0f;
             size[k] += direction[k][i] * direction[k][i];
         }
-        scale[k] = 0.0f;
     }
+    int have_first = 0;
     for (uint8_t k = 0; k < 2u && k < rotor_count; ++k) {
         float *d = direction[k];
-        if (k == 1u && scale[0] > 0.0f) {
+        if (k == 1u && have_first) {
             /* p - (p.r) r, then H_0 applied (its element 0 is zero up to rounding). */
             const float *r = direction[0];
             float along = 0.0f;
@@ -320,14 +323,12 @@ static void thrust_basis_from_torques(const float *roll, const float *pitch, uin
             for (uint8_t i = 0; i < rotor_count; ++i) {
                 d[i] -= along * r[i];
             }
-            const float *v = vector[0];
             float dot = 0.0f;
             for (uint8_t i = 0; i < rotor_count; ++i) {
-                dot += v[i] * d[i];
+                dot += w[0][i] * d[i];
             }
-            dot *= scale[0];
             for (uint8_t i = 0; i < rotor_count; ++i) {
-                d[i] -= dot * v[i];
+                d[i] -= dot * w[0][i];
             }
             d[0] = 0.0f;
         }
@@ -345,11 +346,17 @@ static void thrust_basis_from_torques(const float *roll, const float *pitch, uin
             d[i] *= inv_norm;
         }
         const float sigma = d[k] >= 0.0f ? 1.0f : -1.0f;
+        const float fold = 1.0f / sqrtf(1.0f + fabsf(d[k]));
         for (uint8_t i = k; i < rotor_count; ++i) {
-            vector[k][i] = d[i];
+            w[k][i] = (i == k ? d[i] + sigma : d[i]) * fold;
         }
-        vector[k][k] += sigma;
-        scale[k] = 1.0f / (1.0f + fabsf(d[k]));
+        have_first |= k == 0u;
+    }
+    for (uint8_t i = 0; i < PROPID_MAX_ROTORS; ++i) {
+        basis[i] = w[0][i];
+        if (i > 0u) {
+            basis[PROPID_MAX_ROTORS + i - 1u] = w[1][i];
+        }
     }
 }
 
@@ -364,7 +371,7 @@ static void derive_thrust_basis(const propid_config_t *config, const geometry_t 
         roll[i] = geo->thrust_torque[i][0];
         pitch[i] = geo->thrust_torque[i][1];
     }
-    thrust_basis_from_torques(roll, pitch, config->rotor_count, out->thrust_basis, out->thrust_basis_scale);
+    thrust_basis_from_torques(roll, pitch, config->rotor_count, out->thrust_basis);
 }
 
 static void derive_gyro_jacobian(const propid_config_t *config, geometry_t *geo)
@@ -971,11 +978,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         uint32_t ceiling_bits;
         memcpy(&floor_bits, &floor_var, sizeof(floor_bits));
         memcpy(&ceiling_bits, &ceiling, sizeof(ceiling_bits));
-#if PROPID_GENERAL_VEHICLES
         out.kind_floor_bits[kind] = floor_bits;
-#else
-        (void)floor_bits; /* the quad build's are constants (propid_quad_floor) */
-#endif
         out.kind_range_bits[kind] = ceiling_bits - floor_bits;
     }
 

@@ -9,8 +9,6 @@
 #include "propid_internal.h"
 
 #if !PROPID_GENERAL_VEHICLES
-const float propid_quad_floor[PROPID_STATE_KINDS] = {PROPID_FLOOR_RATE, PROPID_FLOOR_THRUST, PROPID_FLOOR_DRAG,
-                                                     PROPID_FLOOR_BIAS};
 const uint8_t propid_quad_state_kind[PROPID_MAX_STATES] = {
     PROPID_KIND_RATE,   PROPID_KIND_RATE,   PROPID_KIND_RATE,   PROPID_KIND_THRUST, PROPID_KIND_THRUST,
     PROPID_KIND_THRUST, PROPID_KIND_THRUST, PROPID_KIND_DRAG,   PROPID_KIND_DRAG,   PROPID_KIND_DRAG,
@@ -219,16 +217,15 @@ uint32_t propid_clamp_coefficients(propid_filter_t *filter)
         propid_thrust_basis_t thrust;
         propid_thrust_basis_init(&thrust, &filter->derived, config);
         const float *y = &core->state[PROPID_QUAD_FIRST_THRUST];
-        const float *v1 = thrust.vector[1];
-        const float along1 = thrust.scale[1] * (y[1] * v1[1] + y[2] * v1[2] + y[3] * v1[3]);
+        const float *w1 = thrust.vector[1]; /* elements 1..3 */
+        const float along1 = y[1] * w1[0] + y[2] * w1[1] + y[3] * w1[2];
         kf_rel[0] = y[0];
 PROPID_UNROLL(3)
         for (uint8_t i = 1; i < 4u; ++i) {
-            kf_rel[i] = y[i] - along1 * v1[i];
+            kf_rel[i] = y[i] - along1 * w1[i - 1u];
         }
         const float *v0 = thrust.vector[0];
-        const float along0 = thrust.scale[0] *
-                             (kf_rel[0] * v0[0] + kf_rel[1] * v0[1] + kf_rel[2] * v0[2] + kf_rel[3] * v0[3]);
+        const float along0 = kf_rel[0] * v0[0] + kf_rel[1] * v0[1] + kf_rel[2] * v0[2] + kf_rel[3] * v0[3];
 PROPID_UNROLL(4)
         for (uint8_t i = 0; i < 4u; ++i) {
             km_rel[i] = z[i] - along * v[i];

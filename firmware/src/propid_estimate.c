@@ -170,7 +170,7 @@ propid_status_t propid_get_estimate(const propid_filter_t *filter, propid_estima
     if (!core->has_rotor_data) {
         health |= PROPID_HEALTH_NO_ROTOR_DATA;
     }
-    if (filter->counters.rejected[-(int)PROPID_ERR_ROTOR_STALE] != core->stale_mark) {
+    if (filter->counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_ROTOR_STALE)] != core->stale_mark) {
         health |= PROPID_HEALTH_ROTOR_STALE;
     }
     if (estimate->thrust_coeff_converged == all_rotors && estimate->drag_coeff_converged == all_rotors) {
@@ -201,7 +201,7 @@ propid_status_t propid_get_counters(const propid_filter_t *filter, propid_counte
     counters->cov_repairs = kept->cov_repairs;
     counters->state_clamps = kept->state_clamps;
     counters->resyncs = kept->resyncs;
-    memcpy(counters->rejected, kept->rejected, sizeof(counters->rejected));
+    memcpy(&counters->rejected[1], kept->rejected, sizeof(kept->rejected)); /* (slot 0: no rejection) */
 #endif
     return PROPID_OK;
 }

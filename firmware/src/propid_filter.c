@@ -1,6 +1,6 @@
 /* Life cycle and input guards. Every rejection is decided before the first write,
  * so a negative status leaves config, derived and core bit-for-bit unchanged and
- * only moves counters.rejected[-status]. */
+ * only moves counters.rejected[PROPID_REJECT_SLOT(status)]. */
 #include <math.h>
 #include <stddef.h>
 #include <string.h>
@@ -17,7 +17,7 @@ static int initialised(const propid_filter_t *filter)
 
 static propid_status_t reject(propid_filter_t *filter, propid_status_t status)
 {
-    filter->counters.rejected[-(int)status]++;
+    filter->counters.rejected[PROPID_REJECT_SLOT(status)]++;
     return status;
 }
 
@@ -26,7 +26,7 @@ static void core_to_prior(propid_filter_t *filter)
     propid_core_t *core = &filter->core;
     memset(core, 0, sizeof(*core));
     propid_cov_set_prior(&filter->derived, &filter->config, core);
-    core->stale_mark = filter->counters.rejected[-(int)PROPID_ERR_ROTOR_STALE];
+    core->stale_mark = filter->counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_ROTOR_STALE)];
 #if PROPID_DELAY_SLOTS > 0
     propid_delay_clear(filter);
 #endif
@@ -494,7 +494,7 @@ static __attribute__((noinline)) propid_status_t fuse_gyro_timed(propid_filter_t
     memcpy(core->input_speed_sq, core->rotor_speed_sq, sizeof(core->input_speed_sq));
     core->time_us = time_us;
     core->has_time = 1u;
-    core->stale_mark = filter->counters.rejected[-(int)PROPID_ERR_ROTOR_STALE];
+    core->stale_mark = filter->counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_ROTOR_STALE)];
     filter->counters.gyro_accepted++;
     return gated ? PROPID_OK_GATED : PROPID_OK;
 }

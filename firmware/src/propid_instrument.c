@@ -54,7 +54,7 @@ static int is_initialised(const propid_filter_t *filter)
 
 static propid_status_t refuse(propid_filter_t *filter, propid_status_t status)
 {
-    filter->counters.rejected[-(int)status]++;
+    filter->counters.rejected[PROPID_REJECT_SLOT(status)]++;
     return status;
 }
 

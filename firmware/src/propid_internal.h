@@ -394,12 +394,13 @@ static inline propid_reflection_t propid_drag_basis(const propid_derived_t *deri
     return basis;
 }
 
-/* The kf block's two reflections: H_0 over the whole block, H_1 over elements
- * 1..N-1 (its vector[1][0] is 0), derived at init (derived->thrust_basis; the
- * quad build's room for them: its kept counters and constant floors, propid.h). */
+/* The kf block's two reflections H_k = I - w w^T (w = v sqrt(2 / v.v): the
+ * scale folded in, |w|^2 = 2, or w = 0 for the identity), H_0 over the whole
+ * block, H_1 over elements 1..N-1 (vector[1][0] is element 1's), derived at
+ * init (derived->thrust_basis; the quad build's room for them: its kept
+ * counters, propid.h). */
 typedef struct {
-    const float (*vector)[PROPID_MAX_ROTORS]; /* vector[k]: v of H_k */
-    const float *scale;                      /* scale[k]: 2 / v.v of H_k, or 0 */
+    const float *vector[2]; /* w of H_0 (N entries), of H_1 (N - 1 entries) */
     uint8_t rotor_count;
 } propid_thrust_basis_t;
 
@@ -407,16 +408,16 @@ static inline void propid_thrust_basis_init(propid_thrust_basis_t *basis, const 
                                             const propid_kept_config_t *config)
 {
     basis->rotor_count = config->rotor_count;
-    basis->vector = (const float (*)[PROPID_MAX_ROTORS])derived->thrust_basis;
-    basis->scale = derived->thrust_basis_scale;
+    basis->vector[0] = derived->thrust_basis;
+    basis->vector[1] = derived->thrust_basis + PROPID_MAX_ROTORS;
 }
 
 /* Reflection k (0: H_0, 1: H_1) of the kf basis. */
 static inline propid_reflection_t propid_thrust_reflection(const propid_thrust_basis_t *basis, uint8_t k)
 {
     propid_reflection_t reflection;
-    reflection.vector = &basis->vector[k][k];
-    reflection.scale = basis->scale[k];
+    reflection.vector = basis->vector[k];
+    reflection.scale = 1.0f;
     reflection.first = (uint8_t)(propid_first_thrust() + k);
     reflection.count = basis->rotor_count > k ? (uint8_t)(basis->rotor_count - k) : 0u;
     return reflection;
@@ -722,22 +723,9 @@ static inline float propid_prior_var(const propid_derived_t *derived, uint8_t i)
 {
     return derived->kind_prior_var[propid_state_kind(derived, i)];
 }
-/* Bit pattern of kind `kind`'s variance floor: derived at init in the general
- * build, constants in the quad build (its four kinds' floors do not depend on
- * the configuration: propid_config.c). */
-#if !PROPID_GENERAL_VEHICLES
-extern const float propid_quad_floor[PROPID_STATE_KINDS];
-#endif
 static inline uint32_t propid_kind_floor_bits(const propid_derived_t *derived, uint8_t kind)
 {
-#if PROPID_GENERAL_VEHICLES
     return derived->kind_floor_bits[kind];
-#else
-    (void)derived;
-    uint32_t bits;
-    memcpy(&bits, &propid_quad_floor[kind], sizeof(bits));
-    return bits;
-#endif
 }
 static inline uint32_t propid_floor_bits(const propid_derived_t *derived, uint8_t i)
 {

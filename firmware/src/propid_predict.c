@@ -64,7 +64,7 @@ predict_stage_quad(const float *restrict state, const float *restrict input_spee
                    const float *restrict latest_speed_sq, const float *restrict quad_gyro,
                    const float (*restrict jac_torque)[PROPID_JAC_TORQUE_ROW],
                    const float *restrict drag_basis, float drag_basis_scale,
-                   const float (*restrict thrust_basis)[PROPID_MAX_ROTORS], const float *restrict thrust_basis_scale,
+                   const float *restrict thrust_basis,
                    float dt,
                    float rate_limit, float *restrict rate_next,
                    float (*restrict jacobian_dt)[PROPID_JAC_ROW])
@@ -100,20 +100,19 @@ PROPID_UNROLL(4)
             entry[i] = torque[PROPID_QUAD_TORQUE_FIRST + i] * speed_sq_dt[i];
         }
         if (a < 2u) {
-            /* The thrust entries times Q^T (Q e = H_1 H_0 e): the row over the
-             * torque-basis states (propid_internal.h, "The coefficients' bases"). */
-            const float *v = thrust_basis[0];
-            const float along0 = thrust_basis_scale[0] *
-                                 (entry[0] * v[0] + entry[1] * v[1] + entry[2] * v[2] + entry[3] * v[3]);
+            /* The thrust entries times Q^T (Q e = H_1 H_0 e, H = I - w w^T): the row
+             * over the torque-basis states (propid_internal.h, "The coefficients' bases"). */
+            const float *w = thrust_basis;
+            const float along0 = entry[0] * w[0] + entry[1] * w[1] + entry[2] * w[2] + entry[3] * w[3];
 PROPID_UNROLL(4)
             for (uint8_t i = 0; i < 4u; ++i) {
-                entry[i] -= along0 * v[i];
+                entry[i] -= along0 * w[i];
             }
-            v = thrust_basis[1];
-            const float along1 = thrust_basis_scale[1] * (entry[1] * v[1] + entry[2] * v[2] + entry[3] * v[3]);
+            w = thrust_basis + PROPID_MAX_ROTORS; /* H_1, elements 1..3 */
+            const float along1 = entry[1] * w[0] + entry[2] * w[1] + entry[3] * w[2];
 PROPID_UNROLL(3)
             for (uint8_t i = 1; i < 4u; ++i) {
-                entry[i] -= along1 * v[i];
+                entry[i] -= along1 * w[i - 1u];
             }
         } else {
             /* The drag entries times H: the yaw row over the yaw-basis states
@@ -339,7 +338,7 @@ __attribute__((noinline)) propid_status_t propid_predict_stage(const propid_filt
     return predict_stage_quad(filter->core.state, filter->core.input_speed_sq,
                               filter->core.rotor_speed_sq, filter->derived.quad_gyro,
                               filter->derived.jac_torque, basis.vector, basis.scale,
-                              thrust.vector, thrust.scale, dt,
+                              filter->derived.thrust_basis, dt,
                               propid_rate_limit(filter), rate_next, jacobian_dt);
 }
 
@@ -597,8 +596,8 @@ static __attribute__((noinline)) void add_input_noise(const propid_derived_t *de
     propid_drag_per_rotor(&basis, core, km_rel, NULL);
     /* B at the thrust coefficients per rotor too (kept in their torque basis). */
     propid_thrust_basis_t thrust_basis;
-    thrust_basis.vector = (const float (*)[PROPID_MAX_ROTORS])derived->thrust_basis;
-    thrust_basis.scale = derived->thrust_basis_scale;
+    thrust_basis.vector[0] = derived->thrust_basis;
+    thrust_basis.vector[1] = derived->thrust_basis + PROPID_MAX_ROTORS;
     thrust_basis.rotor_count = rotor_count;
     float kf_rel[PROPID_MAX_ROTORS];
     propid_thrust_per_rotor(&thrust_basis, core, kf_rel, NULL);
@@ -694,8 +693,8 @@ __attribute__((noinline)) propid_status_t propid_predict_step(propid_filter_t *f
     propid_thrust_basis_init(&thrust, &filter->derived, &filter->config);
     const propid_status_t staged = predict_stage_quad(
         core->state, core->input_speed_sq, core->rotor_speed_sq, filter->derived.quad_gyro,
-        filter->derived.jac_torque, basis.vector, basis.scale, thrust.vector,
-        thrust.scale, dt, propid_rate_limit(filter), rate_next, rate_jacobian_dt);
+        filter->derived.jac_torque, basis.vector, basis.scale, filter->derived.thrust_basis, dt,
+        propid_rate_limit(filter), rate_next, rate_jacobian_dt);
 #else
     const propid_status_t staged = propid_predict_stage(filter, dt, rate_next, rate_jacobian_dt);
 #endif

@@ -13,13 +13,12 @@ every realisation. Three covariance recursions ("loadings"):
 - ``none``: the bound's own recursion. Its gain is optimal, its error covariance IS the
   bound: what an efficient estimator gives on this flight, under the table's criterion.
 - ``filter``: the same plus the C filter's deterministic covariance loadings
-  (docs/math.md §2: the rates by ``l m eps`` of their rounding scale, kf and biases by
-  ``1 + eps`` per step, the drag coefficients by ``1 + eps`` in their yaw basis every
-  second step). The filter linearised at the truth, as implemented in float32.
-- ``torque-basis``: as ``filter`` but the kf loaded in an orthogonal basis whose first
-  elements are the roll and pitch torque directions (the arm vectors), then the
-  collective: what keeping the kf in such a basis, as the km are kept in their yaw
-  basis, would give.
+  (docs/math.md §2: the rates by ``l m eps`` of their rounding scale, the kf and the
+  biases by ``1 + eps`` per step, the kf in their roll/pitch-torque basis, the drag
+  coefficients by ``1 + eps`` in their yaw basis every second step). The filter
+  linearised at the truth, as implemented in float32.
+- ``per-rotor-kf``: as ``filter`` but the kf loaded per rotor, as the filter did before
+  it kept them in their torque basis: what that basis changed.
 
 All three evolve the same errors with the TRUE process noise (the loadings are not
 noise in the plant), so their differences are the gains' alone.
@@ -34,11 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
-from propid import crlb, table1
+from propid import crlb, reference_filter, table1
 from propid.errors import UserError
 from propid.flightlog import Vehicle, read_vehicle
 
-LOADINGS = ("none", "filter", "torque-basis")
+LOADINGS = ("none", "filter", "per-rotor-kf")
 VAR_LOADING = float(np.finfo(np.float32).eps)  # C: PROPID_VAR_LOADING
 RATE_LOADING_MIN = 8.0  # C: PROPID_RATE_LOADING / PROPID_VAR_LOADING
 
@@ -60,12 +59,16 @@ def drag_basis(vehicle: Vehicle) -> np.ndarray:
 
 
 def thrust_torque_basis(vehicle: Vehicle) -> np.ndarray:
-    """Orthonormal N x N rows: roll-torque direction (the rotors' y arms), pitch (x
-    arms), collective, then the rest (Gram-Schmidt of the identity)."""
+    """The kf's kept basis (C: the filter's torque basis, docs/math.md §2): orthogonal
+    rows, the roll- and pitch-torque directions per unit kf_rel first (the rows of
+    J^-1 (r_i x z) kf_nominal_i; J diagonal 1 when the vehicle has none)."""
     pos = np.asarray(vehicle.positions, dtype=float)
     count = pos.shape[0]
-    q, _ = np.linalg.qr(np.column_stack([pos[:, 1], pos[:, 0], np.ones(count), np.eye(count)]))
-    return q[:, :count].T
+    inertia = np.eye(3) if vehicle.inertia is None else np.asarray(vehicle.inertia, dtype=float)
+    kf = np.ones(count) if vehicle.kf_nominal is None else np.asarray(vehicle.kf_nominal, dtype=float)
+    arm = np.stack([pos[:, 1], -pos[:, 0], np.zeros(count)], axis=1)
+    torque = (arm @ np.linalg.inv(inertia).T) * kf[:, None]
+    return reference_filter.thrust_torque_basis(torque[:, 0], torque[:, 1])
 
 
 def rate_row_terms(count: int) -> float:
@@ -107,7 +110,7 @@ def propagate(flight: crlb.FlightSteps, vehicle: Vehicle, config: crlb.BoundConf
     coeff, bias = slice(3, 3 + 2 * count), slice(n - 3, n)
     basis = np.eye(n)
     basis[3 + count:3 + 2 * count, 3 + count:3 + 2 * count] = drag_basis(vehicle)
-    if loading == "torque-basis":
+    if loading != "per-rotor-kf":
         basis[3:3 + count, 3:3 + count] = thrust_torque_basis(vehicle)
     terms = rate_row_terms(count)
     rate_factor = VAR_LOADING * terms * max(terms, RATE_LOADING_MIN)
@@ -421,7 +424,7 @@ def render(result: dict) -> str:
              f"| flown C filter | {s['flown_t_bias_s']:.2f} | {s['flown_never_bias']} | | |",
              f"| bound 1-sigma time | {s['bound_t_bias_s']:.2f} | {s['bound_never_bias']} | | |"]
     label = {"none": "efficient (the bound's recursion)", "filter": "filter's loadings",
-             "torque-basis": "filter's loadings, kf in a torque basis"}
+             "per-rotor-kf": "filter's loadings, kf per rotor (before)"}
     for name in result["loadings"]:
         r = s[name]
         lines.append(f"| {label[name]} | {r['t_bias_s']:.2f} | {r['expected_never_bias']:.1f} expected | "

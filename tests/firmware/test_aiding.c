@@ -52,8 +52,8 @@ static void expect_rejected(propid_status_t expected, uint64_t t_us, const float
     memcpy(&before, &filter, sizeof(filter));
     TEST_ASSERT_EQUAL_INT(expected, propid_push_accel(&filter, t_us, force));
     TEST_ASSERT_EQUAL_MEMORY(&before.core, &filter.core, sizeof(filter.core));
-    TEST_ASSERT_EQUAL_UINT32(before.counters.rejected[-(int)expected] + 1u,
-                             filter.counters.rejected[-(int)expected]);
+    TEST_ASSERT_EQUAL_UINT32(before.counters.rejected[PROPID_REJECT_SLOT(expected)] + 1u,
+                             filter.counters.rejected[PROPID_REJECT_SLOT(expected)]);
 }
 
 static void test_accel_rejections_leave_the_filter_unchanged(void)

@@ -248,8 +248,8 @@ static void expect_held_rejection(propid_status_t expected, uint64_t t_us, const
     TEST_ASSERT_EQUAL_INT(expected, status);
     TEST_ASSERT_EQUAL_MEMORY(&before.core, &delayed.core, sizeof(delayed.core));
     TEST_ASSERT_EQUAL_MEMORY(&before.delay, &delayed.delay, sizeof(delayed.delay));
-    TEST_ASSERT_EQUAL_UINT32(before.counters.rejected[-(int)expected] + 1u,
-                             delayed.counters.rejected[-(int)expected]);
+    TEST_ASSERT_EQUAL_UINT32(before.counters.rejected[PROPID_REJECT_SLOT(expected)] + 1u,
+                             delayed.counters.rejected[PROPID_REJECT_SLOT(expected)]);
 }
 
 static void test_held_samples_are_validated_on_arrival(void)

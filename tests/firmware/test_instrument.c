@@ -216,10 +216,10 @@ static void test_rejections_leave_the_filter_unchanged(void)
     TEST_ASSERT_EQUAL_MEMORY(&before.core, &filter.core, sizeof(filter.core));
     TEST_ASSERT_EQUAL_MEMORY(&before.instrument, &filter.instrument, sizeof(filter.instrument));
     TEST_ASSERT_EQUAL_UINT32(1u, filter.instrument.command_accepted);
-    TEST_ASSERT_EQUAL_UINT32(1u, filter.counters.rejected[-(int)PROPID_ERR_ROTOR_COUNT]);
-    TEST_ASSERT_EQUAL_UINT32(2u, filter.counters.rejected[-(int)PROPID_ERR_NOT_FINITE]);
-    TEST_ASSERT_EQUAL_UINT32(2u, filter.counters.rejected[-(int)PROPID_ERR_ROTOR_SPEED_RANGE]);
-    TEST_ASSERT_EQUAL_UINT32(2u, filter.counters.rejected[-(int)PROPID_ERR_TIME_BACKWARDS]);
+    TEST_ASSERT_EQUAL_UINT32(1u, filter.counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_ROTOR_COUNT)]);
+    TEST_ASSERT_EQUAL_UINT32(2u, filter.counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_NOT_FINITE)]);
+    TEST_ASSERT_EQUAL_UINT32(2u, filter.counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_ROTOR_SPEED_RANGE)]);
+    TEST_ASSERT_EQUAL_UINT32(2u, filter.counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_TIME_BACKWARDS)]);
     /* Uninitialised filter. */
     static propid_filter_t blank;
     memset(&blank, 0, sizeof(blank));
@@ -285,7 +285,7 @@ static void test_the_configuration_check_names_the_fields(void)
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
     const float good[4] = {0.5f, 0.5f, 0.5f, 0.5f};
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_push_motor_command(&filter, 1000u, good, 4u));
-    TEST_ASSERT_EQUAL_UINT32(1u, filter.counters.rejected[-(int)PROPID_ERR_CONFIG]);
+    TEST_ASSERT_EQUAL_UINT32(1u, filter.counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_CONFIG)]);
 }
 
 #endif /* PROPID_WITH_INSTRUMENT */

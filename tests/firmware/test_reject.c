@@ -1,7 +1,7 @@
 /*
  * Rejection paths of the public API (propid.h): every bad input gets its own
  * status code, leaves config, derived quantities and core state bit-for-bit
- * unchanged, and moves exactly one counter, counters.rejected[-status].
+ * unchanged, and moves exactly one counter, counters.rejected[-status] (the kept slot PROPID_REJECT_SLOT(status)).
  * The filter is "warm" (has run steps) so an accidental write would show.
  */
 #include <math.h>
@@ -85,12 +85,12 @@ static void assert_rejected(propid_status_t expected, propid_status_t got)
     TEST_ASSERT_EQUAL_MEMORY(&before.core, &filter.core, sizeof(filter.core));
     TEST_ASSERT_EQUAL_UINT32(before.magic, filter.magic);
     propid_kept_counters_t expected_counters = before.counters; /* (the quad build keeps fewer) */
-    expected_counters.rejected[-(int)expected]++;
+    expected_counters.rejected[PROPID_REJECT_SLOT(expected)]++;
     TEST_ASSERT_EQUAL_MEMORY(&expected_counters, &filter.counters, sizeof(filter.counters));
     /* ... and the public view agrees. */
     propid_counters_t counters;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_counters(&filter, &counters));
-    TEST_ASSERT_EQUAL_UINT32(before.counters.rejected[-(int)expected] + 1u,
+    TEST_ASSERT_EQUAL_UINT32(before.counters.rejected[PROPID_REJECT_SLOT(expected)] + 1u,
                              counters.rejected[-(int)expected]);
     before = filter; /* next rejection in the same test starts from here */
 }

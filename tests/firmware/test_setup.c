@@ -108,9 +108,9 @@ static void assert_refused(const propid_setup_t *bad)
 {
     before = from_setup;
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_init_prepared(&from_setup, bad));
-    TEST_ASSERT_EQUAL_UINT32(before.counters.rejected[-(int)PROPID_ERR_CONFIG] + 1u,
-                             from_setup.counters.rejected[-(int)PROPID_ERR_CONFIG]);
-    from_setup.counters.rejected[-(int)PROPID_ERR_CONFIG]--;
+    TEST_ASSERT_EQUAL_UINT32(before.counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_CONFIG)] + 1u,
+                             from_setup.counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_CONFIG)]);
+    from_setup.counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_CONFIG)]--;
     TEST_ASSERT_EQUAL_MEMORY(&before, &from_setup, sizeof(before));
 }
 

@@ -380,9 +380,7 @@ typedef struct {
 #endif
     float kind_process_psd[PROPID_STATE_KINDS];     /* Q rate: Q_ii = psd * dt */
     float kind_prior_var[PROPID_STATE_KINDS];       /* prior variance */
-#if PROPID_GENERAL_VEHICLES /* (the quad build: constants in flash, propid_internal.h) */
     uint32_t kind_floor_bits[PROPID_STATE_KINDS];   /* bit pattern of the variance floor */
-#endif
     uint32_t kind_range_bits[PROPID_STATE_KINDS];   /* bits(ceiling) - bits(floor): the ceiling's
                                                        value follows (propid_var_ceiling) */
     /* Sparsity of the 3 rate rows of A = df/dx (structurally non-zero entries only,
@@ -428,10 +426,9 @@ typedef struct {
     float quad_gyro[3];                             /* quad layout only: A_ab = quad_gyro[a] omega_c for
                                                        both other axes b, c of row a (symmetric in b, c) */
     /* Private: the thrust coefficients' torque basis (propid_internal.h,
-     * propid_thrust_basis): Q = H_1 H_0, H_k = I - thrust_basis_scale[k] v v^T with
-     * v = thrust_basis[k] (H_1's v[0] is 0: it acts on elements 1..N-1). */
-    float thrust_basis[2][PROPID_MAX_ROTORS];
-    float thrust_basis_scale[2];
+     * propid_thrust_basis): Q = H_1 H_0, H_k = I - w w^T, H_0's w the first
+     * PROPID_MAX_ROTORS entries, H_1's (on elements 1..N-1) the rest. */
+    float thrust_basis[2 * PROPID_MAX_ROTORS - 1];
 #if PROPID_GENERAL_VEHICLES /* (the quad build: a table in flash, propid_internal.h) */
     /* Private: the drag coefficients' yaw basis (propid_internal.h, propid_drag_basis):
      * the reflection H = I - drag_basis_scale v v^T with v = drag_basis. */
@@ -530,10 +527,14 @@ typedef struct {
 
 /* The counters the filter keeps (private): all of them, or in the quad build only
  * those its calls can move (no accelerometer, delay buffer, consistency monitor
- * or stuck-gyro check there: propid_get_counters reports theirs as 0). */
+ * or stuck-gyro check there, and no rejection has status 0: propid_get_counters
+ * reports those as 0). Rejection `status` is counted in
+ * rejected[PROPID_REJECT_SLOT(status)]. */
 #if PROPID_GENERAL_VEHICLES
 typedef propid_counters_t propid_kept_counters_t;
+#define PROPID_REJECT_SLOT(status) (-(int)(status))
 #else
+#define PROPID_REJECT_SLOT(status) (-(int)(status) - 1)
 typedef struct {
     uint32_t gyro_accepted;
     uint32_t rotor_accepted;
@@ -542,13 +543,18 @@ typedef struct {
     uint32_t cov_repairs;
     uint32_t state_clamps;
     uint32_t resyncs;
-    uint32_t rejected[PROPID_REJECT_SLOTS];
+    uint32_t rejected[PROPID_REJECT_SLOTS - 1];
 } propid_kept_counters_t;
 #endif
 
 typedef struct {
     propid_kept_config_t config;
     propid_derived_t derived;
+#if !PROPID_GENERAL_VEHICLES
+    uint32_t magic;                                 /* set by a successful propid_init() (here in the
+                                                       quad build: in the padding before the core's
+                                                       64-bit stamps, which the object's 1 KiB needs) */
+#endif
     propid_core_t core;
     propid_kept_counters_t counters;
 #if PROPID_DELAY_SLOTS > 0
@@ -560,7 +566,9 @@ typedef struct {
 #if PROPID_WITH_INSTRUMENT
     propid_instrument_t instrument;
 #endif
+#if PROPID_GENERAL_VEHICLES
     uint32_t magic;                                 /* set by a successful propid_init() */
+#endif
 } propid_filter_t;
 
 /* ------------------------------------------------------------------------ */
