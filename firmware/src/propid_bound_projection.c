@@ -16,9 +16,9 @@
  * sticks there (docs/damage.md). Only on a sample whose update left a
  * coefficient outside its range: not on the usual step.
  *
- * The bounds are per rotor while the filter keeps the drag block in its yaw
- * basis: the caller passes the state per rotor and P's column k per rotor
- * (propid_drag_per_rotor_column), so P itself is neither flipped nor touched. */
+ * The bounds are per rotor while the filter keeps the coefficient blocks in
+ * their bases: the caller passes the state per rotor and P's column k per rotor
+ * (propid_coeff_per_rotor_column), so P itself is neither flipped nor touched. */
 #include <float.h>
 #include <math.h>
 

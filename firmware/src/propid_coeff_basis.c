@@ -20,16 +20,16 @@ __attribute__((noinline)) void propid_reflection_transform(const propid_reflecti
     propid_reflection_apply(basis, x);
 }
 
-/* u = B v over the packed drag block, and beta = v . u. */
+/* u = B v over the reflection's packed block, and beta = v . u. */
 static float block_times_basis(const propid_reflection_t *basis, const float *cov, float *u)
 {
-    const uint8_t rotor_count = basis->count;
+    const uint8_t count = basis->count;
     const uint8_t first = basis->first;
     const float *v = basis->vector;
     float beta = 0.0f;
-    for (uint8_t i = 0; i < rotor_count; ++i) {
+    for (uint8_t i = 0; i < count; ++i) {
         float sum = 0.0f;
-        for (uint8_t j = 0; j < rotor_count; ++j) {
+        for (uint8_t j = 0; j < count; ++j) {
             sum += propid_cov_at(cov, (uint8_t)(first + i), (uint8_t)(first + j)) * v[j];
         }
         u[i] = sum;
@@ -40,28 +40,28 @@ static float block_times_basis(const propid_reflection_t *basis, const float *co
 
 void propid_reflection_flip_column(const propid_reflection_t *basis, propid_core_t *core, uint8_t column_index)
 {
-    const uint8_t rotor_count = basis->count;
+    const uint8_t count = basis->count;
     const uint8_t first = basis->first;
     float column[PROPID_MAX_ROTORS];
-    for (uint8_t i = 0; i < rotor_count; ++i) {
+    for (uint8_t i = 0; i < count; ++i) {
         column[i] = propid_cov_at(core->cov, (uint8_t)(first + i), column_index);
     }
     propid_reflection_transform(basis, column);
-    for (uint8_t i = 0; i < rotor_count; ++i) {
+    for (uint8_t i = 0; i < count; ++i) {
         core->cov[propid_cov_index((uint8_t)(first + i), column_index)] = column[i];
     }
 }
 
 void propid_reflection_flip_block(const propid_reflection_t *basis, propid_core_t *core)
 {
-    const uint8_t rotor_count = basis->count;
+    const uint8_t count = basis->count;
     const uint8_t first = basis->first;
     const float *v = basis->vector;
     const float scale = basis->scale;
     float u[PROPID_MAX_ROTORS];
     const float beta = block_times_basis(basis, core->cov, u);
-    for (uint8_t i = 0; i < rotor_count; ++i) {
-        for (uint8_t j = i; j < rotor_count; ++j) {
+    for (uint8_t i = 0; i < count; ++i) {
+        for (uint8_t j = i; j < count; ++j) {
             core->cov[propid_cov_index((uint8_t)(first + i), (uint8_t)(first + j))] -=
                 scale * (v[i] * u[j] + u[i] * v[j]) - scale * scale * beta * v[i] * v[j];
         }
@@ -86,9 +86,9 @@ void propid_reflection_flip(const propid_reflection_t *basis, propid_core_t *cor
 void propid_drag_per_rotor(const propid_reflection_t *basis, const propid_core_t *core, float *km_rel,
                            float *km_var)
 {
-    const uint8_t rotor_count = basis->count;
+    const uint8_t count = basis->count;
     const uint8_t first = basis->first;
-    for (uint8_t i = 0; i < rotor_count; ++i) {
+    for (uint8_t i = 0; i < count; ++i) {
         km_rel[i] = core->state[first + i];
     }
     propid_reflection_transform(basis, km_rel);
@@ -99,7 +99,7 @@ void propid_drag_per_rotor(const propid_reflection_t *basis, const propid_core_t
     const float scale = basis->scale;
     float u[PROPID_MAX_ROTORS];
     const float beta = block_times_basis(basis, core->cov, u);
-    for (uint8_t i = 0; i < rotor_count; ++i) {
+    for (uint8_t i = 0; i < count; ++i) {
         const uint8_t k = (uint8_t)(first + i);
         km_var[i] = propid_cov_at(core->cov, k, k) - scale * v[i] * (2.0f * u[i] - scale * beta * v[i]);
     }

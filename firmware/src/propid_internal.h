@@ -344,7 +344,8 @@ static inline uint8_t propid_first_bias(uint8_t rotor_count)
     return (uint8_t)(PROPID_RATE_STATES + 2u * rotor_count);
 }
 
-/* The coefficients' bases (docs/math.md §2, "The coefficients' bases"). The
+/* The coefficients' bases (docs/math.md §2, "The drag coefficients' basis" and
+ * "The thrust coefficients' basis"). The
  * state and P keep each coefficient block in an orthonormal basis whose first
  * elements are the torque combinations the gyro measures best, so those are
  * rounded (and loaded) relative to their own variances instead of the
@@ -360,13 +361,14 @@ static inline uint8_t propid_first_bias(uint8_t rotor_count)
  * matrix is again a row over the same N columns).
  *
  * One reflection H = I - scale v v^T (symmetric, orthogonal, its own inverse)
- * acting on the `count` states from `first` (scale 0: the identity). The general
+ * acting on the `count` states from `first` (v = 0: the identity). The general
  * build derives the vectors at init; the quad build reads the km's from a table
  * in flash by the relative yaw signs (config.yaw_sign_flips: v = (3/2, +-1/2,
- * +-1/2, +-1/2), scale 2/3) and the kf's from its derived data. */
+ * +-1/2, +-1/2), scale 2/3) and the kf's from its derived data (theirs with the
+ * scale folded into v: scale 1). */
 typedef struct {
     const float *vector; /* v, count entries */
-    float scale;         /* 2 / v.v, or 0 */
+    float scale;         /* 2 / v.v (1 for a folded kf vector) */
     uint8_t first;       /* state index of v[0] */
     uint8_t count;
 } propid_reflection_t;

@@ -101,7 +101,7 @@ PROPID_UNROLL(4)
         }
         if (a < 2u) {
             /* The thrust entries times Q^T (Q e = H_1 H_0 e, H = I - w w^T): the row
-             * over the torque-basis states (propid_internal.h, "The coefficients' bases"). */
+             * over the torque-basis states (propid_internal.h, propid_thrust_basis). */
             const float *w = thrust_basis;
             const float along0 = entry[0] * w[0] + entry[1] * w[1] + entry[2] * w[2] + entry[3] * w[3];
 PROPID_UNROLL(4)

@@ -231,7 +231,10 @@ def test_library_floor_bounds_the_shrink_and_does_not_invent_room_on_an_effect_f
     whole library fitted in-sample takes almost nothing (the residual is sensor noise)."""
     _, _, effect = flights("inertia_error", "0.1")
     for axis, v in effect["shrink"].items():
-        assert 0 < v["rms_library_in_sample"] <= min(v["rms_after"], v["rms_before"]) * 1.001, axis
+        # Not a strict bound: the held-out predictions take each fold's own coefficients, which
+        # together can undercut one least-squares fit on all rows by the folds' spread (the roll
+        # axis here: 0.999 of it with the kf loaded per rotor, 1.002 with their torque basis).
+        assert 0 < v["rms_library_in_sample"] <= min(v["rms_after"], v["rms_before"]) * 1.005, axis
     roll = effect["shrink"]["roll"]
     assert 1 - roll["rms_library_in_sample"] / roll["rms_before"] > 0.4
     assert roll["rms_after"] < 1.2 * roll["rms_library_in_sample"]

@@ -246,7 +246,7 @@ typedef struct {
     float update_vector[2][PROPID_MAX_STATES];
     /* Scaled state: body rate [rad/s], kf/kf_nominal in the torque basis (Q kf/kf_nominal),
      * km/km_nominal in the yaw basis (H km/km_nominal; P's coefficient rows too:
-     * propid_internal.h, "The coefficients' bases"), gyro bias [rad/s]. */
+     * propid_internal.h, propid_reflection_t), gyro bias [rad/s]. */
     float state[PROPID_MAX_STATES];
     float cov[PROPID_COV_SIZE];                       /* symmetric, kept in the scaled units: the
                                                          packed upper triangle (propid_cov_index) */
