@@ -3,6 +3,8 @@
  * kf: z = Q kf_rel = H_1 H_0 kf_rel) and per rotor. One reflection H = I - scale
  * v v^T on a block B = P_zz, with u = B v and beta = v . u:
  *   H B H = B - scale (v u^T + u v^T) + scale^2 beta v v^T. */
+#include <math.h>
+
 #include "propid_internal.h"
 
 #if !PROPID_GENERAL_VEHICLES
@@ -238,19 +240,103 @@ void propid_coeff_per_rotor_column(const propid_derived_t *derived, const propid
     propid_reflection_transform(&drag, &column[first_drag]);
 }
 
+/* One per-rotor coefficient back to `prior`, uncorrelated, in the kept basis: with
+ * a = T e_k its direction in the block from `first` (count entries), P := (I - a a^T) P
+ * (I - a a^T) + prior a a^T = P - a u^T - u a^T + (beta + prior) a a^T, u = P a,
+ * beta = a . u: one rank-2 update, each element rounded once (flipping P to per
+ * rotor and back rounded the coefficient rows through every reflection twice, and
+ * left a nearly singular P indefinite). `u`: state_count floats of scratch. */
+static void reset_along(const propid_derived_t *derived, propid_core_t *core, uint8_t first, uint8_t count,
+                        const float *a, float prior, float *u)
+{
+    const uint8_t n = derived->state_count;
+    for (uint8_t j = 0; j < n; ++j) {
+        float sum = 0.0f;
+        for (uint8_t m = 0; m < count; ++m) {
+            sum += propid_cov_at(core->cov, j, (uint8_t)(first + m)) * a[m];
+        }
+        u[j] = sum;
+    }
+    float beta = 0.0f;
+    for (uint8_t m = 0; m < count; ++m) {
+        beta += a[m] * u[first + m];
+    }
+    const float c = beta + prior;
+    /* The update's rounding, a few eps of the magnitudes each element combines,
+     * is covered by a diagonal term that keeps the computed P at least the exact
+     * one's definiteness: an error matrix E is dominated by diag(d) with d_i =
+     * w_i sum_j |E_ij| / w_j for any positive weights (the scaled matrix is then
+     * diagonally dominant); with w_i = sqrt(P'_ii), the updated variance, it is a
+     * few eps times n of each variance, relative, also for the well-determined
+     * combinations a nearly singular P holds (unscaled row sums would re-open
+     * them far beyond their own variance). */
+    float weight[PROPID_MAX_STATES];
+    float *load = core->update_vector[1];
+    for (uint8_t i = 0; i < n; ++i) {
+        const float ai = i >= first && i < first + count ? a[i - first] : 0.0f;
+        const float updated = propid_cov_at(core->cov, i, i) + ai * (c * ai - 2.0f * u[i]);
+        weight[i] = updated > 0.0f ? sqrtf(updated) : 0.0f;
+        load[i] = 0.0f;
+    }
+    for (uint8_t i = 0; i < n; ++i) {
+        const float ai = i >= first && i < first + count ? a[i - first] : 0.0f;
+        float *row = propid_cov_row(core->cov, i);
+        for (uint8_t j = i; j < n; ++j) {
+            const float aj = j >= first && j < first + count ? a[j - first] : 0.0f;
+            if (ai != 0.0f || aj != 0.0f) {
+                const float magnitude = fabsf(c * ai * aj) + fabsf(ai * u[j]) + fabsf(u[i] * aj) + fabsf(row[j]);
+                row[j] += c * ai * aj - ai * u[j] - u[i] * aj;
+                const float error = 4.0f * PROPID_VAR_LOADING * magnitude;
+                if (weight[i] > 0.0f && weight[j] > 0.0f) {
+                    load[i] += error * (weight[i] / weight[j]);
+                    if (j != i) {
+                        load[j] += error * (weight[j] / weight[i]);
+                    }
+                }
+            }
+        }
+    }
+    for (uint8_t i = 0; i < n; ++i) {
+        core->cov[propid_cov_index(i, i)] += load[i];
+    }
+}
+
 void propid_cov_reset_rotor(const propid_derived_t *derived, const propid_kept_config_t *config, propid_core_t *core,
                             uint8_t rotor, int to_nominal)
 {
-    const uint8_t thrust = (uint8_t)(propid_first_thrust() + rotor);
-    const uint8_t drag = (uint8_t)(propid_first_drag(config->rotor_count) + rotor);
-    propid_coeff_flip(derived, config, core, 1);
-    if (to_nominal) {
-        /* With the torque scale the state is g = s kf = kf / r (docs/math.md §9). */
-        const uint8_t scale = derived->layout.torque_scale;
-        core->state[thrust] = PROPID_WITH_ACCEL && scale != PROPID_NO_STATE ? 1.0f / core->state[scale] : 1.0f;
-        core->state[drag] = 1.0f;
+    const uint8_t rotor_count = config->rotor_count;
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, derived, config);
+    const propid_reflection_t drag = propid_drag_basis(derived, config);
+    const uint8_t first_thrust = propid_first_thrust();
+    /* The step's work area, free between calls: u of reset_along. */
+    float *u = core->update_vector[0];
+    for (uint8_t block = 0; block < 2u; ++block) {
+        const uint8_t first = block == 0u ? first_thrust : drag.first;
+        float a[PROPID_MAX_ROTORS]; /* T e_rotor in the block */
+        for (uint8_t m = 0; m < rotor_count; ++m) {
+            a[m] = m == rotor ? 1.0f : 0.0f;
+        }
+        if (block == 0u) {
+            propid_thrust_to_basis(&thrust, a);
+        } else {
+            propid_reflection_transform(&drag, a);
+        }
+        if (to_nominal) {
+            /* The per-rotor value is a . z; moved to its nominal along a. With the
+             * torque scale the thrust state is g = s kf = kf / r (docs/math.md §9). */
+            const uint8_t scale = derived->layout.torque_scale;
+            const float target = block == 0u && PROPID_WITH_ACCEL && scale != PROPID_NO_STATE
+                                     ? 1.0f / core->state[scale]
+                                     : 1.0f;
+            float value = 0.0f;
+            for (uint8_t m = 0; m < rotor_count; ++m) {
+                value += a[m] * core->state[first + m];
+            }
+            for (uint8_t m = 0; m < rotor_count; ++m) {
+                core->state[first + m] += a[m] * (target - value);
+            }
+        }
+        reset_along(derived, core, first, rotor_count, a, propid_prior_var(derived, first), u);
     }
-    propid_cov_reset_state(derived, core, thrust);
-    propid_cov_reset_state(derived, core, drag);
-    propid_coeff_flip(derived, config, core, 0);
 }

@@ -198,8 +198,13 @@ static void test_reset_rotor_touches_only_that_rotor(void)
     const propid_core_t after = per_rotor_core(&filter);
     TEST_ASSERT_FLOAT_WITHIN(1e-6f, 1.0f, after.state[kf]);
     TEST_ASSERT_FLOAT_WITHIN(1e-6f, 1.0f, after.state[km]);
-    TEST_ASSERT_EQUAL_FLOAT(fresh.core.cov[propid_cov_index(kf, kf)], after.cov[propid_cov_index(kf, kf)]);
-    TEST_ASSERT_EQUAL_FLOAT(fresh.core.cov[propid_cov_index(km, km)], after.cov[propid_cov_index(km, km)]);
+    /* The prior, up to the cover of the reset's rounding (propid_coeff_basis.c: a
+     * few eps times n of each variance of the kept basis, relative). */
+    const float kf_prior = fresh.core.cov[propid_cov_index(kf, kf)];
+    const float km_prior = fresh.core.cov[propid_cov_index(km, km)];
+    TEST_ASSERT_FLOAT_WITHIN(1e-4f * kf_prior, kf_prior, after.cov[propid_cov_index(kf, kf)]);
+    TEST_ASSERT_FLOAT_WITHIN(1e-4f * km_prior, km_prior, after.cov[propid_cov_index(km, km)]);
+    TEST_ASSERT_TRUE(after.cov[propid_cov_index(kf, kf)] >= kf_prior * (1.0f - 1e-6f));
     for (uint8_t i = 0; i < states; ++i) {
         if (i != kf && i != km) {
             TEST_ASSERT_FLOAT_WITHIN(1e-6f, before.state[i], after.state[i]);
@@ -208,7 +213,9 @@ static void test_reset_rotor_touches_only_that_rotor(void)
             const int touches = (i == kf || i == km || j == kf || j == km);
             const float scale = sqrtf(before.cov[propid_cov_index(i, i)] * before.cov[propid_cov_index(j, j)]);
             if (!touches) {
-                TEST_ASSERT_FLOAT_WITHIN(1e-5f * scale, before.cov[propid_cov_index(i, j)],
+                /* Unchanged but for the cover of the reset's rounding (a few eps times n
+                 * of the kept basis' variances, relative; 2e-5 here). */
+                TEST_ASSERT_FLOAT_WITHIN(1e-4f * scale, before.cov[propid_cov_index(i, j)],
                                          after.cov[propid_cov_index(i, j)]);
             } else if (i != j) {
                 TEST_ASSERT_FLOAT_WITHIN(1e-5f * scale, 0.0f, after.cov[propid_cov_index(i, j)]);
