@@ -365,6 +365,10 @@ def _fill_empty_fields(body: str) -> str:
 
 def _parse_table(text: str, where: str) -> tuple[list[str], np.ndarray]:
     lines = text.split("\n", 1)
+    if lines[0].startswith("H Product:Blackbox"):
+        # a blackbox's header lines are text, so only its first line tells it from a CSV
+        raise UserError(f"{where}: a Betaflight blackbox log, not a flight-log CSV: convert it first with "
+                        "`propid convert`")
     header = [h.strip() for h in lines[0].strip().lstrip("\ufeff").split(",")]
     if not header or header == [""]:
         raise UserError(f"{where} line 1: empty header (the first line must name the columns)")

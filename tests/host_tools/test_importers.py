@@ -214,6 +214,24 @@ def test_tlog_round_trip(tmp_path):
 
 
 # ----------------------------------------------------------------------------- CSV, detection, CLI
+_BLACKBOX_HEADERS_ONLY = b"H Product:Blackbox flight data recorder by Nicholas Sherlock\nH Data version:2\n"
+
+
+def test_blackbox_cut_in_its_headers_is_a_plain_error(tmp_path):
+    # an SD-card log cut before its first frame: orangebox fails with an internal TypeError
+    path = tmp_path / "cut.bbl"
+    path.write_bytes(_BLACKBOX_HEADERS_ONLY)
+    with pytest.raises(UserError, match="no data frame could be decoded: the log ends in or right after its headers"):
+        import_log(path, "betaflight")
+
+
+def test_blackbox_given_as_flightlog_says_convert_it(tmp_path):
+    path = tmp_path / "flight.csv"
+    path.write_bytes(_BLACKBOX_HEADERS_ONLY + b"H Firmware type:Cleanflight\n")
+    with pytest.raises(UserError, match="a Betaflight blackbox log, not a flight-log CSV: convert it first"):
+        read_flightlog(path)
+
+
 def test_detect_format_rejects_unknown(tmp_path):
     path = tmp_path / "x.bin"
     path.write_bytes(b"\x00" * 64)

@@ -185,7 +185,9 @@ def _decode_log(parser, path: Path, log_index: int | None, progress: bool) -> tu
             rows.append([data[i] for i in wanted])
     except Exception as exc:  # orangebox: RuntimeError on a truncated file, others on corrupt bytes
         if not rows:
-            raise UserError(f"{path} log {log_index}: {type(exc).__name__}: {exc}") from None
+            # orangebox fails on missing headers with internal errors (e.g. a TypeError on a None field count)
+            raise UserError(f"{path} log {log_index}: no data frame could be decoded: the log ends in or right "
+                            f"after its headers, or they are corrupt (orangebox: {type(exc).__name__}: {exc})") from None
         # a truncated or partly corrupt file (power cut): keep the frames decoded so far
     finally:
         if progress:
