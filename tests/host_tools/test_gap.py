@@ -322,6 +322,24 @@ def test_missing_vehicle_fields_are_a_clean_error(tmp_path, capsys):
     assert "yaw_sign" in err and "\n" not in err
 
 
+def test_vehicle_without_inertia_runs_in_unit_inertia_and_says_why_no_filter_check(flights, tmp_path):
+    """gap runs a file without inertia in unit inertia; the firmware check cannot, and says so in
+    gap's terms (the replay's own message advises a replay option gap does not have)."""
+    from propid.cli import main
+
+    log_path, _, _ = flights("none")
+    vehicle = json.loads(log_path.with_name(log_path.stem + ".vehicle.json").read_text())
+    vehicle["inertia"] = None
+    (tmp_path / "v.json").write_text(json.dumps(vehicle))
+    out = tmp_path / "out.json"
+    assert main(["gap", "--log", str(log_path), "--vehicle", str(tmp_path / "v.json"), "--json", str(out),
+                 "--quiet"]) == 0
+    result = json.loads(out.read_text())
+    assert result["inputs"]["inertia"].startswith("unit")
+    assert result["filter"]["error"].startswith("the vehicle file has no inertia")
+    assert "--no-filter" in result["filter"]["error"] and "Run with --unit-inertia" not in result["filter"]["error"]
+
+
 def test_untestable_lists_effects_whose_columns_are_missing():
     from propid.flightlog import FlightLog, Rotor, Vehicle
     from propid.gap.analysis import testable

@@ -126,11 +126,17 @@ def run(args: argparse.Namespace) -> int:
         from propid.gap.filtercheck import filter_before_after
 
         walk = bool(result["calibration"]["calibrated"])  # the chain the calibrated file is meant for
-        try:
-            result["filter"] = filter_before_after(holdout or logs, vehicle, corrected, progress=lambda: progress(1),
-                                                   walk=walk)
-        except UserError as exc:
-            result["filter"] = {"error": str(exc)}
+        if vehicle.inertia is None:
+            # the replay's own error would advise its --unit-inertia option, which gap does not have
+            result["filter"] = {"error": "the vehicle file has no inertia, and the firmware check reads kf in SI "
+                                         "units (`propid replay --unit-inertia` replays such logs for kf/J; "
+                                         "--no-filter skips this check)"}
+        else:
+            try:
+                result["filter"] = filter_before_after(holdout or logs, vehicle, corrected,
+                                                       progress=lambda: progress(1), walk=walk)
+            except UserError as exc:
+                result["filter"] = {"error": str(exc)}
     progress.close()
     if args.vehicle_out:
         write_vehicle(args.vehicle_out, corrected)
