@@ -309,6 +309,24 @@ def test_corrupt_log_is_a_one_line_error(tmp_path, capsys):
     assert "segment" in capsys.readouterr().err
 
 
+def test_json_into_a_missing_directory_is_an_error_before_the_analysis(tmp_path, capsys):
+    from propid.cli import main
+
+    vehicle = tmp_path / "v.json"
+    vehicle.write_text(json.dumps({"name": "q", "mass": 0.03, "inertia": [1.4e-5, 1.4e-5, 2.2e-5],
+                                   "rotors": [{"position": [0.04, 0, 0], "yaw_sign": 1},
+                                              {"position": [0, 0.04, 0], "yaw_sign": -1},
+                                              {"position": [-0.04, 0, 0], "yaw_sign": 1},
+                                              {"position": [0, -0.04, 0], "yaw_sign": -1}]}))
+    log = tmp_path / "a.csv"  # too short to analyse: only the up-front check can answer first
+    log.write_text("t,gyro_x,gyro_y,gyro_z,omega_1,omega_2,omega_3,omega_4\n"
+                   + "".join(f"{k * 0.01},0,0,0,1000,1000,1000,1000\n" for k in range(20)))
+    out = tmp_path / "no_such_dir" / "out.json"
+    assert main(["gap", "--log", str(log), "--vehicle", str(vehicle), "--json", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f"cannot write --json {out}: no directory {out.parent}") and "\n" not in err
+
+
 def test_missing_vehicle_fields_are_a_clean_error(tmp_path, capsys):
     from propid.cli import main
 

@@ -205,6 +205,19 @@ def test_render_markdown_and_png(tmp_path):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_cli_output_into_a_missing_directory_is_a_one_line_error(tmp_path, capsys):
+    from propid.cli import main
+
+    row = table1.aggregate([metrics(synthetic_columns(x_err=0.1234))], DURATION)
+    source = tmp_path / "table1.json"
+    source.write_text(json.dumps({"lissajous": {"filter": row}}))
+    for option in ("--out", "--png"):
+        target = tmp_path / "no_such_dir" / "t.out"
+        assert main(["table1", str(source), option, str(target)]) == 1
+        err = capsys.readouterr().err.strip()
+        assert err.endswith(f"cannot write {option} {target}: no directory {target.parent}") and "\n" not in err
+
+
 FAKE_SITL = """\
 #!{python}
 # Stand-in for propid_sitl: writes a synthetic log whose x error depends on the mode.

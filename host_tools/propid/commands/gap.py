@@ -11,7 +11,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import read_flightlog, read_vehicle, vehicle_path_for, write_vehicle
-from propid.outputs import check_writable
+from propid.outputs import check_writable, write_text
 
 NAME = "gap"
 HELP = ("diagnose the sim-to-real gap: base fit, where the model misses, which unmodelled effect, "
@@ -91,6 +91,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--calibration on needs --vehicle-out (the calibration is of the written file)")
     if args.vehicle_out:
         check_writable(args.vehicle_out, "--vehicle-out")
+    if args.json:  # before the analysis, not after minutes of it
+        check_writable(args.json, "--json")
     if args.vehicle_out and Path(args.vehicle_out).resolve() in {Path(p).resolve() for p in
                                                                  [vehicle_path, *args.log, *args.holdout]}:
         raise UserError(f"--vehicle-out {args.vehicle_out} is one of the input files")
@@ -143,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
     result = _clean(result)
     text = json.dumps(result, indent=1)
     if args.json:
-        Path(args.json).write_text(text + "\n", encoding="utf-8")
+        write_text(args.json, text + "\n")
     if args.report:
         from propid.gap.report import write_report
 

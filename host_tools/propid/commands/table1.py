@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from propid import table1
+from propid.outputs import check_writable, write_text
 
 NAME = "table1"
 HELP = "render Table 1 (table1.json from `propid campaign`) as markdown beside the paper's values"
@@ -20,13 +20,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    for option, value in (("--out", args.out), ("--png", args.png)):
+        if value:
+            check_writable(value, option)
     table = table1.load_table(args.table)
     text = table1.render_markdown(table, with_paper=not args.no_paper)
     bound = table1.render_bound_markdown(table)
     if bound:
         text += "\nConvergence against the Cramér-Rao bound (propid.crlb):\n\n" + bound
     if args.out:
-        Path(args.out).write_text(text, encoding="utf-8")
+        write_text(args.out, text)
         print(f"wrote {args.out}")
     else:
         print(text, end="")
