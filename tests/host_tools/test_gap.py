@@ -327,6 +327,16 @@ def test_json_into_a_missing_directory_is_an_error_before_the_analysis(tmp_path,
     assert err.endswith(f"cannot write --json {out}: no directory {out.parent}") and "\n" not in err
 
 
+def test_help_names_every_highpass_candidate_of_the_rule(capsys):
+    from propid.cli import main
+    from propid.gap.analysis import HIGHPASS_CANDIDATES_HZ
+
+    with pytest.raises(SystemExit):
+        main(["gap", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "lowest of " + "/".join(f"{c:g}" for c in HIGHPASS_CANDIDATES_HZ) + " Hz" in text
+
+
 def test_missing_vehicle_fields_are_a_clean_error(tmp_path, capsys):
     from propid.cli import main
 

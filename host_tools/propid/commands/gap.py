@@ -37,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "instead; off: never")
     parser.add_argument("--highpass", default="auto", metavar="HZ|auto",
                         help="torque axes: slow disturbance torques below this are a nuisance; auto (default): the "
-                             "lowest of 0.2/0.5/1/2 Hz at which the roll/pitch kf no longer depends on the band")
+                             "lowest of 0.2/0.5/1/2/5 Hz at which the roll/pitch kf no longer depends on the band")
     parser.add_argument("--lowpass", type=float, default=25.0, metavar="HZ",
                         help="upper band edge (default 25 Hz, at most a quarter of the sample rate)")
     parser.add_argument("--no-filter", action="store_true",
