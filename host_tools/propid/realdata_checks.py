@@ -33,7 +33,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
-from propid.signals import measured_torque, repeats_previous_row, segments
+from propid.signals import measured_torque, repeats_previous_row, segments, world_to_body
 
 GRAVITY = 9.80665
 
@@ -355,13 +355,7 @@ def _body_velocity(log: FlightLog) -> np.ndarray | None:
     velocity = log.group(("vx", "vy", "vz"))
     if quat is None or velocity is None:
         return None
-    w, x, y, z = quat.T
-    rot = np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-    ], axis=1)  # body -> world
-    body = np.einsum("nji,nj->ni", rot, velocity)
+    body = world_to_body(quat, velocity)
     return np.nan_to_num(body, nan=0.0)
 
 

@@ -24,6 +24,18 @@ def measured_torque(rate: np.ndarray, rate_dot: np.ndarray, inertia: np.ndarray)
     return rate_dot @ inertia.T + np.cross(rate, rate @ inertia.T)
 
 
+def world_to_body(quat: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """World-frame vectors (n, 3) in the body frame, by the attitude quaternions (n, 4; w, x, y, z;
+    body -> world): R^T v per row. NaN rows stay NaN."""
+    w, x, y, z = np.asarray(quat, dtype=float).T
+    rot = np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+    ], axis=1)  # body -> world
+    return np.einsum("nji,nj->ni", rot, vectors)
+
+
 def segments(mask: np.ndarray, min_length: int) -> list[tuple[int, int]]:
     """[start, stop) index ranges of contiguous True runs at least min_length long."""
     edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))

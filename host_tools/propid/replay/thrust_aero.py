@@ -24,7 +24,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
-from propid.signals import segments
+from propid.signals import segments, world_to_body
 
 TERMS = ("climb", "translational")
 VEHICLE_KEYS = MappingProxyType({"climb": "thrust_climb_coeff", "translational": "thrust_translational_coeff"})
@@ -38,13 +38,7 @@ def body_velocity(log: FlightLog) -> np.ndarray | None:
     velocity = log.group(("vx", "vy", "vz"))
     if quat is None or velocity is None:
         return None
-    w, x, y, z = quat.T
-    rot = np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-    ], axis=1)  # body -> world
-    return np.einsum("nji,nj->ni", rot, velocity)
+    return world_to_body(quat, velocity)
 
 
 def regressors(log: FlightLog, rotor_speed: np.ndarray | None = None) -> dict[str, np.ndarray] | None:
