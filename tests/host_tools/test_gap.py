@@ -288,15 +288,21 @@ def test_corrected_vehicle_leaves_a_significant_delay_to_the_per_log_rule(flight
     assert kept.esc_delay_s == 0.01
 
 
-def test_corrupt_log_is_a_one_line_error(tmp_path, capsys):
-    from propid.cli import main
-
+def _plus_quad_vehicle_file(tmp_path):
+    """A small plus quad's vehicle file in tmp_path (for the command-line error tests)."""
     vehicle = tmp_path / "v.json"
     vehicle.write_text(json.dumps({"name": "q", "mass": 0.03, "inertia": [1.4e-5, 1.4e-5, 2.2e-5],
                                    "rotors": [{"position": [0.04, 0, 0], "yaw_sign": 1},
                                               {"position": [0, 0.04, 0], "yaw_sign": -1},
                                               {"position": [-0.04, 0, 0], "yaw_sign": 1},
                                               {"position": [0, -0.04, 0], "yaw_sign": -1}]}))
+    return vehicle
+
+
+def test_corrupt_log_is_a_one_line_error(tmp_path, capsys):
+    from propid.cli import main
+
+    vehicle = _plus_quad_vehicle_file(tmp_path)
     log = tmp_path / "bad.csv"
     log.write_text("t,gyro_x,gyro_y,gyro_z,omega_1,omega_2,omega_3,omega_4\n0,0,0,0,1,1,1,1\n0.1,abc,0,0,1,1,1,1\n")
     assert main(["gap", "--log", str(log), "--vehicle", str(vehicle), "--quiet"]) == 1
@@ -312,12 +318,7 @@ def test_corrupt_log_is_a_one_line_error(tmp_path, capsys):
 def test_json_into_a_missing_directory_is_an_error_before_the_analysis(tmp_path, capsys):
     from propid.cli import main
 
-    vehicle = tmp_path / "v.json"
-    vehicle.write_text(json.dumps({"name": "q", "mass": 0.03, "inertia": [1.4e-5, 1.4e-5, 2.2e-5],
-                                   "rotors": [{"position": [0.04, 0, 0], "yaw_sign": 1},
-                                              {"position": [0, 0.04, 0], "yaw_sign": -1},
-                                              {"position": [-0.04, 0, 0], "yaw_sign": 1},
-                                              {"position": [0, -0.04, 0], "yaw_sign": -1}]}))
+    vehicle = _plus_quad_vehicle_file(tmp_path)
     log = tmp_path / "a.csv"  # too short to analyse: only the up-front check can answer first
     log.write_text("t,gyro_x,gyro_y,gyro_z,omega_1,omega_2,omega_3,omega_4\n"
                    + "".join(f"{k * 0.01},0,0,0,1000,1000,1000,1000\n" for k in range(20)))

@@ -38,6 +38,22 @@ def _band_noise(rng, n, rate, lo, hi, rms):
     return y * rms / y.std()
 
 
+def _hover_log(rng, t, rate, pos, signs, rotor_torque, seen_torque):
+    """A hovering X quad's log: rotor speeds that make rotor_torque (roll, pitch), a gyro that integrates
+    seen_torque, the accelerometer's collective thrust; and its vehicle."""
+    n = t.size
+    to_torque = np.column_stack([pos[:, 1], -pos[:, 0]]).T  # roll, pitch torque per unit kf Omega^2
+    u = MASS * 9.81 / (4 * KF) + (np.linalg.pinv(to_torque) @ (rotor_torque.T / KF)).T
+    rates = np.column_stack([np.cumsum(seen_torque[:, 0] / INERTIA[0, 0]) / rate,
+                             np.cumsum(seen_torque[:, 1] / INERTIA[1, 1]) / rate, np.zeros(n)])
+    extra = {"acc_x": np.zeros(n), "acc_y": np.zeros(n),
+             "acc_z": KF * u.sum(axis=1) / MASS + 0.05 * rng.standard_normal(n), "is_flying": np.ones(n)}
+    log = FlightLog(t=t, gyro=rates + 2e-4 * rng.standard_normal((n, 3)), rotor_speed=np.sqrt(u), extra=extra)
+    vehicle = Vehicle(name="synthetic-x", rotors=[Rotor(tuple(p), int(s)) for p, s in zip(pos, signs)],
+                      mass=MASS, inertia=INERTIA)
+    return log, vehicle
+
+
 def _closed_loop_log(seed: int, cancelled_rms: float, rate: float = 200.0, duration: float = 40.0):
     """An X quad flown with broadband roll/pitch rotor torque (which the gyro sees); the rotors
     also answer a slow (0.2-1.2 Hz) body torque of `cancelled_rms` that they cancel, so the gyro
@@ -51,16 +67,7 @@ def _closed_loop_log(seed: int, cancelled_rms: float, rate: float = 200.0, durat
     rotor = seen.copy()
     if cancelled_rms:
         rotor -= np.column_stack([_band_noise(rng, n, rate, 0.2, 1.2, cancelled_rms) for _ in range(2)])
-    to_torque = np.column_stack([pos[:, 1], -pos[:, 0]]).T  # roll, pitch torque per unit kf Omega^2
-    u = MASS * 9.81 / (4 * KF) + (np.linalg.pinv(to_torque) @ (rotor.T / KF)).T
-    rates = np.column_stack([np.cumsum(seen[:, 0] / INERTIA[0, 0]) / rate,
-                             np.cumsum(seen[:, 1] / INERTIA[1, 1]) / rate, np.zeros(n)])
-    extra = {"acc_x": np.zeros(n), "acc_y": np.zeros(n),
-             "acc_z": KF * u.sum(axis=1) / MASS + 0.05 * rng.standard_normal(n), "is_flying": np.ones(n)}
-    log = FlightLog(t=t, gyro=rates + 2e-4 * rng.standard_normal((n, 3)), rotor_speed=np.sqrt(u), extra=extra)
-    vehicle = Vehicle(name="synthetic-x", rotors=[Rotor(tuple(p), int(s)) for p, s in zip(pos, signs)],
-                      mass=MASS, inertia=INERTIA)
-    return log, vehicle
+    return _hover_log(rng, t, rate, pos, signs, rotor_torque=rotor, seen_torque=seen)
 
 
 def _run(cancelled_rms: float):
@@ -110,16 +117,7 @@ def _reversed_band_log(seed: int, rate: float = 200.0, duration: float = 40.0):
     slow = np.column_stack([_band_noise(rng, n, rate, 0.3, 4.0, 6e-5) for _ in range(2)])
     fast = np.column_stack([_band_noise(rng, n, rate, 5.0, 30.0, 3e-5) for _ in range(2)])
     seen = slow - 0.3 * fast
-    to_torque = np.column_stack([pos[:, 1], -pos[:, 0]]).T
-    u = MASS * 9.81 / (4 * KF) + (np.linalg.pinv(to_torque) @ ((slow + fast).T / KF)).T
-    rates = np.column_stack([np.cumsum(seen[:, 0] / INERTIA[0, 0]) / rate,
-                             np.cumsum(seen[:, 1] / INERTIA[1, 1]) / rate, np.zeros(n)])
-    extra = {"acc_x": np.zeros(n), "acc_y": np.zeros(n),
-             "acc_z": KF * u.sum(axis=1) / MASS + 0.05 * rng.standard_normal(n), "is_flying": np.ones(n)}
-    log = FlightLog(t=t, gyro=rates + 2e-4 * rng.standard_normal((n, 3)), rotor_speed=np.sqrt(u), extra=extra)
-    vehicle = Vehicle(name="synthetic-x", rotors=[Rotor(tuple(p), int(s)) for p, s in zip(pos, signs)],
-                      mass=MASS, inertia=INERTIA)
-    return log, vehicle
+    return _hover_log(rng, t, rate, pos, signs, rotor_torque=slow + fast, seen_torque=seen)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
