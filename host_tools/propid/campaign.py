@@ -28,6 +28,7 @@ from pathlib import Path
 from propid import crlb, table1
 from propid.errors import UserError
 from propid.flightlog import read_vehicle
+from propid.outputs import make_directory, write_text
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 EXIT_DIVERGED = 3  # propid_sitl's exit code for a flight it stopped
@@ -246,7 +247,7 @@ def run_campaigns(configs: list[CampaignConfig], progress: bool = True,
     from tqdm import tqdm
 
     for config in configs:
-        config.out_dir.mkdir(parents=True, exist_ok=True)
+        make_directory(config.out_dir)
     work = [(index, job) for index, config in enumerate(configs) for job in jobs_for(config)]
     records: list[list[dict]] = [[] for _ in configs]
     bar = tqdm(total=len(work), desc=desc, unit="flight", disable=not progress, mininterval=0.5,
@@ -307,8 +308,7 @@ def build_table(config: CampaignConfig, records: list[dict]) -> dict:
 
 
 def write_outputs(out_dir: Path, table: dict) -> None:
-    (out_dir / "table1.json").write_text(json.dumps(table, indent=1, default=str) + "\n",
-                                         encoding="utf-8")
+    write_text(out_dir / "table1.json", json.dumps(table, indent=1, default=str) + "\n")
     conditions = table.get("_conditions", {})
     header = ("# Table 1 (propid SITL campaign)\n\n"
               f"Vehicle {conditions.get('vehicle')}, {conditions.get('trials')} trials per cell, "
@@ -316,5 +316,5 @@ def write_outputs(out_dir: Path, table: dict) -> None:
               f"{conditions.get('base_seed', 0) + conditions.get('trials', 0) - 1}, "
               f"{conditions.get('duration_s')} s flights.\n"
               f"Example flight: `{conditions.get('command_example')}`\n\n")
-    (out_dir / "table1.md").write_text(header + table1.render_markdown(table) + "\n"
-                                       + table1.render_bound_markdown(table), encoding="utf-8")
+    write_text(out_dir / "table1.md", header + table1.render_markdown(table) + "\n"
+               + table1.render_bound_markdown(table))

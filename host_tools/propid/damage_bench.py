@@ -28,6 +28,7 @@ import numpy as np
 from propid import table1
 from propid.campaign import CampaignConfig, Job, sitl_command
 from propid.errors import UserError
+from propid.outputs import make_directory, save_figure, write_text
 
 PRESETS = ("crazyflie-plus", "crazyflie-x")
 # Effects the filter flies with (docs/sitl.md); esc_delay at its default 20 ms is
@@ -304,7 +305,7 @@ def run_bench(config: BenchConfig, progress: bool = True) -> dict:
 
     if not config.sitl.is_file():
         raise UserError(f"{config.sitl}: propid_sitl not found (make host)")
-    config.out_dir.mkdir(parents=True, exist_ok=True)
+    make_directory(config.out_dir)
     specs = flight_specs(config)
     records = []
     bar = tqdm(total=len(specs), desc="damage-bench", unit="flight", disable=not progress,
@@ -325,7 +326,7 @@ def run_bench(config: BenchConfig, progress: bool = True) -> dict:
         bar.close()
     records.sort(key=lambda r: r["spec"]["index"])
     result = summarise(records, config)
-    (config.out_dir / "damage_bench.json").write_text(json.dumps(result, indent=1) + "\n")
+    write_text(config.out_dir / "damage_bench.json", json.dumps(result, indent=1) + "\n")
     return result
 
 
@@ -426,5 +427,7 @@ def render_png(result: dict, path: str | Path) -> None:
     ax2.set_title("Tracking after the damage")
     ax2.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    try:
+        save_figure(fig, path, dpi=120)
+    finally:
+        plt.close(fig)

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from propid.errors import UserError
+from propid.outputs import write_text
 
 ESC_LATENCY_S = 0.001  # propid_sitl's default --esc-latency
 # (effect, its default strength, the filter options that model it, what the term is)
@@ -94,8 +95,7 @@ def run_demo(config: DemoConfig, progress: bool = True) -> dict:
             rows.append({"effect": effect, "strength": strength, "term": term, "options": options, "mode": mode,
                          "off": cell(flights[(effect, mode, False)]), "on": cell(flights[(effect, mode, True)])})
     result = {"definitions": __doc__.strip(), "seeds": config.seeds, "duration_s": config.duration_s, "rows": rows}
-    config.out_dir.mkdir(parents=True, exist_ok=True)
-    (config.out_dir / "effects_demo.json").write_text(json.dumps(result, indent=2) + "\n")
+    write_text(config.out_dir / "effects_demo.json", json.dumps(result, indent=2) + "\n")
     return result
 
 

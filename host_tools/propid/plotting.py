@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from propid.errors import UserError
+from propid.outputs import save_figure
 from propid.units import FRD_TO_FLU
 
 # Files bigger than this get a progress bar while they are read.
@@ -331,10 +332,7 @@ def plot_flight(flight: FlightData, out: str | os.PathLike, title: str | None = 
     fig.suptitle(heading, fontsize=10)
     fig.tight_layout()
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=dpi)
-    except OSError as exc:
-        raise UserError(f"cannot write {out}: {exc}") from exc
+        save_figure(fig, out, dpi=dpi)
     finally:
         plt.close(fig)
     return out
@@ -375,8 +373,10 @@ def plot_replay(result, path: str, title: str = "", reference_kf: float | None =
     if title:
         axes[0].set_title(title, fontsize=9)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    try:
+        save_figure(fig, path)
+    finally:
+        plt.close(fig)
 
 def plot_fleet(summaries: list[dict], path: str, reference_kf: float, dpi: int = 80) -> None:
     """Bar chart per run: the filter's kf and the least-squares checks, relative to the
@@ -408,6 +408,8 @@ def plot_fleet(summaries: list[dict], path: str, reference_kf: float, dpi: int =
     ax.legend(fontsize=7, ncol=4, loc="upper center")
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    try:
+        save_figure(fig, path)
+    finally:
+        plt.close(fig)
 

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from propid.errors import UserError
+from propid.outputs import write_text
 
 # The disturbance states' bandwidth of the band modes [Hz], fixed before their first run here: the lower edge of
 # the band where the instrumented torque fits of these logs agree between runs (a run-to-run criterion, not the
@@ -306,8 +307,7 @@ def run_real_data(config: RealDataConfig, progress: bool = True) -> dict:
                    "runs": per_mode[name]} for name, what, fields in modes + calibrated],
         "calibrations": calibrations,
     }
-    config.out_dir.mkdir(parents=True, exist_ok=True)
-    (config.out_dir / "real_data.json").write_text(json.dumps(result, indent=2) + "\n")
+    write_text(config.out_dir / "real_data.json", json.dumps(result, indent=2) + "\n")
     return result
 
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
+from propid.outputs import save_figure
 from propid.signals import measured_torque, repeats_previous_row, segments, world_to_body
 
 GRAVITY = 9.80665
@@ -680,5 +681,7 @@ def plot_band_evidence(checks: list[dict], names: list[str], path: str, referenc
         axes[1].plot([], [], color=v, label=k)
     axes[1].legend(fontsize=7, loc="lower left")
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    try:
+        save_figure(fig, path)
+    finally:
+        plt.close(fig)

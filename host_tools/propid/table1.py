@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from propid.errors import UserError
+from propid.outputs import save_figure
 
 TRAJECTORIES = ("lissajous", "circle", "step")
 MODES = ("oracle", "incorrect", "filter")
@@ -391,5 +392,7 @@ def render_png(table: dict, path: str | Path, with_paper: bool = True) -> None:
     title = "Table 1: ours (paper)" if with_paper else "Table 1"
     ax.set_title(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
+    try:
+        save_figure(fig, path, dpi=150)
+    finally:
+        plt.close(fig)

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from propid import table1
 from propid.campaign import CampaignConfig, run_campaigns
+from propid.outputs import write_text
 
 QUAD_PRESETS = ("crazyflie-plus", "crazyflie-x")
 MULTI_PRESETS = ("hexa-plus", "hexa-x", "octo-plus", "octo-x")
@@ -52,8 +53,7 @@ def run_extended(base: CampaignConfig, plan: list[tuple[str, tuple[str, ...]]],
         out.setdefault("_conditions", {"presets": {}, "null_dither_multirotors": null_dither})[
             "presets"][preset] = conditions
     out["_checks"] = checks(out)
-    base.out_dir.mkdir(parents=True, exist_ok=True)
-    (base.out_dir / "table1_extended.json").write_text(json.dumps(out, indent=1, default=str) + "\n")
+    write_text(base.out_dir / "table1_extended.json", json.dumps(out, indent=1, default=str) + "\n")
     return out
 
 

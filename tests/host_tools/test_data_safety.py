@@ -71,9 +71,10 @@ def test_log_without_data_keeps_existing_outputs(tmp_path, capsys):
 
 
 def test_log_unwritable_output_fails_before_listening(tmp_path, capsys):
+    (tmp_path / "no").write_text("a file where the directory should be\n")
     code = cli.main(["log", "--connect", f"udp:127.0.0.1:{free_udp_port()}", "--tlog",
                      str(tmp_path / "no" / "dir.tlog"), "--timeout", "30"])
-    assert code == 1 and "no directory" in capsys.readouterr().err
+    assert code == 1 and "is not a directory" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("url, words", [("foo:bar", ("bad connection", "foo:bar")),
@@ -211,8 +212,9 @@ def test_replay_rejects_bad_flag_combinations_before_any_replay(small_flight, tm
     assert time.monotonic() - start < 30 and not out.exists()
     one_line_error(run_propid("replay", "--log", str(small_flight), "--plot", str(tmp_path / "p.jpg")), "PNG")
     one_line_error(run_propid("replay", "--log", str(small_flight), str(tmp_path / "absent.csv")), "absent.csv")
+    (tmp_path / "nodir").write_text("a file where the directory should be\n")
     one_line_error(run_propid("replay", "--log", str(small_flight), "--json", str(tmp_path / "nodir" / "o.json")),
-                   "no directory")
+                   "is not a directory")
 
 
 def test_replay_prints_a_rotor_table_and_json_only_where_asked(small_flight, tmp_path):

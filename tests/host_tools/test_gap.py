@@ -315,17 +315,17 @@ def test_corrupt_log_is_a_one_line_error(tmp_path, capsys):
     assert "segment" in capsys.readouterr().err
 
 
-def test_json_into_a_missing_directory_is_an_error_before_the_analysis(tmp_path, capsys):
+def test_json_under_a_file_is_an_error_before_the_analysis(tmp_path, capsys):
     from propid.cli import main
 
     vehicle = _plus_quad_vehicle_file(tmp_path)
     log = tmp_path / "a.csv"  # too short to analyse: only the up-front check can answer first
     log.write_text("t,gyro_x,gyro_y,gyro_z,omega_1,omega_2,omega_3,omega_4\n"
                    + "".join(f"{k * 0.01},0,0,0,1000,1000,1000,1000\n" for k in range(20)))
-    out = tmp_path / "no_such_dir" / "out.json"
+    out = log / "out.json"  # a missing directory would be created; a file in the way cannot be
     assert main(["gap", "--log", str(log), "--vehicle", str(vehicle), "--json", str(out), "--quiet"]) == 1
     err = capsys.readouterr().err.strip()
-    assert err.endswith(f"cannot write --json {out}: no directory {out.parent}") and "\n" not in err
+    assert err.endswith(f"cannot write --json {out}: {log} is not a directory") and "\n" not in err
 
 
 def test_help_names_every_highpass_candidate_of_the_rule(capsys):

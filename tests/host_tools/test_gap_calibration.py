@@ -169,8 +169,8 @@ def test_bad_calibration_arguments_are_one_line_errors(flights, tmp_path, capsys
     assert main(["gap", "--log", str(fit), "--vehicle-out", str(fit), "--quiet"]) == 1
     err = capsys.readouterr().err.strip()
     assert "input" in err and "\n" not in err
-    assert main(["gap", "--log", str(fit), "--vehicle-out", str(tmp_path / "no" / "dir.json"), "--quiet"]) == 1
-    assert "no directory" in capsys.readouterr().err
+    assert main(["gap", "--log", str(fit), "--vehicle-out", str(fit / "dir.json"), "--quiet"]) == 1
+    assert "is not a directory" in capsys.readouterr().err
 
 
 def test_reference_std_is_the_filters_own_per_log_std_combined_over_logs():

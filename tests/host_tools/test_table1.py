@@ -205,17 +205,17 @@ def test_render_markdown_and_png(tmp_path):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_cli_output_into_a_missing_directory_is_a_one_line_error(tmp_path, capsys):
+def test_cli_output_under_a_file_is_a_one_line_error(tmp_path, capsys):
     from propid.cli import main
 
     row = table1.aggregate([metrics(synthetic_columns(x_err=0.1234))], DURATION)
     source = tmp_path / "table1.json"
     source.write_text(json.dumps({"lissajous": {"filter": row}}))
     for option in ("--out", "--png"):
-        target = tmp_path / "no_such_dir" / "t.out"
+        target = source / "t.png"  # a missing directory would be created; a file in the way cannot be
         assert main(["table1", str(source), option, str(target)]) == 1
         err = capsys.readouterr().err.strip()
-        assert err.endswith(f"cannot write {option} {target}: no directory {target.parent}") and "\n" not in err
+        assert err.endswith(f"cannot write {option} {target}: {source} is not a directory") and "\n" not in err
 
 
 FAKE_SITL = """\

@@ -10,6 +10,7 @@ from pathlib import Path
 from propid import table1
 from propid.campaign import CampaignConfig, locate_sitl, run_campaign
 from propid.errors import UserError
+from propid.outputs import check_directory
 
 NAME = "campaign"
 HELP = "fly the paper's experiment in the SITL (3 trajectories x 3 modes x N seeds) and write Table 1"
@@ -77,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--duration must be positive")
     if not args.prior_rate_std >= 0:
         raise UserError("--prior-rate-std must be positive (or 0 for the library's)")
+    check_directory(args.out, "--out")
     config = CampaignConfig(
         out_dir=Path(args.out).resolve(),
         sitl=locate_sitl(args.sitl),

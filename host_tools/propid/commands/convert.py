@@ -43,8 +43,7 @@ def check_output(out: Path, input_path: Path) -> None:
         raise UserError(f"--out {out}: a directory, give a file name")
     if out.suffix.lower() != ".csv":
         raise UserError(f"--out {out}: flight-log v1 is a .csv file")
-    if out.parent.is_dir():  # a missing directory is created
-        check_writable(out, "--out")
+    check_writable(out, "--out")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -72,7 +71,6 @@ def run(args: argparse.Namespace) -> int:
         listing = ", ".join(f"{entry['index']} ({entry['bytes'] / 1e6:.2f} MB)" for entry in info.get("logs", []))
         print(f"note: {input_path} holds {info['log_count']} logs: {listing}; converted log 1 "
               "(give --log-index K for another)", file=sys.stderr)
-    out.parent.mkdir(parents=True, exist_ok=True)
     write_flightlog(out, log)
     if vehicle is not None and vehicle.path is not None:
         target = vehicle_path_for(out)

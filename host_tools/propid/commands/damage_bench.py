@@ -8,6 +8,7 @@ from pathlib import Path
 from propid import damage_bench
 from propid.campaign import locate_sitl
 from propid.errors import UserError
+from propid.outputs import check_directory, check_figure
 
 NAME = "damage-bench"
 HELP = ("fly randomized damaged (and undamaged) SITL flights with the damage detector; "
@@ -37,6 +38,9 @@ def run(args: argparse.Namespace) -> int:
     if args.damaged < 1 or args.undamaged < 0 or not args.duration > 5.0:
         raise UserError("need >= 1 damaged flight, >= 0 undamaged and a duration above 5 s "
                         "(damages fall between 2 and 5.5 s)")
+    check_directory(args.out, "--out")
+    if args.png:
+        check_figure(args.png, "--png")
     config = damage_bench.BenchConfig(
         sitl=Path(args.sitl) if args.sitl else locate_sitl(None), out_dir=Path(args.out),
         damaged=args.damaged, undamaged=args.undamaged, duration_s=args.duration,

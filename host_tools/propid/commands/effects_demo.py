@@ -8,6 +8,7 @@ from pathlib import Path
 from propid import effects_demo
 from propid.campaign import locate_sitl
 from propid.errors import UserError
+from propid.outputs import check_directory
 
 NAME = "effects-demo"
 HELP = ("fly SITL flights with com_offset, rotor_drag, rotor_inertia, esc_delay, the filter's matching "
@@ -33,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--effects: unknown {', '.join(unknown) or '(empty)'}; choose from {', '.join(sorted(known))}")
     if args.seeds < 1 or not args.duration > 0:
         raise UserError("--seeds must be >= 1 and --duration positive")
+    check_directory(args.out, "--out")
     config = effects_demo.DemoConfig(sitl=Path(args.sitl) if args.sitl else locate_sitl(None), out_dir=Path(args.out),
                                      seeds=args.seeds, duration_s=args.duration, cases=cases)
     result = effects_demo.run_demo(config, progress=not args.no_progress)

@@ -13,6 +13,7 @@ from propid.errors import UserError
 from propid.gapbench.magnitudes import EFFECTS
 from propid.gapbench.runner import SINGLE_THREADED_BLAS, BenchConfig, default_tool_command, run_bench
 from propid.gapbench.table import render
+from propid.outputs import check_directory, check_writable
 
 NAME = "gap-bench"
 HELP = ("blind benchmark of `propid gap`: SITL flights with known effects, answer key apart, "
@@ -70,6 +71,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--duration must be at least 4 s")
     if args.workers < 1:
         raise UserError("--workers must be at least 1")
+    check_directory(args.out, "--out")
+    check_writable(args.result, "--result")
     tool = None if args.no_tool else (shlex.split(args.tool_command) if args.tool_command
                                       else default_tool_command())
     config = BenchConfig(

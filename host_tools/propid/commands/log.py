@@ -12,7 +12,7 @@ from pathlib import Path
 
 from propid import mavlink_io
 from propid.errors import UserError
-from propid.outputs import check_writable
+from propid.outputs import check_writable, make_parents
 
 NAME = "log"
 HELP = "record MAVLink telemetry to a .tlog (raw frames) and/or a CSV of the estimates"
@@ -45,9 +45,9 @@ class Recorder:
     they were (a failed `propid log` must not wipe yesterday's recording)."""
 
     def __init__(self, tlog: Path | None, csv_path: Path | None):
-        for path in (tlog, csv_path):
+        for path, option in ((tlog, "--tlog"), (csv_path, "--csv")):
             if path is not None:
-                check_writable(path)
+                check_writable(path, option)
         self.tlog_path = tlog
         self.tlog = None
         self.csv_path = csv_path
@@ -62,6 +62,9 @@ class Recorder:
         self.by_type: dict[str, int] = {}
 
     def _open(self) -> None:
+        for path in (self.tlog_path, self.csv_path):
+            if path is not None:
+                make_parents(path)
         if self.tlog_path is not None:
             self.tlog = mavlink_io.TlogWriter(self.tlog_path)
         if self.csv_path is not None:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from propid.errors import UserError
 from propid.flightlog import read_vehicle
+from propid.outputs import check_writable, write_text
 
 NAME = "observability"
 HELP = ("symbolic Lie-derivative observability rank of the filter's model (sympy) for a vehicle "
@@ -32,13 +32,12 @@ def run(args: argparse.Namespace) -> int:
     if "gyro" not in measurements:
         raise UserError(f"--measure: the filter always has the gyro; expected gyro or gyro,accel, "
                         f"got {args.measure!r}")
+    if args.json:  # before the symbolic work, not after it
+        check_writable(args.json, "--json")
     vehicle = read_vehicle(args.vehicle)
     result = observability.analyse(vehicle, measurements, max_order=args.max_order)
     print(observability.render_text(result), end="")
     if args.json:
-        try:
-            Path(args.json).write_text(json.dumps(result.to_json(), indent=2) + "\n", encoding="utf-8")
-        except OSError as exc:
-            raise UserError(f"cannot write {args.json}: {exc.strerror or exc}") from None
+        write_text(args.json, json.dumps(result.to_json(), indent=2) + "\n")
         print(f"wrote {args.json}")
     return 0

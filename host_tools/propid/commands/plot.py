@@ -8,6 +8,7 @@ from pathlib import Path
 
 from propid import plotting
 from propid.errors import UserError
+from propid.outputs import check_writable
 
 NAME = "plot"
 HELP = "plot coefficient estimates (+-1 sigma, truth when known), rotor speeds and body rates to a PNG"
@@ -34,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--dpi {args.dpi}: choose 20..1200")
     if args.summary is not None and not args.summary.is_file():
         raise UserError(f"--summary {args.summary}: no such file")
+    check_writable(args.out, "--out")
     flight = plotting.load_flight(args.log)
     if args.summary is not None:
         flight.context.update(plotting.run_context(args.log, args.summary))

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from propid import real_data
 from propid.errors import UserError
+from propid.outputs import check_directory
 
 NAME = "real-data"
 HELP = ("replay every log of a real-data directory in each mode of the filter's optional terms; "
@@ -37,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"real-data: skipped, {data} not found (the real logs are not distributed with the repository)")
             return 0
         raise UserError(f"--data {data}: no such directory")
+    check_directory(args.out, "--out")
     if args.vehicle:
         vehicle = Path(args.vehicle)
     else:
@@ -82,7 +84,6 @@ def _thrust_evidence(data: Path, vehicle_path: Path, args: argparse.Namespace) -
     print(f"slope kf over the reference {args.reference_kf:.3g} (display only); {len(logs)} runs")
     print(render_evidence(entries), end="")
     out = Path(args.out) / "thrust_evidence.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_text(str(out), json.dumps(entries, indent=2) + "\n")
+    write_text(out, json.dumps(entries, indent=2) + "\n")
     print(f"wrote {out}")
     return 0

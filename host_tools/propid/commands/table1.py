@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from propid import table1
-from propid.outputs import check_writable, write_text
+from propid.outputs import check_figure, check_writable, write_text
 
 NAME = "table1"
 HELP = "render Table 1 (table1.json from `propid campaign`) as markdown beside the paper's values"
@@ -20,9 +20,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    for option, value in (("--out", args.out), ("--png", args.png)):
-        if value:
-            check_writable(value, option)
+    if args.out:
+        check_writable(args.out, "--out")
+    if args.png:
+        check_figure(args.png, "--png")
     table = table1.load_table(args.table)
     text = table1.render_markdown(table, with_paper=not args.no_paper)
     bound = table1.render_bound_markdown(table)

@@ -8,6 +8,7 @@ from pathlib import Path
 from propid import table1_extended
 from propid.campaign import CampaignConfig, locate_sitl
 from propid.errors import UserError
+from propid.outputs import check_directory
 
 NAME = "table1-extended"
 HELP = ("Table 1 per vehicle preset: quads in all modes, hexa/octo in Filter and Oracle; "
@@ -39,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--trials must be >= 1 and --duration positive")
     if not 0.0 <= args.null_dither <= 0.5:
         raise UserError("--null-dither must be within [0, 0.5]")
+    check_directory(args.out, "--out")
     presets = None
     if args.presets:
         presets = tuple(name.strip() for name in args.presets.split(",") if name.strip())

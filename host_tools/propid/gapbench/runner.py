@@ -26,6 +26,7 @@ from propid.gapbench.flights import FlightMaker, clear
 from propid.gapbench.magnitudes import DETECTABILITY_MAX, DETECTION_LIMIT, EFFECT_RANGES
 from propid.gapbench.plan import FlightSpec, make_plan
 from propid.gapbench.scoring import score_flight, summarize
+from propid.outputs import make_directory, write_text
 
 
 # The bench already runs one flight per core; a multi-threaded BLAS on top of that spins
@@ -122,7 +123,7 @@ def run_flight(config: BenchConfig, spec: FlightSpec, with_tool: bool) -> dict:
 
 def run_bench(config: BenchConfig, progress: bool = True) -> dict:
     start = time.monotonic()
-    config.out_dir.mkdir(parents=True, exist_ok=True)
+    make_directory(config.out_dir)
     clear(config.out_dir)
     plan = make_plan(config.seed, config.singles_per_effect, config.pairs, config.nones,
                      config.duration_s, effects=config.effects)
@@ -198,6 +199,5 @@ def run_bench(config: BenchConfig, progress: bool = True) -> dict:
             "tool_per_flight_median": sorted(tool_walls)[len(tool_walls) // 2] if tool_walls else None,
         },
     }
-    config.result_path.parent.mkdir(parents=True, exist_ok=True)
-    config.result_path.write_text(json.dumps(result, indent=1) + "\n", encoding="utf-8")
+    write_text(config.result_path, json.dumps(result, indent=1) + "\n")
     return result
