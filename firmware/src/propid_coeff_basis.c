@@ -22,22 +22,65 @@ __attribute__((noinline)) void propid_reflection_transform(const propid_reflecti
     propid_reflection_apply(basis, x);
 }
 
-/* u = B v over the reflection's packed block, and beta = v . u. */
-static float block_times_basis(const propid_reflection_t *basis, const float *cov, float *u)
+/* u = B v for the count x count block B of P from state `first`, and v . u: each
+ * u_i = sum_j B_ij v_j in j order, B_ij read down column first + i above the
+ * diagonal and along row first + i from it (the packed triangle walked by pointer,
+ * not indexed element by element). */
+static float block_times(const float *cov, uint8_t first, uint8_t count, const float *v, float *u)
 {
-    const uint8_t count = basis->count;
-    const uint8_t first = basis->first;
-    const float *v = basis->vector;
+    const float *block_row = propid_cov_row_const(cov, first); /* row `first`: P_(first)c at [c] */
     float beta = 0.0f;
     for (uint8_t i = 0; i < count; ++i) {
+        const uint8_t column = (uint8_t)(first + i);
         float sum = 0.0f;
-        for (uint8_t j = 0; j < count; ++j) {
-            sum += propid_cov_at(cov, (uint8_t)(first + i), (uint8_t)(first + j)) * v[j];
+        const float *above = block_row + column; /* P_(first)(column), then down the column */
+        for (uint8_t j = 0; j < i; ++j) {
+            sum += *above * v[j];
+            above += PROPID_MAX_STATES - 1u - (uint32_t)(first + j);
+        }
+        const float *row = propid_cov_row_const(cov, column);
+        for (uint8_t j = i; j < count; ++j) {
+            sum += row[first + j] * v[j];
         }
         u[i] = sum;
         beta += v[i] * sum;
     }
     return beta;
+}
+
+#if PROPID_MAX_ROTORS >= 4
+/* The same for a quad's block (count 4), its loops unrolled: the same sums in the
+ * same order. */
+static float block_times_quad(const float *cov, uint8_t first, const float *v, float *u)
+{
+    const float *block_row = propid_cov_row_const(cov, first);
+    float beta = 0.0f;
+    PROPID_UNROLL(4)
+    for (uint8_t i = 0; i < 4u; ++i) {
+        const uint8_t column = (uint8_t)(first + i);
+        float sum = 0.0f;
+        const float *above = block_row + column;
+        PROPID_UNROLL(3)
+        for (uint8_t j = 0; j < i; ++j) {
+            sum += *above * v[j];
+            above += PROPID_MAX_STATES - 1u - (uint32_t)(first + j);
+        }
+        const float *row = propid_cov_row_const(cov, column);
+        PROPID_UNROLL(4)
+        for (uint8_t j = i; j < 4u; ++j) {
+            sum += row[first + j] * v[j];
+        }
+        u[i] = sum;
+        beta += v[i] * sum;
+    }
+    return beta;
+}
+#endif
+
+/* u = B v over the reflection's packed block, and beta = v . u. */
+static float block_times_basis(const propid_reflection_t *basis, const float *cov, float *u)
+{
+    return block_times(cov, basis->first, basis->count, basis->vector, u);
 }
 
 void propid_reflection_flip_column(const propid_reflection_t *basis, propid_core_t *core, uint8_t column_index)
@@ -100,7 +143,13 @@ void propid_drag_per_rotor(const propid_reflection_t *basis, const propid_core_t
     const float *v = basis->vector;
     const float scale = basis->scale;
     float u[PROPID_MAX_ROTORS];
+#if PROPID_MAX_ROTORS >= 4
+    /* (the quad build: always 4 rotors) */
+    const float beta = PROPID_GENERAL_VEHICLES && count != 4u ? block_times_basis(basis, core->cov, u)
+                                                              : block_times_quad(core->cov, first, v, u);
+#else
     const float beta = block_times_basis(basis, core->cov, u);
+#endif
     for (uint8_t i = 0; i < count; ++i) {
         const uint8_t k = (uint8_t)(first + i);
         km_var[i] = propid_cov_at(core->cov, k, k) - scale * v[i] * (2.0f * u[i] - scale * beta * v[i]);
@@ -151,6 +200,101 @@ void propid_coeff_flip(const propid_derived_t *derived, const propid_kept_config
     propid_reflection_flip(&drag, core);
 }
 
+#if PROPID_MAX_ROTORS >= 4
+/* diag(Q^T B Q) for a quad, B the kf block of P: kf_rel_i = a_i . z with a_i = Q e_i,
+ * variance a_i^T B a_i = sum_j a_ij (sum_k B_jk a_ik). The four a_i are built side by
+ * side (column[k][i] = (a_i)_k) by the operations propid_thrust_to_basis does on
+ * e_i, in the same order, and each element of B is loaded once for all four, in
+ * the same order of sums as one a_i at a time (thrust_variances_any): the same
+ * bits, without mapping each e_i through both reflections and reading all of B
+ * again for it (docs/performance.md, "The estimate's per-rotor variances"). */
+static __attribute__((noinline)) void thrust_variances_quad(const propid_thrust_basis_t *basis, const float *cov,
+                                                            float *var)
+{
+    const uint8_t first = propid_first_thrust();
+    float column[4][4];
+    /* H_0 e_i = e_i - w_i w (w = vector[0]): the reflection's dot product of w with
+     * e_i is w_i exactly (its other terms are zeros; a zero w_i gives a zero
+     * product either way). */
+    const float *w = basis->vector[0];
+    PROPID_UNROLL(4)
+    for (uint8_t k = 0; k < 4u; ++k) {
+        PROPID_UNROLL(4)
+        for (uint8_t i = 0; i < 4u; ++i) {
+            column[k][i] = (k == i ? 1.0f : 0.0f) - w[i] * w[k];
+        }
+    }
+    /* H_1 on elements 1..3 of every column. */
+    float dot[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+    w = basis->vector[1] - 1; /* w[k]: element k's entry */
+    PROPID_UNROLL(3)
+    for (uint8_t k = 1; k < 4u; ++k) {
+        PROPID_UNROLL(4)
+        for (uint8_t i = 0; i < 4u; ++i) {
+            dot[i] += w[k] * column[k][i];
+        }
+    }
+    PROPID_UNROLL(3)
+    for (uint8_t k = 1; k < 4u; ++k) {
+        PROPID_UNROLL(4)
+        for (uint8_t i = 0; i < 4u; ++i) {
+            column[k][i] -= dot[i] * w[k];
+        }
+    }
+    const float *block_row = propid_cov_row_const(cov, first); /* P_(first)c at [c] */
+    PROPID_UNROLL(4)
+    for (uint8_t i = 0; i < 4u; ++i) {
+        var[i] = 0.0f;
+    }
+    PROPID_UNROLL(4)
+    for (uint8_t j = 0; j < 4u; ++j) {
+        float sum[4] = {0.0f, 0.0f, 0.0f, 0.0f}; /* (B a_i)_j for every i */
+        const float *above = block_row + first + j; /* B_kj, k < j: down column first + j */
+        PROPID_UNROLL(3)
+        for (uint8_t k = 0; k < j; ++k) {
+            const float b = *above;
+            PROPID_UNROLL(4)
+            for (uint8_t i = 0; i < 4u; ++i) {
+                sum[i] += b * column[k][i];
+            }
+            above += PROPID_MAX_STATES - 1u - (uint32_t)(first + k);
+        }
+        const float *row = propid_cov_row_const(cov, (uint8_t)(first + j)); /* B_jk, k >= j */
+        PROPID_UNROLL(4)
+        for (uint8_t k = j; k < 4u; ++k) {
+            const float b = row[first + k];
+            PROPID_UNROLL(4)
+            for (uint8_t i = 0; i < 4u; ++i) {
+                sum[i] += b * column[k][i];
+            }
+        }
+        PROPID_UNROLL(4)
+        for (uint8_t i = 0; i < 4u; ++i) {
+            var[i] += column[j][i] * sum[i];
+        }
+    }
+}
+#endif
+
+#if PROPID_GENERAL_VEHICLES
+/* The same for any rotor count, one rotor at a time: a_i = Q e_i through both
+ * reflections, then a_i^T B a_i. */
+static __attribute__((noinline)) void thrust_variances_any(const propid_thrust_basis_t *basis, const float *cov,
+                                                           float *var)
+{
+    const uint8_t count = basis->rotor_count;
+    for (uint8_t i = 0; i < count; ++i) {
+        float a[PROPID_MAX_ROTORS];
+        float u[PROPID_MAX_ROTORS];
+        for (uint8_t j = 0; j < count; ++j) {
+            a[j] = j == i ? 1.0f : 0.0f;
+        }
+        propid_thrust_to_basis(basis, a);
+        var[i] = block_times(cov, propid_first_thrust(), count, a, u);
+    }
+}
+#endif
+
 void propid_thrust_per_rotor(const propid_thrust_basis_t *basis, const propid_core_t *core, float *kf_rel,
                              float *kf_var)
 {
@@ -163,23 +307,15 @@ void propid_thrust_per_rotor(const propid_thrust_basis_t *basis, const propid_co
     if (kf_var == NULL) {
         return;
     }
-    /* kf_rel_i = a_i . z with a_i = Q e_i: variance a_i^T P_zz a_i. */
-    for (uint8_t i = 0; i < rotor_count; ++i) {
-        float a[PROPID_MAX_ROTORS];
-        for (uint8_t j = 0; j < rotor_count; ++j) {
-            a[j] = j == i ? 1.0f : 0.0f;
-        }
-        propid_thrust_to_basis(basis, a);
-        float var = 0.0f;
-        for (uint8_t j = 0; j < rotor_count; ++j) {
-            float sum = 0.0f;
-            for (uint8_t k = 0; k < rotor_count; ++k) {
-                sum += propid_cov_at(core->cov, (uint8_t)(first + j), (uint8_t)(first + k)) * a[k];
-            }
-            var += a[j] * sum;
-        }
-        kf_var[i] = var;
+#if PROPID_GENERAL_VEHICLES
+    if (PROPID_MAX_ROTORS < 4 || rotor_count != 4u) {
+        thrust_variances_any(basis, core->cov, kf_var);
+        return;
     }
+#endif
+#if PROPID_MAX_ROTORS >= 4
+    thrust_variances_quad(basis, core->cov, kf_var); /* (the quad build: always 4 rotors) */
+#endif
 }
 
 /* P_jk for every j < state_count: down column k to the diagonal, then along row k. */

@@ -792,6 +792,83 @@ static void test_coefficients_are_clamped(void)
     TEST_ASSERT_TRUE(counters.state_clamps >= 2u);
 }
 
+/* The per-rotor variances of the estimate (propid_thrust_per_rotor,
+ * propid_drag_per_rotor: the quad's columns side by side, B read once) against
+ * one rotor at a time written out plainly, a_i = Q e_i through both reflections
+ * (H e_i for the km) and every B element read by index: the same bits, for
+ * uneven quads, a hexa and an octo, on a block of unrelated values. */
+static void check_per_rotor_variances(uint8_t rotors, float first_angle, uint32_t seed)
+{
+    propid_config_t config;
+    test_vehicle_config(&config, rotors, 0.17f, first_angle);
+    rng_t rng = {seed};
+    /* An uneven frame, so that the bases' entries are not the few exact values of a
+     * symmetric one (their sums would then be exact in any order). */
+    for (uint8_t i = 0; i < rotors; ++i) {
+        config.rotor[i].position_m[0] *= rng_uniform(&rng, 0.8f, 1.2f);
+        config.rotor[i].position_m[1] *= rng_uniform(&rng, 0.8f, 1.2f);
+        config.rotor[i].thrust_coeff_nominal *= rng_uniform(&rng, 0.8f, 1.2f);
+    }
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    for (uint32_t k = 0; k < PROPID_COV_SIZE; ++k) {
+        filter.core.cov[k] = rng_uniform(&rng, -1.0f, 1.0f);
+    }
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter.derived, &filter.config);
+    const propid_reflection_t drag = propid_drag_basis(&filter.derived, &filter.config);
+    float kf_rel[PROPID_MAX_ROTORS];
+    float kf_var[PROPID_MAX_ROTORS];
+    float km_rel[PROPID_MAX_ROTORS];
+    float km_var[PROPID_MAX_ROTORS];
+    propid_thrust_per_rotor(&thrust, &filter.core, kf_rel, kf_var);
+    propid_drag_per_rotor(&drag, &filter.core, km_rel, km_var);
+    const uint8_t first = propid_first_thrust();
+    for (uint8_t i = 0; i < rotors; ++i) {
+        float a[PROPID_MAX_ROTORS];
+        for (uint8_t j = 0; j < rotors; ++j) {
+            a[j] = j == i ? 1.0f : 0.0f;
+        }
+        propid_thrust_to_basis(&thrust, a);
+        float var = 0.0f;
+        for (uint8_t j = 0; j < rotors; ++j) {
+            float sum = 0.0f;
+            for (uint8_t k = 0; k < rotors; ++k) {
+                sum += propid_cov_at(filter.core.cov, (uint8_t)(first + j), (uint8_t)(first + k)) * a[k];
+            }
+            var += a[j] * sum;
+        }
+        TEST_ASSERT_EQUAL_UINT32(0, memcmp(&var, &kf_var[i], sizeof(float)));
+    }
+    /* km: H P H's diagonal by the reflection's rank-2 form, u = B v. */
+    float u[PROPID_MAX_ROTORS];
+    float beta = 0.0f;
+    for (uint8_t i = 0; i < rotors; ++i) {
+        float sum = 0.0f;
+        for (uint8_t j = 0; j < rotors; ++j) {
+            sum += propid_cov_at(filter.core.cov, (uint8_t)(drag.first + i), (uint8_t)(drag.first + j)) *
+                   drag.vector[j];
+        }
+        u[i] = sum;
+        beta += drag.vector[i] * sum;
+    }
+    for (uint8_t i = 0; i < rotors; ++i) {
+        const uint8_t k = (uint8_t)(drag.first + i);
+        const float var = propid_cov_at(filter.core.cov, k, k) -
+                          drag.scale * drag.vector[i] * (2.0f * u[i] - drag.scale * beta * drag.vector[i]);
+        TEST_ASSERT_EQUAL_UINT32(0, memcmp(&var, &km_var[i], sizeof(float)));
+    }
+}
+
+static void test_per_rotor_variances_same_bits(void)
+{
+    check_per_rotor_variances(4u, 0.0f, 41u);
+    check_per_rotor_variances(4u, 0.785398f, 42u);
+#if PROPID_MAX_ROTORS >= 8
+    check_per_rotor_variances(6u, 0.0f, 43u);
+    check_per_rotor_variances(8u, 0.3926991f, 44u);
+#endif
+}
+
 /* A coefficient beyond its bound: the estimate projected onto the bound
  * (propid_bound_projection.c): x_k lands on the bound, every other state moves
  * by its regression on x_k, P_ij / P_jk / P_kk * (bound - x_k), and P is kept.
@@ -957,6 +1034,7 @@ int main(void)
     RUN_TEST(test_drag_coefficients_loaded_every_second_prediction);
     RUN_TEST(test_integrity_tolerance_is_rounding_only);
     RUN_TEST(test_coefficients_are_clamped);
+    RUN_TEST(test_per_rotor_variances_same_bits);
     RUN_TEST(test_clamp_projects_the_estimate);
     RUN_TEST(test_time_jump_resync_workflow);
     return UNITY_END();

@@ -20,6 +20,11 @@
  * below the caller's stack pointer before the call, the deepest overwritten
  * word after it): a measurement of the paths this flight takes, beside the
  * call graph's worst case (firmware/toolchain/stack_report.py).
+ *
+ * -DCOUNT_STEP_GET_ESTIMATE: count propid_get_estimate() read after every step
+ * (a controller reading the estimate at the gyro rate) instead of the step, and
+ * print a hash of every estimate read (estimate_bits): two builds that give the
+ * same estimates, bit for bit, print the same value.
  */
 #include <math.h>
 #include <stdint.h>
@@ -137,6 +142,19 @@ static uint32_t hash_bits(const float *values, uint32_t n)
     return hash;
 }
 
+#ifdef COUNT_STEP_GET_ESTIMATE
+/* The same hash continued over n bytes (an estimate: zeroed whole, padding included,
+ * by propid_get_estimate). */
+static uint32_t hash_more(uint32_t hash, const void *data, uint32_t n)
+{
+    const uint8_t *byte = data;
+    for (uint32_t k = 0; k < n; ++k) {
+        hash = (hash ^ byte[k]) * 16777619u;
+    }
+    return hash;
+}
+#endif
+
 static propid_filter_t filter;
 static propid_filter_t dense_model; /* the dense baseline's model and bookkeeping */
 static dense_ekf_t dense;
@@ -223,6 +241,9 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
     uint64_t t_us = 1000u;
     int errors = 0;
     uint32_t stack_max = 0u; /* deepest stack of a counted propid_push_gyro() [B] */
+#ifdef COUNT_STEP_GET_ESTIMATE
+    uint32_t estimate_hash = 2166136261u;
+#endif
     const uint32_t warmup = with_dense ? DENSE_WARMUP_STEPS : WARMUP_STEPS;
     const uint32_t total = warmup + (with_dense ? DENSE_COUNTED_STEPS : COUNTED_STEPS);
     const float arm = 0.17f;
@@ -300,20 +321,34 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
         if (counted) {
             stack_paint_below(caller_sp);
         }
-#ifndef COUNT_STEP_DELAY_US
+#if !defined(COUNT_STEP_DELAY_US) && !defined(COUNT_STEP_GET_ESTIMATE)
         if (counted) {
             propid_count_begin(variant);
         }
 #endif
         const propid_status_t status = propid_push_gyro(&filter, t_us, gyro);
         if (counted) {
+#ifndef COUNT_STEP_GET_ESTIMATE
             propid_count_end(variant);
+#endif
             const uint32_t used = stack_used_below(caller_sp);
             stack_max = used > stack_max ? used : stack_max;
         }
         if (status < 0) {
             errors++;
         }
+#ifdef COUNT_STEP_GET_ESTIMATE
+        if (counted) {
+            propid_count_begin(variant);
+        }
+        propid_estimate_t estimate;
+        const propid_status_t read = propid_get_estimate(&filter, &estimate);
+        if (counted) {
+            propid_count_end(variant);
+        }
+        errors += read != PROPID_OK;
+        estimate_hash = hash_more(estimate_hash, &estimate, (uint32_t)sizeof(estimate));
+#endif
     }
     propid_counters_t counters;
     (void)propid_get_counters(&filter, &counters);
@@ -336,6 +371,10 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
         propid_qemu_puts(" final_state_bits ");
         put_uint(hash_bits(filter.core.state, PROPID_MAX_STATES) ^
                  hash_bits(filter.core.cov, PROPID_COV_SIZE));
+#ifdef COUNT_STEP_GET_ESTIMATE
+        propid_qemu_puts(" estimate_bits ");
+        put_uint(estimate_hash);
+#endif
     }
     propid_qemu_putc('\n');
     if (with_dense) {
