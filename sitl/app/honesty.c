@@ -84,19 +84,40 @@ static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const do
     return nees;
 }
 
-/* See honesty.h. The whole flip maps every column of P: 3 % of a flight at one NEES sample
- * per 10 control steps. */
+/* See honesty.h. A whole flip maps every column of P: 3 % of a flight at one NEES sample
+ * per 10 control steps for each of the three reflections. Each column is mapped on its
+ * own (propid_reflection_flip_column) and the block apart (flip_block), so the columns
+ * the NEES does not read can be left out, the others taking the same operations. */
 void sitl_honesty_coeff_per_rotor(const propid_filter_t *filter, const uint8_t *columns,
                                  int column_count, propid_core_t *core)
 {
-    /* The thrust block whole (state, every column, block: its two reflections, H_1 first). */
+    const uint8_t rotors = filter->config.rotor_count;
+    const propid_reflection_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    /* The columns the thrust block's reflections map: the asked ones, the drag block's
+     * (its cross-covariances with the thrust block) and the thrust block's own outside
+     * a reflection (H_1 leaves element 0 out). */
+    uint8_t read[PROPID_MAX_STATES] = {0};
+    for (int c = 0; c < column_count; c++) {
+        read[columns[c]] = 1;
+    }
+    for (uint8_t i = 0; i < rotors; ++i) {
+        read[basis.first + i] = 1;
+        read[propid_first_thrust() + i] = 1;
+    }
+    /* The thrust block (state, those columns, block: its two reflections, H_1 first). */
     propid_thrust_basis_t thrust;
     propid_thrust_basis_init(&thrust, &filter->derived, &filter->config);
-    const propid_reflection_t second = propid_thrust_reflection(&thrust, 1u);
-    const propid_reflection_t first = propid_thrust_reflection(&thrust, 0u);
-    propid_reflection_flip(&second, core);
-    propid_reflection_flip(&first, core);
-    const propid_reflection_t basis = propid_drag_basis(&filter->derived, &filter->config);
+    for (uint8_t r = 2; r-- > 0;) {
+        const propid_reflection_t reflection = propid_thrust_reflection(&thrust, r);
+        const uint8_t end = (uint8_t)(reflection.first + reflection.count);
+        propid_reflection_apply(&reflection, &core->state[reflection.first]);
+        for (uint8_t j = 0; j < PROPID_MAX_STATES; ++j) {
+            if (read[j] && (j < reflection.first || j >= end)) {
+                propid_reflection_flip_column(&reflection, core, j);
+            }
+        }
+        propid_reflection_flip_block(&reflection, core);
+    }
     propid_reflection_apply(&basis, &core->state[basis.first]);
     for (int c = 0; c < column_count; c++) {
         propid_reflection_flip_column(&basis, core, columns[c]);

@@ -76,10 +76,11 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
  * next change): recovered (inside at that moment) or not. */
 void sitl_honesty_finish(sitl_honesty_t *h);
 
-/* core (a copy of filter->core) with its thrust block per rotor (state and P whole) and its
- * drag entries per rotor where the NEES reads them: the state's, those of the given columns
- * of P (states outside the drag block) and the drag block itself, by propid_reflection_flip's
- * own two parts (flip_column, flip_block); the other columns stay in the yaw basis. */
+/* core (a copy of filter->core) with its coefficient entries per rotor where the NEES reads
+ * them: the states, the two blocks, their cross-covariances and the given columns of P
+ * (states outside the two blocks, and the thrust block's for the drag), by
+ * propid_reflection_flip's own two parts (flip_column, flip_block), bit for bit as the
+ * whole flip; the other columns stay in the kept bases. */
 void sitl_honesty_coeff_per_rotor(const propid_filter_t *filter, const uint8_t *columns,
                                  int column_count, propid_core_t *core);
 

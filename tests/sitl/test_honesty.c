@@ -8,8 +8,8 @@
  *
  * The NEES's per-rotor coefficient entries (sitl_honesty_coeff_per_rotor) against
  * the filter's own map of the whole state and covariance (propid_coeff_flip):
- * bit for bit on every entry the NEES reads, quad and hexa, and the drag columns
- * it is not asked for left in the yaw basis.
+ * bit for bit on every entry the NEES reads, quad and hexa, and the columns it
+ * does not read (the rates') left in the kept bases.
  *
  * The lost rotor's recovery (sitl_honesty_add / _finish): asked of a loss whose
  * rotor was within 10 % just before it (changed_rotor_from_inside), and counted
@@ -69,18 +69,26 @@ static void check_rotors(uint8_t rotors)
     propid_core_t whole = filter.core, part = filter.core;
     propid_coeff_flip(&filter.derived, &filter.config, &whole, 1);
     sitl_honesty_coeff_per_rotor(&filter, columns, count, &part);
-    /* The thrust block whole: state, block and its columns as the whole flip's. */
+    /* The thrust block: state, block and the columns the NEES reads as the whole flip's. */
+    int thrust_changed = 0;
     for (uint8_t i = 0; i < rotors; ++i) {
         const uint8_t t = (uint8_t)(layout->thrust + i);
         TEST_ASSERT_EQUAL_UINT32(0, memcmp(&whole.state[t], &part.state[t], sizeof(float)));
-        for (uint8_t j = 0; j < filter.derived.state_count; ++j) {
-            if (j >= layout->drag && j < layout->gyro_bias) {
-                continue; /* the drag rows: below */
-            }
-            const uint32_t k = propid_cov_index(t, j);
+        for (uint8_t j = 0; j < rotors; ++j) {
+            const uint32_t k = propid_cov_index(t, (uint8_t)(layout->thrust + j));
             TEST_ASSERT_EQUAL_UINT32(0, memcmp(&whole.cov[k], &part.cov[k], sizeof(float)));
+            thrust_changed += whole.cov[k] != filter.core.cov[k];
         }
+        for (uint8_t a = 0; a < 3; ++a) {
+            const uint32_t k = propid_cov_index(t, (uint8_t)(layout->gyro_bias + a));
+            TEST_ASSERT_EQUAL_UINT32(0, memcmp(&whole.cov[k], &part.cov[k], sizeof(float)));
+            thrust_changed += whole.cov[k] != filter.core.cov[k];
+        }
+        /* A rate column is not read: still in the torque basis. */
+        const uint32_t k = propid_cov_index(t, 0);
+        TEST_ASSERT_EQUAL_UINT32(0, memcmp(&filter.core.cov[k], &part.cov[k], sizeof(float)));
     }
+    TEST_ASSERT_TRUE(thrust_changed > 0);
 
     const uint8_t first = (uint8_t)layout->drag;
     int changed = 0;
