@@ -4,8 +4,8 @@ The rule (README.md, "Output files"): an output's missing directories are
 created, as `mkdir -p` would, when the output is written. Before any work a command
 checks each output path and refuses it with a one-line error only when it cannot be
 written: a part of the path exists and is not a directory, a file output is an existing
-directory (a directory output an existing file), or the nearest existing directory is
-not writable. The directories are created at the write, not at the check, so a command
+directory (a directory output an existing file), the nearest existing directory is
+not writable, or the output is one of the command's input files. The directories are created at the write, not at the check, so a command
 that stops on a bad input leaves nothing behind.
 
 Files are written to a temporary name beside the target and renamed over it only when
@@ -80,6 +80,21 @@ def check_directory(path: str | os.PathLike, option: str = "") -> Path:
         raise UserError(f"cannot write {label}: it is a file, not a directory")
     _existing_ancestor(path, label)
     return path
+
+
+def check_not_inputs(outputs, inputs) -> None:
+    """UserError now if an output (option, path) would overwrite one of the command's input
+    files (a log, a vehicle file, a table): an output is never written over what was read."""
+    read: dict[Path, Path] = {}
+    for path in inputs:
+        if path is not None:
+            read.setdefault(Path(path).resolve(), Path(path))
+    for option, path in outputs:
+        if path is None or str(path) == "-":
+            continue
+        source = read.get(Path(path).resolve())
+        if source is not None:
+            raise UserError(f"cannot write {_label(Path(path), option)}: must not overwrite the input file {source}")
 
 
 def make_directory(path: str | os.PathLike) -> Path:

@@ -242,3 +242,59 @@ def test_file_outputs_of_the_benches_are_checked_before_the_flights(command, opt
                      "--sitl", str(_stand_in_sitl(tmp_path))]) == 1
     assert f"cannot write {option}" in _one_line(capsys)
     assert not (tmp_path / "out").exists()
+
+
+# --------------------------------------------------------------------------- an output over an input
+def _tiny_gap_inputs(tmp_path: Path) -> tuple[Path, Path]:
+    from test_gap import _plus_quad_vehicle_file
+
+    log = tmp_path / "a.csv"
+    log.write_text("t,gyro_x,gyro_y,gyro_z,omega_1,omega_2,omega_3,omega_4\n"
+                   + "".join(f"{k * 0.01},0,0,0,1000,1000,1000,1000\n" for k in range(20)))
+    return log, _plus_quad_vehicle_file(tmp_path)
+
+
+def test_no_output_overwrites_an_input_file(small_flight, tmp_path, capsys, monkeypatch):  # noqa: F811
+    """gap --json, table1 --out, observability --json and replay's outputs over the vehicle file
+    beside the log used to overwrite what they read; every such case is a one-line error before
+    the work, and the input is left as it was."""
+    from test_table1 import DURATION, metrics, synthetic_columns
+
+    from propid import bound_check, observability, table1
+
+    def never(*args, **kwargs):
+        raise AssertionError("the work ran although an output is one of the inputs")
+
+    monkeypatch.setattr(observability, "analyse", never)
+    monkeypatch.setattr(bound_check, "check_campaign", never)
+    log, vehicle = _tiny_gap_inputs(tmp_path)
+    source = tmp_path / "table1.json"
+    source.write_text(json.dumps({"lissajous": {"filter": table1.aggregate([metrics(synthetic_columns())],
+                                                                            DURATION)}}))
+    (tmp_path / "campaign" / "logs").mkdir(parents=True)
+    (tmp_path / "campaign" / "table1.json").write_text(source.read_text())
+    beside = small_flight.with_name("small.vehicle.json")
+    cases = [
+        (["gap", "--log", str(log), "--vehicle", str(vehicle), "--json", str(log), "--quiet"], "--json", log),
+        (["gap", "--log", str(log), "--vehicle", str(vehicle), "--json", str(vehicle), "--quiet"], "--json", vehicle),
+        (["table1", str(source), "--out", str(source)], "--out", source),
+        (["observability", "--vehicle", str(vehicle), "--json", str(vehicle)], "--json", vehicle),
+        (["bound-check", str(tmp_path / "campaign"), "--json", str(tmp_path / "campaign" / "table1.json")],
+         "--json", tmp_path / "campaign" / "table1.json"),
+        (["replay", "--log", str(small_flight), "--table", str(beside), "--no-progress"], "--table", beside),
+        (["convert", str(log), "--out", str(log), "--no-progress"], "--out", log),
+    ]
+    for argv, option, target in cases:
+        before = target.read_bytes()
+        assert cli.main(argv) == 1, argv
+        err = _one_line(capsys)
+        assert f"cannot write {option}" in err and "must not overwrite the input file" in err, err
+        assert target.read_bytes() == before
+
+
+def test_convert_checks_the_vehicle_file_it_copies_beside_the_output(small_flight, tmp_path, capsys):  # noqa: F811
+    (tmp_path / "o.vehicle.json").mkdir()  # where the vehicle file would be copied
+    assert cli.main(["convert", str(small_flight), "--vehicle", str(small_flight.with_name("small.vehicle.json")),
+                     "--out", str(tmp_path / "o.csv"), "--no-progress"]) == 1
+    assert "it is a directory" in _one_line(capsys)
+    assert not (tmp_path / "o.csv").exists()

@@ -40,6 +40,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--realisations must be >= 1")
     if args.json:
         outputs.check_writable(args.json, "--json")
+        campaign = Path(args.campaign)
+        outputs.check_not_inputs([("--json", args.json)],
+                                 [campaign / "table1.json", *sorted((campaign / "logs").glob("*"))])
     if args.z_excess:
         result = bound_check.z_excess_campaign(Path(args.campaign), args.trajectory,
                                                realisations=args.realisations, progress=not args.no_progress)

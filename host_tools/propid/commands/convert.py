@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from propid.errors import UserError
-from propid.outputs import check_writable
+from propid.outputs import check_not_inputs, check_writable
 from propid.flightlog import read_vehicle, vehicle_path_for, write_flightlog
 from propid.importers import FORMATS, detect_format, import_log
 from propid.importers.motor_order import parse_motor_map
@@ -37,8 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def check_output(out: Path, input_path: Path) -> None:
     """Everything about --out that can be known before any work."""
-    if out.exists() and input_path.exists() and out.resolve() == input_path.resolve():
-        raise UserError("--out must differ from the input file")
+    check_not_inputs([("--out", out)], [input_path])
     if out.is_dir():
         raise UserError(f"--out {out}: a directory, give a file name")
     if out.suffix.lower() != ".csv":
@@ -58,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
     if args.log_index is not None and args.log_index < 1:
         raise UserError("--log-index counts from 1")
     vehicle = read_vehicle(args.vehicle) if args.vehicle else None
+    if vehicle is not None:  # copied beside the output
+        check_writable(vehicle_path_for(out), "--out's vehicle file")
     motor_map = None
     if args.motor_map:
         count = vehicle.rotor_count if vehicle else len(args.motor_map.split(","))

@@ -11,7 +11,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import read_flightlog, read_vehicle, vehicle_path_for, write_vehicle
-from propid.outputs import check_directory, check_writable, write_text
+from propid.outputs import check_directory, check_not_inputs, check_writable, write_text
 
 NAME = "gap"
 HELP = ("diagnose the sim-to-real gap: base fit, where the model misses, which unmodelled effect, "
@@ -95,9 +95,8 @@ def run(args: argparse.Namespace) -> int:
         check_writable(args.json, "--json")
     if args.report:
         check_directory(args.report, "--report")
-    if args.vehicle_out and Path(args.vehicle_out).resolve() in {Path(p).resolve() for p in
-                                                                 [vehicle_path, *args.log, *args.holdout]}:
-        raise UserError(f"--vehicle-out {args.vehicle_out} is one of the input files")
+    check_not_inputs((("--vehicle-out", args.vehicle_out), ("--json", args.json)),
+                     [vehicle_path, *args.log, *args.holdout])
     logs = [read_flightlog(p, vehicle) for p in args.log]
     holdout = [read_flightlog(p, vehicle) for p in args.holdout]
     options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,

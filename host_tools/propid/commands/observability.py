@@ -7,7 +7,7 @@ import json
 
 from propid.errors import UserError
 from propid.flightlog import read_vehicle
-from propid.outputs import check_writable, write_text
+from propid.outputs import check_not_inputs, check_writable, write_text
 
 NAME = "observability"
 HELP = ("symbolic Lie-derivative observability rank of the filter's model (sympy) for a vehicle "
@@ -34,6 +34,7 @@ def run(args: argparse.Namespace) -> int:
                         f"got {args.measure!r}")
     if args.json:  # before the symbolic work, not after it
         check_writable(args.json, "--json")
+        check_not_inputs([("--json", args.json)], [args.vehicle])
     vehicle = read_vehicle(args.vehicle)
     result = observability.analyse(vehicle, measurements, max_order=args.max_order)
     print(observability.render_text(result), end="")

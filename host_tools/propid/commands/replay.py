@@ -10,7 +10,7 @@ from pathlib import Path
 
 from propid.errors import UserError
 from propid.flightlog import read_flightlog, read_vehicle, vehicle_path_for
-from propid.outputs import check_writable, write_text
+from propid.outputs import check_not_inputs, check_writable, write_text
 
 NAME = "replay"
 HELP = "replay a flight-log v1 CSV through the firmware filter: per-rotor kf/km, gyro biases, JSON + plot"
@@ -257,17 +257,13 @@ def check_arguments(args: argparse.Namespace, log_paths: list[Path]) -> None:
         raise UserError("--prefilter/--diagnostic-highpass need a rows log, not --streams events")
     if args.reference_kf is not None and not args.reference_kf > 0:
         raise UserError("--reference-kf must be positive")
-    for option in ("vehicle_out", "thrust_aero_out"):
-        value = getattr(args, option)
-        if value and args.vehicle and Path(value).resolve() == Path(args.vehicle).resolve():
-            raise UserError(f"--{option.replace('_', '-')} must not overwrite the input vehicle file")
-    for option, value in (("--json", args.json), ("--plot", args.plot), ("--table", args.table),
-                          ("--vehicle-out", args.vehicle_out), ("--thrust-aero-out", args.thrust_aero_out),
-                          ("--band-table", args.band_table), ("--band-plot", args.band_plot)):
+    outputs = (("--json", args.json), ("--plot", args.plot), ("--table", args.table),
+               ("--vehicle-out", args.vehicle_out), ("--thrust-aero-out", args.thrust_aero_out),
+               ("--band-table", args.band_table), ("--band-plot", args.band_plot))
+    for option, value in outputs:
         if value and value != "-":
             check_writable(value, option)
-            if Path(value).resolve() in {p.resolve() for p in log_paths}:
-                raise UserError(f"{option} {value} is one of the input logs")
+    check_not_inputs(outputs, [*log_paths, Path(args.vehicle) if args.vehicle else vehicle_path_for(log_paths[0])])
     for option in ("plot", "band_plot"):
         value = getattr(args, option)
         if value and not value.lower().endswith(".png"):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from propid import table1
-from propid.outputs import check_figure, check_writable, write_text
+from propid.outputs import check_figure, check_not_inputs, check_writable, write_text
 
 NAME = "table1"
 HELP = "render Table 1 (table1.json from `propid campaign`) as markdown beside the paper's values"
@@ -24,6 +24,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable(args.out, "--out")
     if args.png:
         check_figure(args.png, "--png")
+    check_not_inputs((("--out", args.out), ("--png", args.png)), [args.table])
     table = table1.load_table(args.table)
     text = table1.render_markdown(table, with_paper=not args.no_paper)
     bound = table1.render_bound_markdown(table)
