@@ -613,8 +613,12 @@ def _main(argv: list[str] | None = None) -> int:
         if args.action == "mavlogdump":
             import runpy
 
-            install_for_mavutil()
             rest = [a for a in args.args if a != "--"]
+            names = [a for a in rest if not a.startswith("-")]
+            if names and not any(Path(name).is_file() for name in names):
+                # pymavlink takes a path that is not a file for a serial port (a traceback)
+                raise UserError(f"cannot read {names[-1]}: no such file (mavlogdump reads a .tlog)")
+            install_for_mavutil()
             sys.argv = ["mavlogdump.py", "--dialect", DIALECT_NAME] + rest
             runpy.run_module("pymavlink.tools.mavlogdump", run_name="__main__")
             return 0

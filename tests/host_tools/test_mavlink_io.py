@@ -233,6 +233,15 @@ def test_mavlogdump_decodes_our_tlog(tmp_path):
     assert "HEARTBEAT {" in plain.stdout
 
 
+def test_mavlogdump_of_a_missing_file_is_one_line(tmp_path, capsys):
+    """pymavlink opens a path that is not a file as a serial port (a traceback without pyserial)."""
+    from propid.mavlink_io import _main
+
+    assert _main(["mavlogdump", "--", "--types", "PROPID_COEFFICIENTS", str(tmp_path / "missing.tlog")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: cannot read {tmp_path / 'missing.tlog'}: no such file (mavlogdump reads a .tlog)"
+
+
 # --------------------------------------------------------------------------
 # Damaged files
 # --------------------------------------------------------------------------
