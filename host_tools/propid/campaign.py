@@ -42,7 +42,7 @@ def locate_sitl(explicit: str | None = None) -> Path:
     """propid_sitl: explicit path, else $PROPID_BUILD_DIR/sitl/propid_sitl."""
     path = Path(explicit) if explicit else default_build_dir() / "sitl" / "propid_sitl"
     if not path.is_file() or not os.access(path, os.X_OK):
-        raise UserError(f"propid_sitl not found at {path} (build it with `make sitl`, "
+        raise UserError(f"propid_sitl not found at {path} (build it with `make host`, "
                         "or set PROPID_BUILD_DIR / --sitl)")
     return path.resolve()
 

@@ -533,7 +533,7 @@ def load_library(path: Optional[os.PathLike] = None) -> ctypes.CDLL:
     if key in _loaded:
         return _loaded[key]
     if not lib_path.exists():
-        raise UserError(f"C filter library not found at {lib_path}: build it with `make` "
+        raise UserError(f"C filter library not found at {lib_path}: build it with `make host` "
                         f"(cmake target propid_shared) or set PROPID_LIBRARY / PROPID_BUILD_DIR")
     try:
         lib = ctypes.CDLL(str(lib_path))

@@ -343,3 +343,16 @@ def test_stream_rates_ignore_skipped_segments():
     holed = FlightLog(t=t, gyro=log.gyro, rotor_speed=np.nan_to_num(log.rotor_speed, nan=500.0), extra={})
     rates = stream_rates(holed, np.arange(len(holed)))
     assert rates["gyro"] == pytest.approx(500.0, rel=0.01) and rates["rotor"] == pytest.approx(500.0, rel=0.01)
+
+
+def test_a_missing_build_names_the_make_verb_that_builds_it(tmp_path):
+    """`make` alone only lists the verbs; the advice must name the one that builds (make host)."""
+    from propid.campaign import locate_sitl
+    from propid.cfilter import load_library
+    from propid.errors import UserError
+
+    assert "\nhost:" in (REPO / "Makefile").read_text()
+    with pytest.raises(UserError, match="build it with `make host`"):
+        load_library(tmp_path / "libpropid_shared.so")
+    with pytest.raises(UserError, match="build it with `make host`"):
+        locate_sitl(str(tmp_path / "propid_sitl"))
