@@ -6,7 +6,8 @@ mapped to per rotor at the boundary as in C), prediction with the trapezoid inpu
 term, P := F P F^T + Q dt, three sequential scalar gyro updates (x, y, z) with the
 symmetric rank-one form, innovation gate with re-opening, coefficient clamps,
 variance floors/ceilings, the round-robin covariance integrity check and repair,
-and the same input guards and status codes. Only the arithmetic differs
+the optional stuck-gyro check (gyro_stuck_samples), and the same input guards and
+status codes. Only the arithmetic differs
 (float64 here, float32 in C), which is what tests/host_tools/test_reference_vs_c.py
 measures. Written for clarity, not speed: dense numpy where it is clearer.
 
@@ -17,6 +18,7 @@ they reach the C filter, so that both filters see identical numbers.
 from __future__ import annotations
 
 import math
+import struct
 from typing import Sequence
 
 import numpy as np
@@ -85,6 +87,8 @@ class ReferenceFilter:
             "accel_bias_std0", "accel_bias_walk", "accel_range", "torque_scale_std0", "torque_scale_walk")}
         self.c = c
         self.gate_max_consecutive = int(config.gate_max_consecutive)
+        # A gyro axis repeating its reading bit for bit this many samples is not fused (0: off).
+        self.gyro_stuck_samples = int(getattr(config, "gyro_stuck_samples", 0))
         self.rotor_stale_us = int(config.rotor_stale_us)
         self.max_gyro_gap_us = int(config.max_gyro_gap_us)
         # Telemetry delay (docs/math.md §12, C: propid_delay.c): > 0 the IMU samples are held,
@@ -186,7 +190,7 @@ class ReferenceFilter:
             "gyro_accepted": 0, "rotor_accepted": 0, "axis_gated": [0, 0, 0], "gate_reopened": 0,
             "cov_repairs": 0, "state_clamps": 0, "resyncs": 0, "rejected": [0] * 16,
             "accel_accepted": 0, "accel_gated": 0, "accel_reanchored": 0, "delay_overflows": 0,
-            "command_accepted": 0, "instrument_inputs": 0, "instrument_guarded": 0,
+            "command_accepted": 0, "instrument_inputs": 0, "instrument_guarded": 0, "gyro_stuck": 0,
         }
         # The motor commands' first stage (C: propid_instrument.c), when configured.
         self.instrument = None
@@ -248,6 +252,10 @@ class ReferenceFilter:
         self.has_rotor_data = False
         self.has_time = False
         self.gated_run = [0, 0, 0]
+        # Per axis the last reading's bits and how many readings in a row had them
+        # (C: gyro_last_bits, gyro_repeat_run; cleared here, kept by resync).
+        self.gyro_last_bits = [0, 0, 0]
+        self.gyro_repeat_run = [0, 0, 0]
         self.accel_gated_run = 0
         self.has_accel = False
         self.accel_time_us = 0
@@ -637,7 +645,10 @@ class ReferenceFilter:
         if self._enforce_bounds():
             self.health |= HEALTH["COV_REPAIRED"]
             self.counters_data["cov_repairs"] += 1
-        gated_axes = [self._update_axis(axis, y[axis]) for axis in range(3)]
+        # The stuck-axis check (C: propid_gyro_stuck_mask), not on the anchoring sample.
+        stuck = self._gyro_stuck_mask(y) if (self.gyro_stuck_samples and not anchor) else [False] * 3
+        gated_axes = [self._skip_stuck_axis(axis) if stuck[axis] else self._update_axis(axis, y[axis])
+                      for axis in range(3)]
         gated = any(gated_axes)
         if compensation is not None:
             self._input_compensation_apply(compensation, gated_axes)
@@ -705,6 +716,27 @@ class ReferenceFilter:
                 self.state[coeff] += compensation["correction"][a]
             self.input_error_cross[a] = kept * (compensation["cross"][a] + 1.0)
             self.input_error_carried[a] = kept * kept * compensation["carried"][a]
+
+    def _gyro_stuck_mask(self, y: list[float]) -> list[bool]:
+        """Per axis: has its reading repeated bit for bit gyro_stuck_samples times in a row?
+        Bits, not values, as the C filter compares them (a stuck source repeats its word)."""
+        mask = []
+        for a in range(3):
+            bits = struct.unpack("<I", struct.pack("<f", y[a]))[0]
+            if bits == self.gyro_last_bits[a] and self.gyro_repeat_run[a] != 0:
+                self.gyro_repeat_run[a] = min(self.gyro_repeat_run[a] + 1, 0xFFFF)
+            else:
+                self.gyro_last_bits[a] = bits
+                self.gyro_repeat_run[a] = 1
+            mask.append(self.gyro_repeat_run[a] >= self.gyro_stuck_samples)
+        return mask
+
+    def _skip_stuck_axis(self, axis: int) -> bool:
+        """A stuck axis is not fused: neither the gate nor its re-anchor sees it (C:
+        propid_update_gyro_skipping). Counts as not fused (the GATED flag)."""
+        self.innovation_test_ratio[axis] = 0.0
+        self.counters_data["gyro_stuck"] += 1
+        return True
 
     def _update_axis(self, axis: int, gyro: float) -> bool:
         bias = self.first_bias + axis

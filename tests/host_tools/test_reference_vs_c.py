@@ -271,6 +271,50 @@ def test_c_agrees_with_reference_with_input_error_compensation(flight, options, 
     assert moved > 10.0 * STATE_TOL_SIGMA
 
 
+def with_stuck_gyro(events, axis: int, start_us: int, end_us: int, short_axis: int, short_at_us: int,
+                    short_count: int):
+    """The flight with gyro axis `axis` repeating its reading of `start_us` bit for bit up to `end_us`
+    (a stuck sensor), and axis `short_axis` repeating one reading `short_count` times from
+    `short_at_us` (a run shorter than the check's). Returns the events and the stuck samples."""
+    out, held, stuck, short_left, short_value = [], None, 0, 0, None
+    for t_us, kind, values in events:
+        if kind == "gyro":
+            values = list(values)
+            if start_us <= t_us <= end_us:
+                held = values[axis] if held is None else held
+                values[axis] = held
+                stuck += 1
+            if t_us == short_at_us:
+                short_left, short_value = short_count, values[short_axis]
+            if short_left > 0:
+                values[short_axis] = short_value
+                short_left -= 1
+        out.append((t_us, kind, values))
+    return out, stuck
+
+
+@pytest.mark.parametrize("options", ["plain", "all"])
+def test_c_agrees_with_reference_with_the_stuck_gyro_check(flight, options):
+    """gyro_stuck_samples (docs/reliability.md "A stuck gyro axis"): one axis stuck for 0.5 s, another
+    repeating one reading 4 times (below K = 6): same bounds, the same count of axis-samples left out
+    (the stuck run from its K-th sample on, none of the short run), and the check changes the run."""
+    k = 6
+    events, stuck = with_stuck_gyro(flight, axis=0, start_us=1_500_000, end_us=2_000_000,
+                                    short_axis=1, short_at_us=1_700_000, short_count=4)
+    assert stuck == 251
+    config = make_config(options).with_overrides(gyro_stuck_samples=k)
+    ref, c = ReferenceFilter(config), CFilter(config)
+    trace_ref, trace_c = replay(ref, events), replay(c, events)
+    state_err, cov_err = disagreement(trace_c, trace_ref)  # inf when any status differs
+    print(f"C vs reference, stuck gyro ({options}): max |dx|/std = {state_err:.3g}, "
+          f"max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+    assert c.counters()["gyro_stuck"] == ref.counters()["gyro_stuck"] == stuck - k + 1
+    _, cov_off = disagreement(replay(CFilter(make_config(options)), events), trace_ref)
+    assert cov_off > 10.0 * COV_TOL_REL
+
+
 def arriving(events, rotor_shift_us: int, offset_us: int = 10_000):
     """The flight as it arrives when the rotor telemetry is stamped rotor_shift_us late (> 0: the
     rotor speeds lag) or early (< 0: the gyro lags), in arrival order (rotor speeds first at equal
