@@ -55,3 +55,10 @@ def test_cli_refuses_an_unknown_vehicle(tmp_path):
                            "--sensors", "paper"], capture_output=True, text=True)
     assert proc.returncode == 2
     assert "no motor model for quad-x" in proc.stderr
+
+
+def test_cli_refuses_an_output_that_is_a_directory(tmp_path):
+    proc = subprocess.run([sys.executable, str(RULE), "--sitl", sys.executable, "--out", str(tmp_path)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "it is a directory" in proc.stderr

@@ -45,6 +45,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from propid.errors import UserError
+from propid.outputs import check_writable, write_text
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
@@ -243,8 +245,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if not os.access(args.sitl, os.X_OK):
         parser.error(f"--sitl: {args.sitl} is not an executable (build it: make host)")
-    if args.out and not Path(args.out).resolve().parent.is_dir():
-        parser.error(f"--out: directory {Path(args.out).resolve().parent} does not exist")
+    if args.out:
+        try:  # the host tools' rule (README "Output files"): checked now, directories made at the write
+            check_writable(args.out, "--out")
+        except UserError as exc:
+            parser.error(str(exc))
     soak = load_soak()
     rng = random.Random(args.seed)
     cases, planned = [], 0.0
@@ -266,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
     out = {"plan_seed": args.seed, "matched": pooled(results, "matched"), "derived": pooled(results, "derived"),
            "flights": results}
     if args.out:
-        Path(args.out).write_text(json.dumps(out, indent=1))
+        write_text(args.out, json.dumps(out, indent=1) + "\n")
     print(json.dumps({"plan_seed": args.seed, "matched": out["matched"], "derived": out["derived"]}, indent=1))
     return 0
 
