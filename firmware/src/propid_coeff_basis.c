@@ -48,7 +48,7 @@ static float block_times(const float *cov, uint8_t first, uint8_t count, const f
     return beta;
 }
 
-#if PROPID_MAX_ROTORS >= 4
+#if PROPID_MAX_ROTORS >= 4 && !PROPID_SIZE_LEAN
 /* The same for a quad's block (count 4), its loops unrolled: the same sums in the
  * same order. */
 static float block_times_quad(const float *cov, uint8_t first, const float *v, float *u)
@@ -143,7 +143,7 @@ void propid_drag_per_rotor(const propid_reflection_t *basis, const propid_core_t
     const float *v = basis->vector;
     const float scale = basis->scale;
     float u[PROPID_MAX_ROTORS];
-#if PROPID_MAX_ROTORS >= 4
+#if PROPID_MAX_ROTORS >= 4 && !PROPID_SIZE_LEAN
     /* (the quad build: always 4 rotors) */
     const float beta = PROPID_GENERAL_VEHICLES && count != 4u ? block_times_basis(basis, core->cov, u)
                                                               : block_times_quad(core->cov, first, v, u);
@@ -156,6 +156,9 @@ void propid_drag_per_rotor(const propid_reflection_t *basis, const propid_core_t
     }
 }
 
+#if PROPID_SIZE_LEAN
+/* The size-lean build: one reflection routine called twice (the pair in one pass
+ * below is 118 B more at -Os). */
 /* x := (I - w w^T) x over `count` values (a kf reflection, its scale folded into w). */
 static inline void reflect_folded(const float *w, uint8_t count, float *x)
 {
@@ -186,6 +189,59 @@ void propid_thrust_to_rotor(const propid_thrust_basis_t *basis, float *x)
     reflect_folded(basis->vector[0], count, x);
 }
 
+#else
+/* z = Q x = H_1 H_0 x, each H_k = I - w w^T (its scale folded into w), both in one
+ * pass over x: H_1's dot product taken as H_0 writes the elements (the same
+ * operations in the same order as one reflection after the other). */
+void propid_thrust_to_basis(const propid_thrust_basis_t *basis, float *x)
+{
+    const uint8_t count = basis->rotor_count;
+    const float *w0 = basis->vector[0];
+    const float *w1 = basis->vector[1] - 1; /* w1[k]: element k's entry, k >= 1 */
+    if (count == 0u) {
+        return;
+    }
+    float dot0 = 0.0f;
+    for (uint8_t i = 0; i < count; ++i) {
+        dot0 += w0[i] * x[i];
+    }
+    x[0] -= dot0 * w0[0];
+    float dot1 = 0.0f;
+    for (uint8_t i = 1; i < count; ++i) {
+        x[i] -= dot0 * w0[i];
+        dot1 += w1[i] * x[i];
+    }
+    for (uint8_t i = 1; i < count; ++i) {
+        x[i] -= dot1 * w1[i];
+    }
+}
+
+/* H_0 H_1 x the same way: H_1's update and H_0's dot product in one pass. */
+void propid_thrust_to_rotor(const propid_thrust_basis_t *basis, float *x)
+{
+    const uint8_t count = basis->rotor_count;
+    if (count == 0u) {
+        return;
+    }
+    const float *w0 = basis->vector[0];
+    const float *w1 = basis->vector[1] - 1;
+    float dot1 = 0.0f;
+    for (uint8_t i = 1; i < count; ++i) {
+        dot1 += w1[i] * x[i];
+    }
+    float dot0 = 0.0f;
+    dot0 += w0[0] * x[0]; /* (from zero, as H_0 alone sums it) */
+    for (uint8_t i = 1; i < count; ++i) {
+        x[i] -= dot1 * w1[i];
+        dot0 += w0[i] * x[i];
+    }
+    for (uint8_t i = 0; i < count; ++i) {
+        x[i] -= dot0 * w0[i];
+    }
+}
+
+#endif
+
 void propid_coeff_flip(const propid_derived_t *derived, const propid_kept_config_t *config, propid_core_t *core,
                        int to_rotor)
 {
@@ -200,7 +256,7 @@ void propid_coeff_flip(const propid_derived_t *derived, const propid_kept_config
     propid_reflection_flip(&drag, core);
 }
 
-#if PROPID_MAX_ROTORS >= 4
+#if PROPID_MAX_ROTORS >= 4 && !PROPID_SIZE_LEAN
 /* diag(Q^T B Q) for a quad, B the kf block of P: kf_rel_i = a_i . z with a_i = Q e_i,
  * variance a_i^T B a_i = sum_j a_ij (sum_k B_jk a_ik). The four a_i are built side by
  * side (column[k][i] = (a_i)_k) by the operations propid_thrust_to_basis does on
@@ -276,9 +332,9 @@ static __attribute__((noinline)) void thrust_variances_quad(const propid_thrust_
 }
 #endif
 
-#if PROPID_GENERAL_VEHICLES
-/* The same for any rotor count, one rotor at a time: a_i = Q e_i through both
- * reflections, then a_i^T B a_i. */
+#if PROPID_GENERAL_VEHICLES || PROPID_SIZE_LEAN
+/* The same for any rotor count (and the size-lean build's quad: less code), one
+ * rotor at a time: a_i = Q e_i through both reflections, then a_i^T B a_i. */
 static __attribute__((noinline)) void thrust_variances_any(const propid_thrust_basis_t *basis, const float *cov,
                                                            float *var)
 {
@@ -307,13 +363,13 @@ void propid_thrust_per_rotor(const propid_thrust_basis_t *basis, const propid_co
     if (kf_var == NULL) {
         return;
     }
-#if PROPID_GENERAL_VEHICLES
-    if (PROPID_MAX_ROTORS < 4 || rotor_count != 4u) {
+#if PROPID_GENERAL_VEHICLES || PROPID_SIZE_LEAN
+    if (PROPID_SIZE_LEAN || PROPID_MAX_ROTORS < 4 || rotor_count != 4u) {
         thrust_variances_any(basis, core->cov, kf_var);
         return;
     }
 #endif
-#if PROPID_MAX_ROTORS >= 4
+#if PROPID_MAX_ROTORS >= 4 && !PROPID_SIZE_LEAN
     thrust_variances_quad(basis, core->cov, kf_var); /* (the quad build: always 4 rotors) */
 #endif
 }
