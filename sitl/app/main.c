@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "options.h"
+#include "output_path.h"
 #include "sim.h"
 
 static void on_signal(int signo)
@@ -32,6 +33,17 @@ int main(int argc, char **argv)
     if (rc != 0) {
         return rc;
     }
+    /* Output paths checked before the flight: a bad one fails now, not
+     * after it (their missing directories are created when written). */
+    const char *outputs[2] = {opts.log_path, opts.summary_json};
+    const char *output_names[2] = {"--log", "--summary-json"};
+    for (int k = 0; k < 2; k++) {
+        char why[300];
+        if (outputs[k][0] != '\0' && sitl_output_path_check(outputs[k], why, sizeof(why)) != 0) {
+            fprintf(stderr, "propid_sitl: cannot write %s %s: %s\n", output_names[k], outputs[k], why);
+            return SITL_EXIT_ERROR;
+        }
+    }
     static sitl_result_t result;
     rc = sitl_run(&opts, &result, stdout);
     if (rc != SITL_EXIT_OK && rc != SITL_EXIT_DIVERGED && rc != SITL_EXIT_INTERRUPTED) {
@@ -42,10 +54,16 @@ int main(int argc, char **argv)
         fprintf(stderr, "propid_sitl: %s (log kept up to there)\n", result.message);
     }
     sitl_print_final_summary(stdout, &opts, &result);
-    if (opts.summary_json[0] != '\0' &&
-        sitl_write_summary_json(opts.summary_json, &opts, &result) != 0) {
-        fprintf(stderr, "propid_sitl: cannot write '%s'\n", opts.summary_json);
-        return SITL_EXIT_ERROR;
+    if (opts.summary_json[0] != '\0') {
+        char why[300];
+        if (sitl_output_path_make_parents(opts.summary_json, why, sizeof(why)) != 0) {
+            fprintf(stderr, "propid_sitl: cannot write --summary-json %s: %s\n", opts.summary_json, why);
+            return SITL_EXIT_ERROR;
+        }
+        if (sitl_write_summary_json(opts.summary_json, &opts, &result) != 0) {
+            fprintf(stderr, "propid_sitl: cannot write '%s'\n", opts.summary_json);
+            return SITL_EXIT_ERROR;
+        }
     }
     return rc;
 }

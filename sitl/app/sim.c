@@ -15,6 +15,7 @@
 #include <time.h>
 
 #include "flight_log.h"
+#include "output_path.h"
 #include "propid/propid_damage.h"
 #include "sitl_math.h"
 
@@ -352,6 +353,11 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
     f->last_status = PROPID_OK;
 
     if (o->log_path[0] != '\0') {
+        char why[300];
+        if (sitl_output_path_make_parents(o->log_path, why, sizeof(why)) != 0) {
+            snprintf(err, sizeof(err), "cannot write the log '%.100s': %.140s", o->log_path, why);
+            return fail(r, SITL_EXIT_ERROR, err);
+        }
         if (sitl_flight_log_open(&f->log, o->log_path, n) != 0) {
             snprintf(err, sizeof(err), "cannot write the log '%.200s'", o->log_path);
             return fail(r, SITL_EXIT_ERROR, err);

@@ -116,6 +116,23 @@ assert on < 0.01 < 0.1 < off, (off, on)
 PY
 fi
 
+# Output paths: missing directories are created (as the host tools do); a
+# path that cannot be written fails before the flight, in one line.
+rm -rf "$WORK/new"
+expect_rc 0 "log and summary into missing directories" "$SITL" --duration 1 --quiet \
+    --log "$WORK/new/logs/n.csv" --summary-json "$WORK/new/json/n.json"
+[ -f "$WORK/new/logs/n.csv" ] && [ -f "$WORK/new/logs/n.vehicle.json" ] || fail "log not written into a new directory"
+[ -f "$WORK/new/json/n.json" ] || fail "summary not written into a new directory"
+: >"$WORK/blocker"
+for target in "--summary-json $WORK/blocker/s.json" "--log $WORK/blocker/deeper/l.csv" "--summary-json $WORK"; do
+    # shellcheck disable=SC2086
+    expect_rc 1 "unwritable output $target" "$SITL" --duration 60 --quiet $target
+    grep -q "tracking RMSE" "$WORK/out.txt" && fail "$target: flew before refusing"
+    [ "$(wc -l <"$WORK/err.txt")" -eq 1 ] || fail "$target: message is not one line: $(cat "$WORK/err.txt")"
+    grep -q "cannot write" "$WORK/err.txt" || fail "$target: message: $(cat "$WORK/err.txt")"
+done
+[ -e "$WORK/blocker/deeper" ] && fail "refused output left a directory behind"
+
 # MAVLink: flies when the link is built in, otherwise a clear usage error.
 "$SITL" --duration 10 --quiet --mavlink udp:127.0.0.1:14599 >"$WORK/out.txt" 2>"$WORK/err.txt"
 rc=$?
