@@ -355,7 +355,7 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
     if (o->log_path[0] != '\0') {
         char why[300];
         if (sitl_output_path_make_parents(o->log_path, why, sizeof(why)) != 0) {
-            snprintf(err, sizeof(err), "cannot write the log '%.100s': %.140s", o->log_path, why);
+            snprintf(err, sizeof(err), "cannot write the log '%.100s': %.120s", o->log_path, why);
             return fail(r, SITL_EXIT_ERROR, err);
         }
         if (sitl_flight_log_open(&f->log, o->log_path, n) != 0) {
