@@ -11,6 +11,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import read_flightlog, read_vehicle, vehicle_path_for, write_vehicle
+from propid.gap.log_order import canonical_order
 from propid.outputs import check_directory, check_not_inputs, check_writable, write_text
 
 NAME = "gap"
@@ -21,7 +22,9 @@ HELP = ("diagnose the sim-to-real gap: base fit, where the model misses, which u
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log", required=True, action="extend", nargs="+", metavar="A.csv",
                         help="flight-log v1 CSV(s) of one vehicle to fit on (repeatable)")
-    parser.add_argument("--vehicle", metavar="V.json", help="vehicle file (default: beside the first log)")
+    parser.add_argument("--vehicle", metavar="V.json",
+                        help="vehicle file (default: the one beside the logs, X.csv -> X.vehicle.json; logs beside "
+                             "different vehicle files need it)")
     parser.add_argument("--holdout", action="extend", nargs="+", default=[], metavar="C.csv",
                         help="logs never used to fit: the before/after figures are measured on them")
     parser.add_argument("--json", metavar="OUT.json", help="write the result here (default: print it)")
@@ -54,6 +57,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def _vehicle_content(path: Path):
+    """A vehicle file's content without its free-text notes (the SITL names the seed there)."""
+    try:
+        content = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return path.read_bytes()
+    if isinstance(content, dict):
+        content.pop("notes", None)
+    return content
+
+
+def default_vehicle_path(log_paths: list[str]) -> Path:
+    """The vehicle file beside the logs (X.csv -> X.vehicle.json), whatever their order: the first by
+    path name of those that exist; all that exist must say the same (notes aside), else the logs do
+    not say which vehicle they are of."""
+    beside = sorted({vehicle_path_for(p) for p in log_paths})
+    present = [p for p in beside if p.exists()]
+    if not present:
+        return beside[0]
+    first = _vehicle_content(present[0])
+    differing = [str(p) for p in present[1:] if _vehicle_content(p) != first]
+    if differing:
+        raise UserError(f"the logs' vehicle files differ ({present[0]} and {differing[0]}): give --vehicle V.json")
+    return present[0]
+
+
 def _clean(obj):
     """JSON-ready: numpy scalars to Python, NaN/Inf to null."""
     if isinstance(obj, dict):
@@ -83,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--highpass: expected a frequency in Hz or 'auto', got {args.highpass!r}") from None
     if not (highpass >= 0 and args.lowpass > highpass):
         raise UserError("--lowpass must be above --highpass (both in Hz, >= 0)")
-    vehicle_path = Path(args.vehicle) if args.vehicle else vehicle_path_for(args.log[0])
+    vehicle_path = Path(args.vehicle) if args.vehicle else default_vehicle_path(args.log)
     if not vehicle_path.exists():
         raise UserError(f"no vehicle file: {vehicle_path} (give --vehicle V.json)")
     vehicle = read_vehicle(vehicle_path)
@@ -97,8 +126,9 @@ def run(args: argparse.Namespace) -> int:
         check_directory(args.report, "--report")
     check_not_inputs((("--vehicle-out", args.vehicle_out), ("--json", args.json)),
                      [vehicle_path, *args.log, *args.holdout])
-    logs = [read_flightlog(p, vehicle) for p in args.log]
-    holdout = [read_flightlog(p, vehicle) for p in args.holdout]
+    # the calibration and the filter check below take the logs in the analysis's canonical order too
+    logs = canonical_order([read_flightlog(p, vehicle) for p in args.log])
+    holdout = canonical_order([read_flightlog(p, vehicle) for p in args.holdout])
     options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
                                repeats=args.repeats, lag_evidence=args.lag_evidence)
     try:

@@ -15,6 +15,7 @@ from propid.gap.vehicle_out import corrected_vehicle
 from propid.gap.design import base_columns, build_design, responses
 from propid.gap.effects import (ALL_IDS, CONDITIONED_ON, EFFECTS, ESC_DELAY, MIN_REPORTED_LAG_S, RESIDUAL_LAG,
                                Context, by_id)
+from propid.gap.log_order import canonical_order
 from propid.gap.prep import Band, Flight, columns_present, difference_response, prepare_flight
 from propid.realdata_checks import bandpass
 
@@ -199,6 +200,8 @@ def _physical(design, theta_scaled, effect_id, ctx):
 
 
 def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], options: Options) -> dict:
+    # one order whatever the command line's: folds, bootstraps and sums follow the list (log_order.py)
+    logs, holdout = canonical_order(logs), canonical_order(holdout)
     unit_inertia = vehicle.inertia is None
     original_vehicle = vehicle
     if unit_inertia:  # torque coefficients become kf/J-like ratios in the file's geometry
@@ -342,6 +345,11 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         "ambiguous": [{"candidates": a["candidates"], "kept": a["kept"], "reason": a["reason"],
                        "score_difference_ci": a["score_difference_ci"]} for a in sel["ambiguous"]],
         "inputs": {"logs": [str(l.path) for l in logs], "holdout": [str(l.path) for l in holdout],
+                   "log_order": "canonical, whatever the command line's: sorted by a digest of each log's content "
+                                "(gap/log_order.py); with 3 or more logs the folds are whole logs, index in this "
+                                "order mod 5 (fold_of_log)",
+                   "fold_of_log": ({str(l.path): k % scoring.FOLDS for k, l in enumerate(logs)}
+                                   if len(logs) >= 3 else None),
                    "vehicle": str(vehicle.path) if vehicle.path else vehicle.name, "columns_present": present,
                    "band_hz": [options.band.highpass_hz, options.band.lowpass_hz],
                    "highpass_rule": None if band_rule is None else
