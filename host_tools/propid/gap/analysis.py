@@ -346,10 +346,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                        "score_difference_ci": a["score_difference_ci"]} for a in sel["ambiguous"]],
         "inputs": {"logs": [str(l.path) for l in logs], "holdout": [str(l.path) for l in holdout],
                    "log_order": "canonical, whatever the command line's: sorted by a digest of each log's content "
-                                "(gap/log_order.py); with 3 or more logs the folds are whole logs, index in this "
-                                "order mod 5 (fold_of_log)",
-                   "fold_of_log": ({str(l.path): k % scoring.FOLDS for k, l in enumerate(logs)}
-                                   if len(logs) >= 3 else None),
+                                "(gap/log_order.py); with 3 or more logs each log is a cross-validation fold of "
+                                "its own (leave one log out), else the blocks in this order form 5 folds",
                    "vehicle": str(vehicle.path) if vehicle.path else vehicle.name, "columns_present": present,
                    "band_hz": [options.band.highpass_hz, options.band.lowpass_hz],
                    "highpass_rule": None if band_rule is None else

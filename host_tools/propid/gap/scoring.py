@@ -2,8 +2,10 @@
 blocks.
 
 Rules (docs/gap.md, "Scoring"):
-- folds: with 3 or more flights, whole flights (flight index mod 5); otherwise the
-  fold blocks (Design.fold_group, 1 s on the whitened rows), block index mod 5;
+- folds: with 3 or more flights, one flight each (leave one flight out: no partition of the
+  flights into groups, so neither the order of the logs nor a grouping decides which flights are
+  held out together); otherwise the fold blocks (Design.fold_group, 1 s on the whitened rows),
+  block index mod 5 (blocks numbered in the canonical log order of log_order.py);
 - each axis is weighted by 1/sigma_a^2, sigma_a the base model's residual RMS on it
   (so torque [N m] and thrust [N] rows count alike);
 - an effect's explained fraction = mean over its axes of 1 - SSE_with / SSE_without,
@@ -39,7 +41,7 @@ import numpy as np
 from propid.gap.design import Design
 
 MIN_SCALE_EFFECT_SIZE = 0.03  # effects seen as a torque-vs-accelerometer scale (zero-g offset ~2 % of g)
-FOLDS = 5
+FOLDS = 5  # block folds with one or two flights (three or more: one fold per flight)
 BOOTSTRAP = 300
 BOOTSTRAP_CI = 4000  # resamples for the held-out intervals (their tails are read at 0.05 / candidates)
 RIDGE = 1e-9
@@ -83,7 +85,7 @@ def grams(design: Design, weight: np.ndarray | None = None) -> Grams:
     flights = design.block_flight
     n_flights = int(flights.max()) + 1 if flights.size else 1
     group = np.arange(nb) if design.fold_group is None else design.fold_group
-    fold = flights % FOLDS if n_flights >= 3 else group % FOLDS
+    fold = flights.copy() if n_flights >= 3 else group % FOLDS
     w = np.ones(len(axes)) if weight is None else weight
     return Grams(axes, g, h, s, m, count, w, fold)
 
