@@ -74,10 +74,12 @@ def test_esc_delay_is_the_fitted_stream_lag(flights):
 
 
 
-def test_each_log_is_aligned_by_its_own_stream_lag(tmp_path, sitl_binary):
+@pytest.mark.parametrize("lag_evidence", ["raw", "whitened"])
+def test_each_log_is_aligned_by_its_own_stream_lag(lag_evidence, tmp_path, sitl_binary):
     """Two logs of one vehicle whose rotor streams lag by 5 and 20 ms (a telemetry lag
     belongs to a log): each log, fitted or held out, gets its own lag (the sensor chain's
-    own few ms on top, as in the single-log test), not one pooled value for both."""
+    own few ms on top, as in the single-log test), not one pooled value for both. With
+    --lag-evidence whitened each log's lag is also shown on its own whitened rows."""
     from propid.gap import analysis
     from propid.gap.prep import Band
 
@@ -89,10 +91,16 @@ def test_each_log_is_aligned_by_its_own_stream_lag(tmp_path, sitl_binary):
                        timeout=120, check=True)
         vehicle = read_vehicle(path.with_name(path.stem + ".vehicle.json"))
         logs.append(read_flightlog(path, vehicle))
-    result = analysis.run([logs[0]], vehicle, [logs[1]], analysis.Options(Band(), progress=False))
+    result = analysis.run([logs[0]], vehicle, [logs[1]],
+                          analysis.Options(Band(), progress=False, lag_evidence=lag_evidence))
     per_log = _entry(result, "esc_delay")["params"]["per_log_delay_s"]
     assert per_log["lag_5"] == pytest.approx(0.007, abs=0.004)
     assert per_log["lag_6"] == pytest.approx(0.022, abs=0.004)
+    if lag_evidence == "whitened":
+        evidence = result["alignment"]["per_log_evidence"]
+        assert evidence["lag_5"]["aligned"] and evidence["lag_6"]["aligned"]
+        assert evidence["lag_5"]["role"] == "fit" and evidence["lag_6"]["role"] == "holdout"
+        assert _entry(result, "esc_delay")["significant"]
 
 # two blind-benchmark flights (docs/gap.md, SITL accuracy): a 50 ms telemetry lag on a circle
 LONG_LAG_FLIGHTS = {

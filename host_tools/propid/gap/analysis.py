@@ -10,7 +10,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
-from propid.gap import alignment, basefit, scoring, selection, shrink, where, whitening
+from propid.gap import alignment, basefit, scoring, selection, shrink, significance, where, whitening
 from propid.gap.vehicle_out import corrected_vehicle
 from propid.gap.design import base_columns, build_design, responses
 from propid.gap.effects import (ALL_IDS, CONDITIONED_ON, EFFECTS, ESC_DELAY, MIN_REPORTED_LAG_S, RESIDUAL_LAG,
@@ -178,18 +178,42 @@ def _alignment_nuisance(f: Flight, ctx: Context, candidates: list[str]) -> dict:
     return {a: np.column_stack(v) if v else np.zeros((len(f.t), 0)) for a, v in cols.items()}
 
 
-def per_log_delays(flights: list[Flight], held: list[Flight], vehicle: Vehicle, candidates: list[str]) -> list[float]:
+def per_log_alignment(flights: list[Flight], held: list[Flight], vehicle: Vehicle, candidates: list[str],
+                      evidence: bool = False) -> list[dict]:
     """Each log's own rotor-stream lag (the same search as the pooled one, on that log
     alone): the lag belongs to a log's telemetry schedule, not to the vehicle. A held-out
     log's lag is measured on its own stream, as the filter's per-log delay rule does; the
-    model coefficients evaluated on it still come from the fitted logs only."""
+    model coefficients evaluated on it still come from the fitted logs only. `evidence`: also
+    each log's own held-out evidence on its whitened rows (alignment.whitened_evidence)."""
     out = []
     for f in flights + held:
         ctx = make_context([f], vehicle, np.ones(vehicle.rotor_count), np.ones(vehicle.rotor_count))
         one = alignment.search([f], vehicle.positions, vehicle.yaw_signs,
-                               nuisance=[_alignment_nuisance(f, ctx, candidates)], evidence=False)
-        out.append(float(one["delay_s"]))
+                               nuisance=[_alignment_nuisance(f, ctx, candidates)], evidence=evidence)
+        out.append({"delay_s": float(one["delay_s"]), **({"whitened": one["whitened"]} if evidence else {})})
     return out
+
+
+def per_log_lag_decision(per_log: list[dict], names: list[str], fitted: int, sample_period: float) -> dict:
+    """--lag-evidence whitened with several logs: a log is aligned by its own lag when that
+    lag's own held-out evidence (its whitened rows) passes Holm's step-down at
+    alignment.EVIDENCE_LEVEL over all the logs (fitted and held out), else it is left at 0;
+    esc_delay is significant when a fitted log's lag passes and clears the reporting floors
+    (explained fraction, |d| above a sample and 5 ms). The entry's evidence is the fitted log
+    with the smallest p-value."""
+    p_values = [e["whitened"]["p_value"] for e in per_log]
+    shown = significance.holm(p_values, alignment.EVIDENCE_LEVEL)
+    delays = [e["delay_s"] if ok else 0.0 for e, ok in zip(per_log, shown)]
+    floor = max(sample_period, MIN_REPORTED_DELAY_S)
+    significant = any(shown[k] and per_log[k]["whitened"]["explained_fraction"] >= MIN_DELAY_EXPLAINED
+                      and abs(per_log[k]["delay_s"]) > floor for k in range(fitted))
+    strongest = min(range(fitted), key=lambda k: p_values[k])
+    table = {name: {"delay_s": e["delay_s"], "explained_fraction": e["whitened"]["explained_fraction"],
+                    "ci": e["whitened"]["ci"], "p_value": e["whitened"]["p_value"], "aligned": ok,
+                    "role": "fit" if k < fitted else "holdout"}
+             for k, (name, e, ok) in enumerate(zip(names, per_log, shown))}
+    return {"delays": delays, "shown": any(shown[:fitted]), "significant": significant,
+            "evidence": {**per_log[strongest]["whitened"], "log": names[strongest]}, "per_log": table}
 
 
 def _physical(design, theta_scaled, effect_id, ctx):
@@ -242,9 +266,19 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     delay = align["delay_s"] if shown else 0.0
     # several logs: each log aligned by its own lag when the pooled one is applied
     delays = [delay] * (len(flights) + len(held_flights))
-    if delay and len(flights) + len(held_flights) > 1:
-        delays = per_log_delays(flights, held_flights, vehicle, candidates)
-        align["per_log_delay_s"] = {f.name: d for f, d in zip(flights + held_flights, delays)}
+    names = [f.name for f in flights + held_flights]
+    if whitened and len(names) > 1:
+        # a lag belongs to a log: each log's own lag on its own whitened rows (per_log_lag_decision),
+        # not one pooled lag tested on whole held-out logs
+        decision = per_log_lag_decision(per_log_alignment(flights, held_flights, vehicle, candidates, evidence=True),
+                                        names, len(flights), sample_period)
+        delays, shown, delay_significant = decision["delays"], decision["shown"], decision["significant"]
+        evidence = decision["evidence"]
+        align["per_log_delay_s"] = dict(zip(names, delays))
+        align["per_log_evidence"] = decision["per_log"]
+    elif delay and len(names) > 1:
+        delays = [e["delay_s"] for e in per_log_alignment(flights, held_flights, vehicle, candidates)]
+        align["per_log_delay_s"] = dict(zip(names, delays))
     work = [shifted_flight(f, d) for f, d in zip(flights, delays)]
     work_held = [shifted_flight(f, d) for f, d in zip(held_flights, delays[len(flights):])]
     # the band rule again, on the aligned logs and with the 5 Hz candidate: a misaligned rotor
