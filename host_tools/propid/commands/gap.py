@@ -52,8 +52,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "filter check always skips them (--skip-repeats)")
     parser.add_argument("--lag-evidence", choices=("raw", "whitened"), default="raw",
                         help="the stream lag's held-out evidence: 'raw' (2 s blocks of the band-passed rows, the "
-                             "default) or 'whitened' (the effects' replication test on whitened rows; evaluated, "
-                             "docs/gap.md 'Stream alignment')")
+                             "default) or 'whitened' (the effects' replication test on whitened rows, each log's own lag "
+                             "on its own rows when there are several; evaluated, docs/gap.md 'Stream alignment')")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
