@@ -1,5 +1,5 @@
 """Fixtures shared by the host-tool tests: the built simulator, the C filter library, a free
-UDP port.
+UDP port, the soak's scripts as modules.
 
 The simulator binary comes from PROPID_BUILD_DIR (default <repo>/build/host). When
 PROPID_BUILD_DIR is set (as `make test` does) a missing binary is a failure; in a plain dev
@@ -8,16 +8,19 @@ run without a build the tests that need it are skipped.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import socket
 from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 BUILD_DIR = Path(os.environ.get("PROPID_BUILD_DIR", REPO / "build" / "host"))
 SITL = BUILD_DIR / "sitl" / "propid_sitl"
+SOAK_DIR = REPO / "tests" / "soak"
 
 
 @pytest.fixture(scope="session")
@@ -51,3 +54,17 @@ def cfilter_available() -> None:
         cfilter.load_library()
     except Exception as exc:  # the C library is built by `make` before the Python tests
         pytest.fail(f"the firmware shared library is not built or does not load: {exc}")
+
+
+@pytest.fixture(scope="session")
+def soak_script() -> Callable[[str], ModuleType]:
+    """Returns a function loading tests/soak/NAME.py as a module (the soak's scripts are not
+    a package: they run as `python tests/soak/NAME.py`)."""
+
+    def load(name: str) -> ModuleType:
+        spec = importlib.util.spec_from_file_location(f"{name}_under_test", SOAK_DIR / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    return load

@@ -6,7 +6,6 @@ rates against the filter's step with the true coefficients)."""
 
 from __future__ import annotations
 
-import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -14,13 +13,6 @@ from pathlib import Path
 import pytest
 
 RULE = Path(__file__).resolve().parents[1] / "soak" / "rate_noise_rule.py"
-
-
-def load_rule():
-    spec = importlib.util.spec_from_file_location("rate_noise_rule_under_test", RULE)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope="module")
@@ -32,17 +24,17 @@ def step_log(sitl_binary, tmp_path_factory):
     return log
 
 
-def test_derived_rate_noise_matches_the_truth_residual(step_log):
-    rule = load_rule()
+def test_derived_rate_noise_matches_the_truth_residual(step_log, soak_script):
+    rule = soak_script("rate_noise_rule")
     derived = rule.derive(str(step_log), str(step_log)[:-4] + ".vehicle.json", "hummingbird-x", "paper", truth=True)
     print(derived)
     assert derived["truth_q_rate"] > 1e-5  # a miss the check can see (hovers are below it)
     assert 1 / 1.3 <= derived["q_rate"] / derived["truth_q_rate"] <= 1.3
 
 
-def test_a_wrong_motor_model_is_seen(step_log, monkeypatch):
+def test_a_wrong_motor_model_is_seen(step_log, monkeypatch, soak_script):
     """The same log with the motor time constant doubled: the derivation no longer agrees."""
-    rule = load_rule()
+    rule = soak_script("rate_noise_rule")
     tau, top = rule.MOTORS["hummingbird"]
     monkeypatch.setitem(rule.MOTORS, "hummingbird", (2.0 * tau, top))
     derived = rule.derive(str(step_log), str(step_log)[:-4] + ".vehicle.json", "hummingbird-x", "paper", truth=True)

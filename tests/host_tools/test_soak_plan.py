@@ -2,27 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import random
-from pathlib import Path
-
-SOAK = Path(__file__).resolve().parents[1] / "soak" / "soak.py"
-
-
-def load_soak():
-    spec = importlib.util.spec_from_file_location("soak_plan_under_test", SOAK)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def declared_inertia_std(cmd: list[str]) -> float:
     return float(cmd[cmd.index("--filter-inertia-std") + 1])
 
 
-def test_every_flight_declares_the_same_inertia_std():
-    soak = load_soak()
+def test_every_flight_declares_the_same_inertia_std(soak_script):
+    soak = soak_script("soak")
     rng = random.Random(1)
     cases = [soak.plan_case(rng, i) for i in range(400)]
     with_error = [c for c in cases if any(e.startswith("inertia_error=") for e in c["effects"])]
@@ -35,10 +24,10 @@ def test_every_flight_declares_the_same_inertia_std():
     assert declared_inertia_std(soak.command("sitl", with_error[0], "filter", "x.json", inertia_std=0.0)) == 0.0
 
 
-def test_declared_inertia_std_is_the_plans_rms_error():
+def test_declared_inertia_std_is_the_plans_rms_error(soak_script):
     """The closed form against the plan itself: the RMS of the drawn
     inertia_error strength over many cases (0 where the effect is absent)."""
-    soak = load_soak()
+    soak = soak_script("soak")
     rng = random.Random(7)
     total, count = 0.0, 40000
     for i in range(count):
