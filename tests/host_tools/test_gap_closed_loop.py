@@ -14,6 +14,9 @@ from propid.gap.vehicle_out import corrected_vehicle
 
 KF, ARM, MASS = 3e-8, 0.035, 0.035
 INERTIA = np.diag([1.7e-5, 1.7e-5, 3e-5])
+# the synthetic logs' X quad: rotor positions (body FLU) and yaw signs
+X_POSITIONS = np.array([[ARM, -ARM, 0], [-ARM, -ARM, 0], [-ARM, ARM, 0], [ARM, ARM, 0]]) / np.sqrt(2)
+X_YAW_SIGNS = np.array([-1, 1, -1, 1.0])
 
 
 @pytest.mark.parametrize("rate, freq", [(100.0, 20.0), (100.0, 10.0), (500.0, 25.0)])
@@ -38,10 +41,11 @@ def _band_noise(rng, n, rate, lo, hi, rms):
     return y * rms / y.std()
 
 
-def _hover_log(rng, t, rate, pos, signs, rotor_torque, seen_torque):
+def _hover_log(rng, t, rate, rotor_torque, seen_torque):
     """A hovering X quad's log: rotor speeds that make rotor_torque (roll, pitch), a gyro that integrates
     seen_torque, the accelerometer's collective thrust; and its vehicle."""
     n = t.size
+    pos, signs = X_POSITIONS, X_YAW_SIGNS
     to_torque = np.column_stack([pos[:, 1], -pos[:, 0]]).T  # roll, pitch torque per unit kf Omega^2
     u = MASS * 9.81 / (4 * KF) + (np.linalg.pinv(to_torque) @ (rotor_torque.T / KF)).T
     rates = np.column_stack([np.cumsum(seen_torque[:, 0] / INERTIA[0, 0]) / rate,
@@ -61,13 +65,11 @@ def _closed_loop_log(seed: int, cancelled_rms: float, rate: float = 200.0, durat
     rng = np.random.default_rng(seed)
     n = int(duration * rate)
     t = np.arange(n) / rate
-    pos = np.array([[ARM, -ARM, 0], [-ARM, -ARM, 0], [-ARM, ARM, 0], [ARM, ARM, 0]]) / np.sqrt(2)
-    signs = np.array([-1, 1, -1, 1.0])
     seen = np.column_stack([_band_noise(rng, n, rate, 0.3, 30, 6e-5) for _ in range(2)])
     rotor = seen.copy()
     if cancelled_rms:
         rotor -= np.column_stack([_band_noise(rng, n, rate, 0.2, 1.2, cancelled_rms) for _ in range(2)])
-    return _hover_log(rng, t, rate, pos, signs, rotor_torque=rotor, seen_torque=seen)
+    return _hover_log(rng, t, rate, rotor_torque=rotor, seen_torque=seen)
 
 
 def _run(cancelled_rms: float):
@@ -112,12 +114,10 @@ def _reversed_band_log(seed: int, rate: float = 200.0, duration: float = 40.0):
     rng = np.random.default_rng(seed)
     n = int(duration * rate)
     t = np.arange(n) / rate
-    pos = np.array([[ARM, -ARM, 0], [-ARM, -ARM, 0], [-ARM, ARM, 0], [ARM, ARM, 0]]) / np.sqrt(2)
-    signs = np.array([-1, 1, -1, 1.0])
     slow = np.column_stack([_band_noise(rng, n, rate, 0.3, 4.0, 6e-5) for _ in range(2)])
     fast = np.column_stack([_band_noise(rng, n, rate, 5.0, 30.0, 3e-5) for _ in range(2)])
     seen = slow - 0.3 * fast
-    return _hover_log(rng, t, rate, pos, signs, rotor_torque=slow + fast, seen_torque=seen)
+    return _hover_log(rng, t, rate, rotor_torque=slow + fast, seen_torque=seen)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
