@@ -1,9 +1,9 @@
 """The order gap works through its logs in: fixed by the logs' content, not by the order of
 the command line.
 
-Several of gap's rules depend on where a log sits in the list: with three or more logs the
-cross-validation folds are whole logs (log index mod 5), the block bootstraps draw block
-indices whose order follows the logs, and sums over logs round in list order. A diagnosis
+Some of gap's work depends on where a log sits in the list: the block bootstraps draw
+block indices whose order follows the logs, and sums over logs round in list order (the
+cross-validation folds do not: with three or more logs each log is a fold of its own). A diagnosis
 whose verdict changes when the same logs are given in another order cannot be trusted, so
 every list of logs (fitted and held out) is put into one canonical order first: by a digest
 of each log's content as read (column names and values), the path only breaking a tie
