@@ -34,7 +34,7 @@ import numpy as np
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.outputs import save_figure
-from propid.signals import measured_torque, repeats_previous_row, segments, world_to_body
+from propid.signals import log_body_velocity, measured_torque, repeats_previous_row, segments
 
 GRAVITY = 9.80665
 
@@ -350,16 +350,6 @@ DEFAULT_BANDS = {
 EVIDENCE_BANDS = ("0.5-2Hz", "2-5Hz", "5-10Hz", "10-20Hz")  # the per-band evidence table (docs/real-data.md)
 
 
-def _body_velocity(log: FlightLog) -> np.ndarray | None:
-    """World velocity rotated into the body frame with the attitude (None if not logged)."""
-    quat = log.quat
-    velocity = log.group(("vx", "vy", "vz"))
-    if quat is None or velocity is None:
-        return None
-    body = world_to_body(quat, velocity)
-    return np.nan_to_num(body, nan=0.0)
-
-
 def _commands(log: FlightLog, rotors: int) -> np.ndarray | None:
     """The logged motor commands cmd_1..cmd_N (flight-log v1 optional columns), gaps held; None
     when any is missing or never finite."""
@@ -477,7 +467,7 @@ def check_log(
     speed_dot = np.gradient(speeds, log.t, axis=0)
     reg_yaw_rotor = np.column_stack([reg_yaw[:, 0], (speed_dot * signs).sum(axis=1)])
     sum_u = u.sum(axis=1, keepdims=True)
-    body_velocity = _body_velocity(log)
+    body_velocity = log_body_velocity(log, missing=0.0)
     acc = log.acc
     thrust_ok = acc is not None and vehicle.mass is not None and np.isfinite(acc[:, 2]).any()
     lags = range(-max_lag, max_lag + 1)

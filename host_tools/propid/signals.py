@@ -36,6 +36,18 @@ def world_to_body(quat: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     return np.einsum("nji,nj->ni", rot, vectors)
 
 
+def log_body_velocity(log, missing: float = np.nan) -> np.ndarray | None:
+    """A flight log's world velocity (vx, vy, vz) rotated into the body frame with its attitude;
+    None when the log has no velocity or no attitude. Rows with either missing get `missing`
+    (NaN by default; 0 for fits that take every row as a regressor)."""
+    quat = log.quat
+    velocity = log.group(("vx", "vy", "vz"))
+    if quat is None or velocity is None:
+        return None
+    body = world_to_body(quat, velocity)
+    return body if np.isnan(missing) else np.nan_to_num(body, nan=missing)
+
+
 def segments(mask: np.ndarray, min_length: int) -> list[tuple[int, int]]:
     """[start, stop) index ranges of contiguous True runs at least min_length long."""
     edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))

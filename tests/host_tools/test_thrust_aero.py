@@ -19,7 +19,8 @@ from propid.errors import UserError
 from propid.flightlog import FlightLog, parse_vehicle, read_flightlog, read_vehicle
 from propid.replay import ReplayOptions, replay
 from propid.replay.rotor_spread import deviation_covariance, probability_all_within, spread_bound
-from propid.replay.thrust_aero import body_velocity, carry_thrust_aero, fit_thrust_aero, regressors
+from propid.replay.thrust_aero import carry_thrust_aero, fit_thrust_aero, regressors
+from propid.signals import log_body_velocity
 
 # The SITL's crazyflie preset (sitl/physics/vehicle_presets.c): RotorPy's k_z and k_h scaled by disc area.
 SITL_INFLOW_COEFF = 7.553e-7  # N/(rad/s m/s) per rotor
@@ -47,7 +48,7 @@ def test_body_velocity_is_the_world_velocity_in_the_body_frame():
     half = math.radians(90.0) / 2
     yaw90 = np.tile([math.cos(half), 0.0, 0.0, math.sin(half)], (n, 1))  # body x points world y
     log = table_log(n, np.random.default_rng(0), yaw90, np.tile([1.0, 0.0, 0.5], (n, 1)))
-    np.testing.assert_allclose(body_velocity(log), np.tile([0.0, -1.0, 0.5], (n, 1)), atol=1e-12)
+    np.testing.assert_allclose(log_body_velocity(log), np.tile([0.0, -1.0, 0.5], (n, 1)), atol=1e-12)
     pitch90 = np.tile([math.cos(half), 0.0, math.sin(half), 0.0], (n, 1))  # body z points world x
     log = table_log(n, np.random.default_rng(0), pitch90, np.tile([2.0, 0.0, 0.0], (n, 1)))
     x = regressors(log)

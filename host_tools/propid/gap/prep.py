@@ -37,9 +37,9 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
-from propid.realdata_checks import _body_velocity, _hold_rotor_rows, absurd_speed_limit, bandpass, \
+from propid.realdata_checks import _hold_rotor_rows, absurd_speed_limit, bandpass, \
     clean_rotor_speeds, flying_mask
-from propid.signals import measured_torque, repeats_previous_row, segments
+from propid.signals import log_body_velocity, measured_torque, repeats_previous_row, segments
 
 MIN_SEGMENT_S = 2.0
 BLOCK_S = 2.0
@@ -264,7 +264,7 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
     speed_dot = np.gradient(speeds, log.t, axis=0)
     acc = log.acc
     acc = _interp_missing(acc) if acc is not None and np.isfinite(acc).any() else None
-    vel = _body_velocity(log)
+    vel = log_body_velocity(log, missing=0.0)
     height = log.extra.get("pz")
     height = _interp_missing(height) if height is not None and np.isfinite(height).any() else None
     cmd = log.group(tuple(f"cmd_{i + 1}" for i in range(log.rotor_count)))

@@ -14,6 +14,7 @@ import numpy as np
 
 from propid.flightlog import Vehicle
 from propid.gapbench.rigid_body import Grid, inertia_matrix
+from propid.signals import world_to_body
 
 GRAVITY = 9.81
 
@@ -29,14 +30,7 @@ def _stack(roll=None, pitch=None, yaw=None, thrust=None, n: int = 0) -> np.ndarr
 def _body_velocity(grid: Grid) -> np.ndarray | None:
     if grid.quat is None or grid.vel is None:
         return None
-    w, x, y, z = grid.quat.T
-    # Rows of R^T (body <- world) applied to the world velocity.
-    r = np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)],
-        [2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)],
-        [2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)],
-    ])
-    return np.einsum("ijn,nj->ni", r, grid.vel)
+    return world_to_body(grid.quat, grid.vel)
 
 
 def _coefficients(vehicle: Vehicle, count: int) -> tuple[np.ndarray, np.ndarray]:

@@ -24,27 +24,17 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
-from propid.signals import segments, world_to_body
+from propid.signals import log_body_velocity, segments
 
 TERMS = ("climb", "translational")
 VEHICLE_KEYS = MappingProxyType({"climb": "thrust_climb_coeff", "translational": "thrust_translational_coeff"})
 MIN_SEGMENT_S = 0.5  # flying stretches shorter than this are left out of the fit (take-off, landing blips)
 
 
-def body_velocity(log: FlightLog) -> np.ndarray | None:
-    """The logged world velocity rotated into the body frame with the logged attitude (body -> world
-    quaternion); None when the log has no velocity or attitude. Rows with either missing are NaN."""
-    quat = log.quat
-    velocity = log.group(("vx", "vy", "vz"))
-    if quat is None or velocity is None:
-        return None
-    return world_to_body(quat, velocity)
-
-
 def regressors(log: FlightLog, rotor_speed: np.ndarray | None = None) -> dict[str, np.ndarray] | None:
     """Per row: {"climb": sum_i Omega_i v_z,b, "translational": N v_h^2}; None without velocity/attitude.
     `rotor_speed` overrides the log's (e.g. with spikes and gaps repaired)."""
-    velocity = body_velocity(log)
+    velocity = log_body_velocity(log)
     if velocity is None:
         return None
     speeds = log.rotor_speed if rotor_speed is None else rotor_speed
