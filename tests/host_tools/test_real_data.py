@@ -26,17 +26,21 @@ def test_missing_data_is_skipped_cleanly(tmp_path):
 
 def test_mode_summary_statistics():
     runs = {"square_a": dict(kf_over_reference=1.0, rotor_spread=0.02, km=1e-10, km_converged=True,
-                             accel_bias=0.1, finite=True, p_every_rotor_within_5pct=0.9),
+                             accel_bias=0.1, finite=True, p_every_rotor_within_5pct=0.9,
+                             km_worst_rotor_rel_std=0.2, km_mean_rel_std=0.1),
             "random_b": dict(kf_over_reference=0.8, rotor_spread=0.10, km=2e-10, km_converged=False,
-                             accel_bias=0.3, finite=True, p_every_rotor_within_5pct=0.5),
+                             accel_bias=0.3, finite=True, p_every_rotor_within_5pct=0.5,
+                             km_worst_rotor_rel_std=0.1, km_mean_rel_std=0.05),
             "random_c": dict(kf_over_reference=0.6, rotor_spread=0.04, km=3e-10, km_converged=False,
-                             accel_bias=0.5, finite=True, p_every_rotor_within_5pct=0.25)}
+                             accel_bias=0.5, finite=True, p_every_rotor_within_5pct=0.25,
+                             km_worst_rotor_rel_std=0.3, km_mean_rel_std=0.2)}
     s = real_data.mode_summary(runs)
     assert s["kf_fleet_over_reference"] == pytest.approx(0.8) and s["kf_run_cv"] == pytest.approx(0.25)
     assert s["square_kf"] == 1.0 and s["other_kf"] == pytest.approx(0.7) and s["other_runs"] == 2
     assert s["worst_rotor_spread"] == 0.10 and s["runs_every_rotor_within_5pct"] == 2
     assert s["runs_km_converged"] == 1 and s["accel_bias_median"] == 0.3
     assert s["runs_every_rotor_within_5pct_if_equal"] == pytest.approx(1.65)  # the sum of the runs' chances
+    assert s["km_worst_rotor_rel_std_median"] == 0.2 and s["km_mean_rel_std_median"] == 0.1
 
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason="real logs (../shared) not present")

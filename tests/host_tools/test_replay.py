@@ -124,6 +124,12 @@ def test_synthetic_replay_recovers_known_coefficients(cfilter_available, tmp_pat
     assert s["counters"]["gyro_accepted"] == len(log)
     # series for the plot: one estimate per gyro sample
     assert result.series["kf"].shape == (len(log), 4)
+    # The channels' km combinations (km_evidence.py) come from the km block of the final covariance: for an X quad
+    # they are an orthogonal basis scaled by 1/2, so their variances sum to a quarter of the rotors' relative ones.
+    combination = s["km_combination_std"]
+    rotor_rel_var = sum((std / VEHICLE["km_nominal"]) ** 2 for std in s["km_std"])
+    assert sum(v**2 for v in combination.values()) == pytest.approx(rotor_rel_var / 4, rel=1e-4)
+    assert combination["collective"] < combination["yaw"]  # the trim's yaw balance weighs the sign-weighted sum
 
 
 def test_time_gap_is_bridged_with_resync(cfilter_available):

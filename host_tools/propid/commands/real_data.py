@@ -28,6 +28,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="instead of the replays: per-log least-squares fits of m acc_z on sum Omega^2 with a free "
                              "bias and candidate airspeed/attitude terms (climb, translational, z drag, misalignment, "
                              "ground effect); print the table, write thrust_evidence.json (docs/real-data.md)")
+    parser.add_argument("--km-evidence", action="store_true",
+                        help="instead of the replays: per log, how much the flight tells about the rotors' km (yaw "
+                             "excitation per input channel, least-squares km with white and Newey-West stds, the "
+                             "filter model's bound, the flight time 5 %% would need); print the table, write "
+                             "km_evidence.json (docs/real-data.md)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -46,8 +51,12 @@ def run(args: argparse.Namespace) -> int:
         if len(found) != 1:
             raise UserError(f"{data}: {len(found)} *.vehicle.json files; give --vehicle")
         vehicle = found[0]
+    if args.thrust_evidence and args.km_evidence:
+        raise UserError("--thrust-evidence and --km-evidence: choose one")
     if args.thrust_evidence:
         return _thrust_evidence(data, vehicle, args)
+    if args.km_evidence:
+        return _km_evidence(data, vehicle, args)
     known = {m[0] for m in real_data.MODES}
     modes = tuple(m for m in args.modes.split(",") if m)
     unknown = sorted(set(modes) - known)
@@ -84,6 +93,33 @@ def _thrust_evidence(data: Path, vehicle_path: Path, args: argparse.Namespace) -
     print(f"slope kf over the reference {args.reference_kf:.3g} (display only); {len(logs)} runs")
     print(render_evidence(entries), end="")
     out = Path(args.out) / "thrust_evidence.json"
+    write_text(out, json.dumps(entries, indent=2) + "\n")
+    print(f"wrote {out}")
+    return 0
+
+
+def _km_evidence(data: Path, vehicle_path: Path, args: argparse.Namespace) -> int:
+    import json
+
+    from propid.flightlog import read_flightlog, read_vehicle
+    from propid.km_evidence import km_evidence, render_km_evidence
+    from propid.outputs import write_text
+
+    vehicle = read_vehicle(vehicle_path)
+    paths = sorted(data.glob("*.csv"))
+    if not paths:
+        raise UserError(f"no *.csv logs in {data}")
+    iterator = paths
+    if not args.no_progress:
+        from tqdm import tqdm
+
+        iterator = tqdm(paths, desc="km-evidence", unit="log")
+    entries = {}
+    for path in iterator:
+        entries[path.stem.replace("_20251017", "")] = km_evidence(read_flightlog(path, vehicle), vehicle)
+    print(f"km relative to the vehicle file's nominal; {len(entries)} runs")
+    print(render_km_evidence(entries), end="")
+    out = Path(args.out) / "km_evidence.json"
     write_text(out, json.dumps(entries, indent=2) + "\n")
     print(f"wrote {out}")
     return 0

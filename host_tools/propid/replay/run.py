@@ -10,6 +10,7 @@ from propid import cfilter
 from propid.cfilter import DEFAULT_TUNING
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
+from propid.km_evidence import combination_std
 from propid.replay.alignment import detect_streams, estimate_esc_delay, filter_input_rule
 from propid.replay.config import build_config
 from propid.replay.instrument import resolve_instrument
@@ -240,6 +241,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "kf_mean": kf_mean,
         "km_mean": km_mean,
         "kf_rotor_spread_bound": spread_bound(np.asarray(kf_mean), filt.thrust_coeff_covariance()),
+        # Relative std of the km combination each input channel measures (km_evidence.py): yaw -> the mean km.
+        "km_combination_std": combination_std(filt.drag_coeff_rel_covariance(), filt.vehicle),
         "kf_converged_from_s": kf_start,
         "km_converged_from_s": km_start,
         "converged": {"kf": kf_conv, "km": km_conv},
@@ -276,6 +279,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
             "kf_rotor_spread_bound": "each rotor's std of kf_i / mean(kf) - 1 from the final covariance, and the "
                                      "probability that every rotor is within the tolerance of the run mean if the "
                                      "rotors were equal (replay/rotor_spread.py)",
+            "km_combination_std": "relative std of the km combination each input channel (yaw, collective, roll, "
+                                  "pitch) measures, from the final covariance: yaw -> the mean km (km_evidence.py)",
             "finite": "every recorded kf, km, their stds, gyro bias and body rate is finite",
             "torque_scale_mean": "mean of the thrust-torque scale from the last rotor's kf convergence (the second "
                                  "half if one never converges) to the end; 1 without the scale state",

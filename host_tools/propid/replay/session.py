@@ -85,6 +85,12 @@ class FilterSession:
         jac *= np.asarray(self.vehicle.kf_nominal, dtype=float)[:, None]
         return jac @ cov @ jac.T
 
+    def drag_coeff_rel_covariance(self) -> np.ndarray:
+        """Covariance of the rotors' km relative to their nominal (km_rel, per rotor) now."""
+        _, cov = self._filter.scaled_state()
+        n = self.rotor_count
+        return cov[3 + n:3 + 2 * n, 3 + n:3 + 2 * n].copy()
+
     def counters(self) -> dict:
         return dict(self._filter.counters())
 
