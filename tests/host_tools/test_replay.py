@@ -194,7 +194,7 @@ def _run_cli(argv):
     return command.run(parser.parse_args(argv))
 
 
-def test_cli_writes_json_and_plot(cfilter_available, tmp_path):
+def test_cli_writes_json_and_plot(cfilter_available, tmp_path, capsys):
     log_path = tmp_path / "synthetic.csv"
     write_flightlog(log_path, synthetic_log(duration=6.0))
     write_vehicle(tmp_path / "synthetic.vehicle.json", parse_vehicle(VEHICLE))
@@ -203,8 +203,10 @@ def test_cli_writes_json_and_plot(cfilter_available, tmp_path):
                      "--thrust-coeff-rel-std0", "0.4"]) == 0
     summary = json.loads(out.read_text())
     for key in ("kf", "kf_std", "km", "km_std", "kf_mean", "km_mean", "gyro_bias", "gyro_bias_std", "converged",
-                "rejected", "counters", "config"):
+                "rejected", "counters", "config", "km_combination_std"):
         assert key in summary
+    mean_km = 100 * summary["km_combination_std"]["yaw"]
+    assert f"km combinations, final relative std: mean km (yaw channel) {mean_km:.1f} %" in capsys.readouterr().out
     assert summary["config"]["thrust_coeff_rel_std0"] == 0.4
     assert png.stat().st_size > 5000 and png.read_bytes()[:4] == b"\x89PNG"
 

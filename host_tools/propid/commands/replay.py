@@ -296,6 +296,11 @@ def report(summary: dict, out) -> None:
           f"ESC delay {1e3 * summary['esc_delay_s']:.0f} ms", file=out)
     print("  kf, km: mean over the converged part +- final 1 sigma", file=out)
     print(rotor_table(summary), file=out)
+    combination = summary.get("km_combination_std")
+    if combination:  # what the flight's yaw excitation determined (docs/real-data.md "km: what the information allows")
+        print(f"  km combinations, final relative std: mean km (yaw channel) {100 * combination['yaw']:.1f} %, "
+              f"CW/CCW balance (collective) {100 * combination['collective']:.1f} %, diagonal differences (roll, "
+              f"pitch) {100 * combination['roll']:.1f} %, {100 * combination['pitch']:.1f} %", file=out)
     if summary["rejected"]:
         rejected = ", ".join(f"{count} {name.removeprefix('PROPID_ERR_')}" for name, count in summary["rejected"].items())
         print(f"  rejected samples: {rejected}", file=out)
