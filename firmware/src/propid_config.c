@@ -670,7 +670,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         PROPID_BAD("rotor_speed_noise");
     }
     if (!isfinite(config->rotor_speed_noise_time) || config->rotor_speed_noise_time < 0.0f ||
-        config->rotor_speed_noise_time > 1.0f) {
+        config->rotor_speed_noise_time > PROPID_ROTOR_SPEED_NOISE_TIME_MAX) {
         PROPID_BAD("rotor_speed_noise_time");
     }
     /* The compensation removes the part of the update an error of the configured

@@ -218,6 +218,19 @@ static int parse_esc_quantisation(sitl_options_t *o, const char *opt, const char
     return 0;
 }
 
+static int parse_esc_decode(sitl_options_t *o, const char *opt, const char *val)
+{
+    if (strcmp(val, "period") == 0) {
+        o->esc.decode_middle = 0;
+    } else if (strcmp(val, "middle") == 0) {
+        o->esc.decode_middle = 1;
+    } else {
+        fprintf(stderr, "propid_sitl: %s: '%s' (period|middle)\n", opt, val);
+        return -1;
+    }
+    return 0;
+}
+
 static int parse_pole_pairs(sitl_options_t *o, const char *opt, const char *val)
 {
     double d;
@@ -319,7 +332,7 @@ static const opt_t options[] = {
     NUMBER(NULL, "filter-rotor-speed-noise", filter_rotor_speed_noise, 0.0, 1e4, "RAD_S",
            "filter: std of a rotor-speed sample's error, carried into the\n"
            "rate process noise (docs/math.md §14). Default 0 (exact)"),
-    NUMBER(NULL, "filter-rotor-speed-noise-time", filter_rotor_speed_noise_time, 0.0, 1.0, "S",
+    NUMBER(NULL, "filter-rotor-speed-noise-time", filter_rotor_speed_noise_time, 0.0, 600.0, "S",
            "filter: correlation time of that error [s] (default 0: one step)"),
     FLAG(NULL, "filter-rotor-speed-noise-hold", filter_rotor_speed_noise_hold, 1,
          "filter: that error's correlation time per rotor from the telemetry,\n"
@@ -419,6 +432,9 @@ static const opt_t options[] = {
     NUMBER(NULL, "esc-dropout", esc.dropout_prob, 0.0, 1.0, "P", "probability a report is lost (0.01)"),
     CUSTOM(NULL, "esc-quantisation", parse_esc_quantisation, "dshot|none",
            "DShot eRPM quantisation (default dshot)"),
+    CUSTOM(NULL, "esc-decode", parse_esc_decode, "period|middle",
+           "DShot code to speed: at the code's period, as flight controllers do (default), or at the\n"
+           "middle of its period interval (unbiased)"),
     CUSTOM(NULL, "esc-pole-pairs", parse_pole_pairs, "N", "motor pole pairs (7)"),
 
     PATH("Output", "log", log_path, "FILE.csv", "flight log v1 + FILE.vehicle.json"),

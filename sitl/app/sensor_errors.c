@@ -4,6 +4,8 @@
 #include <math.h>
 #include <string.h>
 
+#include "propid/propid.h"
+
 int sitl_sensor_errors(const sitl_vehicle_t *v, const sitl_esc_params_t *esc, const double *flown_kf,
                        sitl_sensor_errors_t *out)
 {
@@ -18,17 +20,29 @@ int sitl_sensor_errors(const sitl_vehicle_t *v, const sitl_esc_params_t *esc, co
     const double hover = sqrt(v->mass * 9.81 / kf_sum);
     out->hover_speed = hover;
 
-    /* Quantisation: the ESC truncates the period, so a decoded speed is too
-     * high by a share of one step, uniform over [0, step): mean step / 2, std
-     * step / sqrt(12). The filter's input error has mean 0; the size that
-     * covers this error is its root mean square about 0, step / sqrt(3) (the
-     * mean is no smaller a part of it than the spread). It holds while the speed
-     * stays on the code. No errors-in-variables compensation: that removes the
-     * attenuation of a classical error (mean 0, fresh at every sample), which
-     * this one is not (docs/math.md §14, "Validity"). */
+    /* Quantisation: the ESC truncates the period, so the true speed lies
+     * anywhere within one step of the code, uniform. Decoded at the code's
+     * period (the flight controllers' drivers) a speed is too high by a share
+     * of the step: mean step / 2, spread step / sqrt(12); the filter's input
+     * error has mean 0, so the size that covers it is its root mean square
+     * about 0, step / sqrt(3), held 1 s. Decoded at the middle of the code's
+     * interval the mean is gone: the spread alone, step / sqrt(12), held as
+     * long as the rotor's code stands (the hold from the telemetry, the
+     * firmware's largest time its ceiling: at hover a code can stand for the
+     * whole flight, a per-rotor coefficient error). No errors-in-variables
+     * compensation: that removes the attenuation of a classical error (mean 0,
+     * fresh at every sample), which this one is not (docs/math.md §14,
+     * "Validity"). */
     if (esc->quantise_dshot) {
-        out->rotor_speed_noise = sitl_esc_dshot_step(hover, esc->pole_pairs) / sqrt(3.0);
-        out->rotor_speed_noise_time = SITL_HELD_STEP_TIME_S;
+        const double step = sitl_esc_dshot_step(hover, esc->pole_pairs);
+        if (esc->decode_middle) {
+            out->rotor_speed_noise = step / sqrt(12.0);
+            out->rotor_speed_noise_time = (double)PROPID_ROTOR_SPEED_NOISE_TIME_MAX;
+            out->rotor_speed_noise_hold = 1;
+        } else {
+            out->rotor_speed_noise = step / sqrt(3.0);
+            out->rotor_speed_noise_time = SITL_HELD_STEP_TIME_S;
+        }
     }
     out->rotor_delay_s = esc->latency_s;
     return 0;

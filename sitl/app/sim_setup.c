@@ -206,6 +206,7 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
         c->motor_command_instrument = 1u;
         c->motor_command_lag = (float)v->motor_time_constant;
     }
+    int held_by_rule = 0;
     if (opts->filter_sensor_errors) {
         sitl_sensor_errors_t e;
         if (sitl_sensor_errors(v, &opts->esc, flown_kf, &e) != 0) {
@@ -218,8 +219,10 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
         c->rotor_speed_noise_time = (float)e.rotor_speed_noise_time;
         c->rotor_delay_us = (int32_t)lround(e.rotor_delay_s * 1e6);
         c->input_error_compensation = 0u; /* the truncation's error is not classical (sensor_errors.c) */
+        held_by_rule = e.rotor_speed_noise_hold;
     }
-    /* After the sensor errors, which set the error's size and ceiling time. */
-    c->rotor_speed_noise_hold = (uint8_t)(opts->filter_rotor_speed_noise_hold != 0);
+    /* After the sensor errors, which set the error's size and ceiling time (and,
+     * decoded at the code's middle, the hold). */
+    c->rotor_speed_noise_hold = (uint8_t)(opts->filter_rotor_speed_noise_hold != 0 || held_by_rule);
     return propid_config_check(c, bad_field);
 }

@@ -17,6 +17,7 @@ void sitl_esc_default_params(sitl_esc_params_t *p)
     p->latency_s = 0.001;
     p->dropout_prob = 0.01;
     p->quantise_dshot = 1;
+    p->decode_middle = 0;
     p->pole_pairs = 7;
 }
 
@@ -27,6 +28,7 @@ void sitl_esc_paper_params(sitl_esc_params_t *p, double control_rate_hz)
     p->latency_s = 0.0;
     p->dropout_prob = 0.0;
     p->quantise_dshot = 0;
+    p->decode_middle = 0;
     p->pole_pairs = 7;
 }
 
@@ -105,46 +107,57 @@ static void lookup(const sitl_esc_telemetry_t *esc, double t, double *out)
     memcpy(out, newer->speed, (size_t)esc->rotor_count * sizeof(double)); /* oldest kept */
 }
 
-double sitl_esc_quantise_dshot(double speed, int pole_pairs)
+/* The e-period code of a speed: the ESC counts the electrical period in whole
+ * microseconds and keeps its top 9 bits (mantissa) with a 3-bit shift, both by
+ * dropping bits (a truncation). 0 when the period is too long to code (stopped). */
+static int dshot_code(double speed, int pole_pairs, unsigned long *mantissa, unsigned *shift)
 {
-    /* Electrical period in whole microseconds, then e-period: keep the top 9
-     * bits (mantissa) with a 3-bit shift; longer than 511 << 7 us means stopped. */
-    if (!(speed > 0.0)) {
-        return 0.0;
+    if (!(speed > 0.0) || pole_pairs < 1) {
+        return 0;
     }
     double period_us = 2.0 * SITL_PI * 1e6 / (speed * (double)pole_pairs);
     if (period_us >= 511.0 * 128.0) {
-        return 0.0;
+        return 0;
     }
     unsigned long period = (unsigned long)period_us; /* the ESC's timer truncates */
-    unsigned shift = 0;
-    while ((period >> shift) > 511u) {
-        shift++;
+    unsigned s = 0;
+    while ((period >> s) > 511u) {
+        s++;
     }
-    unsigned long mantissa = period >> shift;
-    if (mantissa == 0) {
+    *mantissa = period >> s;
+    *shift = s;
+    return *mantissa != 0;
+}
+
+static double speed_of_period(double period_us, int pole_pairs)
+{
+    return 2.0 * SITL_PI * 1e6 / (period_us * (double)pole_pairs);
+}
+
+double sitl_esc_quantise_dshot(double speed, int pole_pairs, int decode_middle)
+{
+    unsigned long mantissa;
+    unsigned shift;
+    if (!dshot_code(speed, pole_pairs, &mantissa, &shift)) {
         return 0.0;
     }
-    double decoded_us = (double)(mantissa << shift);
-    return 2.0 * SITL_PI * 1e6 / (decoded_us * (double)pole_pairs);
+    /* The true period lies in [m, m + 1) << shift: the flight controllers'
+     * drivers take m << shift (a speed too high by a share of one step); its
+     * middle is the unbiased decode. */
+    double code_us = (double)mantissa + (decode_middle ? 0.5 : 0.0);
+    return speed_of_period(ldexp(code_us, (int)shift), pole_pairs);
 }
 
 double sitl_esc_dshot_step(double speed, int pole_pairs)
 {
-    /* The code the speed decodes to and the next longer period's: their
-     * decoded speeds differ by one quantisation step. */
-    double decoded = sitl_esc_quantise_dshot(speed, pole_pairs);
-    if (!(decoded > 0.0) || pole_pairs < 1) {
+    unsigned long mantissa;
+    unsigned shift;
+    if (!dshot_code(speed, pole_pairs, &mantissa, &shift)) {
         return 0.0;
     }
-    double period_us = 2.0 * SITL_PI * 1e6 / (decoded * (double)pole_pairs);
-    unsigned long period = (unsigned long)lround(period_us);
-    unsigned shift = 0;
-    while ((period >> shift) > 511u) {
-        shift++;
-    }
-    double next_us = (double)(((period >> shift) + 1u) << shift);
-    return decoded - 2.0 * SITL_PI * 1e6 / (next_us * (double)pole_pairs);
+    /* The speeds of the code's two period edges. */
+    return speed_of_period(ldexp((double)mantissa, (int)shift), pole_pairs) -
+           speed_of_period(ldexp((double)(mantissa + 1u), (int)shift), pole_pairs);
 }
 
 int sitl_esc_report(sitl_esc_telemetry_t *esc, double t, double *speed_out)
@@ -157,7 +170,8 @@ int sitl_esc_report(sitl_esc_telemetry_t *esc, double t, double *speed_out)
     lookup(esc, t - esc->params.latency_s - esc->extra_delay_s, speed_out);
     if (esc->params.quantise_dshot) {
         for (int i = 0; i < esc->rotor_count; i++) {
-            speed_out[i] = sitl_esc_quantise_dshot(speed_out[i], esc->params.pole_pairs);
+            speed_out[i] = sitl_esc_quantise_dshot(speed_out[i], esc->params.pole_pairs,
+                                                  esc->params.decode_middle);
         }
     }
     return 1;

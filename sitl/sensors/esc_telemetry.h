@@ -5,8 +5,10 @@
  *   - each report carries the true speed of latency_s (+ esc_delay effect)
  *     before its arrival time, read from a history of the true speeds;
  *   - quantised like bidirectional DShot eRPM telemetry (12-bit e-period:
- *     3-bit exponent, 9-bit mantissa, in microseconds of electrical period)
- *     for a motor with pole_pairs pole pairs, or not at all;
+ *     3-bit exponent, 9-bit mantissa, in microseconds of electrical period,
+ *     truncated by the ESC) for a motor with pole_pairs pole pairs, or not at
+ *     all; decoded at the code's period (as the flight controllers' drivers
+ *     do) or at the middle of the code's period interval (unbiased);
  *   - each report is lost with probability dropout_prob.
  * Defaults and sources: docs/sitl.md.
  */
@@ -24,6 +26,7 @@ typedef struct {
     double latency_s;        /* measurement-to-arrival delay */
     double dropout_prob;     /* 0..1 */
     int quantise_dshot;      /* 1 = DShot e-period encoding, 0 = exact */
+    int decode_middle;       /* 1 = decode at the middle of the code's period interval, 0 = at its period */
     int pole_pairs;          /* motor pole pairs (eRPM = pole_pairs * RPM) */
 } sitl_esc_params_t;
 
@@ -59,11 +62,12 @@ void sitl_esc_record(sitl_esc_telemetry_t *esc, double t, const double *speed);
 /* The report arriving at time t: returns 1 and fills speed_out, or 0 if lost. */
 int sitl_esc_report(sitl_esc_telemetry_t *esc, double t, double *speed_out);
 
-/* DShot e-period round trip of one speed (exposed for tests). */
-double sitl_esc_quantise_dshot(double speed_rad_s, int pole_pairs);
+/* DShot e-period round trip of one speed (exposed for tests); decode_middle as
+ * in sitl_esc_params_t. */
+double sitl_esc_quantise_dshot(double speed_rad_s, int pole_pairs, int decode_middle);
 
-/* Speed step of the DShot e-period code a speed decodes to [rad/s] (the
- * decoded speed minus the next longer period's); 0 when it decodes to 0. */
+/* Speed step of the DShot e-period code a speed is sent as [rad/s] (the speeds
+ * of the code's period and of the next longer period); 0 when stopped. */
 double sitl_esc_dshot_step(double speed_rad_s, int pole_pairs);
 
 #endif /* SITL_ESC_TELEMETRY_H */

@@ -207,12 +207,14 @@ static void test_input_noise_config_is_checked(void)
         TEST_ASSERT_EQUAL_STRING("rotor_speed_noise", bad);
     }
     config.rotor_speed_noise = 2.0f;
-    const float bad_time[] = {-0.1f, NAN, 1.5f};
+    const float bad_time[] = {-0.1f, NAN, 1.01f * PROPID_ROTOR_SPEED_NOISE_TIME_MAX};
     for (uint8_t k = 0; k < 3u; ++k) {
         config.rotor_speed_noise_time = bad_time[k];
         TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
         TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_time", bad);
     }
+    config.rotor_speed_noise_time = PROPID_ROTOR_SPEED_NOISE_TIME_MAX;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
     config.rotor_speed_noise_time = 0.002f;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
     /* The hold: 0 or 1, with an error size, not with the compensation. */
@@ -230,37 +232,42 @@ static void test_input_noise_config_is_checked(void)
     TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_hold", bad);
 }
 
-/* The largest accepted error (sigma = max_rotor_speed, correlated over 1 s) at full
- * speed with wild body rates: every push is accepted or gated by a status, the
- * estimates stay finite and the variances positive. */
+/* The largest accepted error (sigma = max_rotor_speed, correlated over 1 s, and over
+ * the largest time with the hold from the telemetry, whose held speed here stands for
+ * the whole run) at full speed with wild body rates: every push is accepted or gated
+ * by a status, the estimates stay finite and the variances positive. */
 static void test_largest_input_noise_keeps_the_filter_finite(void)
 {
-    propid_config_t config;
-    input_error_configure(&config, 4u, 0);
-    config.rotor_speed_noise = config.max_rotor_speed;
-    config.rotor_speed_noise_time = 1.0f;
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&with_noise, &config));
-    uint64_t t = 1000u;
-    for (uint32_t k = 0; k < 2000u; ++k) {
-        const float spin = config.max_rotor_speed * (0.5f + 0.5f * (float)((k * 7u) % 11u) / 10.0f);
-        const float speeds[4] = {spin, config.max_rotor_speed, 0.3f * spin, spin};
-        const propid_status_t rotor_status = propid_push_rotor_speeds(&with_noise, t, speeds, 4u);
-        TEST_ASSERT_TRUE(rotor_status >= 0 || rotor_status == PROPID_ERR_ROTOR_SPEED_RANGE);
-        const float sign = (k % 2u) ? 1.0f : -1.0f;
-        const float gyro[3] = {sign * 0.9f * config.gyro_range, -sign * 5.0f, 3.0f};
-        TEST_ASSERT_TRUE(propid_push_gyro(&with_noise, t + 500u, gyro) >= 0);
-        t += 2000u;
-    }
-    propid_estimate_t estimate;
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&with_noise, &estimate));
-    TEST_ASSERT_EQUAL_UINT32(0u, with_noise.counters.cov_repairs); /* Q_u is positive semi-definite */
-    for (uint8_t i = 0; i < 4u; ++i) {
-        TEST_ASSERT_TRUE(isfinite(estimate.thrust_coeff[i]) && estimate.thrust_coeff_std[i] > 0.0f);
-        TEST_ASSERT_TRUE(isfinite(estimate.drag_coeff[i]) && estimate.drag_coeff_std[i] > 0.0f);
-    }
-    for (uint8_t a = 0; a < 3u; ++a) {
-        TEST_ASSERT_TRUE(isfinite(estimate.body_rate[a]) && estimate.body_rate_std[a] > 0.0f);
-        TEST_ASSERT_TRUE(isfinite(estimate.body_rate_std[a]));
+    const float times[2] = {1.0f, PROPID_ROTOR_SPEED_NOISE_TIME_MAX};
+    for (uint8_t run = 0; run < 2u; ++run) {
+        propid_config_t config;
+        input_error_configure(&config, 4u, 0);
+        config.rotor_speed_noise = config.max_rotor_speed;
+        config.rotor_speed_noise_time = times[run];
+        config.rotor_speed_noise_hold = run;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&with_noise, &config));
+        uint64_t t = 1000u;
+        for (uint32_t k = 0; k < 2000u; ++k) {
+            const float spin = config.max_rotor_speed * (0.5f + 0.5f * (float)((k * 7u) % 11u) / 10.0f);
+            const float speeds[4] = {spin, config.max_rotor_speed, 0.3f * spin, spin};
+            const propid_status_t rotor_status = propid_push_rotor_speeds(&with_noise, t, speeds, 4u);
+            TEST_ASSERT_TRUE(rotor_status >= 0 || rotor_status == PROPID_ERR_ROTOR_SPEED_RANGE);
+            const float sign = (k % 2u) ? 1.0f : -1.0f;
+            const float gyro[3] = {sign * 0.9f * config.gyro_range, -sign * 5.0f, 3.0f};
+            TEST_ASSERT_TRUE(propid_push_gyro(&with_noise, t + 500u, gyro) >= 0);
+            t += 2000u;
+        }
+        propid_estimate_t estimate;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&with_noise, &estimate));
+        TEST_ASSERT_EQUAL_UINT32(0u, with_noise.counters.cov_repairs); /* Q_u is positive semi-definite */
+        for (uint8_t i = 0; i < 4u; ++i) {
+            TEST_ASSERT_TRUE(isfinite(estimate.thrust_coeff[i]) && estimate.thrust_coeff_std[i] > 0.0f);
+            TEST_ASSERT_TRUE(isfinite(estimate.drag_coeff[i]) && estimate.drag_coeff_std[i] > 0.0f);
+        }
+        for (uint8_t a = 0; a < 3u; ++a) {
+            TEST_ASSERT_TRUE(isfinite(estimate.body_rate[a]) && estimate.body_rate_std[a] > 0.0f);
+            TEST_ASSERT_TRUE(isfinite(estimate.body_rate_std[a]));
+        }
     }
 }
 #else

@@ -6,6 +6,7 @@
 #include <math.h>
 
 #include "esc_telemetry.h"
+#include "propid/propid.h"
 #include "sensor_errors.h"
 #include "sitl_math.h"
 #include "unity.h"
@@ -88,6 +89,31 @@ static void test_step_at_the_flown_hover_speed(void)
     TEST_ASSERT_TRUE(e.rotor_speed_noise > 1.8 * nominal.rotor_speed_noise);
 }
 
+/* Decoded at the middle of the code's period interval the error has no mean left:
+ * its spread alone, step / sqrt(12), half the root mean square of the period decode,
+ * held while the code stands. */
+static void test_middle_decode_gives_the_spread_alone(void)
+{
+    sitl_vehicle_t v;
+    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset("crazyflie-x", &v));
+    sitl_esc_params_t esc;
+    sitl_esc_default_params(&esc);
+    sitl_sensor_errors_t edge;
+    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, NULL, &edge));
+    esc.decode_middle = 1;
+    sitl_sensor_errors_t e;
+    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, NULL, &e));
+    double period = floor(2.0 * SITL_PI * 1e6 / (e.hover_speed * 7.0));
+    double step = speed_of_period(period, 7) - speed_of_period(period + 1.0, 7);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, step / sqrt(12.0), e.rotor_speed_noise);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, 0.5 * edge.rotor_speed_noise, e.rotor_speed_noise);
+    /* Held as long as the rotor's code stands, up to the firmware's largest time. */
+    TEST_ASSERT_EQUAL_INT(1, e.rotor_speed_noise_hold);
+    TEST_ASSERT_EQUAL_DOUBLE((double)PROPID_ROTOR_SPEED_NOISE_TIME_MAX, e.rotor_speed_noise_time);
+    TEST_ASSERT_EQUAL_INT(0, edge.rotor_speed_noise_hold);
+    TEST_ASSERT_EQUAL_DOUBLE(SITL_HELD_STEP_TIME_S, edge.rotor_speed_noise_time);
+}
+
 static void test_exact_speeds_have_no_input_noise(void)
 {
     sitl_vehicle_t v;
@@ -118,6 +144,7 @@ int main(void)
     UNITY_BEGIN();
     RUN_TEST(test_crazyflie_dshot_step_at_hover);
     RUN_TEST(test_hummingbird_step_with_mantissa_shift);
+    RUN_TEST(test_middle_decode_gives_the_spread_alone);
     RUN_TEST(test_step_at_the_flown_hover_speed);
     RUN_TEST(test_exact_speeds_have_no_input_noise);
     RUN_TEST(test_rejects_a_vehicle_without_hover);

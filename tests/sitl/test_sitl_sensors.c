@@ -91,13 +91,42 @@ static void test_esc_latency_and_dshot_quantisation(void)
     TEST_ASSERT_DOUBLE_WITHIN(truth * 2.0 / 256.0, truth, out[0]);
     TEST_ASSERT_TRUE(out[0] != truth);
     /* Quantised values are exact decodes of a period. */
-    double q = sitl_esc_quantise_dshot(1770.0, 7);
+    double q = sitl_esc_quantise_dshot(1770.0, 7, 0);
     double period = 2.0 * 3.14159265358979323846 * 1e6 / (q * 7.0);
     TEST_ASSERT_DOUBLE_WITHIN(1e-6, round(period), period);
     TEST_ASSERT_DOUBLE_WITHIN(1770.0 * 0.003, 1770.0, q);
-    TEST_ASSERT_EQUAL_DOUBLE(0.0, sitl_esc_quantise_dshot(0.0, 7));
-    TEST_ASSERT_EQUAL_DOUBLE(0.0, sitl_esc_quantise_dshot(0.5, 7)); /* below the slowest period */
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, sitl_esc_quantise_dshot(0.0, 7, 0));
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, sitl_esc_quantise_dshot(0.5, 7, 0)); /* below the slowest period */
     sitl_esc_free(&esc);
+}
+
+/* The ESC truncates the period: decoded at the code's period a speed is too high by
+ * half a step on average; decoded at the middle of the code's period interval the
+ * error has mean 0 (over speeds spread across many codes, with and without the
+ * mantissa shift) and each decode lies within the code's speed interval. */
+static void test_esc_middle_decode_is_unbiased(void)
+{
+    const double bands[2][2] = {{1600.0, 1700.0}, {400.0, 500.0}}; /* periods < 511 us; 4 us codes */
+    for (int b = 0; b < 2; b++) {
+        double edge_sum = 0.0, middle_sum = 0.0, step_sum = 0.0;
+        const int n = 20000;
+        for (int k = 0; k < n; k++) {
+            double speed = bands[b][0] + (bands[b][1] - bands[b][0]) * ((double)k + 0.5) / (double)n;
+            double edge = sitl_esc_quantise_dshot(speed, 7, 0);
+            double middle = sitl_esc_quantise_dshot(speed, 7, 1);
+            double step = sitl_esc_dshot_step(speed, 7);
+            TEST_ASSERT_TRUE(step > 0.0);
+            TEST_ASSERT_TRUE(edge >= speed && edge - step < speed);
+            TEST_ASSERT_TRUE(middle < edge && middle > edge - step);
+            edge_sum += edge - speed;
+            middle_sum += middle - speed;
+            step_sum += step;
+        }
+        double mean_step = step_sum / n;
+        TEST_ASSERT_DOUBLE_WITHIN(0.02 * mean_step, 0.5 * mean_step, edge_sum / n);
+        TEST_ASSERT_DOUBLE_WITHIN(0.02 * mean_step, 0.0, middle_sum / n);
+    }
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, sitl_esc_quantise_dshot(0.5, 7, 1));
 }
 
 static void test_esc_dropout_rate(void)
@@ -147,6 +176,7 @@ int main(void)
     RUN_TEST(test_gyro_noise_matches_density_and_bias_in_range);
     RUN_TEST(test_gyro_saturates_and_quantises);
     RUN_TEST(test_esc_latency_and_dshot_quantisation);
+    RUN_TEST(test_esc_middle_decode_is_unbiased);
     RUN_TEST(test_esc_dropout_rate);
     RUN_TEST(test_streams_are_reproducible_and_independent);
     return UNITY_END();

@@ -63,6 +63,10 @@ typedef enum {
 /* Number of distinct rejection reasons; counters.rejected[] is indexed by -status. */
 #define PROPID_REJECT_SLOTS 16
 
+/* Largest rotor_speed_noise_time [s]: a quantised speed at hover can stand on one
+ * telemetry code for a whole flight (docs/math.md §14, "Hold time from the telemetry"). */
+#define PROPID_ROTOR_SPEED_NOISE_TIME_MAX 600.0f
+
 /* ------------------------------------------------------------------------ */
 /* Health flags (propid_estimate_t.health)                                  */
 /* ------------------------------------------------------------------------ */
@@ -163,7 +167,9 @@ typedef struct {
                                          resolution, timing): enters the rate process noise through the
                                          torque Jacobian (docs/math.md §14). 0: exact inputs (off) */
     float rotor_speed_noise_time;     /* correlation time of that error [s]: how long one error stays
-                                         in the input (e.g. the telemetry interval); 0: one step */
+                                         in the input (e.g. the telemetry interval; with the hold below
+                                         its ceiling); 0: one step. At most
+                                         PROPID_ROTOR_SPEED_NOISE_TIME_MAX */
 
     /* What the data cannot tell (docs/reliability.md "Converged claims"). */
     float inertia_rel_std;            /* relative std of the configured inertia's scale (how well the
