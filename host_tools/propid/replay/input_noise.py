@@ -35,7 +35,7 @@ from propid.realdata_checks import absurd_speed_limit, clean_rotor_speeds
 
 MIN_SAMPLES = 50
 QUANT_BAND = 0.1  # +-10 % of the median speed: where the quantisation step is measured
-MAX_TIME_S = 1.0  # the firmware's bound on rotor_speed_noise_time
+MAX_TIME_S = 1.0  # this rule's ceiling and replay's bound (the firmware accepts up to 600 s)
 
 
 def _resolution(values: np.ndarray) -> float:
