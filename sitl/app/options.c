@@ -364,7 +364,8 @@ static const opt_t options[] = {
     FLAG(NULL, "filter-sensor-errors", filter_sensor_errors, 1,
          "filter: input-error terms from the sensor model (docs/sitl.md):\n"
          "rotor-speed noise = the telemetry step at the hover speed the\n"
-         "rotors fly / sqrt(3) (RMS of a truncation), held 1 s, no\n"
+         "rotors fly / sqrt(3) (RMS of a truncation), held 1 s (with\n"
+         "--esc-decode middle: / sqrt(12), held while the code stands), no\n"
          "compensation; delay = the ESC latency.\n"
          "Replaces --filter-rotor-speed-noise(-time), --filter-esc-delay\n"
          "and --filter-input-error-compensation"),
