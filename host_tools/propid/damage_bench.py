@@ -133,6 +133,7 @@ def _fly(config: BenchConfig, spec: FlightSpec, mode: str, work: Path,
         out["stable"] = bool(data.get("stable")) and proc.returncode == 0
         out["detections"] = data.get("detections", [])
         out["on_ground"] = [bool(d.get("on_ground")) for d in data.get("damage", [])]
+        out["after_touchdown"] = [bool(d.get("after_touchdown")) for d in data.get("damage", [])]
         if after_s is not None and log.is_file():
             columns = table1.read_log_columns(log)
             after = columns["t"] >= after_s
@@ -168,17 +169,24 @@ def score_damages(spec: dict, flight: dict) -> list[dict]:
     detections = flight.get("detections", [])
     damages = spec["damages"]
     on_ground = flight.get("on_ground", [])
+    after_touchdown = flight.get("after_touchdown", [])
     out = []
     for k, (rotor, time_s, fraction) in enumerate(damages):
         end = damages[k + 1][1] if k + 1 < len(damages) else math.inf
         window = [d for d in detections if time_s <= d["time_s"] < end]
         first = window[0] if window else None
         right = next((d for d in window if d["rotor"] == rotor), None)
+        resting = bool(on_ground[k]) if k < len(on_ground) else False
+        crashed = bool(after_touchdown[k]) if k < len(after_touchdown) else False
         out.append({
             "rotor": rotor, "time_s": time_s, "fraction": fraction,
-            # struck a vehicle already down on the ground: the contact holds the
-            # attitude, no gyro-based test can see it (counted apart)
-            "on_ground": bool(on_ground[k]) if k < len(on_ground) else False,
+            # struck a vehicle already down on the ground: resting on it at that
+            # instant, or touched it again after flying (a crashed vehicle whose
+            # rotors lift it off by millimetres reads airborne for a sample). The
+            # contact holds the attitude, no gyro-based test can see it (counted apart).
+            "on_ground": resting or crashed,
+            "resting": resting,
+            "after_touchdown": crashed,
             "detected": first is not None,
             "detect_ms": (first["time_s"] - time_s) * 1e3 if first else None,
             "isolated_rotor": first["rotor"] if first else None,
@@ -245,6 +253,9 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
         "oracle_flights": sum(1 for r in damaged if "oracle" in r),
         "damage_events": len(events),
         "damage_events_on_ground": len(events) - len(airborne),
+        # of those, the ones the contact flag alone read as airborne (down after a crash)
+        "damage_events_after_touchdown_only": sum(1 for e in events
+                                                  if e["after_touchdown"] and not e["resting"]),
         "detected_on_ground": sum(1 for e in events if e["on_ground"] and e["detected"]),
         "detection_rate": len(detected) / len(airborne) if airborne else None,
         "detection_rate_all_events": (sum(1 for e in events if e["detected"]) / len(events)
@@ -344,8 +355,10 @@ def render(result: dict) -> str:
         ("flights (damaged + undamaged; + Oracle twins)",
          f"{result['flights']} ({result['damaged_flights']} + {result['undamaged_flights']}; "
          f"+ {result['oracle_flights']})", ""),
-        ("damage events (of which on a vehicle already down on the ground)",
-         f"{result['damage_events']} ({result.get('damage_events_on_ground', 0)})", ""),
+        ("damage events (of which on a vehicle already down on the ground: resting, or touched down after flying)",
+         f"{result['damage_events']} ({result.get('damage_events_on_ground', 0)}: "
+         f"{result.get('damage_events_on_ground', 0) - result.get('damage_events_after_touchdown_only', 0)} / "
+         f"{result.get('damage_events_after_touchdown_only', 0)})", ""),
         ("detection rate, airborne events (all / loss >= 20 %)",
          f"{fmt(100 * result['detection_rate'], '.1f')} % / {fmt(100 * result['detection_rate_ge20'], '.1f')} %",
          ">= 99 % for >= 20 %"),

@@ -147,6 +147,8 @@ typedef struct {
     int last_status;
     propid_damage_t detector;
     int damage_applied[SITL_MAX_DAMAGE];
+    int has_flown;    /* the vehicle has been off the ground */
+    int touched_down; /* and has touched it again since: down, the flight is over */
     sitl_rng_t disturbance_rng; /* its own stream: every other draw is the same with and without it */
     double disturbance_pole, disturbance_drive; /* its discretisation over one control period */
 #ifdef PROPID_SITL_WITH_MAVLINK
@@ -414,6 +416,14 @@ static void teardown(flight_t *f, sitl_result_t *r)
  * allocation knows at once. */
 static void apply_damage(flight_t *f, const sitl_options_t *o, sitl_result_t *r, double t)
 {
+    /* A vehicle that has flown and touched the ground again is down: its rotors
+     * may still lift it off by millimetres (the contact flag then reads 0 for a
+     * sample), but the ground holds it, and no gyro-based test can see a loss. */
+    if (!f->state.on_ground) {
+        f->has_flown = 1;
+    } else if (f->has_flown) {
+        f->touched_down = 1;
+    }
     for (int k = 0; k < o->damage_count; k++) {
         const sitl_damage_t *d = &o->damage[k];
         if (f->damage_applied[k] || t < d->time_s) {
@@ -421,6 +431,7 @@ static void apply_damage(flight_t *f, const sitl_options_t *o, sitl_result_t *r,
         }
         f->damage_applied[k] = 1;
         r->damage_on_ground[k] = f->state.on_ground;
+        r->damage_after_touchdown[k] = f->touched_down;
         f->true_kf[d->rotor] *= 1.0 - d->fraction;
         f->true_km[d->rotor] *= 1.0 - d->fraction;
         f->plant.thrust_coeff[d->rotor] = f->true_kf[d->rotor];

@@ -57,6 +57,10 @@ typedef struct {
     /* Per --damage: 1 when it struck a vehicle resting on the ground (the contact
      * holds the attitude: the loss leaves no trace in the gyro). */
     int damage_on_ground[SITL_MAX_DAMAGE];
+    /* Per --damage: 1 when the vehicle had flown and touched the ground again
+     * before it (down after a crash, even where the spinning rotors lift it off
+     * by millimetres at that instant). */
+    int damage_after_touchdown[SITL_MAX_DAMAGE];
 } sitl_result_t;
 
 /* Set-up pieces (sim_setup.c), public for tests. */

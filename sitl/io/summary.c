@@ -125,6 +125,7 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
         add_number(item, "time_s", o->damage[k].time_s);
         add_number(item, "fraction", o->damage[k].fraction);
         cJSON_AddBoolToObject(item, "on_ground", r->damage_on_ground[k] != 0);
+        cJSON_AddBoolToObject(item, "after_touchdown", r->damage_after_touchdown[k] != 0);
         cJSON_AddItemToArray(damages, item);
     }
     cJSON *detections = cJSON_AddArrayToObject(root, "detections");

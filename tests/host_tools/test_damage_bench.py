@@ -145,6 +145,21 @@ def test_damage_on_a_grounded_vehicle_is_counted_apart():
     assert result["detection_rate"] == 0.5 and result["damage_events_on_ground"] == 0
 
 
+def test_damage_after_a_touchdown_is_counted_apart():
+    """A crashed vehicle whose rotors still push reads airborne at the instant of a
+    sample that lifts it off by millimetres; it touched the ground after flying, so
+    the loss that strikes it then is counted with the grounded ones."""
+    spec = {"damages": [[1, 2.5, 0.45], [2, 4.6, 0.4]], "effects": [], "index": 0}
+    flight = {"detections": [{"rotor": 1, "time_s": 2.505}, {"rotor": 3, "time_s": 4.2}],
+              "on_ground": [False, False], "after_touchdown": [False, True], "stable": True}
+    result = damage_bench.summarise([{"spec": spec, "filter": flight}], config())
+    assert result["damage_events_on_ground"] == 1 and result["damage_events_after_touchdown_only"] == 1
+    assert result["detection_rate"] == 1.0 and result["detection_rate_all_events"] == 0.5
+    flight["after_touchdown"] = [False, False]
+    result = damage_bench.summarise([{"spec": spec, "filter": flight}], config())
+    assert result["detection_rate"] == 0.5 and result["damage_events_after_touchdown_only"] == 0
+
+
 def test_extended_checks_ratio_and_stability():
     row = {"rmse_x": 0.02, "rmse_y": 0.05, "rmse_z": 0.004, "rmse_yaw_deg": 0.5, "stable_pct": 100.0,
            "t_conv_coeff_s": 0.4, "t_conv_bias_s": 3.0}
@@ -195,12 +210,30 @@ def test_sitl_damage_is_detected_isolated_and_reported(tmp_path, sitl_binary):
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     data = json.loads(summary.read_text())
-    assert data["damage"] == [{"rotor": 5, "time_s": 2.5, "fraction": 0.25, "on_ground": False}]
+    assert data["damage"] == [{"rotor": 5, "time_s": 2.5, "fraction": 0.25, "on_ground": False,
+                               "after_touchdown": False}]
     assert len(data["detections"]) == 1
     assert data["detections"][0]["rotor"] == 5
     assert 2.5 <= data["detections"][0]["time_s"] <= 2.55
     assert data["health"] & 0x100  # PROPID_HEALTH_ROTOR_DAMAGE
     assert abs(data["est_kf"][4] / data["true_kf"][4] - 1) < 0.05  # re-learnt in flight
+
+
+def test_sitl_marks_a_damage_after_the_vehicle_came_down(tmp_path, sitl_binary):
+    """A 90 % loss brings a quad down from its 1 m hover; a later loss strikes a vehicle
+    that has touched the ground after flying, and the summary says so."""
+    import json
+    import subprocess
+
+    summary = tmp_path / "s.json"
+    proc = subprocess.run([str(sitl_binary), "--vehicle", "crazyflie-x", "--trajectory", "step", "--seed", "4",
+                           "--duration", "4", "--start-at-rest", "--damage", "1@1.6=0.9", "--damage", "2@3.5=0.3",
+                           "--summary-json", str(summary), "--quiet"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode in (0, 3), proc.stderr
+    first, second = json.loads(summary.read_text())["damage"]
+    assert not first["on_ground"] and not first["after_touchdown"]
+    assert second["after_touchdown"]
 
 
 def test_sitl_rejects_bad_damage_specs(sitl_binary):
