@@ -12,6 +12,7 @@
 
 #include "propid/propid.h"
 #include "unity.h"
+#include "cov_positive_definite.h"
 #include "test_rng.h"
 #include "test_vehicle.h"
 
@@ -416,31 +417,6 @@ static void test_config_bounds_noise_fields(void)
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
 }
 
-/* Cholesky factorisation of the covariance (symmetric view, double precision on
- * the host, float elsewhere) succeeds: P positive definite. */
-static int covariance_is_positive_definite(void)
-{
-    const uint8_t n = filter.derived.state_count;
-    static double l[PROPID_MAX_STATES][PROPID_MAX_STATES];
-    for (uint8_t i = 0; i < n; ++i) {
-        for (uint8_t j = 0; j <= i; ++j) {
-            double sum = (double)(j <= i ? filter.core.cov[propid_cov_index(j, i)] : filter.core.cov[propid_cov_index(i, j)]);
-            for (uint8_t k = 0; k < j; ++k) {
-                sum -= l[i][k] * l[j][k];
-            }
-            if (i == j) {
-                if (!(sum > 0.0)) {
-                    return 0;
-                }
-                l[i][i] = sqrt(sum);
-            } else {
-                l[i][j] = sum / l[j][j];
-            }
-        }
-    }
-    return 1;
-}
-
 /* Random-call streams of valid samples (random rates, speeds, gaps, occasional
  * outliers and resyncs) on random valid noise settings: P stays positive
  * definite after every accepted sample. */
@@ -475,7 +451,7 @@ static void test_covariance_stays_positive_definite_under_random_calls(void)
             TEST_ASSERT_TRUE_MESSAGE(status >= 0, propid_status_name(status));
             assert_sane();
             checks++;
-            failures += covariance_is_positive_definite() ? 0u : 1u;
+            failures += test_cov_positive_definite(&filter) ? 0u : 1u;
         }
     }
     TEST_ASSERT_TRUE(checks > 7000u);
@@ -503,16 +479,16 @@ static void test_covariance_definite_after_gyroscopic_rate_inflation(void)
     const float next[3] = {0x1.7e4b4p-4f, 0x1.7e4b4p-4f, 0x1.afc964p+1f};
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1005281u, still, ROTORS));
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, 1010201u, anchor));
-    TEST_ASSERT_TRUE(covariance_is_positive_definite());
+    TEST_ASSERT_TRUE(test_cov_positive_definite(&filter));
     TEST_ASSERT_TRUE(propid_push_gyro(&filter, 1021043u, next) >= 0);
-    TEST_ASSERT_TRUE_MESSAGE(covariance_is_positive_definite(), "P not positive definite after the inflating step");
+    TEST_ASSERT_TRUE_MESSAGE(test_cov_positive_definite(&filter), "P not positive definite after the inflating step");
     uint64_t t = 1021043u;
     for (uint32_t k = 0; k < 200u; ++k) {
         t += 2000u;
         TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, still, ROTORS));
         TEST_ASSERT_TRUE(propid_push_gyro(&filter, t, next) >= 0);
         assert_sane();
-        TEST_ASSERT_TRUE(covariance_is_positive_definite());
+        TEST_ASSERT_TRUE(test_cov_positive_definite(&filter));
     }
 }
 
@@ -545,22 +521,22 @@ static void test_covariance_definite_after_huge_rate_prior_and_torque(void)
     const float g_bad[3] = {-3.4f, NAN, 0.0f};
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1007801u, still, 5u));
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_gyro(&filter, 1007801u, g));
-    TEST_ASSERT_TRUE(covariance_is_positive_definite());
+    TEST_ASSERT_TRUE(test_cov_positive_definite(&filter));
     TEST_ASSERT_TRUE(propid_push_gyro(&filter, 1015602u, g_x) >= 0);
-    TEST_ASSERT_TRUE(covariance_is_positive_definite());
+    TEST_ASSERT_TRUE(test_cov_positive_definite(&filter));
     TEST_ASSERT_TRUE(propid_push_gyro(&filter, 1023403u, g) >= 0);
-    TEST_ASSERT_TRUE(covariance_is_positive_definite());
+    TEST_ASSERT_TRUE(test_cov_positive_definite(&filter));
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_NOT_FINITE, propid_push_gyro(&filter, 1023404u, g_bad));
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, 1015602u, fast, 5u));
     TEST_ASSERT_TRUE(propid_push_gyro(&filter, 1031205u, g) >= 0);
-    TEST_ASSERT_TRUE_MESSAGE(covariance_is_positive_definite(), "P not positive definite after the torque step");
+    TEST_ASSERT_TRUE_MESSAGE(test_cov_positive_definite(&filter), "P not positive definite after the torque step");
     /* and on: the same input for a while, every accepted sample */
     uint64_t t = 1031205u;
     for (uint32_t k = 0; k < 200u; ++k) {
         t += 7801u;
         TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, fast, 5u));
         TEST_ASSERT_TRUE(propid_push_gyro(&filter, t, g) >= 0);
-        TEST_ASSERT_TRUE(covariance_is_positive_definite());
+        TEST_ASSERT_TRUE(test_cov_positive_definite(&filter));
     }
 }
 #endif
@@ -603,7 +579,7 @@ static void test_covariance_definite_with_rates_correlated_by_spin(void)
     for (uint32_t k = 0; k < sizeof times / sizeof times[0]; ++k) {
         TEST_ASSERT_TRUE(propid_push_gyro(&filter, times[k], samples[k]) >= 0);
         assert_sane();
-        failures += covariance_is_positive_definite() ? 0u : 1u;
+        failures += test_cov_positive_definite(&filter) ? 0u : 1u;
     }
     TEST_ASSERT_EQUAL_FLOAT(-68.0f, filter.core.state[1]); /* the spin of the finding */
     TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite while spinning");
@@ -613,7 +589,7 @@ static void test_covariance_definite_with_rates_correlated_by_spin(void)
         TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, t, speeds, 7u));
         TEST_ASSERT_TRUE(propid_push_gyro(&filter, t, samples[k % 8u]) >= 0);
         assert_sane();
-        failures += covariance_is_positive_definite() ? 0u : 1u;
+        failures += test_cov_positive_definite(&filter) ? 0u : 1u;
     }
     TEST_ASSERT_EQUAL_UINT32_MESSAGE(0u, failures, "P not positive definite while spinning on");
 }
@@ -624,7 +600,7 @@ static uint32_t push_and_count(uint64_t time_us, const float gyro[3])
 {
     TEST_ASSERT_TRUE(propid_push_gyro(&filter, time_us, gyro) >= 0);
     assert_sane();
-    return covariance_is_positive_definite() ? 0u : 1u;
+    return test_cov_positive_definite(&filter) ? 0u : 1u;
 }
 
 /* The call sequence the fuzzer found (decoded): the rotors spin at 2434 rad/s

@@ -23,6 +23,7 @@
 #include <string.h>
 
 #include "propid/propid.h"
+#include "../firmware/cov_positive_definite.h"
 
 #ifndef PROPID_FUZZ_CHOLESKY_ABORT
 #define PROPID_FUZZ_CHOLESKY_ABORT 1
@@ -198,29 +199,6 @@ static void fail(const char *what)
 static uint64_t cholesky_checks;
 static uint64_t cholesky_failures;
 
-static int positive_definite(const propid_filter_t *filter)
-{
-    const uint8_t n = filter->derived.state_count;
-    double l[PROPID_MAX_STATES][PROPID_MAX_STATES];
-    for (uint8_t i = 0; i < n; ++i) {
-        for (uint8_t j = 0; j <= i; ++j) {
-            double sum = (double)filter->core.cov[propid_cov_index(j, i)]; /* upper triangle: (j, i), j <= i */
-            for (uint8_t k = 0; k < j; ++k) {
-                sum -= l[i][k] * l[j][k];
-            }
-            if (i == j) {
-                if (!(sum > 0.0)) {
-                    return 0;
-                }
-                l[i][i] = sqrt(sum);
-            } else {
-                l[i][j] = sum / l[j][j];
-            }
-        }
-    }
-    return 1;
-}
-
 static void check_invariants(const propid_filter_t *filter)
 {
     propid_estimate_t e;
@@ -345,7 +323,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         check_invariants(&filter);
         if (gyro_call && status >= 0) {
             cholesky_checks++;
-            if (!positive_definite(&filter)) {
+            if (!test_cov_positive_definite(&filter)) {
                 cholesky_failures++;
 #ifdef PROPID_FUZZ_DEBUG
                 propid_fuzz_debug_dump(&before, &filter);

@@ -24,20 +24,6 @@ typedef struct {
 static const vehicle_t crazyflie = {0.03, {{1.43e-5, 0, 0}, {0, 1.43e-5, 0}, {0, 0, 2.89e-5}}};
 static const vehicle_t hummingbird = {0.5, {{3.65e-3, 0, 0}, {0, 3.68e-3, 0}, {0, 0, 7.03e-3}}};
 
-static void quat_to_matrix(const double q[4], double r[3][3])
-{
-    double w = q[0], x = q[1], y = q[2], z = q[3];
-    r[0][0] = 1 - 2 * (y * y + z * z);
-    r[0][1] = 2 * (x * y - w * z);
-    r[0][2] = 2 * (x * z + w * y);
-    r[1][0] = 2 * (x * y + w * z);
-    r[1][1] = 1 - 2 * (x * x + z * z);
-    r[1][2] = 2 * (y * z - w * x);
-    r[2][0] = 2 * (x * z - w * y);
-    r[2][1] = 2 * (y * z + w * x);
-    r[2][2] = 1 - 2 * (x * x + y * y);
-}
-
 static void on_trajectory_state(const sitl_flat_output_t *f, sitl_vehicle_state_t *s)
 {
     memset(s, 0, sizeof(*s));
@@ -154,7 +140,7 @@ static void test_feed_forward_matches_attitude_derivative(sitl_trajectory_kind_t
             sitl_controller_update(&ctl, &s, &f, &o[k]);
             double q[4];
             sitl_quat_from_matrix(o[k].desired_rotation, q);
-            quat_to_matrix(q, rd[k]);
+            sitl_quat_to_matrix(q, rd[k]);
             memcpy(rates[k], o[k].desired_body_rate, sizeof(rates[k]));
         }
         /* w_d = vee(R_d^T dR_d/dt) */
@@ -191,7 +177,7 @@ static void body_derivative(const vehicle_t *veh, const body_t *b, double thrust
                             const double moment[3], body_t *d)
 {
     double r[3][3];
-    quat_to_matrix(b->q, r);
+    sitl_quat_to_matrix(b->q, r);
     for (int i = 0; i < 3; i++) {
         d->p[i] = b->v[i];
         d->v[i] = thrust / veh->mass * r[i][2];
