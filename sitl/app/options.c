@@ -25,6 +25,11 @@ const char *sitl_mode_name(sitl_mode_t mode)
     return mode_names[mode];
 }
 
+uint64_t sitl_options_vehicle_seed(const sitl_options_t *o)
+{
+    return o->vehicle_seed_set ? o->vehicle_seed : o->seed;
+}
+
 void sitl_options_default(sitl_options_t *o)
 {
     memset(o, 0, sizeof(*o));
@@ -146,6 +151,18 @@ static int parse_seed(sitl_options_t *o, const char *opt, const char *val)
     return 0;
 }
 
+static int parse_vehicle_seed(sitl_options_t *o, const char *opt, const char *val)
+{
+    const uint64_t flight_seed = o->seed;
+    if (parse_seed(o, opt, val) != 0) {
+        return -1;
+    }
+    o->vehicle_seed = o->seed;
+    o->vehicle_seed_set = 1;
+    o->seed = flight_seed;
+    return 0;
+}
+
 static int parse_incorrect_source(sitl_options_t *o, const char *opt, const char *val)
 {
     if (strcmp(val, "nominal") == 0) {
@@ -257,6 +274,10 @@ static const opt_t options[] = {
      "one of (default lissajous):", sitl_trajectory_names},
     CUSTOM(NULL, "mode", parse_mode, "MODE", "oracle | incorrect | filter (default)"),
     CUSTOM(NULL, "seed", parse_seed, "N", "random seed (default 1); same seed -> same log"),
+    CUSTOM(NULL, "vehicle-seed", parse_vehicle_seed, "N",
+           "seed of the vehicle's own draws (true kf/km, a random Incorrect\n"
+           "mixer, the IMU's constant biases; default --seed): another --seed\n"
+           "with the same N is another flight of the same vehicle"),
     NUMBER(NULL, "duration", duration_s, 1e-3, 1e6, "S", "flight time [s] (default 10)"),
     NUMBER(NULL, "trajectory-period", trajectory_period_s, 1e-2, 1e6, "S",
            "the trajectory's period T [s] (default 10, the paper's;\n"

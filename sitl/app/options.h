@@ -43,6 +43,8 @@ typedef struct {
     sitl_trajectory_kind_t trajectory;
     sitl_mode_t mode;
     uint64_t seed;
+    uint64_t vehicle_seed;              /* the airframe's draws (--vehicle-seed) */
+    int vehicle_seed_set;               /* 0: the vehicle is drawn from seed */
     double duration_s;                  /* how long the flight lasts */
     double trajectory_period_s;         /* the trajectory's period T (independent of it) */
     double yaw_amplitude_rad;           /* < 0 = the trajectory's default */
@@ -129,5 +131,9 @@ int sitl_options_parse(sitl_options_t *opts, int argc, char **argv);
 void sitl_options_print_help(const char *prog);
 
 const char *sitl_mode_name(sitl_mode_t mode);
+
+/* The seed of the vehicle's own draws (true coefficients, a random Incorrect mixer,
+ * the IMU's constant biases): --vehicle-seed when given, else --seed. */
+uint64_t sitl_options_vehicle_seed(const sitl_options_t *opts);
 
 #endif /* SITL_OPTIONS_H */

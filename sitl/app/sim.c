@@ -227,7 +227,8 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
     if (n > SITL_ALLOC_MAX_ROTORS) {
         return fail(r, SITL_EXIT_USAGE, "too many rotors for the allocation");
     }
-    sitl_setup_true_coefficients(&f->vehicle, o->coeff_spread, o->seed, f->true_kf, f->true_km);
+    sitl_setup_true_coefficients(&f->vehicle, o->coeff_spread, sitl_options_vehicle_seed(o),
+                                 f->true_kf, f->true_km);
     sitl_setup_incorrect_coefficients(o, &f->vehicle, f->true_kf, f->true_km, f->incorrect_kf,
                                       f->incorrect_km);
     if (sitl_plant_init(&f->plant, &f->vehicle, f->true_kf, f->true_km, &o->effects, err,
@@ -335,7 +336,7 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
         }
     }
 
-    sitl_imu_init(&f->imu, &o->imu, o->seed, &o->effects);
+    sitl_imu_init(&f->imu, &o->imu, sitl_options_vehicle_seed(o), o->seed, &o->effects);
     sitl_faults_init(&f->faults, &o->faults, o->seed);
     sitl_rng_init(&f->disturbance_rng, o->seed, SITL_RNG_DISTURBANCE_TORQUE);
     double history_rate = o->physics_rate_hz + o->imu.rate_hz + o->esc.rate_hz +
@@ -366,14 +367,18 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
         }
         f->log_open = 1;
         char vpath[SITL_PATH_MAX + 32];
-        char notes[1024], fx[256];
+        char notes[1024], fx[256], vseed[48] = "";
         sitl_flight_log_vehicle_path(o->log_path, vpath, sizeof(vpath));
         sitl_effects_describe(&o->effects, fx, (int)sizeof(fx));
+        if (o->vehicle_seed_set) {
+            snprintf(vseed, sizeof(vseed), ", vehicle seed %llu",
+                     (unsigned long long)o->vehicle_seed);
+        }
         snprintf(notes, sizeof(notes),
                  "written by propid_sitl: vehicle '%s', geometry and inertia as simulated "
                  "(before effects), nominal catalogue coefficients (the truth is in the CSV "
-                 "true_kf_i/true_km_i columns); seed %llu, coeff spread %g, effects %s",
-                 f->vehicle.name, (unsigned long long)o->seed, o->coeff_spread, fx);
+                 "true_kf_i/true_km_i columns); seed %llu%s, coeff spread %g, effects %s",
+                 f->vehicle.name, (unsigned long long)o->seed, vseed, o->coeff_spread, fx);
         if (sitl_vehicle_write_json(vpath, &f->vehicle, notes) != 0) {
             snprintf(err, sizeof(err), "cannot write '%.200s'", vpath);
             return fail(r, SITL_EXIT_ERROR, err);

@@ -81,7 +81,7 @@ void sitl_setup_incorrect_coefficients(const sitl_options_t *opts, const sitl_ve
                                        double *km)
 {
     sitl_rng_t rng;
-    sitl_rng_init(&rng, opts->seed, SITL_RNG_INCORRECT);
+    sitl_rng_init(&rng, sitl_options_vehicle_seed(opts), SITL_RNG_INCORRECT);
     for (int i = 0; i < v->rotor_count; i++) {
         if (!opts->incorrect_random) {
             kf[i] = v->rotor[i].thrust_coeff;

@@ -36,6 +36,9 @@ void sitl_print_final_summary(FILE *out, const sitl_options_t *o, const sitl_res
     fprintf(out, "---- propid_sitl: %s, %s, mode %s, seed %llu, effects %s\n", o->vehicle,
             sitl_trajectory_name(o->trajectory), sitl_mode_name(o->mode),
             (unsigned long long)o->seed, fx);
+    if (o->vehicle_seed_set) {
+        fprintf(out, "vehicle seed %llu\n", (unsigned long long)o->vehicle_seed);
+    }
     if (r->diverged) {
         fprintf(out, "DIVERGED: %s\n", r->message);
     }
@@ -80,6 +83,10 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
     cJSON_AddStringToObject(root, "mode", sitl_mode_name(o->mode));
     snprintf(text, sizeof(text), "%llu", (unsigned long long)o->seed); /* exact beyond 2^53 */
     cJSON_AddRawToObject(root, "seed", text);
+    if (o->vehicle_seed_set) { /* absent by default: the default summary stays as it was */
+        snprintf(text, sizeof(text), "%llu", (unsigned long long)o->vehicle_seed);
+        cJSON_AddRawToObject(root, "vehicle_seed", text);
+    }
     cJSON_AddStringToObject(root, "effects", fx);
     cJSON_AddBoolToObject(root, "paper_sensors", o->paper);
     add_number(root, "duration_s", o->duration_s);

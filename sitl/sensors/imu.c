@@ -37,26 +37,26 @@ void sitl_imu_paper_params(sitl_imu_params_t *p)
     p->accel.resolution = 0.0;
 }
 
-void sitl_imu_init(sitl_imu_t *imu, const sitl_imu_params_t *params, uint64_t seed,
-                   const sitl_effects_t *effects)
+void sitl_imu_init(sitl_imu_t *imu, const sitl_imu_params_t *params, uint64_t bias_seed,
+                   uint64_t noise_seed, const sitl_effects_t *effects)
 {
     memset(imu, 0, sizeof(*imu));
     imu->params = *params;
     imu->gyro_sigma = params->gyro.noise_density * sqrt(params->rate_hz);
     imu->accel_sigma = params->accel.noise_density * sqrt(params->rate_hz);
     sitl_rng_t bias_rng;
-    sitl_rng_init(&bias_rng, seed, SITL_RNG_GYRO_BIAS);
+    sitl_rng_init(&bias_rng, bias_seed, SITL_RNG_GYRO_BIAS);
     for (int i = 0; i < 3; i++) {
         imu->gyro_bias[i] = sitl_rng_range(&bias_rng, -params->gyro.bias_max,
                                            params->gyro.bias_max);
     }
-    sitl_rng_init(&bias_rng, seed, SITL_RNG_ACCEL_BIAS);
+    sitl_rng_init(&bias_rng, bias_seed, SITL_RNG_ACCEL_BIAS);
     for (int i = 0; i < 3; i++) {
         imu->accel_bias[i] = sitl_rng_range(&bias_rng, -params->accel.bias_max,
                                             params->accel.bias_max);
     }
-    sitl_rng_init(&imu->gyro_rng, seed, SITL_RNG_GYRO);
-    sitl_rng_init(&imu->accel_rng, seed, SITL_RNG_ACCEL);
+    sitl_rng_init(&imu->gyro_rng, noise_seed, SITL_RNG_GYRO);
+    sitl_rng_init(&imu->accel_rng, noise_seed, SITL_RNG_ACCEL);
     sitl_effects_gyro_matrix(effects, imu->gyro_matrix);
 }
 

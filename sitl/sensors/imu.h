@@ -44,9 +44,10 @@ void sitl_imu_default_params(sitl_imu_params_t *params);
  * no saturation, no quantisation. */
 void sitl_imu_paper_params(sitl_imu_params_t *params);
 
-/* Draw the constant biases from the seed (own streams). */
-void sitl_imu_init(sitl_imu_t *imu, const sitl_imu_params_t *params, uint64_t seed,
-                   const sitl_effects_t *effects);
+/* Draw the constant biases from bias_seed (the airframe's) and seed the noise and
+ * bias-walk streams from noise_seed (the flight's); own streams each. */
+void sitl_imu_init(sitl_imu_t *imu, const sitl_imu_params_t *params, uint64_t bias_seed,
+                   uint64_t noise_seed, const sitl_effects_t *effects);
 
 /* One sample; dt = time since the previous sample (bias walk). With
  * accel_out NULL only the gyro is sampled (specific_force may be NULL too):

@@ -336,6 +336,56 @@ static void test_same_seed_same_log_bytes(void)
     TEST_ASSERT_FALSE(files_equal(tmp_path("repro_a.csv"), tmp_path("repro_c.csv")));
 }
 
+/* --vehicle-seed: the vehicle (true kf/km, a random Incorrect mixer, the IMU's constant
+ * biases) comes from it, the noise from --seed; given equal to --seed it changes nothing. */
+static void test_vehicle_seed_draws_the_vehicle_apart_from_the_flight(void)
+{
+    const char *argv[] = {"propid_sitl", "--vehicle-seed", "7", "--seed", "3"};
+    TEST_ASSERT_EQUAL_INT(0, sitl_options_parse(&opts, 5, (char **)argv));
+    TEST_ASSERT_EQUAL_UINT64(3u, opts.seed);
+    TEST_ASSERT_EQUAL_UINT64(7u, sitl_options_vehicle_seed(&opts));
+    sitl_options_default(&opts);
+    opts.quiet = 1;
+    TEST_ASSERT_EQUAL_UINT64(opts.seed, sitl_options_vehicle_seed(&opts));
+
+    opts.trajectory = SITL_TRAJ_CIRCLE;
+    opts.duration_s = 2.0;
+    opts.mode = SITL_MODE_INCORRECT;
+    opts.incorrect_random = 1;
+    opts.imu.gyro.bias_walk = 0.0; /* the final bias is the constant one */
+    sitl_effects_parse(&opts.effects, "rotor_drag", NULL, 0);
+    sitl_result_t first;
+    snprintf(opts.log_path, sizeof(opts.log_path), "%s", tmp_path("vseed_a.csv"));
+    TEST_ASSERT_EQUAL_INT(SITL_EXIT_OK, fly());
+    first = result;
+
+    opts.vehicle_seed = opts.seed; /* explicit, equal: the same flight */
+    opts.vehicle_seed_set = 1;
+    snprintf(opts.log_path, sizeof(opts.log_path), "%s", tmp_path("vseed_b.csv"));
+    TEST_ASSERT_EQUAL_INT(SITL_EXIT_OK, fly());
+    TEST_ASSERT_TRUE(files_equal(tmp_path("vseed_a.csv"), tmp_path("vseed_b.csv")));
+
+    opts.seed = first.rotor_count + 40u; /* another flight of the same vehicle */
+    snprintf(opts.log_path, sizeof(opts.log_path), "%s", tmp_path("vseed_c.csv"));
+    TEST_ASSERT_EQUAL_INT(SITL_EXIT_OK, fly());
+    TEST_ASSERT_FALSE(files_equal(tmp_path("vseed_a.csv"), tmp_path("vseed_c.csv")));
+    for (int i = 0; i < first.rotor_count; i++) {
+        TEST_ASSERT_EQUAL_DOUBLE(first.true_kf[i], result.true_kf[i]);
+        TEST_ASSERT_EQUAL_DOUBLE(first.true_km[i], result.true_km[i]);
+        TEST_ASSERT_EQUAL_DOUBLE(first.used_kf[i], result.used_kf[i]);
+    }
+    for (int k = 0; k < 3; k++) {
+        TEST_ASSERT_EQUAL_DOUBLE(first.true_bias[k], result.true_bias[k]);
+    }
+    /* Other noise: the filter (in the loop in every mode) reads it differently. */
+    TEST_ASSERT_TRUE(first.estimate.thrust_coeff[0] != result.estimate.thrust_coeff[0]);
+
+    opts.vehicle_seed = 2u; /* another vehicle */
+    TEST_ASSERT_EQUAL_INT(SITL_EXIT_OK, fly());
+    TEST_ASSERT_TRUE(first.true_kf[0] != result.true_kf[0]);
+    TEST_ASSERT_TRUE(first.true_bias[0] != result.true_bias[0]);
+}
+
 static void test_log_rate(void)
 {
     opts.log_rate_hz = 50.0;
@@ -435,6 +485,7 @@ int main(void)
     RUN_TEST(test_filter_with_realistic_sensors_stays_close);
     RUN_TEST(test_coefficient_source_per_mode);
     RUN_TEST(test_same_seed_same_log_bytes);
+    RUN_TEST(test_vehicle_seed_draws_the_vehicle_apart_from_the_flight);
     RUN_TEST(test_log_rate);
     RUN_TEST(test_divergence_is_detected_and_stops_the_run);
     RUN_TEST(test_effects_in_flight_change_the_flight);

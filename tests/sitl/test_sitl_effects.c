@@ -280,7 +280,7 @@ static void test_gyro_scale_and_esc_delay_reach_the_sensors(void)
     ip.accel.noise_density = 0.0;
     ip.accel.bias_max = 0.0;
     sitl_imu_t imu;
-    sitl_imu_init(&imu, &ip, 1, &fx);
+    sitl_imu_init(&imu, &ip, 1, 1, &fx);
     double w[3] = {1.0, 0.0, 0.0}, f[3] = {0.0, 0.0, 9.81}, g[3], acc[3];
     sitl_imu_sample(&imu, w, f, 0.002, g, acc);
     TEST_ASSERT_DOUBLE_WITHIN(1e-12, 1.05, g[0]);

@@ -28,7 +28,7 @@ static void test_gyro_noise_matches_density_and_bias_in_range(void)
     sitl_effects_t fx;
     sitl_effects_clear(&fx);
     sitl_imu_t imu;
-    sitl_imu_init(&imu, &p, 42, &fx);
+    sitl_imu_init(&imu, &p, 42, 42, &fx);
     for (int k = 0; k < 3; k++) {
         TEST_ASSERT_TRUE(fabs(imu.gyro_bias[k]) <= p.gyro.bias_max);
     }
@@ -62,7 +62,7 @@ static void test_gyro_saturates_and_quantises(void)
     sitl_effects_t fx;
     sitl_effects_clear(&fx);
     sitl_imu_t imu;
-    sitl_imu_init(&imu, &p, 1, &fx);
+    sitl_imu_init(&imu, &p, 1, 1, &fx);
     double w[3] = {100.0, -100.0, 0.01234}, f[3] = {0, 0, 9.81}, g[3], a[3];
     sitl_imu_sample(&imu, w, f, 0.001, g, a);
     TEST_ASSERT_DOUBLE_WITHIN(1e-12, p.gyro.range, g[0]);
