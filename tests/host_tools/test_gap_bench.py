@@ -12,6 +12,7 @@ import sys
 import numpy as np
 import pytest
 
+from propid.gapbench.plan import further_flight, make_plan
 from propid.gapbench.rigid_body import lowpass
 from propid.gapbench.runner import BenchConfig, run_bench
 from propid.gapbench.scoring import score_flight, shrink_of, summarize
@@ -162,6 +163,57 @@ def test_truths_under_the_tools_reporting_floors_are_counted_beside_the_headline
     assert "truth under the tool's reporting floors" in render({"tool": s, "baseline": s})
 
 
+def test_k_flights_per_diagnosis_keep_the_one_flight_plan_and_draw_further_flights():
+    one = make_plan(seed=5, singles_per_effect=2, pairs=4, nones=3)
+    three = make_plan(seed=5, singles_per_effect=2, pairs=4, nones=3, flights_per_diagnosis=3)
+    assert len(one) == len(three)
+    for a, b in zip(one, three):
+        assert a.extra == {} and b.extra["flights_per_diagnosis"] == 3
+        b_dict = b.to_dict()
+        b_dict["extra"] = {}
+        assert a.to_dict() == b_dict  # the first flights are the one-flight plan's
+    for spec in three:
+        seeds = set()
+        for number in (2, 3):
+            seed, trajectory = further_flight(spec, number)
+            assert (seed, trajectory) == further_flight(spec, number)  # reproducible
+            assert further_flight(spec, number, attempt=1)[0] != seed  # a retry redraws
+            seeds.add(seed)
+            low = trajectory.start_height < 0.6  # rotor radii above ground, not 0.6-1.5 m
+            assert low == bool(spec.extra["low"])
+            if "ground_effect" in spec.effects:
+                assert low
+        assert len(seeds | {spec.seed}) == 3  # each flight its own noise
+    with pytest.raises(ValueError):
+        further_flight(three[0], 4)
+    with pytest.raises(ValueError):
+        further_flight(one[0], 2)
+    with pytest.raises(ValueError):
+        make_plan(seed=5, flights_per_diagnosis=0)
+
+
+def test_a_k_flight_diagnosis_is_scored_as_one_and_banded_by_its_pooled_detectability():
+    a = answer("f0", "pair", ["esc_delay", "com_offset"], index=7.0)
+    a["effects"][0]["pooled_detectability"] = 14.0
+    a["effects"][1]["pooled_detectability"] = 25.0
+    right = score_flight(a, result("esc_delay", significant=["esc_delay", "com_offset"]))
+    assert right["right"] and right["detectability"] == 7.0
+    assert right["pooled_detectability"] == 14.0  # the weaker effect's, like D
+    b = answer("f1", "single", ["esc_delay"], index=30.0)
+    b["effects"][0]["pooled_detectability"] = 45.0
+    wrong = score_flight(b, result("none"))
+    s = summarize([right, wrong])
+    assert s["by_detectability"]["5-10"] == {"n": 1, "accuracy": 1.0}
+    assert s["by_pooled_detectability"]["10-20"] == {"n": 1, "accuracy": 1.0}
+    assert s["by_pooled_detectability"]["20-inf"] == {"n": 1, "accuracy": 0.0}
+    assert s["by_pooled_detectability"]["5-10"]["n"] == 0
+    assert "pooled D over the flights 10-20" in render({"tool": s, "baseline": s})
+    # one flight per diagnosis: no pooled figures at all
+    single = summarize([score_flight(answer("f2", "single", ["esc_delay"]), result("esc_delay"))])
+    assert "by_pooled_detectability" not in single
+    assert "pooled D" not in render({"tool": single, "baseline": single})
+
+
 def test_lowpass_keeps_a_slow_sine_and_differentiates_it():
     fs = 500.0
     t = np.arange(0, 6, 1 / fs)
@@ -177,12 +229,13 @@ def test_lowpass_keeps_a_slow_sine_and_differentiates_it():
 FAKE_TOOL = """
 import argparse, json, sys
 p = argparse.ArgumentParser()
-p.add_argument("--log"); p.add_argument("--vehicle"); p.add_argument("--json")
+p.add_argument("--log", action="append"); p.add_argument("--vehicle"); p.add_argument("--json")
 p.add_argument("--report")
 a = p.parse_args()
-header = open(a.log).readline().strip().split(",")
+headers = [open(log).readline().strip().split(",") for log in a.log]
 vehicle = json.load(open(a.vehicle))
-json.dump({"verdict": "none", "effects": [], "shrink": {}, "seen_columns": header,
+json.dump({"verdict": "none", "effects": [], "shrink": {}, "seen_columns": headers[0],
+           "seen_logs": a.log, "seen_columns_per_log": headers,
            "seen_notes": vehicle.get("notes")}, open(a.json, "w"))
 """
 
@@ -222,3 +275,38 @@ def test_three_flights_end_to_end_blind_and_scored(tmp_path, sitl_binary):
             assert effect["strength"] != 0 and effect["detectability"] > 0
     assert "least squares" in render(out)
     assert "single effects right / flown, by D" in render(out)
+
+
+def test_two_flights_per_diagnosis_end_to_end(tmp_path, sitl_binary):
+    tool = tmp_path / "fake_gap.py"
+    tool.write_text(FAKE_TOOL)
+    config = BenchConfig(out_dir=tmp_path / "bench", result_path=tmp_path / "gap_bench.json",
+                         sitl=sitl_binary, seed=3, singles_per_effect=1, pairs=0, nones=1,
+                         effects=("com_offset",), duration_s=6.0, workers=2,
+                         tool_command=[sys.executable, str(tool)], flights_per_diagnosis=2)
+    out = run_bench(config, progress=False)
+    assert not out["errors"] and out["config"]["flights_per_diagnosis"] == 2
+    assert sorted(f["kind"] for f in out["flights"]) == ["none", "single"]
+    for flight in out["flights"]:
+        fid = flight["flight_id"]
+        key = json.loads((config.out_dir / "answers" / f"{fid}.json").read_text())
+        (further,) = key["further_flights"]
+        # the second flight: the first one's vehicle, its own noise seed, the same effects
+        assert further["vehicle_seed"] == key["seed_flown"] != further["seed_flown"]
+        assert f"--vehicle-seed {key['seed_flown']} " in further["sitl_command"]
+        assert f"--seed {further['seed_flown']} " in further["sitl_command"]
+        for effect in key["effects"]:
+            assert f"--effect {effect['id']}=" in further["sitl_command"]
+            first, second = effect["detectability_per_flight"]
+            assert first == effect["detectability"] and second > 0
+            # one shared kf/km for both flights: at least the two flights' D added in quadrature
+            assert effect["pooled_detectability"] >= 0.999 * np.hypot(first, second)
+        # the tool got both blind logs, measured columns only
+        seen = json.loads((config.out_dir / "tool" / f"{fid}.json").read_text())
+        assert [p.rsplit("/", 1)[-1] for p in seen["seen_logs"]] == [f"{fid}.csv", further["csv"]]
+        for columns in seen["seen_columns_per_log"]:
+            assert "gyro_x" in columns and not [c for c in columns if c.startswith("true_")]
+    single = next(f for f in out["flights"] if f["kind"] == "single")
+    assert single["tool"]["pooled_detectability"] > single["tool"]["detectability"]
+    assert "by_pooled_detectability" in out["tool"]
+    assert "2 flights per diagnosis" in render(out)

@@ -33,6 +33,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--nones", type=int, default=15, help="effect-free flights (default 15)")
     parser.add_argument("--effects", default=",".join(EFFECTS),
                         help="comma list of the effects to draw from (default all 11)")
+    parser.add_argument("--flights-per-diagnosis", type=int, default=1, metavar="K",
+                        help="flights of one vehicle per diagnosis (default 1): the first as with 1, "
+                             "K - 1 more with the same effects and strengths, their own noise and "
+                             "trajectory; `propid gap` gets all K logs (docs/gap-bench.md)")
     parser.add_argument("--duration", type=float, default=12.0, help="flight length [s] (default 12)")
     parser.add_argument("--workers", type=int, default=2, help="parallel flights (default 2)")
     parser.add_argument("--tool-command", default=None, metavar="'CMD'",
@@ -69,6 +73,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--pairs needs at least two --effects")
     if not args.duration >= 4.0:
         raise UserError("--duration must be at least 4 s")
+    if not 1 <= args.flights_per_diagnosis <= 10:
+        raise UserError("--flights-per-diagnosis must be 1 to 10")
     if args.workers < 1:
         raise UserError("--workers must be at least 1")
     check_directory(args.out, "--out")
@@ -80,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         sitl=locate_sitl(args.sitl), seed=args.seed, singles_per_effect=args.singles_per_effect,
         pairs=args.pairs, nones=args.nones, effects=effects, duration_s=args.duration,
         workers=args.workers, tool_command=tool, time_budget_s=args.time_budget,
-        reports=args.reports,
+        reports=args.reports, flights_per_diagnosis=args.flights_per_diagnosis,
     )
     result = run_bench(config, progress=not args.no_progress)
     print(render(result))

@@ -69,12 +69,15 @@ class _GramFit:
         return coef / self.scale[cols], float(max(ssr, 0.0))
 
 
-def diagnose(csv_path: Path, vehicle_path: Path) -> dict:
+def diagnose(csv_path: Path | list[Path], vehicle_path: Path) -> dict:
+    """One fit over the log, or over several logs of one vehicle (rows stacked: one set of
+    coefficients for all)."""
     vehicle = read_vehicle(vehicle_path)
-    log = read_flightlog(csv_path, vehicle)
-    grid = make_grid(log)
-    target = response(grid, vehicle)
-    nominal = nominal_regressors(grid, vehicle)
+    paths = list(csv_path) if isinstance(csv_path, (list, tuple)) else [csv_path]
+    grids = [make_grid(read_flightlog(path, vehicle)) for path in paths]
+    target = np.concatenate([response(grid, vehicle) for grid in grids], axis=1)
+    nominal = np.concatenate([nominal_regressors(grid, vehicle) for grid in grids], axis=1)
+    rows = target.shape[1]
     axes = [a for a in range(4) if np.all(np.isfinite(target[a]))]
 
     def flat(columns_4n: np.ndarray) -> np.ndarray:  # (4, n, k) -> (len(axes) n, k)
@@ -83,22 +86,23 @@ def diagnose(csv_path: Path, vehicle_path: Path) -> dict:
     # Weights: per-axis residual RMS of the nominal-only fit (two passes).
     weights = np.array([1.0 / max(np.std(target[a]), 1e-12) for a in axes])
     for _ in range(2):
-        w = np.repeat(weights, grid.t.size)
+        w = np.repeat(weights, rows)
         coef, _ = _fit(flat(nominal) * w[:, None], flat(target[:, :, None])[:, 0] * w)
         resid = target - nominal @ coef
         weights = np.array([1.0 / max(np.sqrt(np.mean(resid[a] ** 2)), 1e-12) for a in axes])
     rms_before = {AXES[a]: float(np.sqrt(np.mean(resid[a] ** 2))) for a in axes}
-    w = np.repeat(weights, grid.t.size)
+    w = np.repeat(weights, rows)
     y = flat(target[:, :, None])[:, 0] * w
 
     groups: dict[str, np.ndarray] = {}
     untestable = []
     for effect in EFFECTS:
-        cols = effect_columns(effect, grid, vehicle)
-        if cols is None:
+        per_log = [effect_columns(effect, grid, vehicle) for grid in grids]
+        if any(cols is None for cols in per_log):
             untestable.append(effect)
             continue
-        groups[effect] = np.stack(cols, axis=-1)  # (4, n, k)
+        groups[effect] = np.concatenate([np.stack(cols, axis=-1) for cols in per_log],
+                                        axis=1)  # (4, n, k)
     base = flat(nominal) * w[:, None]
     names = list(groups)
     blocks = [flat(groups[e]) * w[:, None] for e in names]

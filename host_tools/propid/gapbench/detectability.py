@@ -52,9 +52,9 @@ def _common(*arrays: np.ndarray) -> list[np.ndarray]:
     return [a[..., :n] for a in arrays]
 
 
-def detectability(clean_effect: FlightLog, clean_twin: FlightLog, noisy_twin: FlightLog,
-                  vehicle: Vehicle) -> dict:
-    """D of the effect present in `clean_effect`, plus per-axis signature/noise RMS."""
+def _weighted_parts(clean_effect: FlightLog, clean_twin: FlightLog, noisy_twin: FlightLog,
+                    vehicle: Vehicle) -> dict:
+    """One flight's noise-weighted signature, nominal columns and accelerometer-offset column."""
     kf, km = true_coefficients(clean_twin)
     grids = [make_grid(log) for log in (clean_effect, clean_twin, noisy_twin)]
     r_b, r_c, r_n = _common(*(residual(g, vehicle, kf, km) for g in grids))
@@ -68,14 +68,31 @@ def detectability(clean_effect: FlightLog, clean_twin: FlightLog, noisy_twin: Fl
     sigma = np.maximum(sigma, 1e-12 * max(float(np.max(sigma)), 1e-30))
     weighted_e = np.concatenate([signature[a] / s for a, s in zip(axes, sigma)])
     weighted_x = np.concatenate([x_nominal[a] / s for a, s in zip(axes, sigma)], axis=0)
+    offset_column = None
     if 3 in axes:  # accelerometer bias: a constant on the thrust axis
         offset_column = np.concatenate([np.full(signature.shape[1], 1.0 / s if a == 3 else 0.0)
                                         for a, s in zip(axes, sigma)])
-        weighted_x = np.column_stack([weighted_x, offset_column])
+    return {"signature": signature, "axes": axes, "sigma": sigma, "e": weighted_e,
+            "x": weighted_x, "offset": offset_column}
+
+
+def _project_out(weighted_e: np.ndarray, weighted_x: np.ndarray) -> np.ndarray:
+    """What of the signature least squares on the nuisance columns cannot absorb."""
     scale = np.linalg.norm(weighted_x, axis=0)
     scale[scale == 0] = 1.0
     coef, *_ = np.linalg.lstsq(weighted_x / scale, weighted_e, rcond=None)
-    remaining = weighted_e - (weighted_x / scale) @ coef
+    return weighted_e - (weighted_x / scale) @ coef
+
+
+def detectability(clean_effect: FlightLog, clean_twin: FlightLog, noisy_twin: FlightLog,
+                  vehicle: Vehicle) -> dict:
+    """D of the effect present in `clean_effect`, plus per-axis signature/noise RMS."""
+    parts = _weighted_parts(clean_effect, clean_twin, noisy_twin, vehicle)
+    signature, axes, sigma = parts["signature"], parts["axes"], parts["sigma"]
+    weighted_e, weighted_x = parts["e"], parts["x"]
+    if parts["offset"] is not None:
+        weighted_x = np.column_stack([weighted_x, parts["offset"]])
+    remaining = _project_out(weighted_e, weighted_x)
     per_axis = {}
     offset = 0
     for a, s in zip(axes, sigma):
@@ -88,3 +105,26 @@ def detectability(clean_effect: FlightLog, clean_twin: FlightLog, noisy_twin: Fl
             "index": float(np.linalg.norm(part)),
         }
     return {"index": float(np.linalg.norm(remaining)), "axes": per_axis}
+
+
+def pooled_detectability(flights: list[tuple[FlightLog, FlightLog, FlightLog]],
+                         vehicle: Vehicle) -> float:
+    """D over several flights of one vehicle: each flight's (clean probe, clean twin, noisy twin)
+    weighted by its own noise as in `detectability`, stacked, and the part that one set of
+    per-rotor kf/km (the same vehicle: shared by every flight) and one accelerometer offset per
+    flight could absorb projected out. The matched filter's t-statistic over all the flights;
+    with one flight it is `detectability`'s index; with independent nuisances per flight it
+    would be sqrt(sum D_k^2), and the shared kf/km make it at least that."""
+    parts = [_weighted_parts(*flight, vehicle) for flight in flights]
+    if len({p["x"].shape[1] for p in parts}) != 1:
+        raise ValueError("pooled detectability: the flights have different nominal columns")
+    weighted_e = np.concatenate([p["e"] for p in parts])
+    columns = [np.concatenate([p["x"] for p in parts], axis=0)]
+    row = 0
+    for p in parts:
+        if p["offset"] is not None:
+            column = np.zeros(weighted_e.size)
+            column[row: row + p["offset"].size] = p["offset"]
+            columns.append(column[:, None])
+        row += p["e"].size
+    return float(np.linalg.norm(_project_out(weighted_e, np.column_stack(columns))))

@@ -122,8 +122,17 @@ def _target(rng: np.random.Generator) -> float:
 
 
 def make_plan(seed: int = 1, singles_per_effect: int = 5, pairs: int = 15, nones: int = 15,
-              duration_s: float = 12.0, effects: tuple[str, ...] | None = None) -> list[FlightSpec]:
-    """The bench's flights: every effect alone, pairs of distinct effects, effect-free."""
+              duration_s: float = 12.0, effects: tuple[str, ...] | None = None,
+              flights_per_diagnosis: int = 1) -> list[FlightSpec]:
+    """The bench's diagnoses: every effect alone, pairs of distinct effects, effect-free.
+
+    Each spec is the diagnosis's first flight. With flights_per_diagnosis K > 1 the spec's
+    `extra` says so and keeps whether the flights fly low; the K - 1 further flights of the
+    same vehicle are drawn by `further_flight`, from their own generators, so the plan's
+    draws (and every first flight) are those of K = 1.
+    """
+    if flights_per_diagnosis < 1:
+        raise ValueError("flights_per_diagnosis must be at least 1")
     rng = np.random.default_rng(seed)
     pool = tuple(effects) if effects else EFFECTS
     unknown = [e for e in pool if e not in EFFECTS]
@@ -154,5 +163,23 @@ def make_plan(seed: int = 1, singles_per_effect: int = 5, pairs: int = 15, nones
             nuisances=_nuisances(rng, strong=kind == "none" or rng.random() < 0.3),
             duration_s=duration_s,
             seed=int(rng.integers(1, 2**31 - 1)),
+            extra={} if flights_per_diagnosis == 1 else
+            {"flights_per_diagnosis": flights_per_diagnosis, "low": low},
         ))
     return plan
+
+
+def flights_per_diagnosis(spec: FlightSpec) -> int:
+    return int(spec.extra.get("flights_per_diagnosis", 1))
+
+
+def further_flight(spec: FlightSpec, number: int, attempt: int = 0) -> tuple[int, Trajectory]:
+    """The noise seed and trajectory of the diagnosis's flight `number` (2..K), another flight
+    of the first one's vehicle: the effects, strengths, rates and nuisances stay the first
+    flight's; the trajectory is drawn afresh (a flight-test engineer flies several manoeuvres),
+    as low as the first one. `attempt` > 0 redraws both after a divergence."""
+    if not 2 <= number <= flights_per_diagnosis(spec):
+        raise ValueError(f"flight {number} of a {flights_per_diagnosis(spec)}-flight diagnosis")
+    rng = np.random.default_rng([spec.seed, number, attempt])
+    seed = int(rng.integers(1, 2**31 - 1))
+    return seed, _trajectory(rng, bool(spec.extra["low"]), spec.vehicle)

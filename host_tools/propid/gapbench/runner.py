@@ -56,6 +56,7 @@ class BenchConfig:
     tool_timeout_s: float = 600.0
     time_budget_s: float | None = None  # stop starting flights after this [s]
     reports: bool = False  # ask the tool for its HTML report too (not scored; ~2 s per flight)
+    flights_per_diagnosis: int = 1  # K flights of one vehicle per diagnosis (plan.further_flight)
 
 
 def tool_available(command: list[str]) -> tuple[bool, str]:
@@ -71,12 +72,12 @@ def tool_available(command: list[str]) -> tuple[bool, str]:
     return True, ""
 
 
-def _run_tool(config: BenchConfig, flight_id: str, csv: Path, vehicle: Path) -> dict:
+def _run_tool(config: BenchConfig, flight_id: str, csvs: list[Path], vehicle: Path) -> dict:
     out_dir = config.out_dir / "tool"
     out_dir.mkdir(parents=True, exist_ok=True)
     out_json = out_dir / f"{flight_id}.json"
-    command = config.tool_command + ["--log", str(csv), "--vehicle", str(vehicle),
-                                     "--json", str(out_json)]
+    logs = [arg for csv in csvs for arg in ("--log", str(csv))]
+    command = config.tool_command + logs + ["--vehicle", str(vehicle), "--json", str(out_json)]
     if config.reports:
         command += ["--report", str(out_dir / f"{flight_id}_report")]
     start = time.monotonic()
@@ -103,11 +104,13 @@ def run_flight(config: BenchConfig, spec: FlightSpec, with_tool: bool) -> dict:
     start = time.monotonic()
     answer = FlightMaker(config.sitl, config.out_dir).make(spec)
     fly_s = time.monotonic() - start
-    csv = config.out_dir / "flights" / f"{spec.flight_id}.csv"
-    vehicle = config.out_dir / "flights" / f"{spec.flight_id}.vehicle.json"
+    flights = config.out_dir / "flights"
+    csvs = [flights / f"{spec.flight_id}.csv"] + \
+        [flights / further["csv"] for further in answer.get("further_flights", [])]
+    vehicle = flights / f"{spec.flight_id}.vehicle.json"
     start = time.monotonic()
     try:
-        base = baseline.diagnose(csv, vehicle)
+        base = baseline.diagnose(csvs, vehicle)
         base_error = None
     except Exception as exc:  # noqa: BLE001 - a baseline failure is scored as a failure
         base, base_error = None, f"{type(exc).__name__}: {exc}"
@@ -116,7 +119,7 @@ def run_flight(config: BenchConfig, spec: FlightSpec, with_tool: bool) -> dict:
     if base is not None:
         (config.out_dir / "baseline" / f"{spec.flight_id}.json").write_text(
             json.dumps(base, indent=1) + "\n", encoding="utf-8")
-    tool = _run_tool(config, spec.flight_id, csv, vehicle) if with_tool else None
+    tool = _run_tool(config, spec.flight_id, csvs, vehicle) if with_tool else None
     return {"answer": answer, "baseline": base, "baseline_error": base_error, "tool": tool,
             "fly_s": fly_s, "baseline_s": base_s}
 
@@ -126,7 +129,8 @@ def run_bench(config: BenchConfig, progress: bool = True) -> dict:
     make_directory(config.out_dir)
     clear(config.out_dir)
     plan = make_plan(config.seed, config.singles_per_effect, config.pairs, config.nones,
-                     config.duration_s, effects=config.effects)
+                     config.duration_s, effects=config.effects,
+                     flights_per_diagnosis=config.flights_per_diagnosis)
     with_tool, why = (False, "disabled") if config.tool_command is None else \
         tool_available(config.tool_command)
     outcomes: list[dict] = []
@@ -165,7 +169,8 @@ def run_bench(config: BenchConfig, progress: bool = True) -> dict:
         "config": {
             "seed": config.seed, "duration_s": config.duration_s, "workers": config.workers,
             "singles_per_effect": config.singles_per_effect, "pairs": config.pairs,
-            "nones": config.nones, "tool_command": None if config.tool_command is None
+            "nones": config.nones, "flights_per_diagnosis": config.flights_per_diagnosis,
+            "tool_command": None if config.tool_command is None
             else " ".join(shlex.quote(c) for c in config.tool_command),
             "detection_limit": DETECTION_LIMIT, "detectability_max": DETECTABILITY_MAX,
             "strength_max": {k: r.strength_max for k, r in EFFECT_RANGES.items()},
@@ -184,6 +189,8 @@ def run_bench(config: BenchConfig, progress: bool = True) -> dict:
                 "rates": o["answer"]["spec"]["rates"],
                 "nuisances": o["answer"]["spec"]["nuisances"],
                 "sitl_command": o["answer"]["sitl_command"],
+                **({"further_flights": o["answer"]["further_flights"]}
+                   if "further_flights" in o["answer"] else {}),
                 "tool": tool_records[i] if with_tool else None,
                 "tool_error": (o["tool"] or {}).get("error") if with_tool else None,
                 "baseline": base_records[i],

@@ -117,6 +117,9 @@ def score_flight(answer: dict, result: dict | None) -> dict:
               "below_limit": below, "headline": not below,
               "under_floor": any(under_reporting_floor(e) for e in answer["effects"]),
               "detectability": min(indices) if indices else None}
+    pooled = [e["pooled_detectability"] for e in answer["effects"] if "pooled_detectability" in e]
+    if pooled:  # a diagnosis of several flights: the oracle's D over all of them too
+        record["pooled_detectability"] = min(pooled)
     if not isinstance(result, dict) or "verdict" not in result:
         record.update(failed=True, right=False, false_effect=False, false_effect_strict=False,
                       ambiguous_named=[], verdict=None, named=[],
@@ -156,11 +159,12 @@ def _median(values: list[float]) -> float | None:
     return values[mid] if len(values) % 2 else 0.5 * (values[mid - 1] + values[mid])
 
 
-def power_by_band(records: list[dict]) -> dict:
-    """{band: {"n", "right"}} over DETECTABILITY_BANDS (flights with a measured D)."""
+def power_by_band(records: list[dict], key: str = "detectability") -> dict:
+    """{band: {"n", "right"}} over DETECTABILITY_BANDS (flights with a measured D; `key`
+    "pooled_detectability" for the D over a diagnosis's flights)."""
     out = {}
     for lo, hi in DETECTABILITY_BANDS:
-        rows = [r for r in records if r["detectability"] is not None and lo <= r["detectability"] < hi]
+        rows = [r for r in records if r.get(key) is not None and lo <= r[key] < hi]
         out[f"{lo:g}-{hi:g}"] = {"n": len(rows), "right": sum(r["right"] for r in rows)}
     return out
 
@@ -209,10 +213,18 @@ def summarize(records: list[dict]) -> dict:
         # the bound over every effect flight, named right or not
         "shrink_library_bound_median_all": _median([r.get("shrink_library_bound") for r in effectful]),
         "per_effect": per_effect,
-        "by_detectability": {
-            f"{lo:g}-{hi:g}": {"n": len(rows), "accuracy": _fraction(sum(r["right"] for r in rows), len(rows))}
-            for lo, hi in DETECTABILITY_BANDS
-            for rows in [[r for r in records if r["kind"] != "none" and r["detectability"] is not None
-                          and lo <= r["detectability"] < hi]]
-        },
+        "by_detectability": _accuracy_by_band(records, "detectability"),
+        # several flights per diagnosis: the same by the oracle's D over all of them
+        **({"by_pooled_detectability": _accuracy_by_band(records, "pooled_detectability")}
+           if any("pooled_detectability" in r for r in records) else {}),
+    }
+
+
+def _accuracy_by_band(records: list[dict], key: str) -> dict:
+    """Effect diagnoses right per band of D (`key`), below-limit ones included."""
+    return {
+        f"{lo:g}-{hi:g}": {"n": len(rows), "accuracy": _fraction(sum(r["right"] for r in rows), len(rows))}
+        for lo, hi in DETECTABILITY_BANDS
+        for rows in [[r for r in records if r["kind"] != "none" and r.get(key) is not None
+                      and lo <= r[key] < hi]]
     }

@@ -53,9 +53,15 @@ def render(result: dict) -> str:
         rows.append((f"detectability {band}", str(stats["n"]),
                      _cell(tool, lambda s, b=band: _pct(s["by_detectability"][b]["accuracy"])),
                      _pct(stats["accuracy"])))
+    for band, stats in base.get("by_pooled_detectability", {}).items():
+        rows.append((f"pooled D over the flights {band}", str(stats["n"]),
+                     _cell(tool, lambda s, b=band: _pct(s["by_pooled_detectability"][b]["accuracy"])),
+                     _pct(stats["accuracy"])))
     acc_row("below limit (not in headline)", lambda s: s["below_limit"])
     rows.append(("failed runs", "", _cell(tool, lambda s: str(s["failed"])), str(base["failed"])))
-    header = ("", "flights", "propid gap", "least squares")
+    flights = result.get("config", {}).get("flights_per_diagnosis", 1)
+    header = ("" if flights == 1 else f"{flights} flights per diagnosis", "flights", "propid gap",
+              "least squares")
     widths = [max(len(r[i]) for r in rows + [header]) for i in range(4)]
     lines = ["  ".join(h.ljust(widths[i]) if i == 0 else h.rjust(widths[i])
                        for i, h in enumerate(header))]
