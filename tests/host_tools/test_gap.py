@@ -323,6 +323,31 @@ def test_corrupt_log_is_a_one_line_error(tmp_path, capsys):
     assert "segment" in capsys.readouterr().err
 
 
+def test_a_log_without_a_flying_segment_is_left_out_of_several(flights, tmp_path, capsys):
+    """One unflown log among several is listed and left out: the diagnosis is the other logs'."""
+    from propid.cli import main
+
+    log_path, _, _ = flights("inertia_error", "0.1")
+    vehicle = log_path.with_name(log_path.stem + ".vehicle.json")
+    tiny = tmp_path / "tiny.csv"
+    tiny.write_text("t,gyro_x,gyro_y,gyro_z,omega_1,omega_2,omega_3,omega_4\n"
+                    + "".join(f"{k * 0.01},0,0,0,1000,1000,1000,1000\n" for k in range(20)))
+    alone, both = tmp_path / "alone.json", tmp_path / "both.json"
+    common = ["--vehicle", str(vehicle), "--no-filter", "--quiet"]
+    assert main(["gap", "--log", str(log_path), "--json", str(alone)] + common) == 0
+    capsys.readouterr()
+    assert main(["gap", "--log", str(tiny), "--log", str(log_path), "--json", str(both)] + common) == 0
+    assert "left out" in capsys.readouterr().err
+    with_tiny = json.loads(both.read_text())
+    (entry,) = with_tiny["inputs"].pop("left_out")
+    assert entry["log"] == str(tiny) and "segment" in entry["why"]
+    assert with_tiny == json.loads(alone.read_text())
+    # every log unflown: still the one-line error
+    tiny.with_name("tiny2.csv").write_text(tiny.read_text().replace(",0,0,0,", ",0,0,0.001,"))
+    assert main(["gap", "--log", str(tiny), "--log", str(tiny.with_name("tiny2.csv"))] + common) == 1
+    assert "segment" in capsys.readouterr().err
+
+
 def test_json_under_a_file_is_an_error_before_the_analysis(tmp_path, capsys):
     from propid.cli import main
 

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -101,6 +103,33 @@ def _clean(obj):
     return obj
 
 
+def without_unflown_logs(logs: list, vehicle, options) -> tuple[list, list[dict]]:
+    """With several fitted logs, the ones without a flying segment to fit (a ground run, a log
+    cut short) are left out and listed, so one such log does not stop the diagnosis of the
+    others; the result is then that of the other logs alone. Alone, or all of them, it stays
+    the one-line error."""
+    from propid.gap.prep import NoFlyingSegment, prepare_flight
+
+    if len(logs) < 2:
+        return logs, []
+    checked = vehicle
+    if vehicle.inertia is None:  # as the analysis runs it (unit inertia)
+        checked = copy.deepcopy(vehicle)
+        checked.inertia = np.eye(3)
+    kept, left_out, last_error = [], [], None
+    for log in logs:
+        try:
+            prepare_flight(log, checked, options.band, repeats=options.repeats)
+        except NoFlyingSegment as exc:
+            left_out.append({"log": str(log.path), "why": str(exc)})
+            last_error = exc
+            continue
+        kept.append(log)
+    if not kept:
+        raise last_error
+    return kept, left_out
+
+
 def run(args: argparse.Namespace) -> int:
     from propid.gap import analysis
     from propid.gap.prep import Band
@@ -131,10 +160,15 @@ def run(args: argparse.Namespace) -> int:
     holdout = canonical_order([read_flightlog(p, vehicle) for p in args.holdout])
     options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
                                repeats=args.repeats, lag_evidence=args.lag_evidence)
+    logs, left_out = without_unflown_logs(logs, vehicle, options)
+    for entry in left_out:
+        print(f"propid gap: left out {entry['why']}", file=sys.stderr)
     try:
         result = analysis.run(logs, vehicle, holdout, options)
     except (np.linalg.LinAlgError, ValueError, FloatingPointError) as exc:
         raise UserError(f"cannot analyse these logs: {exc}") from None
+    if left_out:
+        result["inputs"]["left_out"] = left_out
     internal = result.pop("_internal")
     corrected = internal["corrected"]
     progress = internal["progress"]

@@ -42,6 +42,11 @@ from propid.realdata_checks import _hold_rotor_rows, absurd_speed_limit, bandpas
 from propid.signals import log_body_velocity, measured_torque, repeats_previous_row, segments
 
 MIN_SEGMENT_S = 2.0
+
+
+class NoFlyingSegment(UserError):
+    """A log without a flying segment of MIN_SEGMENT_S: nothing in it to fit (with several
+    fitted logs, gap leaves such a log out and lists it; alone it is an error)."""
 BLOCK_S = 2.0
 GROUND_CONTACT_M = 0.03  # cross-validation / bootstrap block length
 
@@ -252,7 +257,7 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
     uniform[:-1] &= ~bad_dt
     segs = segments(fly & uniform, min_length=int(max(MIN_SEGMENT_S * rate, 50)))
     if not segs:
-        raise UserError(f"{where}: no flying segment of {MIN_SEGMENT_S:.0f} s or more with uniform timing")
+        raise NoFlyingSegment(f"{where}: no flying segment of {MIN_SEGMENT_S:.0f} s or more with uniform timing")
     inertia = np.asarray(vehicle.inertia, dtype=float)
     rate_dot = np.gradient(gyro, log.t, axis=0)
     torque = measured_torque(gyro, rate_dot, inertia)
