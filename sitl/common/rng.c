@@ -53,21 +53,57 @@ double sitl_rng_range(sitl_rng_t *rng, double lo, double hi)
     return lo + (hi - lo) * sitl_rng_uniform(rng);
 }
 
+/* One Box-Muller pair's radius and angle from the next two uniforms. */
+static void box_muller_draw(sitl_rng_t *rng, double *radius, double *angle)
+{
+    double u1 = sitl_rng_uniform(rng);
+    double u2 = sitl_rng_uniform(rng);
+    if (u1 < 1e-300) {
+        u1 = 1e-300;
+    }
+    *radius = sqrt(-2.0 * log(u1));
+    *angle = 2.0 * 3.14159265358979323846 * u2;
+}
+
 double sitl_rng_normal(sitl_rng_t *rng)
 {
     if (rng->has_spare) {
         rng->has_spare = 0;
         return rng->spare;
     }
-    double u1 = sitl_rng_uniform(rng);
-    double u2 = sitl_rng_uniform(rng);
-    if (u1 < 1e-300) {
-        u1 = 1e-300;
-    }
-    double r = sqrt(-2.0 * log(u1));
-    double s, c;
-    sitl_sincos(2.0 * 3.14159265358979323846 * u2, &s, &c);
+    double r, angle, s, c;
+    box_muller_draw(rng, &r, &angle);
+    sitl_sincos(angle, &s, &c);
     rng->spare = r * s;
     rng->has_spare = 1;
     return r * c;
+}
+
+void sitl_rng_normals(sitl_rng_t *rng, double *out, int count)
+{
+    int done = 0;
+    if (count > 0 && rng->has_spare) {
+        rng->has_spare = 0;
+        out[done++] = rng->spare;
+    }
+    while (done < count) {
+        /* Pairs in draw order: pair p gives out[done + 2p] (cosine) and the one
+         * after it (sine), which is the spare when count runs out first. */
+        const int pairs_left = (count - done + 1) / 2;
+        const int pairs = pairs_left < 4 ? pairs_left : 4;
+        double r[4], angle[4] = {0.0, 0.0, 0.0, 0.0}, s[4], c[4];
+        for (int p = 0; p < pairs; p++) {
+            box_muller_draw(rng, &r[p], &angle[p]);
+        }
+        sitl_sincos4(angle, s, c);
+        for (int p = 0; p < pairs; p++) {
+            out[done++] = r[p] * c[p];
+            if (done < count) {
+                out[done++] = r[p] * s[p];
+            } else {
+                rng->spare = r[p] * s[p];
+                rng->has_spare = 1;
+            }
+        }
+    }
 }

@@ -35,5 +35,9 @@ double sitl_rng_uniform(sitl_rng_t *rng);
 double sitl_rng_range(sitl_rng_t *rng, double lo, double hi);
 /* Standard normal. */
 double sitl_rng_normal(sitl_rng_t *rng);
+/* count standard normals into out: the same values, in the same order and
+ * leaving the same stream state, as count calls of sitl_rng_normal; the angles of
+ * up to four Box-Muller pairs go through one sitl_sincos4. */
+void sitl_rng_normals(sitl_rng_t *rng, double *out, int count);
 
 #endif /* SITL_RNG_H */

@@ -12,5 +12,9 @@
 /* *s = sin(x), *c = cos(x). Exact-reduction range |x| <= 2^19 (the angles
  * here are below 1e4 rad); beyond it, and for non-finite x, libm answers. */
 void sitl_sincos(double x, double *s, double *c);
+/* sitl_sincos of four angles at once, each value the same bit for bit (one
+ * 4-wide polynomial instead of four calls: the Box-Muller normals of an IMU
+ * sample, the reference trajectory's angles). */
+void sitl_sincos4(const double x[4], double s[4], double c[4]);
 
 #endif

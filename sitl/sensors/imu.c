@@ -81,15 +81,19 @@ void sitl_imu_sample(sitl_imu_t *imu, const double true_rate[3],
     double walk_a = p->accel.bias_walk * sqrt(dt > 0.0 ? dt : 0.0);
     double scaled[3];
     sitl_mat3_mul_vec(scaled, imu->gyro_matrix, true_rate);
+    /* Draw order is fixed (per axis: noise, then walk) so runs stay reproducible;
+     * the six draws of each stream at once are the same values in that order. */
+    double gyro_draws[6], accel_draws[6];
+    sitl_rng_normals(&imu->gyro_rng, gyro_draws, 6);
+    if (accel_out != NULL) {
+        sitl_rng_normals(&imu->accel_rng, accel_draws, 6);
+    }
     for (int i = 0; i < 3; i++) {
-        /* Draw order is fixed (noise, then walk) so runs stay reproducible. */
-        double ng = sitl_rng_normal(&imu->gyro_rng);
-        double wg = sitl_rng_normal(&imu->gyro_rng);
+        const double ng = gyro_draws[2 * i], wg = gyro_draws[2 * i + 1];
         imu->gyro_bias[i] += walk_g * wg;
         gyro_out[i] = finish(&p->gyro, scaled[i] + imu->gyro_bias[i] + sigma_g * ng);
         if (accel_out != NULL) {
-            double na = sitl_rng_normal(&imu->accel_rng);
-            double wa = sitl_rng_normal(&imu->accel_rng);
+            const double na = accel_draws[2 * i], wa = accel_draws[2 * i + 1];
             imu->accel_bias[i] += walk_a * wa;
             accel_out[i] =
                 finish(&p->accel, specific_force[i] + imu->accel_bias[i] + sigma_a * na);

@@ -114,13 +114,12 @@ int sitl_trajectory_init(sitl_trajectory_t *traj, sitl_trajectory_kind_t kind,
 }
 
 /*
- * Derivatives 0..4 of a sin(w t) and a (1 - cos(w t)) at t.
+ * Derivatives 0..4 of a sin(w t) and a (1 - cos(w t)) at t, from s = sin(w t)
+ * and c = cos(w t) (the angles of one evaluation go through sitl_sincos4 together).
  * d^k/dt^k sin(w t) = w^k sin(w t + k pi/2).
  */
-static void sine_derivatives(double amplitude, double omega, double t, double out[5])
+static void sine_derivatives(double amplitude, double omega, double s, double c, double out[5])
 {
-    double s, c;
-    sitl_sincos(omega * t, &s, &c);
     double w1 = omega, w2 = w1 * omega, w3 = w2 * omega, w4 = w3 * omega;
     out[0] = amplitude * s;
     out[1] = amplitude * w1 * c;
@@ -129,10 +128,9 @@ static void sine_derivatives(double amplitude, double omega, double t, double ou
     out[4] = amplitude * w4 * s;
 }
 
-static void one_minus_cos_derivatives(double amplitude, double omega, double t, double out[5])
+static void one_minus_cos_derivatives(double amplitude, double omega, double s, double c,
+                                      double out[5])
 {
-    double s, c;
-    sitl_sincos(omega * t, &s, &c);
     double w1 = omega, w2 = w1 * omega, w3 = w2 * omega, w4 = w3 * omega;
     out[0] = amplitude * (1.0 - c);
     out[1] = amplitude * w1 * s;
@@ -151,24 +149,17 @@ static void add_axis(sitl_flat_output_t *flat, int axis, const double d[5])
     flat->snap[axis] += d[4];
 }
 
-static void add_lissajous(sitl_flat_output_t *flat, const sitl_lissajous_part_t *part,
-                          double period, double t)
+/* The back-and-forth yaw's angular rate (circle and Lissajous). */
+static double yaw_omega(const sitl_trajectory_t *traj)
 {
-    double d[5];
-    const double two_pi = 2.0 * pi;
-    one_minus_cos_derivatives(part->amplitude_m[0], two_pi * part->cycles[0] / period, t, d);
-    add_axis(flat, 0, d);
-    sine_derivatives(part->amplitude_m[1], two_pi * part->cycles[1] / period, t, d);
-    add_axis(flat, 1, d);
-    sine_derivatives(part->amplitude_m[2], two_pi * part->cycles[2] / period, t, d);
-    add_axis(flat, 2, d);
+    return 2.0 * pi * traj->yaw_cycles / traj->period_s;
 }
 
-static void add_yaw(sitl_flat_output_t *flat, const sitl_trajectory_t *traj, double t)
+static void set_yaw(sitl_flat_output_t *flat, const sitl_trajectory_t *traj, double omega, double s,
+                    double c)
 {
     double d[5];
-    sine_derivatives(traj->yaw_amplitude_rad, 2.0 * pi * traj->yaw_cycles / traj->period_s,
-                     t, d);
+    sine_derivatives(traj->yaw_amplitude_rad, omega, s, c, d);
     flat->yaw = d[0];
     flat->yaw_rate = d[1];
     flat->yaw_acceleration = d[2];
@@ -196,21 +187,51 @@ static void eval_circle(const sitl_trajectory_t *traj, double t, sitl_flat_outpu
      * through origin at t = 0; derivatives of cos(a) = sin(a + pi/2). */
     double omega = 2.0 * pi * traj->circle_cycles / traj->period_s;
     double phase = traj->circle_start_angle_rad;
+    const double omega_yaw = yaw_omega(traj);
+    const double angle[4] = {omega * (t + (phase + 0.5 * pi) / omega), omega * (t + phase / omega),
+                             omega_yaw * t, 0.0};
+    double s[4], c[4];
+    sitl_sincos4(angle, s, c);
     double dx[5], dy[5];
-    sine_derivatives(traj->circle_radius_m, omega, t + (phase + 0.5 * pi) / omega, dx);
-    sine_derivatives(traj->circle_radius_m, omega, t + phase / omega, dy);
+    sine_derivatives(traj->circle_radius_m, omega, s[0], c[0], dx);
+    sine_derivatives(traj->circle_radius_m, omega, s[1], c[1], dy);
     dx[0] -= traj->circle_radius_m * cos(phase);
     dy[0] -= traj->circle_radius_m * sin(phase);
     add_axis(flat, 0, dx);
     add_axis(flat, 1, dy);
-    add_yaw(flat, traj, t);
+    set_yaw(flat, traj, omega_yaw, s[2], c[2]);
 }
 
+/* Slow part, fast part (x: 1 - cos, y and z: sin, each added in that order), then
+ * the yaw: seven angles, their sines and cosines from two sitl_sincos4 calls. */
 static void eval_lissajous(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat)
 {
-    add_lissajous(flat, &traj->lissajous_slow, traj->period_s, t);
-    add_lissajous(flat, &traj->lissajous_fast, traj->period_s, t);
-    add_yaw(flat, traj, t);
+    const double two_pi = 2.0 * pi;
+    const sitl_lissajous_part_t *part[2] = {&traj->lissajous_slow, &traj->lissajous_fast};
+    double omega[8], angle[8], s[8], c[8];
+    for (int p = 0; p < 2; p++) {
+        for (int axis = 0; axis < 3; axis++) {
+            omega[3 * p + axis] = two_pi * part[p]->cycles[axis] / traj->period_s;
+        }
+    }
+    omega[6] = yaw_omega(traj);
+    omega[7] = 0.0;
+    for (int k = 0; k < 8; k++) {
+        angle[k] = omega[k] * t;
+    }
+    sitl_sincos4(angle, s, c);
+    sitl_sincos4(angle + 4, s + 4, c + 4);
+    for (int p = 0; p < 2; p++) {
+        double d[5];
+        const int k = 3 * p;
+        one_minus_cos_derivatives(part[p]->amplitude_m[0], omega[k], s[k], c[k], d);
+        add_axis(flat, 0, d);
+        sine_derivatives(part[p]->amplitude_m[1], omega[k + 1], s[k + 1], c[k + 1], d);
+        add_axis(flat, 1, d);
+        sine_derivatives(part[p]->amplitude_m[2], omega[k + 2], s[k + 2], c[k + 2], d);
+        add_axis(flat, 2, d);
+    }
+    set_yaw(flat, traj, omega[6], s[6], c[6]);
 }
 
 void sitl_trajectory_eval(const sitl_trajectory_t *traj, double t, sitl_flat_output_t *flat)
