@@ -44,7 +44,8 @@ void sitl_honesty_init(sitl_honesty_t *h, const propid_filter_t *filter, const d
  * passes go column by column: every element takes the same operations in the
  * same order as row by row, but the elements of one column do not wait for
  * each other (independent chains instead of one through the whole row). */
-static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const double *e, int n)
+static inline __attribute__((always_inline)) double
+nees_of_inline(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const double *e, int n)
 {
     double l[HONESTY_MAX_DOF][HONESTY_MAX_DOF];
     double inv_diag[HONESTY_MAX_DOF];
@@ -84,6 +85,36 @@ static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const do
     return nees;
 }
 
+/* The quad's sizes (11 states, 12 with the torque scale) as constants, so the
+ * loops above compile for them (the same operations in the same order). */
+static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const double *e, int n)
+{
+    switch (n) {
+    case 11:
+        return nees_of_inline(p, e, 11);
+    case 12:
+        return nees_of_inline(p, e, 12);
+    default:
+        return nees_of_inline(p, e, n);
+    }
+}
+
+/* propid_reflection_flip_column's operations on one column (the same values):
+ * inlined, with the reflection's count a constant where the caller has one. */
+static inline __attribute__((always_inline)) void
+flip_column(const propid_reflection_t *reflection, uint8_t count, propid_core_t *core, uint8_t column_index)
+{
+    const uint8_t first = reflection->first;
+    float column[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < count; ++i) {
+        column[i] = propid_cov_at(core->cov, (uint8_t)(first + i), column_index);
+    }
+    propid_reflection_apply(reflection, column);
+    for (uint8_t i = 0; i < count; ++i) {
+        core->cov[propid_cov_index((uint8_t)(first + i), column_index)] = column[i];
+    }
+}
+
 /* See honesty.h. A whole flip maps every column of P: 3 % of a flight at one NEES sample
  * per 10 control steps for each of the three reflections. Each column is mapped on its
  * own (propid_reflection_flip_column) and the block apart (flip_block), so the columns
@@ -113,14 +144,24 @@ void sitl_honesty_coeff_per_rotor(const propid_filter_t *filter, const uint8_t *
         propid_reflection_apply(&reflection, &core->state[reflection.first]);
         for (uint8_t j = 0; j < PROPID_MAX_STATES; ++j) {
             if (read[j] && (j < reflection.first || j >= end)) {
-                propid_reflection_flip_column(&reflection, core, j);
+                if (reflection.count == 4u) {
+                    flip_column(&reflection, 4u, core, j);
+                } else if (reflection.count == 3u) {
+                    flip_column(&reflection, 3u, core, j);
+                } else {
+                    flip_column(&reflection, reflection.count, core, j);
+                }
             }
         }
         propid_reflection_flip_block(&reflection, core);
     }
     propid_reflection_apply(&basis, &core->state[basis.first]);
     for (int c = 0; c < column_count; c++) {
-        propid_reflection_flip_column(&basis, core, columns[c]);
+        if (basis.count == 4u) {
+            flip_column(&basis, 4u, core, columns[c]);
+        } else {
+            flip_column(&basis, basis.count, core, columns[c]);
+        }
     }
     propid_reflection_flip_block(&basis, core);
 }

@@ -1,7 +1,8 @@
 /*
  * Sensor models: gyro noise level and bias draw, saturation and quantisation;
  * ESC telemetry latency, DShot quantisation bound, dropout rate;
- * reproducibility of every random stream from the seed.
+ * reproducibility of every random stream from the seed; sitl_rng_normals
+ * against sitl_rng_normal called as often (the IMU draws its normals so).
  */
 #include <math.h>
 #include <string.h>
@@ -170,6 +171,28 @@ static void test_streams_are_reproducible_and_independent(void)
     }
 }
 
+/* Runs of 1 to 11 normals, a spare left over or not, through sitl_rng_normals and
+ * through as many sitl_rng_normal calls: the same bits and the same stream after. */
+static void test_normals_at_once_match_one_by_one(void)
+{
+    sitl_rng_t a, b;
+    sitl_rng_init(&a, 11, SITL_RNG_GYRO);
+    sitl_rng_init(&b, 11, SITL_RNG_GYRO);
+    int mismatches = 0;
+    for (int round = 0; round < 2000; round++) {
+        const int count = 1 + round % 11;
+        double batch[11];
+        sitl_rng_normals(&a, batch, count);
+        for (int i = 0; i < count; i++) {
+            const double one = sitl_rng_normal(&b);
+            mismatches += memcmp(&one, &batch[i], sizeof(one)) != 0;
+        }
+        mismatches += a.has_spare != b.has_spare || memcmp(a.s, b.s, sizeof(a.s)) != 0 ||
+                       (a.has_spare && a.spare != b.spare);
+    }
+    TEST_ASSERT_EQUAL_INT(0, mismatches);
+}
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -179,5 +202,6 @@ int main(void)
     RUN_TEST(test_esc_middle_decode_is_unbiased);
     RUN_TEST(test_esc_dropout_rate);
     RUN_TEST(test_streams_are_reproducible_and_independent);
+    RUN_TEST(test_normals_at_once_match_one_by_one);
     return UNITY_END();
 }

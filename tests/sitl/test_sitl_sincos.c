@@ -2,7 +2,8 @@
  * sitl_sincos against libm's sin and cos: within 2 units in the last place of
  * the libm value (and 2.5e-16 absolute) over the angles the simulator uses and
  * beyond (quadrant boundaries, large arguments up to the reduction limit);
- * libm's own values outside that range and for non-finite input.
+ * libm's own values outside that range and for non-finite input. sitl_sincos4
+ * against four sitl_sincos calls: the same bits in every lane.
  */
 #include <math.h>
 #include <stdint.h>
