@@ -264,15 +264,17 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
                       const double true_bias[3])
 {
     const int n = estimate->rotor_count;
-    int finite = 1;
     int inside = 1;
     int rotors_inside = 1;
     int all_claimed = n > 0;
     unsigned changed = 0u;
     unsigned rotor_inside_bits = 0u;
+    /* Every reported value finite: their sum in double is (floats cannot overflow it;
+     * an Inf or NaN makes it Inf or NaN), one test instead of one per value. */
+    double reported_sum = 0.0;
     for (int i = 0; i < n; i++) {
-        finite &= isfinite(estimate->thrust_coeff[i]) && isfinite(estimate->thrust_coeff_std[i]) &&
-                  isfinite(estimate->drag_coeff[i]) && isfinite(estimate->drag_coeff_std[i]);
+        reported_sum += ((double)estimate->thrust_coeff[i] + (double)estimate->thrust_coeff_std[i]) +
+                        ((double)estimate->drag_coeff[i] + (double)estimate->drag_coeff_std[i]);
         const double kf_err = fabs((double)estimate->thrust_coeff[i] / true_kf[i] - 1.0);
         const double km_err = fabs((double)estimate->drag_coeff[i] / true_km[i] - 1.0);
         if ((estimate->thrust_coeff_converged >> i) & 1u) {
@@ -298,9 +300,10 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
         h->last_true_km[i] = true_km[i];
     }
     for (int a = 0; a < 3; a++) {
-        finite &= isfinite(estimate->gyro_bias[a]) && isfinite(estimate->gyro_bias_std[a]) &&
-                  isfinite(estimate->body_rate[a]) && isfinite(estimate->body_rate_std[a]);
+        reported_sum += ((double)estimate->gyro_bias[a] + (double)estimate->gyro_bias_std[a]) +
+                        ((double)estimate->body_rate[a] + (double)estimate->body_rate_std[a]);
     }
+    const int finite = isfinite(reported_sum);
     if (!finite) {
         h->nonfinite_estimates++;
     }

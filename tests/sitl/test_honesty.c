@@ -15,6 +15,7 @@
  * rotor was within 10 % just before it (changed_rotor_from_inside), and counted
  * recovered when that rotor's kf and km came back within 10 % and stayed.
  */
+#include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
@@ -354,10 +355,57 @@ static void test_covariance_check_reads_the_whole_p(void)
     TEST_ASSERT_EQUAL_INT(0, h.nees_samples);
 }
 
+/* A step counts as non-finite when any reported value or std is Inf or NaN, and not
+ * when all are finite, however large (FLT_MAX in every field). */
+static void test_nonfinite_estimate_is_counted(void)
+{
+    static propid_filter_t filter;
+    propid_config_t config;
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.17f, 0.785398f, 1.0f,
+                                                                 (float)nominal_kf, (float)nominal_km));
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    const double kf[4] = {nominal_kf, nominal_kf, nominal_kf, nominal_kf};
+    const double km[4] = {nominal_km, nominal_km, nominal_km, nominal_km};
+    const double bias[3] = {0.0, 0.0, 0.0};
+    propid_estimate_t estimate;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    sitl_honesty_t h;
+    sitl_honesty_init(&h, &filter, kf, km, 1.0);
+    sitl_honesty_add(&h, 0.0, &estimate, &filter, kf, km, bias);
+    TEST_ASSERT_EQUAL_INT(0, h.nonfinite_estimates);
+
+    propid_estimate_t big = estimate;
+    for (int i = 0; i < 4; i++) {
+        big.thrust_coeff[i] = big.thrust_coeff_std[i] = big.drag_coeff[i] = big.drag_coeff_std[i] = FLT_MAX;
+    }
+    for (int a = 0; a < 3; a++) {
+        big.gyro_bias[a] = big.gyro_bias_std[a] = big.body_rate[a] = big.body_rate_std[a] = FLT_MAX;
+    }
+    sitl_honesty_add(&h, 0.002, &big, &filter, kf, km, bias);
+    TEST_ASSERT_EQUAL_INT(0, h.nonfinite_estimates);
+
+    float *fields[] = {&estimate.thrust_coeff[3], &estimate.drag_coeff_std[0], &estimate.gyro_bias[2],
+                       &estimate.body_rate_std[1]};
+    const float bad[] = {INFINITY, -INFINITY, NAN};
+    long expected = 0;
+    for (size_t f = 0; f < sizeof(fields) / sizeof(fields[0]); f++) {
+        for (size_t b = 0; b < sizeof(bad) / sizeof(bad[0]); b++) {
+            const float kept = *fields[f];
+            *fields[f] = bad[b];
+            sitl_honesty_add(&h, 0.004, &estimate, &filter, kf, km, bias);
+            *fields[f] = kept;
+            TEST_ASSERT_EQUAL_INT(++expected, h.nonfinite_estimates);
+        }
+    }
+}
+
 int main(void)
 {
     UNITY_BEGIN();
     RUN_TEST(test_covariance_check_reads_the_whole_p);
+    RUN_TEST(test_nonfinite_estimate_is_counted);
     RUN_TEST(test_true_torque_scale_is_the_file_over_the_true_inertia);
     RUN_TEST(test_truth_with_the_scale_state_is_s_kf_and_1_over_s);
     RUN_TEST(test_truth_without_the_scale_state_is_kf);
