@@ -42,6 +42,7 @@ reference value (the reference kf only divides the results for display):
 from __future__ import annotations
 
 import json
+import math
 import statistics
 from dataclasses import dataclass
 from pathlib import Path
@@ -167,6 +168,7 @@ def run_summary(summary: dict, reference_kf: float) -> dict:
         "km": statistics.fmean(summary["km_mean"]),
         "km_converged": all(summary["converged"]["km"]),
         "km_converged_rotors": sum(summary["converged"]["km"]),
+        "rotor_count": len(summary["converged"]["km"]),
         "km_worst_rotor_rel_std": max(s / k for s, k in zip(summary["km_std"],
                                                            summary["config"]["drag_coeff_nominal"])),
         "km_mean_rel_std": summary["km_combination_std"]["yaw"],
@@ -319,6 +321,16 @@ def run_real_data(config: RealDataConfig, progress: bool = True) -> dict:
     return result
 
 
+def _percent(value: float) -> str:
+    """A ratio as a whole percent; '-' where it is undefined (a CV of fewer than two runs)."""
+    return f"{100 * value:.0f}%" if math.isfinite(value) else "-"
+
+
+def _group(kf: float, cv: float) -> str:
+    """A group's kf over the reference and its CV; '-' for a group without runs (no square runs)."""
+    return f"{kf:.2f} ({_percent(cv)})" if math.isfinite(kf) else "-"
+
+
 def render(result: dict) -> str:
     ref = result["reference_kf"]
     lines = [f"kf over the reference {ref:.3g} N/(rad/s)^2 (display only); {result['modes'][0]['summary']['runs']} runs",
@@ -329,10 +341,10 @@ def render(result: dict) -> str:
     for mode in result["modes"]:
         s = mode["summary"]
         lines.append(
-            f"| {mode['what']} | {s['kf_fleet_over_reference']:.3f} | {100 * s['kf_run_cv']:.0f}% "
-            f"| {s['square_kf']:.2f} ({100 * s['square_cv']:.0f}%) | {s['other_kf']:.2f} ({100 * s['other_cv']:.0f}%) "
+            f"| {mode['what']} | {s['kf_fleet_over_reference']:.3f} | {_percent(s['kf_run_cv'])} "
+            f"| {_group(s['square_kf'], s['square_cv'])} | {_group(s['other_kf'], s['other_cv'])} "
             f"| {100 * s['worst_rotor_spread']:.0f}% | {s['runs_every_rotor_within_5pct']}/{s['runs']} "
-            f"| {s['km_fleet']:.3g} ({100 * s['km_cv']:.0f}%) | {s['runs_km_converged']}/{s['runs']} "
+            f"| {s['km_fleet']:.3g} ({_percent(s['km_cv'])}) | {s['runs_km_converged']}/{s['runs']} "
             f"| {s['accel_bias_median']:.2f} |")
     lines += ["", "Runs with every rotor within 5 % expected if the rotors were equal, by the filter's own final "
               "covariance (replay/rotor_spread.py): " + "; ".join(
@@ -351,7 +363,7 @@ def render(result: dict) -> str:
         cells = []
         for mode in result["modes"]:
             r = mode["runs"][name]
-            cells.append(f"{r['kf_over_reference']:.2f} ({100 * r['rotor_spread']:.0f}%, {r['km_converged_rotors']}/4)")
+            cells.append(f"{r['kf_over_reference']:.2f} ({100 * r['rotor_spread']:.0f}%, {r['km_converged_rotors']}/{r['rotor_count']})")
         walk = f"{walks[name]['torque_scale_walk']:.3f} | " if walks else ""
         lines.append(f"| {name} | {1e3 * delay + 0.0:.0f} | " + walk + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

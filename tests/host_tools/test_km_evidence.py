@@ -117,3 +117,30 @@ def test_cli_refuses_both_evidence_flags(tmp_path):
                            "--vehicle", str(tmp_path / "v.json"), "--reference-kf", "3.72e-8", "--thrust-evidence",
                            "--km-evidence", "--out", str(tmp_path)], capture_output=True, text=True, timeout=60)
     assert proc.returncode != 0 and "choose one" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_cli_km_evidence_needs_no_reference_kf(tmp_path):
+    """--km-evidence divides nothing by a reference kf: it runs without --reference-kf (the replays refuse)."""
+    import json
+
+    from propid.flightlog import write_flightlog
+
+    data = tmp_path / "data"
+    data.mkdir()
+    write_flightlog(data / "flight.csv", _flight(seconds=20.0))
+    (data / "km-x.vehicle.json").write_text(json.dumps(x_quad("km-x", 0.045, INERTIA, 0.035, KF, KM)))
+    command = [sys.executable, "-m", "propid.cli", "real-data", "--data", str(data), "--out", str(tmp_path / "out"),
+               "--no-progress"]
+    proc = subprocess.run([*command, "--km-evidence"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "| flight |" in proc.stdout and (tmp_path / "out" / "km_evidence.json").is_file()
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1 and "--reference-kf is needed" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_cli_data_that_is_a_file_is_named(tmp_path):
+    log = tmp_path / "flight.csv"
+    log.write_text("t\n")
+    proc = subprocess.run([sys.executable, "-m", "propid.cli", "real-data", "--data", str(log), "--km-evidence",
+                           "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1 and "a file, not a directory" in proc.stderr and "Traceback" not in proc.stderr

@@ -43,6 +43,24 @@ def test_mode_summary_statistics():
     assert s["km_worst_rotor_rel_std_median"] == 0.2 and s["km_mean_rel_std_median"] == 0.1
 
 
+def test_render_without_square_runs_and_one_run_per_group_shows_no_nan():
+    """A directory of other logs (no name starts with "square", one "square" log) of a hexa: the groups' kf and CV
+    read '-' where undefined, not 'nan'; the converged km count is out of the vehicle's rotors."""
+    base = dict(rotor_spread=0.02, km=1e-10, km_converged=False, accel_bias=0.1, finite=True,
+                p_every_rotor_within_5pct=0.9, km_worst_rotor_rel_std=0.2, km_mean_rel_std=0.1, esc_delay_s=0.0,
+                km_converged_rotors=1, rotor_count=6)
+    for runs in ({"hover_a": dict(base, kf_over_reference=1.0), "hover_b": dict(base, kf_over_reference=0.9)},
+                 {"square_a": dict(base, kf_over_reference=1.0), "hover_b": dict(base, kf_over_reference=0.9)}):
+        result = {"reference_kf": 3.72e-8,
+                  "modes": [{"name": "gyro", "what": "gyro only", "runs": runs, "summary": real_data.mode_summary(runs)}]}
+        text = real_data.render(result)
+        assert "nan" not in text.lower()
+        row = next(line for line in text.splitlines() if line.startswith("| gyro only |"))
+        assert "| 0.950 | 7% |" in row
+        assert "| hover_b | 0 | 0.90 (2%, 1/6) |" in text  # a hexa's rotors counted, not 4
+    assert "| 1.00 (-) | 0.90 (-) |" in row  # one run per group: no CV
+
+
 @pytest.mark.skipif(not SHARED.is_dir(), reason="real logs (../shared) not present")
 def test_one_real_log(tmp_path):
     data = tmp_path / "data"

@@ -17,8 +17,9 @@ HELP = ("replay every log of a real-data directory in each mode of the filter's 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", required=True, metavar="DIR", help="directory of flight-log v1 CSVs of one vehicle")
     parser.add_argument("--vehicle", metavar="V.json", help="vehicle file (default: the one *.vehicle.json in DIR)")
-    parser.add_argument("--reference-kf", type=float, required=True,
-                        help="independent kf the results are divided by for display (not used by any rule)")
+    parser.add_argument("--reference-kf", type=float, metavar="KF",
+                        help="independent kf the results are divided by for display (not used by any rule); "
+                             "needed by the replays and --thrust-evidence, not by --km-evidence")
     parser.add_argument("--out", default="build/results", metavar="DIR", help="output directory (default build/results)")
     parser.add_argument("--modes", default=",".join(m[0] for m in real_data.MODES),
                         help="comma list of modes (default all: " + ",".join(m[0] for m in real_data.MODES) + ")")
@@ -38,11 +39,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     data = Path(args.data)
+    if data.exists() and not data.is_dir():
+        raise UserError(f"--data {data}: a file, not a directory of logs")
     if not data.is_dir():
         if args.skip_missing:
             print(f"real-data: skipped, {data} not found (the real logs are not distributed with the repository)")
             return 0
         raise UserError(f"--data {data}: no such directory")
+    if args.thrust_evidence and args.km_evidence:
+        raise UserError("--thrust-evidence and --km-evidence: choose one")
+    if not args.km_evidence and args.reference_kf is None:
+        raise UserError("--reference-kf is needed (the kf the tables are divided by); only --km-evidence goes without")
     check_directory(args.out, "--out")
     if args.vehicle:
         vehicle = Path(args.vehicle)
@@ -51,8 +58,6 @@ def run(args: argparse.Namespace) -> int:
         if len(found) != 1:
             raise UserError(f"{data}: {len(found)} *.vehicle.json files; give --vehicle")
         vehicle = found[0]
-    if args.thrust_evidence and args.km_evidence:
-        raise UserError("--thrust-evidence and --km-evidence: choose one")
     if args.thrust_evidence:
         return _thrust_evidence(data, vehicle, args)
     if args.km_evidence:
