@@ -228,6 +228,11 @@ def test_replay_prints_a_rotor_table_and_json_only_where_asked(small_flight, tmp
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)  # stdout is pure JSON; the report went to stderr
     assert len(summary["kf"]) == 4 and "kf [N/(rad/s)^2]" in proc.stderr
+    # the km-combination line reads the JSON's stds in channel order, named by channel (right for X and plus)
+    line = next(line for line in proc.stderr.splitlines() if "km combinations" in line)
+    std = {name: f"{100 * value:.1f} %" for name, value in summary["km_combination_std"].items()}
+    assert (f"mean km (yaw channel) {std['yaw']}, CW/CCW balance (collective) {std['collective']}, rotor "
+            f"differences (roll, pitch channels) {std['roll']}, {std['pitch']}") in line
 
 
 def _replay(log, options=None):

@@ -298,9 +298,11 @@ def report(summary: dict, out) -> None:
     print(rotor_table(summary), file=out)
     combination = summary.get("km_combination_std")
     if combination:  # what the flight's yaw excitation determined (docs/real-data.md "km: what the information allows")
+        # Roll and pitch measure rotor differences: the diagonals of a quad X, opposite rotors of a plus, a mix on
+        # a hexa or octo; so named by their channel, not their shape.
         print(f"  km combinations, final relative std: mean km (yaw channel) {100 * combination['yaw']:.1f} %, "
-              f"CW/CCW balance (collective) {100 * combination['collective']:.1f} %, diagonal differences (roll, "
-              f"pitch) {100 * combination['roll']:.1f} %, {100 * combination['pitch']:.1f} %", file=out)
+              f"CW/CCW balance (collective) {100 * combination['collective']:.1f} %, rotor differences (roll, "
+              f"pitch channels) {100 * combination['roll']:.1f} %, {100 * combination['pitch']:.1f} %", file=out)
     if summary["rejected"]:
         rejected = ", ".join(f"{count} {name.removeprefix('PROPID_ERR_')}" for name, count in summary["rejected"].items())
         print(f"  rejected samples: {rejected}", file=out)
