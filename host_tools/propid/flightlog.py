@@ -276,6 +276,12 @@ def vehicle_path_for(log_path: str | Path) -> Path:
     return log_path.with_name(log_path.stem + ".vehicle.json")
 
 
+def run_name(log_path: str | Path) -> str:
+    """A log's short name in tables: its file stem without a date token (_YYYYMMDD), which every log of one
+    campaign shares (square_20251017_run1 -> square_run1)."""
+    return re.sub(r"_(?:19|20)\d{2}(?:0[1-9]|1[0-2])(?:0[1-9]|[12]\d|3[01])(?=_|$)", "", Path(log_path).stem)
+
+
 # --------------------------------------------------------------------------- samples
 @dataclass
 class FlightLog:

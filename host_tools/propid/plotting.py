@@ -381,9 +381,11 @@ def plot_replay(result, path: str, title: str = "", reference_kf: float | None =
 def plot_fleet(summaries: list[dict], path: str, reference_kf: float, dpi: int = 80) -> None:
     """Bar chart per run: the filter's kf and the least-squares checks, relative to the
     independent kf."""
+    from propid.flightlog import run_name
+
     plt = _pyplot()
 
-    names = [Path(s["log"]).stem.replace("_20251017", "") if s.get("log") else "?" for s in summaries]
+    names = [run_name(s["log"]) if s.get("log") else "?" for s in summaries]
     series = {"filter (mean of rotors)": [np.mean(s["kf_mean"]) / reference_kf for s in summaries]}
 
     def check(band, key):

@@ -262,7 +262,7 @@ def _cross_fitted_thrust(name: str, logs: list[Path], vehicle, loaded: dict) -> 
 
 
 def run_real_data(config: RealDataConfig, progress: bool = True) -> dict:
-    from propid.flightlog import read_flightlog, read_vehicle
+    from propid.flightlog import read_flightlog, read_vehicle, run_name
     from propid.replay import ReplayOptions, replay
 
     logs = sorted(config.data_dir.glob("*.csv"))
@@ -309,7 +309,7 @@ def run_real_data(config: RealDataConfig, progress: bool = True) -> dict:
             use = corrected[(name, path)]
         summary = replay(loaded[path], use, options).summary
         raw[(name, path)] = summary
-        per_mode[name][path.stem.replace("_20251017", "")] = run_summary(summary, config.reference_kf)
+        per_mode[name][run_name(path)] = run_summary(summary, config.reference_kf)
     result = {
         "rules": __doc__.strip(),
         "data_dir": str(config.data_dir), "vehicle": str(config.vehicle), "reference_kf": config.reference_kf,

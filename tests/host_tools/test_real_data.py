@@ -123,3 +123,13 @@ def test_thrust_terms_are_fitted_on_the_other_half_of_the_runs():
         assert fitted.thrust_climb_coeff == pytest.approx(-3e-6 if k % 2 else -1e-6, rel=1e-6)
         assert fitted.thrust_translational_coeff is None  # the climb mode fits the climb term only
     assert len(infos) == 2
+
+
+def test_run_names_drop_any_date_token_not_one_date():
+    from propid.flightlog import run_name
+
+    assert run_name("logs/square_20251017_run1.csv") == "square_run1"
+    assert run_name("hover_20240229_run2.csv") == "hover_run2"  # another campaign's date, not only the shared one
+    assert run_name("flight_20240101.csv") == "flight"
+    assert run_name("run_12345678_a.csv") == "run_12345678_a"  # not a date
+    assert run_name("flight.csv") == "flight"

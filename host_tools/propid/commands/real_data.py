@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
 def _thrust_evidence(data: Path, vehicle_path: Path, args: argparse.Namespace) -> int:
     import json
 
-    from propid.flightlog import read_flightlog, read_vehicle
+    from propid.flightlog import read_flightlog, read_vehicle, run_name
     from propid.outputs import write_text
     from propid.thrust_evidence import render_evidence, thrust_evidence
 
@@ -90,7 +90,7 @@ def _thrust_evidence(data: Path, vehicle_path: Path, args: argparse.Namespace) -
     paths = sorted(data.glob("*.csv"))
     if not paths:
         raise UserError(f"no *.csv logs in {data}")
-    logs = {p.stem.replace("_20251017", ""): read_flightlog(p, vehicle) for p in paths}
+    logs = {run_name(p): read_flightlog(p, vehicle) for p in paths}
     try:
         entries = thrust_evidence(logs, vehicle, args.reference_kf)
     except ValueError as exc:
@@ -106,7 +106,7 @@ def _thrust_evidence(data: Path, vehicle_path: Path, args: argparse.Namespace) -
 def _km_evidence(data: Path, vehicle_path: Path, args: argparse.Namespace) -> int:
     import json
 
-    from propid.flightlog import read_flightlog, read_vehicle
+    from propid.flightlog import read_flightlog, read_vehicle, run_name
     from propid.km_evidence import km_evidence, render_km_evidence
     from propid.outputs import write_text
 
@@ -121,7 +121,7 @@ def _km_evidence(data: Path, vehicle_path: Path, args: argparse.Namespace) -> in
         iterator = tqdm(paths, desc="km-evidence", unit="log")
     entries = {}
     for path in iterator:
-        entries[path.stem.replace("_20251017", "")] = km_evidence(read_flightlog(path, vehicle), vehicle)
+        entries[run_name(path)] = km_evidence(read_flightlog(path, vehicle), vehicle)
     print(f"km relative to the vehicle file's nominal; {len(entries)} runs")
     print(render_km_evidence(entries), end="")
     out = Path(args.out) / "km_evidence.json"
