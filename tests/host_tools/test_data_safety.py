@@ -361,3 +361,19 @@ def test_a_missing_build_names_the_make_verb_that_builds_it(tmp_path):
         load_library(tmp_path / "libpropid_shared.so")
     with pytest.raises(UserError, match="build it with `make host`"):
         locate_sitl(str(tmp_path / "propid_sitl"))
+
+
+def test_replay_report_prints_no_negative_zero_delay():
+    """A replay as recorded (a delay of -0.0 s, or under half a millisecond of gyro lag) reads 'ESC delay 0 ms'."""
+    import io
+
+    from propid.commands.replay import report
+
+    for delay in (-0.0, -0.0003, 0.0):
+        summary = {"log": "flight.csv", "duration_s": 1.0, "rows_replayed": 10, "segment": "all", "gyro_rate_hz": 500.0,
+                   "rotor_rate_hz": 500.0, "esc_delay_s": delay, "kf": [1.0], "kf_std": [0.1], "km": [1.0],
+                   "km_std": [0.1], "kf_mean": [1.0], "km_mean": [1.0], "converged": {"kf": [True], "km": [True]},
+                   "rejected": {}}
+        out = io.StringIO()
+        report(summary, out)
+        assert "ESC delay 0 ms" in out.getvalue()

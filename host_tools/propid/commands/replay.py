@@ -293,7 +293,7 @@ def report(summary: dict, out) -> None:
     name = Path(summary["log"]).name if summary["log"] else "log"
     print(f"{name}: {summary['duration_s']:.1f} s, {summary['rows_replayed']} rows ({summary['segment']}), "
           f"gyro {summary['gyro_rate_hz']:.0f} Hz, rotor speeds {summary['rotor_rate_hz']:.0f} Hz, "
-          f"ESC delay {1e3 * summary['esc_delay_s']:.0f} ms", file=out)
+          f"ESC delay {round(1e3 * summary['esc_delay_s'])} ms", file=out)  # an int: never "-0 ms"
     print("  kf, km: mean over the converged part +- final 1 sigma", file=out)
     print(rotor_table(summary), file=out)
     combination = summary.get("km_combination_std")
