@@ -377,3 +377,13 @@ def test_replay_report_prints_no_negative_zero_delay():
         out = io.StringIO()
         report(summary, out)
         assert "ESC delay 0 ms" in out.getvalue()
+
+
+@pytest.mark.parametrize("argv", [("listen", "--timeout", "-1"), ("listen", "--duration", "0"),
+                                  ("log", "--csv", "x.csv", "--timeout", "nan"),
+                                  ("log", "--csv", "x.csv", "--stop-when-idle", "-2")])
+def test_listen_and_log_refuse_times_that_are_not_positive(argv, tmp_path):
+    """A time that is not > 0 is refused before any socket is opened (it used to wait 'within -1 s')."""
+    proc = run_propid(*argv[:1], "--connect", "udp:127.0.0.1:1", *argv[1:])
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "must be a positive number of seconds" in proc.stderr and argv[-2] in proc.stderr

@@ -7,6 +7,7 @@ import sys
 import time
 
 from propid import mavlink_io
+from propid.commands.log import positive_seconds
 from propid.errors import UserError
 
 NAME = "listen"
@@ -21,9 +22,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="MAVLink link (default: listen on udp:0.0.0.0:14550)")
     parser.add_argument("--plot", action="store_true",
                         help="live matplotlib plot of the estimates (needs a display)")
-    parser.add_argument("--timeout", type=float, default=10.0, metavar="S",
+    parser.add_argument("--timeout", type=positive_seconds, default=10.0, metavar="S",
                         help="fail if no propid message arrives within S seconds (default 10)")
-    parser.add_argument("--duration", type=float, metavar="S",
+    parser.add_argument("--duration", type=positive_seconds, metavar="S",
                         help="stop after S seconds (default: until Ctrl-C)")
     parser.add_argument("--reset", type=int, metavar="ROTOR",
                         help="first send MAV_CMD_PROPID_RESET (rotor index, -1 = all) and "

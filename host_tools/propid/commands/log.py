@@ -21,6 +21,18 @@ HELP = "record MAVLink telemetry to a .tlog (raw frames) and/or a CSV of the est
 FLUSH_PERIOD_S = 1.0
 
 
+def positive_seconds(text: str) -> float:
+    """argparse type of --timeout, --duration, --stop-when-idle (here and in `propid listen`): a finite time > 0
+    (a negative timeout used to fail at once with "no data within -1 s")."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected seconds") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive number of seconds")
+    return value
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--connect", default="udp:0.0.0.0:14550",
                         help="MAVLink link to record (default: listen on udp:0.0.0.0:14550)")
@@ -29,11 +41,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--csv", type=Path,
                         help="write one row per PROPID_COEFFICIENTS message here "
                              "(columns as in the SITL flight log, body FLU)")
-    parser.add_argument("--duration", type=float, metavar="S",
+    parser.add_argument("--duration", type=positive_seconds, metavar="S",
                         help="stop after S seconds (default: until Ctrl-C)")
-    parser.add_argument("--timeout", type=float, default=10.0, metavar="S",
+    parser.add_argument("--timeout", type=positive_seconds, default=10.0, metavar="S",
                         help="fail if nothing arrives within S seconds (default 10)")
-    parser.add_argument("--stop-when-idle", type=float, metavar="S",
+    parser.add_argument("--stop-when-idle", type=positive_seconds, metavar="S",
                         help="stop once data has arrived and then nothing for S seconds "
                              "(e.g. the simulator finished)")
     parser.add_argument("--quiet", action="store_true", help="no progress line")
