@@ -308,6 +308,17 @@ static void test_lost_rotor_recovery_is_asked_of_an_accurate_rotor(void)
     }
 }
 
+/* A hummingbird-sized quad filter at its prior, on the nominal coefficients. */
+static void init_nominal_hummingbird_filter(propid_filter_t *filter)
+{
+    propid_config_t config;
+    propid_config_default(&config);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.17f, 0.785398f, 1.0f,
+                                                                 (float)nominal_kf, (float)nominal_km));
+    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(filter, &config));
+}
+
 /* The definiteness check reads the filter's whole P, not only the NEES block: the prior
  * passes; two body rates correlated beyond 1 (states the NEES does not read) fail it while
  * the NEES is still taken; a coefficient pair correlated beyond 1 fails both (the NEES
@@ -315,12 +326,7 @@ static void test_lost_rotor_recovery_is_asked_of_an_accurate_rotor(void)
 static void test_covariance_check_reads_the_whole_p(void)
 {
     static propid_filter_t filter;
-    propid_config_t config;
-    propid_config_default(&config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.17f, 0.785398f, 1.0f,
-                                                                 (float)nominal_kf, (float)nominal_km));
-    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    init_nominal_hummingbird_filter(&filter);
     const double kf[4] = {nominal_kf, nominal_kf, nominal_kf, nominal_kf};
     const double km[4] = {nominal_km, nominal_km, nominal_km, nominal_km};
     const double bias[3] = {0.0, 0.0, 0.0};
@@ -360,12 +366,7 @@ static void test_covariance_check_reads_the_whole_p(void)
 static void test_nonfinite_estimate_is_counted(void)
 {
     static propid_filter_t filter;
-    propid_config_t config;
-    propid_config_default(&config);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_set_symmetric(&config, 4u, 0.17f, 0.785398f, 1.0f,
-                                                                 (float)nominal_kf, (float)nominal_km));
-    propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&filter, &config));
+    init_nominal_hummingbird_filter(&filter);
     const double kf[4] = {nominal_kf, nominal_kf, nominal_kf, nominal_kf};
     const double km[4] = {nominal_km, nominal_km, nominal_km, nominal_km};
     const double bias[3] = {0.0, 0.0, 0.0};
