@@ -180,6 +180,11 @@ def parse_vehicle(data: dict, where: str = "vehicle") -> Vehicle:
     for i, rotor in enumerate(rotors_raw, start=1):
         if not isinstance(rotor, dict):
             raise UserError(f"{where}: rotor {i} must be an object with 'position' and 'yaw_sign'")
+        missing = [key for key in ("position", "yaw_sign") if key not in rotor]
+        if missing:
+            raise UserError(f"{where}: rotor {i} has no {' and no '.join(repr(k) for k in missing)}: each rotor needs "
+                            "'position' (3 numbers, body FLU from the centre of mass [m]) and 'yaw_sign' (+1 or -1: "
+                            "the sign of the z torque its drag puts on the body, docs/flightlog.md)")
         pos = rotor.get("position")
         if (
             not isinstance(pos, list)

@@ -171,6 +171,10 @@ def test_vehicle_parse_and_round_trip(tmp_path):
         ({"rotors": []}, "'rotors' must be a non-empty list"),
         ({"rotors": [{"position": [0, 0], "yaw_sign": 1}]}, "rotor 1 'position' must be 3 finite numbers"),
         ({"rotors": [{"position": [0, 0, 0], "yaw_sign": 0}]}, "rotor 1 'yaw_sign' must be \\+1 or -1"),
+        # a missing key is named with what it must hold, not 'got None'
+        ({"rotors": [{"position": [0, 0, 0]}]}, "rotor 1 has no 'yaw_sign': .*\\+1 or -1"),
+        ({"rotors": [{"position": [0, 0, 0], "yaw_sign": 1}, {"yaw_sign": -1}]}, "rotor 2 has no 'position': .*3 numbers"),
+        ({"rotors": [{}]}, "rotor 1 has no 'position' and no 'yaw_sign'"),
         ({"inertia": [1e-3, -1e-3, 1e-3]}, "symmetric positive definite"),
         ({"mass": -1}, "'mass' must be a positive number or null"),
         ({"kf_nominal": [1e-6, 1e-6]}, "'kf_nominal' has 2 values but the vehicle has 4 rotors"),
