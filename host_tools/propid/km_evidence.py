@@ -29,15 +29,19 @@ import statistics
 
 import numpy as np
 
+from propid.cfilter import DEFAULT_TUNING
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
+from propid.signals import bartlett_long_run_covariance
 
 CHANNELS = ("yaw", "collective", "roll", "pitch")
 NW_WINDOW_S = 0.5  # Newey-West window: beyond the yaw residual's correlation (lags of a few samples)
-TARGET_REL_STD = 0.05  # the per-rotor target (converged_rel_std) ...
+# The library's defaults, read from the one Python mirror of propid_config_default() (checked against the C
+# library by tests/host_tools/test_reference_vs_c.py): the per-rotor target (converged_rel_std) ...
+TARGET_REL_STD = float(DEFAULT_TUNING["converged_rel_std"])
 CLAIM_SIGMAS = 3.0  # ... and the filter's claim: 3 std below it (docs/reliability.md "Converged claims")
-LIBRARY_WALK = 0.02  # the library's drag_coeff_rel_walk [1/sqrt(s)]
-PRIOR_REL_STD = 0.3  # the library's drag_coeff_rel_std0
+LIBRARY_WALK = float(DEFAULT_TUNING["drag_coeff_rel_walk"])  # [1/sqrt(s)]
+PRIOR_REL_STD = float(DEFAULT_TUNING["drag_coeff_rel_std0"])
 
 
 def channel_patterns(vehicle: Vehicle) -> np.ndarray:
@@ -64,14 +68,9 @@ def combination_std(covariance: np.ndarray, vehicle: Vehicle) -> dict:
 
 
 def newey_west(design: np.ndarray, residual: np.ndarray, lags: int) -> np.ndarray:
-    """Covariance of least-squares coefficients with an autocorrelated residual (Bartlett weights)."""
+    """Covariance of least-squares coefficients with an autocorrelated residual (Bartlett weights over `lags`)."""
     inverse = np.linalg.inv(design.T @ design)
-    scores = design * residual[:, None]
-    middle = scores.T @ scores
-    for lag in range(1, lags + 1):
-        cross = scores[lag:].T @ scores[:-lag]
-        middle += (1.0 - lag / (lags + 1.0)) * (cross + cross.T)
-    return inverse @ middle @ inverse
+    return inverse @ bartlett_long_run_covariance(design * residual[:, None], lags) @ inverse
 
 
 def model_bound(regressors: np.ndarray, step_variance: np.ndarray, walk: float, dt: float,
@@ -139,6 +138,11 @@ def _fit(regressors: np.ndarray, response: np.ndarray, lags: int) -> dict:
     return {"km_rel": coeffs, "residual": residual, "white": white, "coloured": coloured}
 
 
+def _walk_key(walk: float) -> str:
+    """The JSON key of the filter-model bound with this km walk ('walk_0', 'walk_0.02')."""
+    return f"walk_{walk:g}"
+
+
 def km_evidence(log: FlightLog, vehicle: Vehicle) -> dict:
     """The entry of one log (see the module text)."""
     from propid.replay.alignment import estimate_esc_delay
@@ -162,7 +166,7 @@ def km_evidence(log: FlightLog, vehicle: Vehicle) -> dict:
         fits["with_rotor_inertia"] = _fit(regressors, data["increment"] - data["reaction"], lags)
     gyro_var = noise["gyro_noise_density"] ** 2 * noise["gyro_sample_rate_hz"]
     filter_step_var = noise["rate_process_noise"] ** 2 * steps + 2.0 * gyro_var
-    bounds = {f"walk_{walk:g}": model_bound(regressors, filter_step_var, walk, dt) for walk in (0.0, LIBRARY_WALK)}
+    bounds = {_walk_key(walk): model_bound(regressors, filter_step_var, walk, dt) for walk in (0.0, LIBRARY_WALK)}
     duration = float(steps.sum())
 
     def stds(cov):
@@ -207,17 +211,18 @@ def km_evidence_all(logs: dict[str, FlightLog], vehicle: Vehicle) -> dict:
 
 def render_km_evidence(entries: dict) -> str:
     """Per run: excitation, the per-rotor and mean-km stds (filter model, white, as is), the time needed."""
+    target = f"{100 * TARGET_REL_STD:g}"
     lines = ["| run | s | yaw channel rms [% of mean u] | its yaw accel. [rad/s^2] | LS km / nominal, rotors "
-             "| yaw residual [rad/s^2/sqrt(Hz)] (filter q) | per-rotor std: filter model walk 0.02 / walk 0 "
-             "/ white / as is | mean-km std: same | sign-weighted km std as is | s for every rotor at 5 %: one std "
-             "/ 3 std |",
+             f"| yaw residual [rad/s^2/sqrt(Hz)] (filter q) | per-rotor std: filter model walk {LIBRARY_WALK:g} / walk 0 "
+             f"/ white / as is | mean-km std: same | sign-weighted km std as is | s for every rotor at {target} %: one std "
+             f"/ {CLAIM_SIGMAS:g} std |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for name, e in entries.items():
         fit = e["fits"]["without_rotor_inertia"]
         model = e["filter_model"]
-        rotor = [max(model["walk_0.02"]["rotor"]), max(model["walk_0"]["rotor"]), max(fit["white"]["rotor"]),
-                 max(fit["as_is"]["rotor"])]
-        mean = [model["walk_0.02"]["combination"]["yaw"], model["walk_0"]["combination"]["yaw"],
+        library, frozen = model[_walk_key(LIBRARY_WALK)], model[_walk_key(0.0)]
+        rotor = [max(library["rotor"]), max(frozen["rotor"]), max(fit["white"]["rotor"]), max(fit["as_is"]["rotor"])]
+        mean = [library["combination"]["yaw"], frozen["combination"]["yaw"],
                 fit["white"]["combination"]["yaw"], fit["as_is"]["combination"]["yaw"]]
         lines.append(
             f"| {name} | {e['duration_s']:.0f} | {100 * e['excitation_rel']['yaw']:.1f} "
@@ -228,7 +233,7 @@ def render_km_evidence(entries: dict) -> str:
             f"| {e['seconds_for_every_rotor']['one_std_5pct']:.0f} / {e['seconds_for_every_rotor']['claim_3std_5pct']:.0f} |")
     per_rotor = [max(e["fits"]["without_rotor_inertia"]["as_is"]["rotor"]) for e in entries.values()]
     lines += ["", f"worst rotor's std as is: median {100 * statistics.median(per_rotor):.0f} % over "
-              f"{len(per_rotor)} runs; runs with every rotor's std as is below 5 %: "
-              f"{sum(v < TARGET_REL_STD for v in per_rotor)}, below 5 % / 3: "
+              f"{len(per_rotor)} runs; runs with every rotor's std as is below {target} %: "
+              f"{sum(v < TARGET_REL_STD for v in per_rotor)}, below {target} % / {CLAIM_SIGMAS:g}: "
               f"{sum(v < TARGET_REL_STD / CLAIM_SIGMAS for v in per_rotor)}"]
     return "\n".join(lines) + "\n"

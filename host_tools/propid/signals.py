@@ -1,5 +1,6 @@
 """Signal-processing helpers shared by the replay, its pre-filters and the least-squares
-checks: sample interval, contiguous segments, gap holding and the measured body torque.
+checks: sample interval, contiguous segments, gap holding, the measured body torque and the
+Newey-West long-run covariance of autocorrelated scores.
 
 The measured torque is the rigid-body equation read backwards: with the body rate w
 from the gyro and its derivative dw/dt, tau = J dw/dt + w x (J w). Callers choose the
@@ -8,6 +9,8 @@ match the discretisation it is compared with.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -85,3 +88,18 @@ def repeats_previous_row(values: np.ndarray) -> np.ndarray:
     same = np.zeros(len(values), dtype=bool)
     same[1:] = np.all(values[1:] == values[:-1], axis=1)
     return same
+
+
+def bartlett_long_run_covariance(scores: np.ndarray, bandwidth: float) -> np.ndarray | float:
+    """Newey-West long-run covariance of the rows of `scores` (n x k; a 1-D array: its scalar variance):
+    sum over |lag| <= floor(bandwidth) of (1 - |lag| / (bandwidth + 1)) scores[t]' scores[t - lag]. The
+    Bartlett weights keep it positive semi-definite; a sum of n autocorrelated terms has this variance. The
+    one implementation behind `propid gap`'s tests and `propid real-data --km-evidence`'s coloured std."""
+    scores = np.asarray(scores, dtype=float)
+    column = scores.ndim == 1
+    rows = scores[:, None] if column else scores
+    omega = rows.T @ rows
+    for lag in range(1, min(int(math.floor(bandwidth)), rows.shape[0] - 1) + 1):
+        cross = rows[lag:].T @ rows[:-lag]
+        omega += (1.0 - lag / (bandwidth + 1.0)) * (cross + cross.T)
+    return float(omega[0, 0]) if column else omega

@@ -144,3 +144,48 @@ def test_cli_data_that_is_a_file_is_named(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "propid.cli", "real-data", "--data", str(log), "--km-evidence",
                            "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 1 and "a file, not a directory" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def _bartlett_by_definition(scores, bandwidth):
+    """sum over every pair of rows of w(|t - s|) x_t x_s', w(l) = 1 - l / (bandwidth + 1) up to floor(bandwidth)."""
+    rows = np.atleast_2d(np.asarray(scores, dtype=float).T).T
+    n = rows.shape[0]
+    lag = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    weight = np.where(lag <= np.floor(bandwidth), 1.0 - lag / (bandwidth + 1.0), 0.0)
+    return rows.T @ weight @ rows
+
+
+def test_one_newey_west_serves_the_km_evidence_and_the_gap():
+    """km_evidence's coloured std and the gap's block-score variances are the same Bartlett long-run covariance
+    (propid.signals): equal to its definition as a double sum, for a matrix and a scalar, an integer window
+    and Andrews' fractional bandwidth, a window longer than the data."""
+    from propid.gap.significance import andrews_bandwidth, long_run_variance
+    from propid.km_evidence import newey_west
+    from propid.signals import bartlett_long_run_covariance
+
+    rng = np.random.default_rng(3)
+    scores = np.cumsum(rng.standard_normal((60, 3)), axis=0) * 0.1 + rng.standard_normal((60, 3))
+    for bandwidth in (0, 1, 4, 6.7, 200):
+        np.testing.assert_allclose(bartlett_long_run_covariance(scores, bandwidth),
+                                   _bartlett_by_definition(scores, bandwidth), rtol=1e-12)
+        assert bartlett_long_run_covariance(scores[:, 0], bandwidth) == pytest.approx(
+            _bartlett_by_definition(scores[:, 0], bandwidth)[0, 0], rel=1e-12)
+    design, residual = rng.standard_normal((60, 3)), scores[:, 1]
+    inverse = np.linalg.inv(design.T @ design)
+    np.testing.assert_allclose(newey_west(design, residual, 5),
+                               inverse @ _bartlett_by_definition(design * residual[:, None], 5) @ inverse, rtol=1e-12)
+    c = scores[:, 2]
+    variance, bandwidth = long_run_variance(c)
+    assert bandwidth == andrews_bandwidth(c - c.mean()) and bandwidth > 1
+    assert variance == pytest.approx(_bartlett_by_definition(c - c.mean(), bandwidth)[0, 0], rel=1e-12)
+
+
+def test_filter_model_constants_are_the_libraries_defaults(cfilter_available):
+    """The km bound's prior and walk and the 5 % target are propid_config_default()'s, read from the library."""
+    from propid import km_evidence as ke
+    from propid.cfilter import c_default_tuning
+
+    c_defaults = c_default_tuning()
+    assert ke.PRIOR_REL_STD == pytest.approx(c_defaults["drag_coeff_rel_std0"], rel=1e-6)
+    assert ke.LIBRARY_WALK == pytest.approx(c_defaults["drag_coeff_rel_walk"], rel=1e-6)
+    assert ke.TARGET_REL_STD == pytest.approx(c_defaults["converged_rel_std"], rel=1e-6)

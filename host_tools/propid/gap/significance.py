@@ -41,6 +41,8 @@ import math
 
 import numpy as np
 
+from propid.signals import bartlett_long_run_covariance
+
 FAMILY_LEVEL = 0.05  # per selection step: chance of naming an effect that adds nothing
 REPLICATION_LEVEL = 0.05  # held-out confirmation, family-wise over a step's candidates (Holm)
 
@@ -72,14 +74,9 @@ def andrews_bandwidth(u: np.ndarray) -> float:
 
 def long_run_variance(c: np.ndarray) -> tuple[float, float]:
     """Newey-West variance of sum(c) and the bandwidth used."""
-    n = c.shape[0]
     u = c - c.mean()
     bw = andrews_bandwidth(u)
-    lags = min(int(math.floor(bw)), n - 1)
-    s = float(u @ u) / n
-    for k in range(1, lags + 1):
-        s += 2.0 * (1.0 - k / (bw + 1.0)) * float(u[k:] @ u[:-k]) / n
-    return max(s, 0.0) * n, bw
+    return max(bartlett_long_run_covariance(u, bw), 0.0), bw
 
 
 def _beta_fraction(a: float, b: float, x: float) -> float:
@@ -389,11 +386,7 @@ def effect_test(gr, current: list[int], effect_cols: list[int], nonnegative: boo
     omega0 = s_n.T @ s_n
     direction = np.linalg.lstsq(omega0, b, rcond=None)[0]
     bw = andrews_bandwidth(s_n @ direction)
-    lags = min(int(math.floor(bw)), n - 1)
-    omega = omega0.copy()
-    for lag in range(1, lags + 1):
-        c = s_n[lag:].T @ s_n[:-lag]
-        omega += (1.0 - lag / (bw + 1.0)) * (c + c.T)
+    omega = bartlett_long_run_covariance(s_n, bw)
     stat = float(b @ np.linalg.lstsq(omega, b, rcond=None)[0])
     rank = max(int(np.linalg.matrix_rank(omega, tol=1e-10 * max(np.abs(omega).max(), 1e-300))), 1)
     # Hotelling: W with a covariance estimated on nu degrees of freedom
