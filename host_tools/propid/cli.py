@@ -6,10 +6,23 @@ import argparse
 import importlib
 import os
 import sys
+import textwrap
 
 from propid import __version__
 from propid.commands import COMMAND_MODULES
 from propid.errors import UserError
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """argparse's help, wrapped only at spaces: an option named in a help text ("--motor-tau 0.03")
+    or a comma list of names stays whole, so it can be copied from the screen."""
+
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        text = self._whitespace_matcher.sub(" ", text).strip()
+        return textwrap.wrap(text, width, break_on_hyphens=False, break_long_words=False)
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        return "\n".join(indent + line for line in self._split_lines(text, width - len(indent)))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -21,7 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
         module = importlib.import_module(f"propid.commands.{name}")
-        cmd = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP)
+        cmd = sub.add_parser(module.NAME, help=module.HELP, description=module.HELP, formatter_class=HelpFormatter)
         module.add_arguments(cmd)
         cmd.set_defaults(_run=module.run)
     return parser

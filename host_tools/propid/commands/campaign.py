@@ -34,14 +34,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--modes", default=",".join(table1.MODES),
                         help="comma list (default oracle,incorrect,filter)")
     parser.add_argument("--duration", type=float, default=10.0, help="flight length [s] (default 10)")
-    parser.add_argument("--vehicle", default="crazyflie-plus", help="propid_sitl vehicle preset or JSON")
+    parser.add_argument("--vehicle", default="crazyflie-plus", help="propid_sitl vehicle preset or JSON (default crazyflie-plus)")
     parser.add_argument("--coeff-spread", type=float, default=0.2,
                         help="true kf, km = nominal x U(1-S, 1+S) (default 0.2)")
     parser.add_argument("--gyro-bias-max", type=float, default=math.radians(1.0),
                         help="true gyro bias per axis ~ U(-B, B) [rad/s] (default 1 deg/s)")
     parser.add_argument("--sensors", choices=["paper", "realistic"], default="paper",
                         help="paper: 500 Hz gyro with noise and constant bias, exact rotor speeds "
-                             "(propid_sitl --paper); realistic: the SITL's BMI088/DShot models")
+                             "(propid_sitl --paper; the default); realistic: the SITL's BMI088/DShot models")
     parser.add_argument("--start-on-trajectory", action="store_true",
                         help="start each flight with the reference's velocity instead of at rest")
     parser.add_argument("--esc-phase", type=float, default=None, metavar="S",

@@ -21,7 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=20.0, help="flight length [s] (default 20)")
     parser.add_argument("--effects", default=",".join(case[0] for case in effects_demo.CASES),
                         help="comma list of the cases to fly (default: all: "
-                             + ",".join(case[0] for case in effects_demo.CASES) + ")")
+                             + ", ".join(case[0] for case in effects_demo.CASES) + ")")
     parser.add_argument("--sitl", metavar="PATH", help="propid_sitl binary (default $PROPID_BUILD_DIR/sitl/propid_sitl)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 

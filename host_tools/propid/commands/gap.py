@@ -56,7 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the stream lag's held-out evidence: 'raw' (2 s blocks of the band-passed rows, the "
                              "default) or 'whitened' (the effects' replication test on whitened rows, each log's own lag "
                              "on its own rows when there are several; evaluated, docs/gap.md 'Stream alignment')")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--no-progress", "--quiet", dest="quiet", action="store_true",
+                        help="no progress bar (--quiet: the older spelling)")
 
 
 def _vehicle_content(path: Path):

@@ -32,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--pairs", type=int, default=15, help="flights with two effects (default 15)")
     parser.add_argument("--nones", type=int, default=15, help="effect-free flights (default 15)")
     parser.add_argument("--effects", default=",".join(EFFECTS),
-                        help="comma list of the effects to draw from (default all 11)")
+                        help=f"comma list of the effects to draw from (default all {len(EFFECTS)}: {', '.join(EFFECTS)})")
     parser.add_argument("--flights-per-diagnosis", type=int, default=1, metavar="K",
                         help="flights of one vehicle per diagnosis (default 1): the first as with 1, "
                              "K - 1 more with the same effects and strengths, their own noise and "

@@ -48,7 +48,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--stop-when-idle", type=positive_seconds, metavar="S",
                         help="stop once data has arrived and then nothing for S seconds "
                              "(e.g. the simulator finished)")
-    parser.add_argument("--quiet", action="store_true", help="no progress line")
+    parser.add_argument("--no-progress", "--quiet", dest="quiet", action="store_true",
+                        help="no progress line (--quiet: the older spelling)")
 
 
 class Recorder:

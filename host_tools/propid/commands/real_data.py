@@ -22,7 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "needed by the replays and --thrust-evidence, not by --km-evidence")
     parser.add_argument("--out", default="build/results", metavar="DIR", help="output directory (default build/results)")
     parser.add_argument("--modes", default=",".join(m[0] for m in real_data.MODES),
-                        help="comma list of modes (default all: " + ",".join(m[0] for m in real_data.MODES) + ")")
+                        help="comma list of modes (default all: " + ", ".join(m[0] for m in real_data.MODES) + ")")
     parser.add_argument("--skip-missing", action="store_true",
                         help="exit 0 with a note when DIR does not exist (for make real-data without ../shared)")
     parser.add_argument("--thrust-evidence", action="store_true",

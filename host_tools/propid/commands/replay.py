@@ -64,10 +64,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--table", metavar="OUT.md", help="several logs: write the per-run validation table (Markdown)")
     parser.add_argument("--segment", choices=["all", "flying"], default="all",
                         help="replay every row, or only flying rows (is_flying column, else every rotor above "
-                             "1/3 of the median spinning speed); gaps are bridged with propid_resync")
+                             "1/3 of the median spinning speed); gaps are bridged with propid_resync (default all)")
     parser.add_argument("--streams", choices=["auto", "rows", "events"], default="auto",
                         help="rows: every row is one gyro and one rotor sample; events: a row carries whichever "
-                             "stream is non-empty (ULog/tlog conversions); auto decides from the log")
+                             "stream is non-empty (ULog/tlog conversions); auto (default) decides from the log")
     parser.add_argument("--skip-repeats", action="store_true",
                         help="treat a row whose gyro (or rotor speeds) exactly repeat the previous row as no new "
                              "sample (logs resampled by sample-and-hold)")
@@ -117,7 +117,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "below F (docs/math.md §16); default 0: no guard")
     parser.add_argument("--rotor-inertia", choices=["auto", "on", "off"], default="auto",
                         help="model the rotors' yaw reaction and gyroscopic torque with the vehicle file's "
-                             "rotor_inertia (auto: when it is given)")
+                             "rotor_inertia (auto, the default: when it is given)")
     parser.add_argument("--aero-damping", choices=["auto", "on", "off"], default="off",
                         help="model the airframe's aerodynamic rate damping (a body torque -d_a omega_a) with the "
                              "vehicle file's aero_damping [N m s/rad] (docs/math.md §17; auto: when it is given; "
@@ -128,7 +128,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--torque-scale", choices=["auto", "on", "off"], default="auto",
                         help="with the accelerometer, also estimate the scale of the thrust torques relative to the "
                              "vehicle file's inertia and arms, so kf's scale comes from the accelerometer alone "
-                             "(auto: on with --aiding gyro+accel)")
+                             "(auto, the default: on with --aiding gyro+accel)")
     parser.add_argument("--torque-scale-walk", metavar="auto|W", type=_walk,
                         help="let that scale follow a torque gain that changes within the flight: random walk W "
                              "[1/sqrt(s)], or auto: measured on the log from the change of the 2-10 Hz torque gain "
