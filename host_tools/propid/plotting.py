@@ -368,7 +368,7 @@ def plot_replay(result, path: str, title: str = "", reference_kf: float | None =
         axes[2].fill_between(t, mean - std, mean + std, color=c, alpha=0.15, lw=0)
     axes[2].set_ylabel("gyro bias [rad/s]")
     axes[2].set_xlabel("log time [s]")
-    axes[2].legend(fontsize=7, ncol=3)
+    axes[2].legend(fontsize=7, ncol=3, loc="upper right")  # a fixed place: "best" searches every point (slow, warns)
     axes[2].grid(alpha=0.3)
     if title:
         axes[0].set_title(title, fontsize=9)

@@ -211,6 +211,23 @@ def test_cli_writes_json_and_plot(cfilter_available, tmp_path, capsys):
     assert png.stat().st_size > 5000 and png.read_bytes()[:4] == b"\x89PNG"
 
 
+def test_replay_plot_places_its_legends_without_searching(cfilter_available, tmp_path, monkeypatch):
+    """matplotlib's loc="best" searches every plotted point; on a long log it took over a second and printed a
+    UserWarning into the replay's report (a 24 s Betaflight log). Every legend of the replay plot has a place."""
+    from matplotlib.legend import Legend
+
+    def searched(*args, **kwargs):
+        raise AssertionError("a legend placed by loc='best'")
+
+    monkeypatch.setattr(Legend, "_find_best_position", searched)
+    log_path = tmp_path / "synthetic.csv"
+    write_flightlog(log_path, synthetic_log(duration=3.0))
+    write_vehicle(tmp_path / "synthetic.vehicle.json", parse_vehicle(VEHICLE))
+    png = tmp_path / "out.png"
+    assert _run_cli(["--log", str(log_path), "--plot", str(png), "--no-progress"]) == 0
+    assert png.read_bytes()[:4] == b"\x89PNG"
+
+
 @pytest.mark.skipif(not CRAZYFLIE.is_dir(), reason="shared real data not present")
 def test_real_crazyflie_replay_is_finite_and_honest(cfilter_available):
     """One real run with NaN rows and two eRPM spikes. Bounds (see docs/real-data.md):
