@@ -40,14 +40,18 @@ GRAVITY = 9.80665
 
 
 GROUND_CLEARANCE_M = 0.05  # airborne = this far above the lowest logged height (ground contact, ground effect)
+# ... when that height can be the ground: a landed multirotor's centre of mass sits lower than this (0.03-0.05 m
+# on the Crazyflie logs, landing gear of larger vehicles ~0.1-0.3 m); a log whose lowest height is above it never
+# touched the ground (a SITL flight hovering at 1 m), and its height says nothing about ground contact
+LANDED_HEIGHT_MAX_M = 0.3
 
 
 def flying_mask(log: FlightLog, min_fraction: float = 0.33, clearance: float = GROUND_CLEARANCE_M) -> np.ndarray:
     """Rows in free flight (docs/real-data.md): the log's is_flying flag if present, else
     every rotor above `min_fraction` of the median spinning rotor speed; and, when the
-    height pz is logged, at least `clearance` above the lowest logged height, so that
-    rows on the ground (take-off, landing: contact torques the model does not have)
-    are left out."""
+    height pz is logged and its lowest value can be the ground (LANDED_HEIGHT_MAX_M), at
+    least `clearance` above it, so that rows on the ground (take-off, landing: contact
+    torques the model does not have) are left out."""
     speeds = _hold_rotor_rows(log.rotor_speed)
     if "is_flying" in log.extra:
         mask = np.nan_to_num(log.extra["is_flying"], nan=0.0) > 0.5
@@ -62,7 +66,8 @@ def flying_mask(log: FlightLog, min_fraction: float = 0.33, clearance: float = G
     height = log.extra.get("pz")
     if height is not None and np.isfinite(height).any():
         ground = float(np.nanmin(height))
-        mask &= np.nan_to_num(height, nan=ground) > ground + clearance
+        if ground <= LANDED_HEIGHT_MAX_M:
+            mask &= np.nan_to_num(height, nan=ground) > ground + clearance
     return mask
 
 

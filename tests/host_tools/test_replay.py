@@ -211,6 +211,28 @@ def test_cli_writes_json_and_plot(cfilter_available, tmp_path, capsys):
     assert png.stat().st_size > 5000 and png.read_bytes()[:4] == b"\x89PNG"
 
 
+def test_flying_rows_of_a_log_that_never_touches_the_ground():
+    """The lowest logged height is the ground only when a landed vehicle could sit there: a flight hovering
+    at 1 m (the SITL's start) is flying on every spinning row, --segment flying replays them all and the
+    noise is measured on them; a log that starts on the ground still leaves its ground rows out."""
+    from propid.realdata_checks import flying_mask
+
+    log = synthetic_log(duration=4.0)
+    n = len(log)
+    hover = np.linspace(0.985, 1.019, n)  # the SITL's default flight: never below 0.98 m
+    airborne = FlightLog(t=log.t, gyro=log.gyro, rotor_speed=log.rotor_speed, extra={"pz": hover})
+    spinning = flying_mask(FlightLog(t=log.t, gyro=log.gyro, rotor_speed=log.rotor_speed, extra={}))
+    assert spinning.sum() > 0.9 * n
+    np.testing.assert_array_equal(flying_mask(airborne), spinning)
+    vehicle = parse_vehicle(VEHICLE)
+    result = replay(airborne, vehicle, ReplayOptions(segment="flying", noise="auto", progress=False))
+    assert result.summary["rows_replayed"] == int(spinning.sum())
+    assert result.summary["config_notes"]["noise"].startswith("auto: ")
+    landing = np.where(np.arange(n) < n // 4, 0.04, 1.0)  # on the ground at 0.04 m (a Crazyflie), then up
+    grounded = flying_mask(FlightLog(t=log.t, gyro=log.gyro, rotor_speed=log.rotor_speed, extra={"pz": landing}))
+    np.testing.assert_array_equal(grounded, spinning & (np.arange(n) >= n // 4))
+
+
 def test_replay_plot_places_its_legends_without_searching(cfilter_available, tmp_path, monkeypatch):
     """matplotlib's loc="best" searches every plotted point; on a long log it took over a second and printed a
     UserWarning into the replay's report (a 24 s Betaflight log). Every legend of the replay plot has a place."""
