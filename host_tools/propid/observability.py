@@ -40,6 +40,7 @@ from propid.flightlog import Vehicle
 
 MEASUREMENTS = ("gyro", "accel")
 MAX_ORDER_DEFAULT = 4
+NEGLIGIBLE_WEIGHT = 1e-9  # of a printed direction, relative: a nanometre on a metre arm
 
 
 def _exact(value: float) -> sympy.Rational:
@@ -348,8 +349,12 @@ def hover_rank(model: Model, measurements: tuple[str, ...], max_order: int
 
 
 def describe_direction(names: list[str], vector: list[Fraction]) -> str:
-    """'kf_1 - kf_3' style text of a state-space direction (integer coefficients when exact)."""
-    nonzero = [(names[j], value) for j, value in enumerate(vector) if value != 0]
+    """'kf_1 - kf_3' style text of a state-space direction (integer coefficients when exact). A weight below
+    NEGLIGIBLE_WEIGHT of the largest is the rounding of the geometry's floats (a plus frame's cos 90 deg arm
+    written as 2.6e-18 m), not a direction: left out."""
+    largest_weight = max((abs(value) for value in vector), default=Fraction(0))
+    nonzero = [(names[j], value) for j, value in enumerate(vector)
+               if value != 0 and abs(value) > NEGLIGIBLE_WEIGHT * largest_weight]
     if not nonzero:
         return "0"
     if nonzero[0][1] < 0:  # a direction and its opposite are the same statement
@@ -369,8 +374,8 @@ def describe_direction(names: list[str], vector: list[Fraction]) -> str:
         if small_integers:
             text = "" if abs(value) == 1 else f"{abs(value)} "
         else:  # irrational geometry (cos 45 deg) read as decimals: relative weights
-            ratio = abs(value) / largest
-            text = "" if ratio == 1 else f"{float(ratio):.3g} "
+            ratio = f"{float(abs(value) / largest):.3g}"
+            text = "" if ratio == "1" else f"{ratio} "
         sign = "-" if value < 0 else "+"
         parts.append(f"{sign} {text}{name}")
     out = " ".join(parts)

@@ -101,6 +101,28 @@ def test_describe_direction_is_sign_normalised():
     assert observability.describe_direction(names, [Fraction(0), Fraction(1, 2), Fraction(1, 2)]) == "b + c"
 
 
+def test_geometry_rounding_is_not_a_direction():
+    """A plus quad's arms as propid_sitl writes them (L cos 90 deg = 2.6e-18 m, not 0) read as the exact plus
+    quad: 'kf_1 - kf_3', not 'kf_1 + 6.12e-17 kf_2 - 1 kf_3 - 1.84e-16 kf_4'."""
+    names = ["a", "b", "c"]
+    assert observability.describe_direction(
+        names, [Fraction(1.0), Fraction(6.12e-17), Fraction(-0.9999999999999998)]) == "a - c"
+    assert observability.describe_direction(names, [Fraction(1), Fraction(1, 1000), Fraction(0)]) == "a + 0.001 b"
+    exact = analyse(vehicle_dict(4, 0.0))
+    unrounded = vehicle_dict(4, 0.0)
+    for i, rotor in enumerate(unrounded["rotors"]):
+        angle = 2.0 * math.pi * i / 4
+        rotor["position"] = [0.043 * math.cos(angle), 0.043 * math.sin(angle), 0.0]
+    assert unrounded["rotors"][1]["position"][0] != 0.0
+    floats = analyse(unrounded)
+    def hover_part(result):  # what is seen and not seen at hover
+        text = observability.render_text(result)
+        return text[text.index("at hover"):]
+
+    assert floats.generic_rank == exact.generic_rank and hover_part(floats) == hover_part(exact)
+    assert "kf_1 - kf_3" in floats.hover_seen_combinations()
+
+
 def test_cli_prints_and_writes_json(tmp_path, capsys):
     path = tmp_path / "quad.json"
     path.write_text(json.dumps(vehicle_dict(4, math.pi / 4)))
