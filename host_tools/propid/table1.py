@@ -347,6 +347,9 @@ def bound_rows(table: dict) -> list[list[str]]:
     def ratio(row, filt, bound):
         if row.get(filt) is None or not row.get(bound):
             return "—"
+        stable = row.get("stable_trials")
+        if stable and row.get(f"{filt}_unconverged") == stable == row.get(f"{bound}_unconverged"):
+            return "—"  # neither reached on any flight: both are the flight duration, their ratio says nothing
         return f"{row[filt] / row[bound]:.2f}"
     for traj in TRAJECTORIES:
         for mode in MODES:

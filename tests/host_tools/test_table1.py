@@ -333,3 +333,15 @@ def test_campaign_cli_rate_prior_default_and_library(tmp_path, capsys):
     assert conditions("library", "--prior-rate-std", "0")["prior_rate_std"] is None  # 0 = library's
     with pytest.raises(UserError):
         conditions("negative", "--prior-rate-std", "-1")
+
+
+def test_bound_ratio_is_a_dash_where_neither_converged():
+    """'filter / bound' of two times that are both the flight duration on every flight (never reached) said
+    1.00, as if the filter were at the bound; a cell where one of them converged keeps its ratio."""
+    censored = {"trials": 3, "stable_trials": 3, "t_conv_coeff_s": 10.0, "t_conv_coeff_s_unconverged": 3,
+                "t_bound_coeff_s": 10.0, "t_bound_coeff_s_unconverged": 3, "t_conv_bias_s": 4.0,
+                "t_bound_bias_s": 10.0, "t_bound_bias_s_unconverged": 3}
+    rows = table1.bound_rows({"step": {"filter": censored}})
+    coeff_ratio, bias_ratio = rows[1][5], rows[1][9]
+    assert coeff_ratio == "—" and bias_ratio == "0.40"
+    assert "| — |" in table1.render_bound_markdown({"step": {"filter": censored}})
