@@ -345,3 +345,13 @@ def test_bound_ratio_is_a_dash_where_neither_converged():
     coeff_ratio, bias_ratio = rows[1][5], rows[1][9]
     assert coeff_ratio == "—" and bias_ratio == "0.40"
     assert "| — |" in table1.render_bound_markdown({"step": {"filter": censored}})
+
+
+def test_cli_without_a_table_says_what_writes_it(tmp_path, monkeypatch, capsys):
+    """`propid table1` alone reads build/results/table1.json; where there is none it says how to make one."""
+    from propid.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["table1"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "make table1" in err and "propid campaign" in err and "\n" not in err
