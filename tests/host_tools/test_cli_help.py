@@ -130,3 +130,11 @@ def test_every_verb_with_a_progress_bar_takes_no_progress():
 def _required(verb: str) -> list[str]:
     return {"gap": ["--log", "a.csv"]}.get(verb, [])
 
+
+
+def test_every_make_verb_of_make_help_is_in_the_readme_and_build_md():
+    verbs = re.findall(r'@echo "  make ([a-z0-9-]+)', (REPO / "Makefile").read_text())
+    assert {"sitl", "test", "gap-bench", "soak"} <= set(verbs)
+    for doc in ("README.md", "docs/build.md"):
+        text = (REPO / doc).read_text()
+        assert not [v for v in verbs if f"`make {v}`" not in text], doc
