@@ -281,6 +281,17 @@ def vehicle_path_for(log_path: str | Path) -> Path:
     return log_path.with_name(log_path.stem + ".vehicle.json")
 
 
+def other_vehicle_files(log_path: str | Path) -> str:
+    """For an error about a missing X.vehicle.json: the vehicle files that are in the log's folder under
+    other names (one vehicle file for a folder of logs, as the shared real data has it), '' if none."""
+    folder = Path(log_path).parent
+    names = sorted(p.name for p in folder.glob("*.vehicle.json")) if folder.is_dir() else []
+    if not names:
+        return ""
+    shown = ", ".join(str(folder / name) for name in names[:3]) + (", ..." if len(names) > 3 else "")
+    return f"; the folder has {shown}: give it with --vehicle"
+
+
 def run_name(log_path: str | Path) -> str:
     """A log's short name in tables: its file stem without a date token (_YYYYMMDD), which every log of one
     campaign shares (square_20251017_run1 -> square_run1)."""

@@ -183,6 +183,20 @@ def test_binary_or_utf16_vehicle_file_is_one_line(small_flight, tmp_path, conten
                    "rand.bin")
 
 
+def test_a_missing_vehicle_file_names_the_one_in_the_folder(small_flight, tmp_path, capsys):
+    """A folder of logs with one vehicle file under another name (the shared real data's layout): replay and gap
+    name that file in their error instead of only the X.vehicle.json they looked for."""
+    (tmp_path / "small.vehicle.json").rename(tmp_path / "quad.vehicle.json")
+    for argv in (["replay", "--log", str(small_flight), "--no-progress"],
+                 ["gap", "--log", str(small_flight), "--no-filter", "--no-progress"]):
+        assert cli.main(argv) == 1
+        err = capsys.readouterr().err.strip()
+        assert "small.vehicle.json" in err and str(tmp_path / "quad.vehicle.json") in err and "\n" not in err, err
+    (tmp_path / "quad.vehicle.json").unlink()
+    assert cli.main(["replay", "--log", str(small_flight), "--no-progress"]) == 1
+    assert "the folder has" not in capsys.readouterr().err
+
+
 def test_table1_on_a_binary_file_is_one_line(tmp_path):
     bad = tmp_path / "rand.bin"
     bad.write_bytes(os.urandom(4096))

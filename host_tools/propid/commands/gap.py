@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from propid.errors import UserError
-from propid.flightlog import read_flightlog, read_vehicle, vehicle_path_for, write_vehicle
+from propid.flightlog import other_vehicle_files, read_flightlog, read_vehicle, vehicle_path_for, write_vehicle
 from propid.gap.log_order import canonical_order
 from propid.outputs import check_directory, check_not_inputs, check_writable, write_text
 
@@ -144,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--lowpass must be above --highpass (both in Hz, >= 0)")
     vehicle_path = Path(args.vehicle) if args.vehicle else default_vehicle_path(args.log)
     if not vehicle_path.exists():
-        raise UserError(f"no vehicle file: {vehicle_path} (give --vehicle V.json)")
+        raise UserError(f"no vehicle file: {vehicle_path} (give --vehicle V.json){other_vehicle_files(args.log[0])}")
     vehicle = read_vehicle(vehicle_path)
     if args.calibration == "on" and not args.vehicle_out:
         raise UserError("--calibration on needs --vehicle-out (the calibration is of the written file)")

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from propid.errors import UserError
-from propid.flightlog import read_flightlog, read_vehicle, vehicle_path_for
+from propid.flightlog import other_vehicle_files, read_flightlog, read_vehicle, vehicle_path_for
 from propid.outputs import check_not_inputs, check_writable, write_text
 
 NAME = "replay"
@@ -318,7 +318,8 @@ def run(args: argparse.Namespace) -> int:
     check_arguments(args, log_paths)
     vehicle_path = Path(args.vehicle) if args.vehicle else vehicle_path_for(log_paths[0])
     if not args.vehicle and not vehicle_path.is_file():
-        raise UserError(f"no --vehicle given and no {vehicle_path.name} beside the log")
+        raise UserError(f"no --vehicle given and no {vehicle_path.name} beside the log"
+                        f"{other_vehicle_files(log_paths[0])}")
     vehicle = read_vehicle(vehicle_path)
     logs = [read_flightlog(path, vehicle) for path in log_paths]  # every file checked before any replay
     overrides = {
