@@ -106,8 +106,9 @@ def test_listen_duration_without_sender_is_an_error(capsys):
     assert code == 1 and "no MAVLink data" in capsys.readouterr().err
 
 
-def _fake_vehicle(port: int, result: int, stop: threading.Event) -> None:
-    """Sends HEARTBEAT and propid telemetry to `port`; answers MAV_CMD_PROPID_RESET with `result`."""
+def _fake_vehicle(port: int, result: int, stop: threading.Event, received: list | None = None) -> None:
+    """Sends HEARTBEAT and propid telemetry to `port`; answers MAV_CMD_PROPID_RESET with `result` (its param1
+    appended to `received`)."""
     from test_mavlink_io import heartbeat_frame, telemetry_frames
 
     d = mavlink_io.dialect()
@@ -124,21 +125,28 @@ def _fake_vehicle(port: int, result: int, stop: threading.Event) -> None:
                 continue
             for msg in parser.parse_buffer(data) or []:
                 if msg.get_type() == "COMMAND_LONG" and msg.command == d.MAV_CMD_PROPID_RESET:
+                    if received is not None:
+                        received.append(msg.param1)
                     ack = mavlink_io.encode_message("COMMAND_ACK", command=msg.command, result=result, progress=0,
                                                     result_param2=0, target_system=255, target_component=190)
                     sock.sendto(ack, ("127.0.0.1", port))
 
 
-@pytest.mark.parametrize("result_name, code", [("MAV_RESULT_DENIED", 1), ("MAV_RESULT_ACCEPTED", 0)])
-def test_listen_reset_exit_code_follows_the_acknowledgement(result_name, code, capsys):
+@pytest.mark.parametrize("result_name, code, rotor, param1, label", [
+    ("MAV_RESULT_DENIED", 1, "2", 1.0, "rotor 2"), ("MAV_RESULT_ACCEPTED", 0, "2", 1.0, "rotor 2"),
+    ("MAV_RESULT_ACCEPTED", 0, "all", -1.0, "all rotors")])
+def test_listen_reset_exit_code_follows_the_acknowledgement(result_name, code, rotor, param1, label, capsys):
+    """--reset takes the rotor as listen's screen numbers it (1..N) or all; the command carries the 0-based
+    index (rotor 2 -> param1 1; it sent 2, the screen's rotor 3)."""
     port = free_udp_port()
     stop = threading.Event()
     result = getattr(mavlink_io.dialect(), result_name)
-    vehicle = threading.Thread(target=_fake_vehicle, args=(port, result, stop))
+    received: list = []
+    vehicle = threading.Thread(target=_fake_vehicle, args=(port, result, stop, received))
     timer = threading.Timer(0.3, vehicle.start)
     timer.start()
     try:
-        got = cli.main(["listen", "--connect", f"udp:127.0.0.1:{port}", "--reset", "2", "--duration", "2",
+        got = cli.main(["listen", "--connect", f"udp:127.0.0.1:{port}", "--reset", rotor, "--duration", "2",
                         "--timeout", "10"])
     finally:
         stop.set()
@@ -146,10 +154,18 @@ def test_listen_reset_exit_code_follows_the_acknowledgement(result_name, code, c
         if vehicle.is_alive():
             vehicle.join()
     captured = capsys.readouterr()
-    assert result_name in captured.out
+    assert f"MAV_CMD_PROPID_RESET {label}: {result_name}" in captured.out
+    assert received and set(received) == {param1}
     assert got == code
     if code:
         assert "refused" in captured.err
+
+
+@pytest.mark.parametrize("bad", ["0", "-2", "x", "1.5"])
+def test_listen_reset_refuses_what_is_not_a_rotor_number(bad, capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["listen", "--reset", bad, "--duration", "1"])
+    assert "expected a rotor number 1..N" in capsys.readouterr().err
 
 
 # --------------------------------------------------------------------------- convert

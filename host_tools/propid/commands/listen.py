@@ -26,9 +26,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="fail if no propid message arrives within S seconds (default 10)")
     parser.add_argument("--duration", type=positive_seconds, metavar="S",
                         help="stop after S seconds (default: until Ctrl-C)")
-    parser.add_argument("--reset", type=int, metavar="ROTOR",
-                        help="first send MAV_CMD_PROPID_RESET (rotor index, -1 = all) and "
-                             "report the acknowledgement")
+    parser.add_argument("--reset", type=reset_target, metavar="ROTOR|all",
+                        help="first send MAV_CMD_PROPID_RESET for rotor ROTOR as this screen numbers the rotors "
+                             "(1..N; the command's param1 is the 0-based index ROTOR - 1) or for all (the whole "
+                             "filter; -1 also means all) and report the acknowledgement")
+
+
+def reset_target(text: str) -> int:
+    """--reset: the rotor as the screen numbers it (1..N) or all; returns the command's param1, the 0-based
+    rotor index or -1 for the whole filter (docs/telemetry.md MAV_CMD_PROPID_RESET)."""
+    if text.strip().lower() in ("all", "-1"):
+        return -1
+    try:
+        rotor = int(text)
+    except ValueError:
+        rotor = 0
+    if rotor < 1:
+        raise argparse.ArgumentTypeError(f"expected a rotor number 1..N (as the screen shows them) or all, got {text!r}")
+    return rotor - 1
+
+
+def reset_label(param1: int) -> str:
+    return "all rotors" if param1 < 0 else f"rotor {param1 + 1}"
 
 
 def health_names(health: int) -> list[str]:
@@ -217,7 +236,7 @@ def run(args: argparse.Namespace) -> int:
                                                    target_system=msg.get_srcSystem(),
                                                    target_component=msg.get_srcComponent())
                     reset_result = mavlink_io.dialect().enums["MAV_RESULT"][result].name
-                    print(f"MAV_CMD_PROPID_RESET rotor {args.reset}: {reset_result}", flush=True)
+                    print(f"MAV_CMD_PROPID_RESET {reset_label(args.reset)}: {reset_result}", flush=True)
             if now - last_draw >= REFRESH_S:
                 last_draw = now
                 view = format_view(coeffs, gyro, status, frames, args.connect, model, damage)
@@ -239,5 +258,5 @@ def run(args: argparse.Namespace) -> int:
         if reset_result is None:
             raise UserError("MAV_CMD_PROPID_RESET was not sent: no HEARTBEAT arrived to address it to")
         if reset_result != "MAV_RESULT_ACCEPTED":
-            raise UserError(f"MAV_CMD_PROPID_RESET rotor {args.reset} refused: {reset_result}")
+            raise UserError(f"MAV_CMD_PROPID_RESET {reset_label(args.reset)} refused: {reset_result}")
     return 0
