@@ -131,6 +131,8 @@ def _fly(config: BenchConfig, spec: FlightSpec, mode: str, work: Path,
             return out
         data = json.loads(summary.read_text())
         out["stable"] = bool(data.get("stable")) and proc.returncode == 0
+        out["diverged_at_s"] = data.get("diverged_at_s")
+        out["touchdown_at_s"] = data.get("touchdown_at_s")
         out["detections"] = data.get("detections", [])
         out["on_ground"] = [bool(d.get("on_ground")) for d in data.get("damage", [])]
         out["after_touchdown"] = [bool(d.get("after_touchdown")) for d in data.get("damage", [])]
@@ -196,6 +198,20 @@ def score_damages(spec: dict, flight: dict) -> list[dict]:
     return out
 
 
+def lost(flight: dict) -> bool:
+    """The flight was lost: diverged (the SITL's flag) or crashed (touched the ground again
+    after flying), whichever first. A crash is a loss whatever the wreck does afterwards."""
+    return not flight.get("stable", False) or flight.get("touchdown_at_s") is not None
+
+
+def within_crash_aware(filter_lost: bool, oracle_lost: bool, ratio: float | None) -> bool:
+    """Tracking within 1.5x of the Oracle with a crash counted as a crash: both lost is a tie,
+    the Filter lost alone a miss, the Oracle lost alone within; otherwise the RMSE ratio."""
+    if filter_lost or oracle_lost:
+        return oracle_lost
+    return ratio is not None and ratio <= 1.5
+
+
 def _miss_causes(record: dict, oracle_rmse: float) -> tuple[bool, bool]:
     """(the Filter's gap before the damage explains it, the Oracle lost yaw) for a flight above 1.5x."""
     intact = record.get("filter_undamaged", {}).get("rmse_after_damage_m")
@@ -213,8 +229,19 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
     misses: list[tuple[bool, bool]] = []
     yaw_held: list[float] = []  # the ratios of the flights whose Oracle holds yaw
     per_trajectory: dict[str, dict[str, list[float]]] = {}
+    crash_aware: list[bool] = []       # every damaged flight, crash-aware tracking
+    oracle_not_lost: list[bool] = []   # the flights whose Oracle is not lost
+    lost_pairs: list[tuple[bool, bool]] = []
     for record in damaged:
         flight = record["filter"]
+        f_lost, o_lost = lost(flight), lost(record.get("oracle", {}))
+        lost_pairs.append((f_lost, o_lost))
+        ratio = None
+        if flight.get("rmse_after_damage_m") is not None and record.get("oracle", {}).get("rmse_after_damage_m"):
+            ratio = flight["rmse_after_damage_m"] / record["oracle"]["rmse_after_damage_m"]
+        crash_aware.append(within_crash_aware(f_lost, o_lost, ratio))
+        if not o_lost:
+            oracle_not_lost.append(crash_aware[-1])
         record["damages_scored"] = score_damages(record["spec"], flight)
         events += record["damages_scored"]
         first_damage = record["spec"]["damages"][0][1]
@@ -294,6 +321,23 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
             "oracle_yaw_lost": sum(1 for _, yaw in misses if yaw),
             "both": sum(1 for gap, yaw in misses if gap and yaw),
             "neither": sum(1 for gap, yaw in misses if not gap and not yaw)},
+        # Crash-aware (docs/damage.md, Metrics): a flight is lost when it diverged or touched the
+        # ground again after flying; both lost is a tie, the Filter lost alone a miss.
+        "tracking_within_1_5x_crash_aware": (sum(crash_aware) / len(crash_aware)) if crash_aware else None,
+        "tracking_within_1_5x_oracle_not_lost": (sum(oracle_not_lost) / len(oracle_not_lost)
+                                                 if oracle_not_lost else None),
+        "oracle_not_lost_flights": len(oracle_not_lost),
+        "lost_flights": {
+            "filter": sum(1 for f, _ in lost_pairs if f),
+            "oracle": sum(1 for _, o in lost_pairs if o),
+            "both": sum(1 for f, o in lost_pairs if f and o),
+            "filter_only": sum(1 for f, o in lost_pairs if f and not o),
+            "oracle_only": sum(1 for f, o in lost_pairs if o and not f),
+            "filter_undamaged": sum(1 for r in undamaged if lost(r["filter"]))},
+        "stable_no_crash_pct": (100.0 * sum(not lost(r["filter"]) for r in records) / len(records)
+                                if records else None),
+        "oracle_stable_no_crash_pct": (100.0 * sum(not lost(r["oracle"]) for r in damaged if "oracle" in r)
+                                       / len(damaged)) if damaged else None,
         "stable_pct": 100.0 * sum(stable) / len(stable) if stable else None,
         "oracle_stable_pct": (100.0 * sum(r["oracle"].get("stable", False) for r in damaged if "oracle" in r)
                               / len(damaged)) if damaged else None,
@@ -348,6 +392,17 @@ def _misses_text(misses: dict | None) -> str:
             f"{misses['both']} / {misses['neither']}")
 
 
+def _pct(value: float | None, scale: float = 100.0, spec: str = ".0f") -> str:
+    return "—" if value is None else format(scale * value, spec)
+
+
+def _lost_text(lost_flights: dict | None) -> str:
+    if not lost_flights:
+        return "—"
+    return (f"{lost_flights['filter']} / {lost_flights['oracle']} / {lost_flights['both']} / "
+            f"{lost_flights['filter_only']} / {lost_flights['oracle_only']} ({lost_flights['filter_undamaged']})")
+
+
 def render(result: dict) -> str:
     def fmt(value, spec=".3g"):
         return "—" if value is None else format(value, spec)
@@ -384,6 +439,16 @@ def render(result: dict) -> str:
          _misses_text(result.get("tracking_misses")), ""),
         ("stable (Filter / Oracle)", f"{fmt(result['stable_pct'], '.1f')} % / {fmt(result['oracle_stable_pct'], '.1f')} %",
          ""),
+        ("crash-aware: within 1.5x (both lost a tie, the Filter lost alone a miss) / over the flights "
+         "whose Oracle is not lost",
+         (f"{_pct(result.get('tracking_within_1_5x_crash_aware'))} % / "
+          f"{_pct(result.get('tracking_within_1_5x_oracle_not_lost'))} % of "
+          f"{result.get('oracle_not_lost_flights', 0)} flights"), ""),
+        ("crash-aware: stable = neither diverged nor down after flying (Filter / Oracle)",
+         f"{_pct(result.get('stable_no_crash_pct'), 1.0, '.1f')} % / "
+         f"{_pct(result.get('oracle_stable_no_crash_pct'), 1.0, '.1f')} %", ""),
+        ("damaged flights lost: Filter / Oracle / both / Filter alone / Oracle alone (undamaged Filter)",
+         _lost_text(result.get("lost_flights")), ""),
     ]
     lines = ["| metric | measured | target |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in rows]

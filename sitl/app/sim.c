@@ -426,8 +426,9 @@ static void apply_damage(flight_t *f, const sitl_options_t *o, sitl_result_t *r,
      * sample), but the ground holds it, and no gyro-based test can see a loss. */
     if (!f->state.on_ground) {
         f->has_flown = 1;
-    } else if (f->has_flown) {
+    } else if (f->has_flown && !f->touched_down) {
         f->touched_down = 1;
+        r->touchdown_at_s = t;
     }
     for (int k = 0; k < o->damage_count; k++) {
         const sitl_damage_t *d = &o->damage[k];
@@ -558,6 +559,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     memset(r, 0, sizeof(*r));
     r->coeff_converged_s = -1.0;
     r->bias_converged_s = -1.0;
+    r->touchdown_at_s = -1.0;
     double wall_start = wall_seconds();
 
     stop_requested = 0;

@@ -61,6 +61,10 @@ typedef struct {
      * before it (down after a crash, even where the spinning rotors lift it off
      * by millimetres at that instant). */
     int damage_after_touchdown[SITL_MAX_DAMAGE];
+    /* The first time the vehicle, having been off the ground, touched it again
+     * (a crash or a landing: the flight is over whatever the wreck does next);
+     * -1 if it never did. */
+    double touchdown_at_s;
 } sitl_result_t;
 
 /* Set-up pieces (sim_setup.c), public for tests. */

@@ -96,6 +96,8 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
     cJSON_AddBoolToObject(root, "stable", !r->diverged);
     cJSON_AddItemToObject(root, "diverged_at_s",
                           r->diverged ? number9(r->diverged_at_s) : cJSON_CreateNull());
+    cJSON_AddItemToObject(root, "touchdown_at_s",
+                          r->touchdown_at_s >= 0.0 ? number9(r->touchdown_at_s) : cJSON_CreateNull());
     add_number(root, "rmse_x_m", r->rmse[0]);
     add_number(root, "rmse_y_m", r->rmse[1]);
     add_number(root, "rmse_z_m", r->rmse[2]);

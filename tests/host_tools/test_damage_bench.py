@@ -160,6 +160,44 @@ def test_damage_after_a_touchdown_is_counted_apart():
     assert result["detection_rate"] == 0.5 and result["damage_events_after_touchdown_only"] == 0
 
 
+def test_crash_aware_scoring_counts_a_crash_as_a_crash():
+    """A flight is lost when it diverged or touched the ground again after flying, whatever the
+    wreck does next. Crash-aware tracking: both lost is a tie (within), the Filter lost alone a
+    miss, the Oracle lost alone within, neither lost the RMSE ratio. The old columns stay."""
+    def flight(rmse, stable=True, touchdown=None):
+        return {"detections": [{"rotor": 1, "time_s": 2.505}], "stable": stable, "rmse_after_damage_m": rmse,
+                "diverged_at_s": None if stable else 5.0, "touchdown_at_s": touchdown}
+
+    def record(f, o):
+        return {"spec": {"damages": [[1, 2.5, 0.4]], "effects": [], "index": 0}, "filter": f, "oracle": o}
+    records = [
+        record(flight(0.012), flight(0.010)),                      # neither lost, within
+        record(flight(0.030), flight(0.010)),                      # neither lost, above
+        record(flight(0.90, stable=False, touchdown=4.4), flight(0.80, touchdown=4.5)),  # both lost: tie
+        record(flight(0.50, touchdown=4.0), flight(0.10)),         # Filter crashed alone, stable flag up
+        record(flight(0.05), flight(0.02, touchdown=4.2)),         # Oracle crashed alone: within
+        {"spec": {"damages": [], "effects": ["com_offset"], "index": 5},
+         "filter": {"detections": [], "stable": True, "touchdown_at_s": 3.0}},   # undamaged, crashed
+        {"spec": {"damages": [], "effects": ["rotor_drag"], "index": 6},
+         "filter": {"detections": [], "stable": True, "touchdown_at_s": None}},
+    ]
+    result = damage_bench.summarise(records, config())
+    # the old columns: ratios 1.2, 3, 1.125, 5, 2.5 -> 2 of 5 within; the stable flag 6 of 7
+    assert result["tracking_within_1_5x"] == pytest.approx(2 / 5)
+    assert result["stable_pct"] == pytest.approx(600.0 / 7.0)
+    assert result["tracking_within_1_5x_crash_aware"] == pytest.approx(3 / 5)
+    assert result["oracle_not_lost_flights"] == 3
+    assert result["tracking_within_1_5x_oracle_not_lost"] == pytest.approx(1 / 3)
+    assert result["lost_flights"] == {"filter": 2, "oracle": 2, "both": 1, "filter_only": 1, "oracle_only": 1,
+                                      "filter_undamaged": 1}
+    assert result["stable_no_crash_pct"] == pytest.approx(400.0 / 7.0)
+    assert result["oracle_stable_no_crash_pct"] == pytest.approx(60.0)
+    text = damage_bench.render(result)
+    assert "| 60 % / 33 % of 3 flights |" in text
+    assert "| 57.1 % / 60.0 % |" in text
+    assert "| 2 / 2 / 1 / 1 / 1 (1) |" in text
+
+
 def test_extended_checks_ratio_and_stability():
     row = {"rmse_x": 0.02, "rmse_y": 0.05, "rmse_z": 0.004, "rmse_yaw_deg": 0.5, "stable_pct": 100.0,
            "t_conv_coeff_s": 0.4, "t_conv_bias_s": 3.0}
@@ -212,6 +250,7 @@ def test_sitl_damage_is_detected_isolated_and_reported(tmp_path, sitl_binary):
     data = json.loads(summary.read_text())
     assert data["damage"] == [{"rotor": 5, "time_s": 2.5, "fraction": 0.25, "on_ground": False,
                                "after_touchdown": False}]
+    assert data["touchdown_at_s"] is None  # flew on to the end
     assert len(data["detections"]) == 1
     assert data["detections"][0]["rotor"] == 5
     assert 2.5 <= data["detections"][0]["time_s"] <= 2.55
@@ -234,6 +273,11 @@ def test_sitl_marks_a_damage_after_the_vehicle_came_down(tmp_path, sitl_binary):
     first, second = json.loads(summary.read_text())["damage"]
     assert not first["on_ground"] and not first["after_touchdown"]
     assert second["after_touchdown"]
+    # the crash's time: after the first loss, before the second, and the wreck never counted stable
+    # by the crash-aware scoring even where the SITL's divergence flag stays down
+    touchdown = json.loads(summary.read_text())["touchdown_at_s"]
+    assert 1.6 < touchdown < 3.5
+    assert damage_bench.lost({"stable": True, "touchdown_at_s": touchdown})
 
 
 def test_sitl_rejects_bad_damage_specs(sitl_binary):
