@@ -191,6 +191,30 @@ static void reopen_rotor(propid_filter_t *filter, uint8_t rotor)
     filter->core.health |= PROPID_HEALTH_ROTOR_DAMAGE;
 }
 
+propid_status_t propid_damage_set_landed(propid_damage_t *detector, bool landed)
+{
+    if (detector == NULL) {
+        return PROPID_ERR_NULL;
+    }
+    if (detector->rotor_count == 0u || detector->rotor_count > PROPID_MAX_ROTORS) {
+        return PROPID_ERR_NOT_INITIALISED;
+    }
+    detector->landed = landed;
+    return PROPID_OK;
+}
+
+/* The bank from scratch: unarmed, statistics at zero, an honest filter's
+ * moments; the rotors' design is derived again when it arms. */
+static void restart_bank(propid_damage_t *detector)
+{
+    detector->armed_s = 0.0f;
+    detector->design_set = 0u;
+    for (uint8_t i = 0; i < detector->rotor_count; ++i) {
+        detector->statistic[i] = 0.0f;
+        reset_moments(detector, i);
+    }
+}
+
 propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *filter,
                                    int8_t *detected_rotor)
 {
@@ -213,6 +237,13 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
     }
     const float dt = (float)(uint32_t)(now - detector->last_time_us) * 1.0e-6f;
     detector->last_time_us = now;
+    if (detector->landed) {
+        /* On the ground: no test, and nothing of the contact learnt; the
+         * re-anchor count is followed so take-off starts from a clean slate. */
+        detector->reanchors_seen = filter->counters.gate_reopened;
+        restart_bank(detector);
+        return PROPID_OK;
+    }
     const int holding = now < detector->hold_until_us;
 
     /* Normalised innovations z_a and 1/sqrt(S_a) from the stored innovation and
@@ -391,12 +422,7 @@ propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *f
     detector->hold_until_us = now + (uint64_t)(uint32_t)(detector->config.hold_s * 1.0e6f);
     /* Start afresh: the re-opened coefficients re-converge during the hold and
      * the running moments are re-learnt (armed again after 3 adapt times). */
-    detector->armed_s = 0.0f;
-    detector->design_set = 0u;
-    for (uint8_t i = 0; i < rotor_count; ++i) {
-        detector->statistic[i] = 0.0f;
-        reset_moments(detector, i);
-    }
+    restart_bank(detector);
     *detected_rotor = best;
     return PROPID_OK;
 }

@@ -426,6 +426,9 @@ static const opt_t options[] = {
            "detector tuned per rotor for a loss of FRACTION, variance\n"
            "floor at the gyro noise's share (docs/math.md 4); 0: the\n"
            "fixed design (default)"),
+    FLAG(NULL, "damage-landed-input", damage_landed_input, 1,
+         "tell the detector when the vehicle is on the ground (the\n"
+         "plant's contact, an ideal land detector): no test there"),
     NUMBER("Excitation (docs/results.md, \"Extended campaign\")", "null-dither", null_dither, 0.0, 0.5,
            "FRACTION",
            "more than 4 rotors: excite the allocation's null space\n"

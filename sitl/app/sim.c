@@ -458,6 +458,9 @@ static void apply_damage(flight_t *f, const sitl_options_t *o, sitl_result_t *r,
 static void step_detector(flight_t *f, const sitl_options_t *o, sitl_result_t *r, double t)
 {
     int8_t rotor = -1;
+    if (o->damage_landed_input) {
+        (void)propid_damage_set_landed(&f->detector, f->state.on_ground != 0);
+    }
     propid_status_t dst = propid_damage_step(&f->detector, &f->filter, &rotor);
     if (dst != PROPID_OK || rotor < 0) {
         return;

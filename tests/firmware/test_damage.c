@@ -464,6 +464,56 @@ static void test_reanchor_is_not_a_loss(void)
     }
 }
 
+/* The ground-contact input: while landed the bank does not test, even through a
+ * loss that the same flight airborne detects; it restarts on every landed step,
+ * so after take-off it arms 3 adaptation times later and then catches a loss. */
+static void test_landed_input_holds_the_bank(void)
+{
+    propid_damage_t blank;
+    memset(&blank, 0, sizeof(blank));
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_NULL, propid_damage_set_landed(NULL, true));
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_NOT_INITIALISED, propid_damage_set_landed(&blank, true));
+    TEST_ASSERT_FALSE(blank.landed);
+
+    int8_t rotor;
+    for (int landed = 0; landed < 2; landed++) { /* the airborne twin first: it detects */
+        flight_t f;
+        setup_flight(&f, 31u);
+        TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 2.0f, &rotor));
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_damage_set_landed(&f.detector, landed != 0));
+        f.kf[2] *= 0.6f; /* 40 % loss */
+        f.km[2] *= 0.6f;
+        const float at = fly(&f, 2.0f, 3.0f, &rotor);
+        if (!landed) {
+            TEST_ASSERT_TRUE_MESSAGE(at > 2.0f && at <= 2.05f, "the airborne twin detects the loss");
+            TEST_ASSERT_EQUAL_INT(2, rotor);
+        } else {
+            TEST_ASSERT_EQUAL_FLOAT(-1.0f, at);
+            TEST_ASSERT_EQUAL_UINT32(0u, f.detector.detections);
+            TEST_ASSERT_EQUAL_FLOAT(0.0f, f.detector.armed_s);
+            for (int i = 0; i < 4; i++) {
+                TEST_ASSERT_EQUAL_FLOAT(0.0f, f.detector.statistic[i]);
+            }
+        }
+    }
+
+    flight_t f;
+    setup_flight(&f, 32u);
+    TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 2.0f, &rotor));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_damage_set_landed(&f.detector, true));
+    TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 2.0f, 2.5f, &rotor));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_damage_set_landed(&f.detector, false));
+    TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 2.5f, 3.9f, &rotor));
+    /* re-learning since take-off, not armed yet (3 adaptation times = 1.5 s) */
+    TEST_ASSERT_FLOAT_WITHIN(0.01f, 1.4f, f.detector.armed_s);
+    TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 3.9f, 4.2f, &rotor));
+    f.kf[1] *= 0.85f;
+    f.km[1] *= 0.85f;
+    const float at = fly(&f, 4.2f, 4.4f, &rotor);
+    TEST_ASSERT_TRUE_MESSAGE(at > 4.2f && at <= 4.25f, "armed again after take-off");
+    TEST_ASSERT_EQUAL_INT(1, rotor);
+}
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -475,5 +525,6 @@ int main(void)
     RUN_TEST(test_loss_detected_under_the_input_error_model);
     RUN_TEST(test_correlated_innovations_keep_the_design_rate);
     RUN_TEST(test_reanchor_is_not_a_loss);
+    RUN_TEST(test_landed_input_holds_the_bank);
     return UNITY_END();
 }

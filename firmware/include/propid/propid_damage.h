@@ -16,6 +16,7 @@
 #ifndef PROPID_DAMAGE_H
 #define PROPID_DAMAGE_H
 
+#include <stdbool.h>
 #include <stdint.h>
 
 #include "propid/propid.h"
@@ -79,6 +80,7 @@ typedef struct {
     uint8_t has_time;
     uint8_t design_set;                    /* the rotors' k and h were derived since the last (re-)start */
     int8_t last_rotor;                     /* latest isolated rotor, -1 none */
+    bool landed;                           /* the caller's ground contact (propid_damage_set_landed) */
 } propid_damage_t;
 
 /* Defaults: 1e-3 false alarms per flight hour, design shift 8 sigma (no derived
@@ -101,6 +103,16 @@ propid_status_t propid_damage_init(propid_damage_t *detector, const propid_damag
  * status (filter untouched) on NULL or an uninitialised filter. */
 propid_status_t propid_damage_step(propid_damage_t *detector, propid_filter_t *filter,
                                    int8_t *detected_rotor);
+
+/* Optional ground-contact input (a flight controller's land detector): while
+ * landed is true the bank does not test (a vehicle the ground holds leaves no
+ * loss in the gyro, and the contact torques the model lacks would read as
+ * one, e.g. on a wreck whose rotors still run); it restarts on every landed
+ * step, so after take-off it re-learns its moments and arms 3 adaptation
+ * times later, as after init. Never called (the default): the detector is as
+ * without it. PROPID_OK, PROPID_ERR_NULL, or PROPID_ERR_NOT_INITIALISED on a
+ * detector propid_damage_init() has not set up (detector untouched). */
+propid_status_t propid_damage_set_landed(propid_damage_t *detector, bool landed);
 
 #ifdef __cplusplus
 }
