@@ -334,6 +334,11 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
             "filter_only": sum(1 for f, o in lost_pairs if f and not o),
             "oracle_only": sum(1 for f, o in lost_pairs if o and not f),
             "filter_undamaged": sum(1 for r in undamaged if lost(r["filter"]))},
+        # detections on a vehicle already down after flying (a wreck whose rotors still run;
+        # docs/damage.md, "Ground contact"), Filter flights, damaged and undamaged
+        "detections_after_touchdown": sum(
+            1 for r in records for d in r["filter"].get("detections", [])
+            if r["filter"].get("touchdown_at_s") is not None and d["time_s"] >= r["filter"]["touchdown_at_s"]),
         "stable_no_crash_pct": (100.0 * sum(not lost(r["filter"]) for r in records) / len(records)
                                 if records else None),
         "oracle_stable_no_crash_pct": (100.0 * sum(not lost(r["oracle"]) for r in damaged if "oracle" in r)
@@ -449,6 +454,8 @@ def render(result: dict) -> str:
          f"{_pct(result.get('oracle_stable_no_crash_pct'), 1.0, '.1f')} %", ""),
         ("damaged flights lost: Filter / Oracle / both / Filter alone / Oracle alone (undamaged Filter)",
          _lost_text(result.get("lost_flights")), ""),
+        ("detections after a touch-down (on a vehicle already down)",
+         str(result.get("detections_after_touchdown", 0)), ""),
     ]
     lines = ["| metric | measured | target |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in rows]

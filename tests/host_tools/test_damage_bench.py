@@ -174,7 +174,9 @@ def test_crash_aware_scoring_counts_a_crash_as_a_crash():
         record(flight(0.012), flight(0.010)),                      # neither lost, within
         record(flight(0.030), flight(0.010)),                      # neither lost, above
         record(flight(0.90, stable=False, touchdown=4.4), flight(0.80, touchdown=4.5)),  # both lost: tie
-        record(flight(0.50, touchdown=4.0), flight(0.10)),         # Filter crashed alone, stable flag up
+        record(dict(flight(0.50, touchdown=4.0), detections=[{"rotor": 1, "time_s": 2.505},
+                                                              {"rotor": 2, "time_s": 4.0}]),
+               flight(0.10)),                                      # Filter crashed alone, stable flag up
         record(flight(0.05), flight(0.02, touchdown=4.2)),         # Oracle crashed alone: within
         {"spec": {"damages": [], "effects": ["com_offset"], "index": 5},
          "filter": {"detections": [], "stable": True, "touchdown_at_s": 3.0}},   # undamaged, crashed
@@ -192,6 +194,7 @@ def test_crash_aware_scoring_counts_a_crash_as_a_crash():
                                       "filter_undamaged": 1}
     assert result["stable_no_crash_pct"] == pytest.approx(400.0 / 7.0)
     assert result["oracle_stable_no_crash_pct"] == pytest.approx(60.0)
+    assert result["detections_after_touchdown"] == 1  # at the touch-down counts; before it does not
     text = damage_bench.render(result)
     assert "| 60 % / 33 % of 3 flights |" in text
     assert "| 57.1 % / 60.0 % |" in text
