@@ -449,7 +449,8 @@ def render(result: dict) -> str:
          (f"{_pct(result.get('tracking_within_1_5x_crash_aware'))} % / "
           f"{_pct(result.get('tracking_within_1_5x_oracle_not_lost'))} % of "
           f"{result.get('oracle_not_lost_flights', 0)} flights"), ""),
-        ("crash-aware: stable = neither diverged nor down after flying (Filter / Oracle)",
+        ("crash-aware: stable = neither diverged nor down after flying (Filter, every flight / "
+         "Oracle, the damaged twins)",
          f"{_pct(result.get('stable_no_crash_pct'), 1.0, '.1f')} % / "
          f"{_pct(result.get('oracle_stable_no_crash_pct'), 1.0, '.1f')} %", ""),
         ("damaged flights lost: Filter / Oracle / both / Filter alone / Oracle alone (undamaged Filter)",
