@@ -65,6 +65,183 @@ apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *r
     return outside == 0u;
 }
 #else
+#if PROPID_ARM_BLOCK_MOVES
+/* The block-move kernels' registers: the vectors' values of four consecutive
+ * columns c = 0..3 in s16+c (h_0), s20+c (h_1), s24+c (h_2), a row's elements
+ * of those columns in s28+c; the rows' gains stay where the compiler put them
+ * (s0-s15: the kernels clobber s16-s31). Each element takes its three terms in
+ * the C loop's order, p - g0 h0 - g1 h1 - g2 h2, each a fused multiply-subtract
+ * (vfms: what -ffp-contract=fast makes of the C), so the results are the C
+ * loop's to the bit. */
+#define PROPID_FMS(element, value, gain) "vfms.f32 " element ", %[" gain "], " value "\n\t"
+#define PROPID_TERMS_C0(g, k) PROPID_FMS("s28", k##0, g)
+#define PROPID_TERMS_C1(g, k) PROPID_FMS("s29", k##1, g)
+#define PROPID_TERMS_C2(g, k) PROPID_FMS("s30", k##2, g)
+#define PROPID_TERMS_C3(g, k) PROPID_FMS("s31", k##3, g)
+#define PROPID_H0_0 "s16"
+#define PROPID_H0_1 "s17"
+#define PROPID_H0_2 "s18"
+#define PROPID_H0_3 "s19"
+#define PROPID_H1_0 "s20"
+#define PROPID_H1_1 "s21"
+#define PROPID_H1_2 "s22"
+#define PROPID_H1_3 "s23"
+#define PROPID_H2_0 "s24"
+#define PROPID_H2_1 "s25"
+#define PROPID_H2_2 "s26"
+#define PROPID_H2_3 "s27"
+/* A row's elements of columns c0..3 (4, 3, 2 or 1 of them) at byte offset `at`
+ * from cov: one VLDM, 3 x (4 - c0) multiply-subtracts, one VSTM. */
+#define PROPID_ROW4(at, g)                                                                           \
+    "add ip, %[cov], %[" at "]\n\tvldmia ip, {s28-s31}\n\t"                                          \
+    PROPID_TERMS_C0(g "0", PROPID_H0_) PROPID_TERMS_C1(g "0", PROPID_H0_)                            \
+    PROPID_TERMS_C2(g "0", PROPID_H0_) PROPID_TERMS_C3(g "0", PROPID_H0_)                            \
+    PROPID_TERMS_C0(g "1", PROPID_H1_) PROPID_TERMS_C1(g "1", PROPID_H1_)                            \
+    PROPID_TERMS_C2(g "1", PROPID_H1_) PROPID_TERMS_C3(g "1", PROPID_H1_)                            \
+    PROPID_TERMS_C0(g "2", PROPID_H2_) PROPID_TERMS_C1(g "2", PROPID_H2_)                            \
+    PROPID_TERMS_C2(g "2", PROPID_H2_) PROPID_TERMS_C3(g "2", PROPID_H2_)                            \
+    "vstmia ip, {s28-s31}\n\t"
+#define PROPID_ROW3(at, g)                                                                           \
+    "add ip, %[cov], %[" at "]\n\tvldmia ip, {s29-s31}\n\t"                                          \
+    PROPID_TERMS_C1(g "0", PROPID_H0_) PROPID_TERMS_C2(g "0", PROPID_H0_)                            \
+    PROPID_TERMS_C3(g "0", PROPID_H0_)                                                               \
+    PROPID_TERMS_C1(g "1", PROPID_H1_) PROPID_TERMS_C2(g "1", PROPID_H1_)                            \
+    PROPID_TERMS_C3(g "1", PROPID_H1_)                                                               \
+    PROPID_TERMS_C1(g "2", PROPID_H2_) PROPID_TERMS_C2(g "2", PROPID_H2_)                            \
+    PROPID_TERMS_C3(g "2", PROPID_H2_)                                                               \
+    "vstmia ip, {s29-s31}\n\t"
+#define PROPID_ROW2(at, g)                                                                           \
+    "add ip, %[cov], %[" at "]\n\tvldmia ip, {s30-s31}\n\t"                                          \
+    PROPID_TERMS_C2(g "0", PROPID_H0_) PROPID_TERMS_C3(g "0", PROPID_H0_)                            \
+    PROPID_TERMS_C2(g "1", PROPID_H1_) PROPID_TERMS_C3(g "1", PROPID_H1_)                            \
+    PROPID_TERMS_C2(g "2", PROPID_H2_) PROPID_TERMS_C3(g "2", PROPID_H2_)                            \
+    "vstmia ip, {s30-s31}\n\t"
+#define PROPID_ROW1(at, g)                                                                           \
+    "add ip, %[cov], %[" at "]\n\tvldr s31, [ip]\n\t"                                                \
+    PROPID_TERMS_C3(g "0", PROPID_H0_) PROPID_TERMS_C3(g "1", PROPID_H1_)                            \
+    PROPID_TERMS_C3(g "2", PROPID_H2_)                                                               \
+    "vstr s31, [ip]\n\t"
+/* The vectors' values of columns c0..3 from h_k + j + c0 (j: column 0's). */
+#define PROPID_LOAD_H4 "vldmia %[h0], {s16-s19}\n\tvldmia %[h1], {s20-s23}\n\tvldmia %[h2], {s24-s27}\n\t"
+#define PROPID_LOAD_H3 "vldmia %[h0], {s17-s19}\n\tvldmia %[h1], {s21-s23}\n\tvldmia %[h2], {s25-s27}\n\t"
+#define PROPID_GAINS(r, g)                                                                           \
+    [g##0] "t"(gain[r][0]), [g##1] "t"(gain[r][1]), [g##2] "t"(gain[r][2])
+#define PROPID_BLOCK_CLOBBERS                                                                        \
+    "s16", "s17", "s18", "s19", "s20", "s21", "s22", "s23", "s24", "s25", "s26", "s27", "s28", "s29",  \
+        "s30", "s31", "ip", "memory"
+#define PROPID_AT(i, j) "n"(4u * propid_cov_index((i), (j)))
+
+/* Rows first..first+4 (or +3): gains g_k,i = h_k,i (1 / S_k) into registers
+ * the compiler chooses (outputs; s0-s15, the block kernels clobber the rest),
+ * and the states x_i + g_0,i nu_0 + g_1,i nu_1 + g_2,i nu_2 (three fused
+ * multiply-adds in that order, as the C loop contracts), the vectors' values,
+ * 1 / S, nu and the states moved by VLDM / VSTM. */
+#define PROPID_GAIN(r, k, value, inv) "vmul.f32 %[" r #k "], " value ", " inv "\n\t"
+#define PROPID_STATE_ROW(r, x)                                                                       \
+    "vfma.f32 " x ", %[" r "0], s29\n\tvfma.f32 " x ", %[" r "1], s30\n\tvfma.f32 " x ", %[" r "2], s31\n\t"
+#define PROPID_GAIN_OUT(r, g) [g##0] "=&t"(gain[r][0]), [g##1] "=&t"(gain[r][1]), [g##2] "=&t"(gain[r][2])
+static inline __attribute__((always_inline)) void
+gains_and_states_5(float gain[5][3], float *state, const float *h0, const float *h1, const float *h2,
+                   const float *inv_var, const float *innovation)
+{
+    __asm__ volatile("vldmia %[inv], {s29-s31}\n\t"
+                     "vldmia %[h0], {s16-s20}\n\tvldmia %[h1], {s21-s25}\n\t"
+                     PROPID_GAIN("ga", 0, "s16", "s29") PROPID_GAIN("ga", 1, "s21", "s30")
+                     PROPID_GAIN("gb", 0, "s17", "s29") PROPID_GAIN("gb", 1, "s22", "s30")
+                     PROPID_GAIN("gc", 0, "s18", "s29") PROPID_GAIN("gc", 1, "s23", "s30")
+                     PROPID_GAIN("gd", 0, "s19", "s29") PROPID_GAIN("gd", 1, "s24", "s30")
+                     PROPID_GAIN("ge", 0, "s20", "s29") PROPID_GAIN("ge", 1, "s25", "s30")
+                     "vldmia %[h2], {s16-s20}\n\t"
+                     PROPID_GAIN("ga", 2, "s16", "s31") PROPID_GAIN("gb", 2, "s17", "s31")
+                     PROPID_GAIN("gc", 2, "s18", "s31") PROPID_GAIN("gd", 2, "s19", "s31")
+                     PROPID_GAIN("ge", 2, "s20", "s31")
+                     "vldmia %[nu], {s29-s31}\n\tvldmia %[x], {s16-s20}\n\t"
+                     PROPID_STATE_ROW("ga", "s16") PROPID_STATE_ROW("gb", "s17") PROPID_STATE_ROW("gc", "s18")
+                     PROPID_STATE_ROW("gd", "s19") PROPID_STATE_ROW("ge", "s20")
+                     "vstmia %[x], {s16-s20}\n\t"
+                     : PROPID_GAIN_OUT(0, ga), PROPID_GAIN_OUT(1, gb), PROPID_GAIN_OUT(2, gc), PROPID_GAIN_OUT(3, gd),
+                       PROPID_GAIN_OUT(4, ge)
+                     : [h0] "r"(h0), [h1] "r"(h1), [h2] "r"(h2), [inv] "r"(inv_var), [nu] "r"(innovation),
+                       [x] "r"(state)
+                     : PROPID_BLOCK_CLOBBERS);
+}
+static inline __attribute__((always_inline)) void
+gains_and_states_4(float gain[5][3], float *state, const float *h0, const float *h1, const float *h2,
+                   const float *inv_var, const float *innovation)
+{
+    __asm__ volatile("vldmia %[inv], {s29-s31}\n\t"
+                     "vldmia %[h0], {s16-s19}\n\tvldmia %[h1], {s20-s23}\n\tvldmia %[h2], {s24-s27}\n\t"
+                     PROPID_GAIN("ga", 0, "s16", "s29") PROPID_GAIN("ga", 1, "s20", "s30") PROPID_GAIN("ga", 2, "s24", "s31")
+                     PROPID_GAIN("gb", 0, "s17", "s29") PROPID_GAIN("gb", 1, "s21", "s30") PROPID_GAIN("gb", 2, "s25", "s31")
+                     PROPID_GAIN("gc", 0, "s18", "s29") PROPID_GAIN("gc", 1, "s22", "s30") PROPID_GAIN("gc", 2, "s26", "s31")
+                     PROPID_GAIN("gd", 0, "s19", "s29") PROPID_GAIN("gd", 1, "s23", "s30") PROPID_GAIN("gd", 2, "s27", "s31")
+                     "vldmia %[nu], {s29-s31}\n\tvldmia %[x], {s16-s19}\n\t"
+                     PROPID_STATE_ROW("ga", "s16") PROPID_STATE_ROW("gb", "s17") PROPID_STATE_ROW("gc", "s18")
+                     PROPID_STATE_ROW("gd", "s19")
+                     "vstmia %[x], {s16-s19}\n\t"
+                     : PROPID_GAIN_OUT(0, ga), PROPID_GAIN_OUT(1, gb), PROPID_GAIN_OUT(2, gc), PROPID_GAIN_OUT(3, gd)
+                     : [h0] "r"(h0), [h1] "r"(h1), [h2] "r"(h2), [inv] "r"(inv_var), [nu] "r"(innovation),
+                       [x] "r"(state)
+                     : PROPID_BLOCK_CLOBBERS);
+}
+
+/* P_ij -= sum_k g_k,i h_k,j for five rows i = first.. (gains in registers) and
+ * four consecutive columns j.. right of their diagonal block: the columns' 12
+ * vector values in three VLDMs, each row's four elements in one VLDM and one
+ * VSTM (the C loop: 12 loads of the values, 20 loads and 20 stores). */
+static inline __attribute__((always_inline)) void
+downdate_tile_5x4(float *restrict cov, const uint32_t first, const uint32_t j, const float *h0, const float *h1,
+                  const float *h2, const float gain[5][3])
+{
+    __asm__ volatile(PROPID_LOAD_H4
+                     PROPID_ROW4("r0", "ga") PROPID_ROW4("r1", "gb") PROPID_ROW4("r2", "gc")
+                     PROPID_ROW4("r3", "gd") PROPID_ROW4("r4", "ge")
+                     :
+                     : [h0] "r"(h0 + j), [h1] "r"(h1 + j), [h2] "r"(h2 + j), [cov] "r"(cov),
+                       [r0] PROPID_AT(first, j), [r1] PROPID_AT(first + 1u, j), [r2] PROPID_AT(first + 2u, j),
+                       [r3] PROPID_AT(first + 3u, j), [r4] PROPID_AT(first + 4u, j),
+                       PROPID_GAINS(0, ga), PROPID_GAINS(1, gb), PROPID_GAINS(2, gc), PROPID_GAINS(3, gd),
+                       PROPID_GAINS(4, ge)
+                     : PROPID_BLOCK_CLOBBERS);
+}
+
+/* The group's diagonal block (upper triangle) but its first element (first,
+ * first): columns first+1..first+4 of five rows, each row from its diagonal
+ * or column first+1 on (4, 4, 3, 2, 1 elements: a VLDM and a VSTM each). */
+static inline __attribute__((always_inline)) void
+downdate_triangle_5(float *restrict cov, const uint32_t first, const float *h0, const float *h1, const float *h2,
+                    const float gain[5][3])
+{
+    __asm__ volatile(PROPID_LOAD_H4
+                     PROPID_ROW4("r0", "ga") PROPID_ROW4("r1", "gb") PROPID_ROW3("r2", "gc")
+                     PROPID_ROW2("r3", "gd") PROPID_ROW1("r4", "ge")
+                     :
+                     : [h0] "r"(h0 + first + 1u), [h1] "r"(h1 + first + 1u), [h2] "r"(h2 + first + 1u),
+                       [cov] "r"(cov), [r0] PROPID_AT(first, first + 1u), [r1] PROPID_AT(first + 1u, first + 1u),
+                       [r2] PROPID_AT(first + 2u, first + 2u), [r3] PROPID_AT(first + 3u, first + 3u),
+                       [r4] PROPID_AT(first + 4u, first + 4u),
+                       PROPID_GAINS(0, ga), PROPID_GAINS(1, gb), PROPID_GAINS(2, gc), PROPID_GAINS(3, gd),
+                       PROPID_GAINS(4, ge)
+                     : PROPID_BLOCK_CLOBBERS);
+}
+
+/* The same for a group of four rows: columns first+1..first+3 (3, 3, 2, 1). */
+static inline __attribute__((always_inline)) void
+downdate_triangle_4(float *restrict cov, const uint32_t first, const float *h0, const float *h1, const float *h2,
+                    const float gain[5][3])
+{
+    __asm__ volatile(PROPID_LOAD_H3
+                     PROPID_ROW3("r0", "ga") PROPID_ROW3("r1", "gb") PROPID_ROW2("r2", "gc")
+                     PROPID_ROW1("r3", "gd")
+                     :
+                     : [h0] "r"(h0 + first + 1u), [h1] "r"(h1 + first + 1u), [h2] "r"(h2 + first + 1u),
+                       [cov] "r"(cov), [r0] PROPID_AT(first, first + 1u), [r1] PROPID_AT(first + 1u, first + 1u),
+                       [r2] PROPID_AT(first + 2u, first + 2u), [r3] PROPID_AT(first + 3u, first + 3u),
+                       PROPID_GAINS(0, ga), PROPID_GAINS(1, gb), PROPID_GAINS(2, gc), PROPID_GAINS(3, gd)
+                     : PROPID_BLOCK_CLOBBERS);
+}
+#endif
+
 /* Rows first .. first + rows - 1 of the quad's three-term pass: their gains
  * g_k,i = h_k,i / S_k and state updates, the upper triangle of their diagonal
  * block, then every column to the right, where each h_j triple is loaded once
@@ -88,6 +265,14 @@ apply_row_group(float *restrict cov, propid_core_t *restrict core,
     const float nu2 = core->innovation[2];
     float gain[5][3];
     uint32_t outside = 0u;
+#if PROPID_ARM_BLOCK_MOVES
+    (void)inv0, (void)inv1, (void)inv2, (void)nu0, (void)nu1, (void)nu2;
+    if (rows == 5u) {
+        gains_and_states_5(gain, &state[first], &h0[first], &h1[first], &h2[first], pending->inv_var, core->innovation);
+    } else {
+        gains_and_states_4(gain, &state[first], &h0[first], &h1[first], &h2[first], pending->inv_var, core->innovation);
+    }
+#else
 PROPID_UNROLL(5)
     for (uint8_t r = 0; r < rows; ++r) {
         const uint8_t i = (uint8_t)(first + r);
@@ -97,6 +282,40 @@ PROPID_UNROLL(5)
         /* Summed from the state on: three multiply-adds. */
         state[i] = state[i] + gain[r][0] * nu0 + gain[r][1] * nu1 + gain[r][2] * nu2;
     }
+#endif
+#if PROPID_ARM_BLOCK_MOVES
+    /* Block moves (PROPID_ARM_BLOCK_MOVES): the columns right of the group four
+     * at a time while only the gains are live, the diagonal block but its first
+     * element, that element and the columns left over one at a time; then the
+     * variances' tests on their bit patterns read from memory (as floats the
+     * compiler would load them early and spill them). */
+    uint8_t j = (uint8_t)(first + rows);
+    if (rows == 5u) {
+PROPID_UNROLL(2)
+        for (; j + 4u <= PROPID_QUAD_STATES; j = (uint8_t)(j + 4u)) {
+            downdate_tile_5x4(cov, first, j, h0, h1, h2, (const float (*)[3])gain);
+        }
+        downdate_triangle_5(cov, first, h0, h1, h2, (const float (*)[3])gain);
+    } else {
+        downdate_triangle_4(cov, first, h0, h1, h2, (const float (*)[3])gain);
+    }
+    {
+        float *p = &cov[propid_cov_index(first, first)];
+        *p = *p - gain[0][0] * h0[first] - gain[0][1] * h1[first] - gain[0][2] * h2[first];
+    }
+PROPID_UNROLL(10)
+    for (; j < PROPID_QUAD_STATES; ++j) {
+        const float hj0 = h0[j];
+        const float hj1 = h1[j];
+        const float hj2 = h2[j];
+PROPID_UNROLL(5)
+        for (uint8_t r = 0; r < rows; ++r) {
+            float *p = &cov[propid_cov_index((uint32_t)first + r, j)];
+            *p = *p - gain[r][0] * hj0 - gain[r][1] * hj1 - gain[r][2] * hj2;
+        }
+    }
+    (void)derived; /* the variances are tested after the last group (apply_three_quad) */
+#else
 PROPID_UNROLL(5)
     for (uint8_t r = 0; r < rows; ++r) {
         const uint8_t i = (uint8_t)(first + r);
@@ -126,6 +345,7 @@ PROPID_UNROLL(5)
             *p = *p - gain[r][0] * hj0 - gain[r][1] * hj1 - gain[r][2] * hj2;
         }
     }
+#endif
     return outside;
 }
 
@@ -155,6 +375,19 @@ apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *r
     PROPID_RELOAD_BARRIER(pending->h0);
     PROPID_RELOAD_BARRIER(core->update_vector);
     outside |= apply_row_group(cov, core, pending, derived, 10u, 4u);
+#if PROPID_ARM_BLOCK_MOVES
+    /* The new variances' tests, on their bit patterns read from memory (tested
+     * inside the groups, the compiler loads them early and spills them). */
+PROPID_UNROLL(14)
+    for (uint8_t i = 0; i < PROPID_QUAD_STATES; ++i) {
+        const uint8_t kind = i < PROPID_QUAD_FIRST_THRUST ? PROPID_KIND_RATE
+                             : (i < PROPID_QUAD_FIRST_DRAG ? PROPID_KIND_THRUST
+                                : (i < PROPID_QUAD_FIRST_BIAS ? PROPID_KIND_DRAG : PROPID_KIND_BIAS));
+        uint32_t bits;
+        memcpy(&bits, &cov[propid_cov_index(i, i)], sizeof(bits));
+        outside |= (uint32_t)(bits - propid_kind_floor_bits(derived, kind)) > derived->kind_range_bits[kind] ? 1u : 0u;
+    }
+#endif
     return outside == 0u;
 }
 #endif

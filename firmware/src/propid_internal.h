@@ -170,6 +170,21 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
 #define PROPID_SCHEDULE_BARRIER() ((void)0)
 #define PROPID_RELOAD_BARRIER(object) ((void)0)
 #endif
+/* PROPID_ARM_BLOCK_MOVES: the quad downdate's rectangular tiles move their
+ * rows' consecutive P elements and the vectors' consecutive values with the
+ * Cortex-M4's VLDM/VSTM (GNU inline assembly: C has no way to ask for them, and
+ * GCC emits them only for register saves), with the same fused multiply-
+ * subtracts in the same order as the C loop compiled with -ffp-contract=fast
+ * (the target build's flag): the same bits (propid_gyro.c, apply_row_group).
+ * Only where the instructions exist (Thumb-2, a single-precision FPU with fused
+ * multiply-add) and only for straight-line kernels (not in the size-lean build);
+ * -DPROPID_NO_ARM_ASM keeps the portable C everywhere. */
+#if !defined(PROPID_NO_ARM_ASM) && defined(__GNUC__) && defined(__thumb2__) && defined(__ARM_FP) && \
+    ((__ARM_FP & 4) != 0) && defined(__ARM_FEATURE_FMA) && !PROPID_SIZE_LEAN
+#define PROPID_ARM_BLOCK_MOVES 1
+#else
+#define PROPID_ARM_BLOCK_MOVES 0
+#endif
 /* PROPID_UNROLL(n): the pragma before a kernel's loop that asks for it fully
  * unrolled (straight-line code: fewer instructions per step, ~4 B of flash per
  * instruction); empty in the size-lean build (PROPID_SIZE_LEAN), whose loops stay
