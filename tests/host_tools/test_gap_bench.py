@@ -275,6 +275,14 @@ def test_three_flights_end_to_end_blind_and_scored(tmp_path, sitl_binary):
             assert effect["strength"] != 0 and effect["detectability"] > 0
     assert "least squares" in render(out)
     assert "single effects right / flown, by D" in render(out)
+    # the census: the stand-in names nothing and reports no entry, so each headline single's truth
+    # is missed as untestable (or under a reporting floor, checked first)
+    missed = [f for f in saved["flights"] if f["kind"] == "single" and f["tool"]["headline"]]
+    assert sum(saved["census"]["misses"].values()) == len(missed)
+    assert set(saved["census"]["misses"]) <= {"untestable", "under a reporting floor"}
+    assert saved["census"]["false"] == {}
+    assert all("census" in f["tool"] for f in saved["flights"])
+    assert "why true effects were missed" in render(out)
 
 
 def test_two_flights_per_diagnosis_end_to_end(tmp_path, sitl_binary):

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from propid.gapbench import baseline
+from propid.gapbench.census import flight_census, summarize_census
 from propid.gapbench.flights import FlightMaker, clear
 from propid.gapbench.magnitudes import DETECTABILITY_MAX, DETECTION_LIMIT, EFFECT_RANGES
 from propid.gapbench.plan import FlightSpec, make_plan
@@ -163,6 +164,9 @@ def run_bench(config: BenchConfig, progress: bool = True) -> dict:
     outcomes.sort(key=lambda o: o["answer"]["flight_id"])
     tool_records = [score_flight(o["answer"], (o["tool"] or {}).get("result")) for o in outcomes] \
         if with_tool else []
+    # why each headline miss and false effect happened, from the tool's OUT.json (census.py)
+    for o, record in zip(outcomes, tool_records):
+        record["census"] = flight_census(o["answer"], (o["tool"] or {}).get("result"), record)
     base_records = [score_flight(o["answer"], o["baseline"]) for o in outcomes]
     tool_walls = [o["tool"]["wall_s"] for o in outcomes if o.get("tool")]
     result = {
@@ -178,6 +182,7 @@ def run_bench(config: BenchConfig, progress: bool = True) -> dict:
         "tool_available": with_tool,
         "tool_unavailable_reason": None if with_tool else why,
         "tool": summarize(tool_records) if with_tool else None,
+        "census": summarize_census([r["census"] for r in tool_records], tool_records) if with_tool else None,
         "baseline": summarize(base_records),
         "flights": [
             {

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from propid.gapbench.census import render_census
 from propid.gapbench.magnitudes import EFFECTS
 
 
@@ -73,6 +74,8 @@ def render(result: dict) -> str:
         lines.append(f"propid gap not run: {result.get('tool_unavailable_reason')}")
     else:
         lines += ["", power_curves(tool)]
+        if result.get("census") is not None:
+            lines += ["", render_census(result["census"])]
     return "\n".join(lines)
 
 
