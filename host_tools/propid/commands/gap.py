@@ -184,8 +184,13 @@ def run(args: argparse.Namespace) -> int:
         if result["calibration"]["calibrated"] and result.get("base_fit_after"):
             from propid.gap.calibration import base_fit_with_calibrated_inertia
 
+            inertia_fit = next((e["params"] for e in result["effects"]
+                                if e["id"] == "inertia_error" and e["significant"]), {})
+            file_over_fit = {key: inertia_fit[f"{axis}_least_squares"] / inertia_fit[axis]
+                             for key, axis in (("kf_roll", "inertia_scale_xx"), ("kf_pitch", "inertia_scale_yy"))
+                             if f"{axis}_least_squares" in inertia_fit}
             result["calibration"]["base_fit_after_with_calibrated_inertia"] = base_fit_with_calibrated_inertia(
-                result["base_fit_after"], result["calibration"]["torque_gain"])
+                result["base_fit_after"], result["calibration"]["torque_gain"], file_over_fit)
     else:
         from propid.gap.calibration import not_calibrated
 

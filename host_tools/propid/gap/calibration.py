@@ -180,15 +180,19 @@ def calibrate_or_fall_back(mode: str, logs: list[FlightLog], vehicle: Vehicle, c
         return corrected, dict(out, **getattr(exc, "details", {}))
 
 
-def base_fit_with_calibrated_inertia(base_fit_after: dict, gain: float) -> dict:
+def base_fit_with_calibrated_inertia(base_fit_after: dict, gain: float, file_over_fit: dict | None = None) -> dict:
     """gap's after-fit read with the calibrated Jxx, Jyy: the roll/pitch torque kf is linear in the axis
-    inertia, so it is the after-fit's times c (thrust and yaw unchanged). Shown beside the after-fit: the
-    filter's torque scale and the fits' are different estimators' and need not agree."""
+    inertia, so it is the after-fit's times the calibrated inertia over the inertia the after-fit used:
+    c times `file_over_fit` (per axis, the written file's torque scale over the after-fit's: the file
+    carries the least-squares scale, the after-fit the instrument's; 1 when they are the same); thrust and
+    yaw unchanged. Shown beside the after-fit: the filter's torque scale and the fits' are different
+    estimators' and need not agree."""
+    file_over_fit = file_over_fit or {}
     out = {}
     for key, entry in base_fit_after.items():
         if key in ("kf_roll", "kf_pitch") and isinstance(entry, dict) and entry.get("value") is not None:
-            out[key] = {"value": entry["value"] * gain,
-                        "ci": [v * gain if v is not None else None for v in entry.get("ci") or []]}
+            g = gain * file_over_fit.get(key, 1.0)
+            out[key] = {"value": entry["value"] * g, "ci": [v * g if v is not None else None for v in entry.get("ci") or []]}
         else:
             out[key] = entry
     return out

@@ -4,7 +4,7 @@ the vehicle JSON where the model can carry them (flight-log v1 extension keys, d
 | effect | written as |
 |---|---|
 | esc_delay | no fixed `esc_delay_s`: the key is left out, so `propid replay` measures the lag per log |
-| inertia_error | `inertia` Jxx, Jyy times the fitted scale (Jzz kept: no independent yaw reference) |
+| inertia_error | `inertia` Jxx, Jyy times the least-squares scale (Jzz kept: no independent yaw reference) |
 | gyro_scale | `gyro_scale` = file's times the fitted diagonal (the off-diagonal part is reported, not carried) |
 | com_offset | rotor positions minus the fitted offset (x, y); `com_offset` = file's + offset |
 | aero_damping | `aero_damping` = file's + fitted [dx, dy, dz] |
@@ -12,6 +12,14 @@ the vehicle JSON where the model can carry them (flight-log v1 extension keys, d
 | closed_loop_cancellation | `loop_bandwidth_hz` = the band edge the rule chose (a lower bound when it is the highest candidate) |
 Others (rotor_drag, translational_lift, ground_effect, thrust_nonlinearity) have no key:
 listed in `not_carried`.
+
+Why the least-squares torque scale: the file is read by the firmware filter, which takes the
+logged rotor speeds as its input without an instrument, so it reads the torque gain the way least
+squares does (attenuated where the logged speeds carry errors the torque does not share). With
+motor commands, inertia_error's `params` carry the instrument's scale (the base fit's, without
+that attenuation) and the least-squares one beside it (`*_least_squares`); the file takes the
+latter, the estimator class that will read it. Without commands the two are the same number.
+Measured in docs/gap.md ("Crazyflie": the file replayed gyro only on held-out runs).
 
 Why no fixed delay: a telemetry lag belongs to a log (its telemetry schedule, its buffers),
 not to the vehicle: on one vehicle's logs it differs from run to run, and the filter's delay
@@ -44,11 +52,17 @@ def corrected_vehicle(vehicle: Vehicle, effects: list[dict]) -> tuple[Vehicle, d
             applied[eid] = {"esc_delay_s": "per log (left out: propid replay --esc-delay auto)",
                             "fitted_delay_s": float((vehicle.esc_delay_s or 0.0) + p["delay_s"])}
         elif eid == "inertia_error":
+            # the file is read by the filter, which takes the rotor speeds without an instrument: the torque
+            # scale as least squares measures it (attenuation included), not the instrument's (module docstring)
+            sx = p.get("inertia_scale_xx_least_squares", p["inertia_scale_xx"])
+            sy = p.get("inertia_scale_yy_least_squares", p["inertia_scale_yy"])
             j = np.array(out.inertia, dtype=float)
-            j[0, 0] *= p["inertia_scale_xx"]
-            j[1, 1] *= p["inertia_scale_yy"]
+            j[0, 0] *= sx
+            j[1, 1] *= sy
             out.inertia = j
-            applied[eid] = {"inertia": np.diag(j).tolist()}
+            applied[eid] = {"inertia": np.diag(j).tolist(), "scale": [float(sx), float(sy)],
+                            "scale_source": "least squares" if "inertia_scale_xx_least_squares" in p else
+                            "the effect's fit (no instrument correction)"}
         elif eid == "gyro_scale":
             old = np.array(vehicle.gyro_scale or [1.0, 1.0, 1.0])
             out.gyro_scale = (old * np.array(p["scale"])).tolist()
