@@ -101,8 +101,12 @@ def test_gap_cli_calibrates_on_top_of_its_effects_and_records_it(flights, tmp_pa
     assert "--thrust-coeff-rel-walk auto" in cal["replay_options"]["command"]
     assert "--skip-repeats" in cal["replay_options"]["command"]
     assert cal["calibration_replay"]["with_accelerometer"]["aiding"] == "gyro+accel"
-    scaled = cal["base_fit_after_with_calibrated_inertia"]  # the after-fit read with the calibrated Jxx
-    assert scaled["kf_roll"]["value"] == pytest.approx(result["base_fit_after"]["kf_roll"]["value"] * cal["torque_gain"])
+    # the after-fit read with the calibrated Jxx: c times the file's scale (least squares) over the after-fit's
+    scaled = cal["base_fit_after_with_calibrated_inertia"]
+    params = next(e["params"] for e in result["effects"] if e["id"] == "inertia_error")
+    file_over_fit = params.get("inertia_scale_xx_least_squares", params["inertia_scale_xx"]) / params["inertia_scale_xx"]
+    assert scaled["kf_roll"]["value"] == pytest.approx(
+        result["base_fit_after"]["kf_roll"]["value"] * cal["torque_gain"] * file_over_fit)
     assert scaled["kf_thrust"] == result["base_fit_after"]["kf_thrust"]
     truth_j = (1 + INERTIA_ERROR) * np.diag(_vehicle(fit).inertia)
     assert np.allclose(np.diag(written.inertia)[:2], truth_j[:2], rtol=0.10)

@@ -10,7 +10,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
-from propid.gap import alignment, basefit, scoring, selection, shrink, significance, where, whitening
+from propid.gap import alignment, basefit, coherence, scoring, selection, shrink, significance, where, whitening
 from propid.gap.vehicle_out import corrected_vehicle
 from propid.gap.design import base_columns, build_design, responses
 from propid.gap.effects import (ALL_IDS, CONDITIONED_ON, EFFECTS, ESC_DELAY, MIN_REPORTED_LAG_S, RESIDUAL_LAG,
@@ -489,6 +489,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         # full_residual: base + every testable candidate, in-sample on these rows (the floor)
         result["shrink"] = shrink.shrink_table(design, base_res, final_res, inertia, vehicle.mass, full_residual)
         result["shrink_on"] = "cross-validation held-out blocks" if len(flights) < 3 else "cross-validation held-out flights"
+    # what bounds the shrink: the torque no linear model of the logged input channels predicts
+    result["shrink_bound"] = coherence.shrink_bound(work_held or work, result["shrink"])
     corrected, carried = corrected_vehicle(original_vehicle, entries)
     result["vehicle_out"] = carried
     result["_internal"] = {"corrected": corrected, "design": design, "base_res": base_res, "final_res": final_res,
