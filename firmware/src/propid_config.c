@@ -681,7 +681,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     }
     /* The hold sets the time of an error of the configured size: nothing without one.
      * The compensation's memory is per axis with one time for all rotors. */
-    if (config->rotor_speed_noise_hold > 1u ||
+    if (config->rotor_speed_noise_hold > 2u ||
         (config->rotor_speed_noise_hold && (!(config->rotor_speed_noise > 0.0f) || config->input_error_compensation))) {
         PROPID_BAD("rotor_speed_noise_hold");
     }

@@ -575,6 +575,25 @@ static float held_span(propid_core_t *core, uint8_t rotor, float dt, float ceili
     return span < ceiling ? span : ceiling;
 }
 
+/* The same age with the configured time as the span's floor instead of its ceiling
+ * (rotor_speed_noise_hold = 2; docs/math.md §14, "The hold as a floor"): a moving
+ * rotor's quantisation error follows its speed, not its code changes, so it keeps
+ * the configured time; a value that has stood longer than that (a hover's code)
+ * spans its hold, up to the configuration's largest time. */
+static float held_span_floor(propid_core_t *core, uint8_t rotor, float dt, float floor_span)
+{
+    float held = dt;
+    if (core->rotor_speed_sq[rotor] != core->input_speed_sq[rotor]) {
+        core->input_hold_age[rotor] = 0.0f;
+    } else {
+        held = dt + 2.0f * core->input_hold_age[rotor];
+        const float age = core->input_hold_age[rotor] + dt;
+        core->input_hold_age[rotor] = age < PROPID_ROTOR_SPEED_NOISE_TIME_MAX ? age : PROPID_ROTOR_SPEED_NOISE_TIME_MAX;
+    }
+    const float span = held > floor_span ? held : floor_span;
+    return span < PROPID_ROTOR_SPEED_NOISE_TIME_MAX ? span : PROPID_ROTOR_SPEED_NOISE_TIME_MAX;
+}
+
 /* Not inlined: its per-rotor arrays stay out of propid_predict_covariance's frame,
  * which is on the deepest stack chain (predict_covariance_any). */
 static __attribute__((noinline)) void add_input_noise(const propid_derived_t *derived, propid_core_t *core, float dt)
@@ -585,7 +604,12 @@ static __attribute__((noinline)) void add_input_noise(const propid_derived_t *de
     const float span = derived->input_noise_time > dt ? derived->input_noise_time : dt;
     float weight[PROPID_MAX_ROTORS];
     for (uint8_t i = 0; i < rotor_count; ++i) {
-        const float rotor_span = derived->input_noise_hold ? held_span(core, i, dt, span) : span;
+        float rotor_span = span;
+        if (derived->input_noise_hold == 1u) {
+            rotor_span = held_span(core, i, dt, span);
+        } else if (derived->input_noise_hold == 2u) {
+            rotor_span = held_span_floor(core, i, dt, span);
+        }
         weight[i] = 0.5f * derived->input_noise_var * dt * rotor_span;
     }
     /* B at the drag coefficients per rotor (kept in their yaw basis; this term is

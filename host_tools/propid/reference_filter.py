@@ -34,6 +34,7 @@ _F32_MAX = float(np.finfo(np.float32).max)
 VAR_LOADING = float(np.finfo(np.float32).eps)
 ROUNDING_TOL = 2.0 * VAR_LOADING
 UPDATE_LOADING = 64.0 * VAR_LOADING
+ROTOR_SPEED_NOISE_TIME_MAX = 600.0  # C: PROPID_ROTOR_SPEED_NOISE_TIME_MAX [s]
 GATE_OFF_SQ = 1.0e30  # C: PROPID_GATE_OFF_SQ (gating off still refuses 1e15-sigma innovations)
 
 
@@ -135,7 +136,7 @@ class ReferenceFilter:
         self.input_noise_var = 4.0 * _f32(config.rotor_speed_noise) ** 2
         self.input_noise_time = _f32(config.rotor_speed_noise_time)
         self.input_compensation = bool(getattr(config, "input_error_compensation", 0))
-        self.input_noise_hold = bool(getattr(config, "rotor_speed_noise_hold", 0))
+        self.input_noise_hold = int(getattr(config, "rotor_speed_noise_hold", 0))  # 0, 1 or 2 (floor)
         self.converged_var = c["converged_rel_std"] ** 2
         # C (propid_config.c): a claim counts the configured inertia's scale error too, which
         # the data cannot see (for kf not when the torque-scale state takes it).
@@ -331,8 +332,15 @@ class ReferenceFilter:
     # ------------------------------------------------------------------ model
     def _held_spans(self, dt: float, ceiling: float) -> np.ndarray:
         """The held error's span per rotor (C: held_span, docs/math.md §14): dt when the
-        value changes within the step, else dt + 2 age, bounded by the configured time."""
+        value changes within the step, else dt + 2 age, bounded by the configured time
+        (hold 2: raised to it, bounded by the largest time)."""
         changed = self.rotor_speed_sq != self.input_speed_sq
+        if self.input_noise_hold == 2:
+            # C: held_span_floor: the configured time is the floor, the largest time the ceiling.
+            largest = ROTOR_SPEED_NOISE_TIME_MAX
+            held = np.where(changed, dt, dt + 2.0 * self.input_hold_age)
+            self.input_hold_age = np.where(changed, 0.0, np.minimum(self.input_hold_age + dt, largest))
+            return np.minimum(np.maximum(held, ceiling), largest)
         span = np.where(changed, dt, np.minimum(dt + 2.0 * self.input_hold_age, ceiling))
         self.input_hold_age = np.where(changed, 0.0, np.minimum(self.input_hold_age + dt, ceiling))
         return span

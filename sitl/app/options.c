@@ -359,6 +359,10 @@ static const opt_t options[] = {
          "filter: that error's correlation time per rotor from the telemetry,\n"
          "how long the rotor's value has stood (the configured time its\n"
          "ceiling; docs/math.md §14). Also with --filter-sensor-errors"),
+    FLAG(NULL, "filter-rotor-speed-noise-hold-floor", filter_rotor_speed_noise_hold, 2,
+         "filter: the same hold with the configured time as its floor, the\n"
+         "firmware's largest time its ceiling (rotor_speed_noise_hold = 2,\n"
+         "docs/math.md §14). Also with --filter-sensor-errors"),
     NUMBER(NULL, "filter-inertia-std", filter_inertia_rel_std, 0.0, 1.0, "R",
            "filter: relative std of the vehicle file's inertia scale\n"
            "(inertia_rel_std): the data cannot see it, converged claims\n"
@@ -390,6 +394,10 @@ static const opt_t options[] = {
          "compensation; delay = the ESC latency.\n"
          "Replaces --filter-rotor-speed-noise(-time), --filter-esc-delay\n"
          "and --filter-input-error-compensation"),
+    FLAG(NULL, "filter-report-age", filter_report_age, 1,
+         "filter: add to its delay the mean age of the newest report at the\n"
+         "gyro samples, in whole gyro periods (reports slower than the gyro:\n"
+         "the trapezoid input lags the step by that age; docs/math.md §2)"),
 
     NUMBER("Disturbance", "disturbance-torque", disturbance_torque_std, 0.0, 10.0, "NM",
            "a random body torque outside every model, std per axis [N m]:\n"

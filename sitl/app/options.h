@@ -112,6 +112,7 @@ typedef struct {
     int filter_aero_damping;              /* 1: the airframe's rate damping (its aero_damping effect at
                                              hover speed) in the filter's model (docs/math.md §17) */
     int filter_sensor_errors;           /* input-error terms from the sensor model (sensor_errors.h) */
+    int filter_report_age;              /* delay + the fused report's mean age in whole gyro periods (sensor_errors.h) */
 
     /* Propeller damage scenario and the firmware's damage detector. */
     sitl_damage_t damage[SITL_MAX_DAMAGE];

@@ -47,3 +47,30 @@ int sitl_sensor_errors(const sitl_vehicle_t *v, const sitl_esc_params_t *esc, co
     out->rotor_delay_s = esc->latency_s;
     return 0;
 }
+
+double sitl_report_mean_age(const sitl_esc_params_t *esc, double gyro_rate_hz, double gyro_first_s)
+{
+    /* Instants in nanoseconds, rounded as the simulator's schedules round them. */
+    const double report_ns = 1e9 / esc->rate_hz;
+    const double gyro_ns = 1e9 / gyro_rate_hz;
+    const double phase_ns = esc->phase_s * 1e9;
+    const double latency_ns = llround(esc->latency_s * 1e9);
+    const long samples = lround(gyro_rate_hz);
+    double age_sum = 0.0;
+    long counted = 0;
+    for (long k = 0; k < samples; k++) {
+        const double reach = (double)llround(gyro_first_s * 1e9 + (double)k * gyro_ns) + latency_ns;
+        long long j = (long long)floor((reach - phase_ns) / report_ns) + 1;
+        double arrived = (double)llround(phase_ns + (double)j * report_ns);
+        while (j >= 0 && arrived > reach) { /* the newest report that arrived by the reach */
+            j--;
+            arrived = (double)llround(phase_ns + (double)j * report_ns);
+        }
+        if (j < 0) {
+            continue;
+        }
+        age_sum += reach - arrived; /* the gyro time minus the report's measurement time */
+        counted++;
+    }
+    return counted > 0 ? age_sum / (double)counted * 1e-9 : 0.0;
+}

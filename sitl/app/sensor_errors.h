@@ -34,4 +34,14 @@ typedef struct {
 int sitl_sensor_errors(const sitl_vehicle_t *v, const sitl_esc_params_t *esc, const double *flown_kf,
                        sitl_sensor_errors_t *out);
 
+/* Mean age [s] of the newest rotor-speed report the filter holds at a gyro sample
+ * (--filter-report-age, docs/math.md §2 "What the prediction misses"): reports
+ * every 1 / esc->rate_hz from esc->phase_s, each measured esc->latency_s before it
+ * arrives, paired with the gyro sample at t when they arrived by t + latency (the
+ * filter told the latency as its delay); gyro samples every 1 / gyro_rate_hz from
+ * gyro_first_s. Averaged over one second of gyro samples (the streams' common
+ * period for rates in whole hertz). Unlocked clocks average half the report
+ * period. */
+double sitl_report_mean_age(const sitl_esc_params_t *esc, double gyro_rate_hz, double gyro_first_s);
+
 #endif /* SITL_SENSOR_ERRORS_H */

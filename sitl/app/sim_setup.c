@@ -220,9 +220,25 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
         c->rotor_delay_us = (int32_t)lround(e.rotor_delay_s * 1e6);
         c->input_error_compensation = 0u; /* the truncation's error is not classical (sensor_errors.c) */
         held_by_rule = e.rotor_speed_noise_hold;
+        if (opts->filter_rotor_speed_noise_hold == 2) {
+            /* The hold as a floor: the rule's fixed time is the floor, whatever the decode. */
+            c->rotor_speed_noise_time = (float)SITL_HELD_STEP_TIME_S;
+        }
+    }
+    if (opts->filter_report_age) {
+        /* The trapezoid of the reports held at a step's two ends lags the step by
+         * the held report's mean age (docs/math.md §2); the delay buffer can move
+         * the pairing only by whole gyro periods, so the nearest whole number of
+         * them is added: what is left is at most half a period. */
+        const double gyro_first_s = opts->imu_sample_at_start ? 0.0 : 1.0 / opts->imu.rate_hz;
+        const double age = sitl_report_mean_age(&opts->esc, opts->imu.rate_hz, gyro_first_s);
+        const double periods = floor(age * opts->imu.rate_hz + 0.5);
+        c->rotor_delay_us += (int32_t)lround(periods * 1e6 / opts->imu.rate_hz);
     }
     /* After the sensor errors, which set the error's size and ceiling time (and,
      * decoded at the code's middle, the hold). */
-    c->rotor_speed_noise_hold = (uint8_t)(opts->filter_rotor_speed_noise_hold != 0 || held_by_rule);
+    c->rotor_speed_noise_hold = (uint8_t)(opts->filter_rotor_speed_noise_hold == 2
+                                              ? 2
+                                              : (opts->filter_rotor_speed_noise_hold != 0 || held_by_rule));
     return propid_config_check(c, bad_field);
 }

@@ -6,7 +6,8 @@
  *   nothing elsewhere, B computed here densely from the model's Jacobian at the
  *   current coefficients (quad layout, general lists, hexa);
  * - with rotor_speed_noise_hold, the span per rotor from how long its value
- *   has stood (dt + 2 age, a change renews it, the configured time its ceiling);
+ *   has stood (dt + 2 age, a change renews it, the configured time its ceiling;
+ *   with hold = 2 its floor);
  * - the configuration check refuses bad values by name.
  */
 #include <math.h>
@@ -178,6 +179,56 @@ static void test_held_input_error_spans_from_the_telemetry(void)
     }
 }
 
+/* rotor_speed_noise_hold = 2 (docs/math.md §14, "The hold as a floor"): the same age,
+ * with the configured time the span's floor and no ceiling below the configuration's
+ * largest time. Same five steps as above, floor 2 dt: a rotor that changes every step
+ * keeps 2 dt (the hold alone would give dt), a standing one grows past the 5 dt the
+ * ceiling gave (7 dt, 9 dt). */
+static void test_held_input_error_with_the_time_as_floor(void)
+{
+    static const uint8_t quad_and_hexa[2] = {4u, 6u};
+    for (uint8_t v = 0; v < 2u; ++v) {
+        const uint8_t rotors = quad_and_hexa[v];
+        const float sigma = 3.0f;
+        const float dt = 0.002f;
+        propid_config_t config;
+        input_error_configure(&config, rotors, 0);
+        config.rotor_speed_noise = sigma;
+        config.rotor_speed_noise_time = 2.0f * dt;
+        config.rotor_speed_noise_hold = 2u;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, NULL));
+        input_error_off_prior(&with_noise, &config);
+        static const float expected_span[6][4] = {
+            {2.0f, 2.0f, 2.0f, 2.0f}, /* changed: dt, raised to the floor */
+            {2.0f, 2.0f, 2.0f, 2.0f}, /* the new values' first full step: dt, floor */
+            {2.0f, 3.0f, 3.0f, 3.0f}, /* stood one step */
+            {2.0f, 5.0f, 2.0f, 2.0f}, /* rotors 2 and 3 change */
+            {2.0f, 7.0f, 2.0f, 2.0f}, /* past the time: no ceiling at 2 dt */
+            {2.0f, 9.0f, 3.0f, 3.0f},
+        };
+        for (uint8_t step = 0; step < 6u; ++step) {
+            if (step > 0u) {
+                memcpy(with_noise.core.input_speed_sq, with_noise.core.rotor_speed_sq,
+                       sizeof(with_noise.core.input_speed_sq));
+                with_noise.core.rotor_speed_sq[0] += 100.0f;
+                if (step == 3u) {
+                    with_noise.core.rotor_speed_sq[2] += 100.0f;
+                    with_noise.core.rotor_speed_sq[3] += 100.0f;
+                }
+            }
+            without_noise = with_noise;
+            without_noise.derived.input_noise_var = 0.0f;
+            predict_both(dt);
+            float span[PROPID_MAX_ROTORS];
+            for (uint8_t i = 0; i < rotors; ++i) {
+                span[i] = dt * expected_span[step][i < 4u ? i : 1u];
+            }
+            check_block(&with_noise, &without_noise, span, sigma, dt);
+            TEST_ASSERT_EQUAL_MEMORY(without_noise.core.state, with_noise.core.state, sizeof(with_noise.core.state));
+        }
+    }
+}
+
 /* The hold with a configured time of one step or less is the plain term, bit for
  * bit: every span is dt either way. */
 static void test_held_input_error_within_one_step_is_the_plain_term(void)
@@ -217,10 +268,13 @@ static void test_input_noise_config_is_checked(void)
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
     config.rotor_speed_noise_time = 0.002f;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
-    /* The hold: 0 or 1, with an error size, not with the compensation. */
-    config.rotor_speed_noise_hold = 2u;
+    /* The hold: 0, 1 or 2 (the time as floor), with an error size, not with the
+     * compensation. */
+    config.rotor_speed_noise_hold = 3u;
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
     TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_hold", bad);
+    config.rotor_speed_noise_hold = 2u;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
     config.rotor_speed_noise_hold = 1u;
     config.input_error_compensation = 1u;
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
@@ -234,12 +288,12 @@ static void test_input_noise_config_is_checked(void)
 
 /* The largest accepted error (sigma = max_rotor_speed, correlated over 1 s, and over
  * the largest time with the hold from the telemetry, whose held speed here stands for
- * the whole run) at full speed with wild body rates: every push is accepted or gated
+ * the whole run, and with the hold above a floor of 1 s, growing to that time) at full speed with wild body rates: every push is accepted or gated
  * by a status, the estimates stay finite and the variances positive. */
 static void test_largest_input_noise_keeps_the_filter_finite(void)
 {
-    const float times[2] = {1.0f, PROPID_ROTOR_SPEED_NOISE_TIME_MAX};
-    for (uint8_t run = 0; run < 2u; ++run) {
+    const float times[3] = {1.0f, PROPID_ROTOR_SPEED_NOISE_TIME_MAX, 1.0f};
+    for (uint8_t run = 0; run < 3u; ++run) {
         propid_config_t config;
         input_error_configure(&config, 4u, 0);
         config.rotor_speed_noise = config.max_rotor_speed;
@@ -289,6 +343,7 @@ int main(void)
     RUN_TEST(test_input_noise_adds_its_block_to_the_rate_covariance);
     RUN_TEST(test_input_noise_off_is_the_plain_prediction);
     RUN_TEST(test_held_input_error_spans_from_the_telemetry);
+    RUN_TEST(test_held_input_error_with_the_time_as_floor);
     RUN_TEST(test_held_input_error_within_one_step_is_the_plain_term);
     RUN_TEST(test_input_noise_config_is_checked);
     RUN_TEST(test_largest_input_noise_keeps_the_filter_finite);

@@ -232,18 +232,20 @@ def test_c_agrees_with_reference_with_input_noise(flight, options):
 
 
 @pytest.mark.parametrize("options", ["plain", "all"])
-def test_c_agrees_with_reference_with_held_input_noise(flight, options):
+@pytest.mark.parametrize("hold", [1, 2])
+def test_c_agrees_with_reference_with_held_input_noise(flight, options, hold):
     """The input error's correlation time per rotor from how long its value has stood
-    (rotor_speed_noise_hold, docs/math.md §14), on the flight's speeds quantised to a 25 rad/s
-    grid so that values stand for several samples: same bounds, and the hold changes the run."""
+    (rotor_speed_noise_hold, docs/math.md §14; 2: the configured time its floor), on the
+    flight's speeds quantised to a 25 rad/s grid so that values stand for several samples:
+    same bounds, and the hold changes the run."""
     quantised = [(t, kind, [25.0 * round(v / 25.0) for v in values] if kind == "rotor" else values)
                  for t, kind, values in flight]
     noisy = make_config(options).with_overrides(rotor_speed_noise=20.0, rotor_speed_noise_time=0.05)
-    config = noisy.with_overrides(rotor_speed_noise_hold=1)
+    config = noisy.with_overrides(rotor_speed_noise_hold=hold)
     trace_ref = replay(ReferenceFilter(config), quantised)
     trace_c = replay(CFilter(config), quantised)
     state_err, cov_err = disagreement(trace_c, trace_ref)
-    print(f"C vs reference, held input noise ({options}): max |dx|/std = {state_err:.3g}, "
+    print(f"C vs reference, held input noise ({options}, hold {hold}): max |dx|/std = {state_err:.3g}, "
           f"max |dP_ii|/P_ii = {cov_err:.3g}")
     assert state_err < STATE_TOL_SIGMA
     assert cov_err < COV_TOL_REL

@@ -1,7 +1,7 @@
 /*
  * The filter's input-error terms from the sensor model (sensor_errors.h):
- * the DShot step at the flown hover speed and the latency, against an
- * independent computation.
+ * the DShot step at the flown hover speed, the latency and the held report's
+ * mean age, against an independent computation.
  */
 #include <math.h>
 
@@ -126,6 +126,27 @@ static void test_exact_speeds_have_no_input_noise(void)
     TEST_ASSERT_EQUAL_DOUBLE(0.0, e.rotor_delay_s);
 }
 
+/* The mean age of the newest report at the gyro samples (--filter-report-age),
+ * against the instants counted by hand: the default sensors (reports every 2 ms from
+ * 0.25 ms, measured 1 ms before arrival; gyro every 1 ms from 1 ms) hold, at the gyro
+ * samples, reports aged 0.75 and 1.75 ms in turn: 1.25 ms. The paper's reports at the
+ * gyro instants without latency: 0. Reports every 3 ms from 0 against a 1 kHz gyro,
+ * no latency: ages 1, 2, 0 ms in turn: 1 ms (half the period, as unlocked clocks
+ * average). */
+static void test_report_mean_age(void)
+{
+    sitl_esc_params_t esc;
+    sitl_esc_default_params(&esc);
+    esc.rate_hz = 500.0;
+    esc.phase_s = 0.25e-3;
+    esc.latency_s = 1e-3;
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, 1.25e-3, sitl_report_mean_age(&esc, 1000.0, 1e-3));
+    sitl_esc_paper_params(&esc, 500.0);
+    TEST_ASSERT_DOUBLE_WITHIN(1e-9, 0.0, sitl_report_mean_age(&esc, 500.0, 2e-3));
+    esc.rate_hz = 1000.0 / 3.0;
+    TEST_ASSERT_DOUBLE_WITHIN(2e-6, 1e-3, sitl_report_mean_age(&esc, 1000.0, 1e-3));
+}
+
 static void test_rejects_a_vehicle_without_hover(void)
 {
     sitl_vehicle_t v;
@@ -147,6 +168,7 @@ int main(void)
     RUN_TEST(test_middle_decode_gives_the_spread_alone);
     RUN_TEST(test_step_at_the_flown_hover_speed);
     RUN_TEST(test_exact_speeds_have_no_input_noise);
+    RUN_TEST(test_report_mean_age);
     RUN_TEST(test_rejects_a_vehicle_without_hover);
     return UNITY_END();
 }

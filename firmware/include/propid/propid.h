@@ -193,7 +193,9 @@ typedef struct {
     uint8_t rotor_speed_noise_hold;   /* 1 (needs rotor_speed_noise > 0, no compensation): the error's
                                          correlation time per rotor from the telemetry itself, how long
                                          the rotor's value has stood (renewed when it changes), with
-                                         rotor_speed_noise_time its ceiling (docs/math.md §14). 0: the
+                                         rotor_speed_noise_time its ceiling (docs/math.md §14). 2: the
+                                         same hold with rotor_speed_noise_time its floor and
+                                         PROPID_ROTOR_SPEED_NOISE_TIME_MAX its ceiling. 0: the
                                          configured time for every rotor */
     float motor_command_lag;          /* [s] first-order lag of the rotor speed behind its command
                                          in the first stage (> 0 with the instrument on) */
