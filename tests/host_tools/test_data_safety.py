@@ -106,18 +106,23 @@ def test_listen_duration_without_sender_is_an_error(capsys):
     assert code == 1 and "no MAVLink data" in capsys.readouterr().err
 
 
-def _fake_vehicle(port: int, result: int, stop: threading.Event, received: list | None = None) -> None:
-    """Sends HEARTBEAT and propid telemetry to `port`; answers MAV_CMD_PROPID_RESET with `result` (its param1
-    appended to `received`)."""
+def _vehicle_frames() -> list:
+    """The fake vehicle's telemetry and HEARTBEAT, built before its thread starts: built inside it, a loaded
+    machine could spend listen's whole --duration before the first HEARTBEAT went out."""
     from test_mavlink_io import heartbeat_frame, telemetry_frames
 
+    return telemetry_frames(2) + [heartbeat_frame()]
+
+
+def _fake_vehicle(port: int, frames: list, result: int, stop: threading.Event, received: list | None = None) -> None:
+    """Sends `frames` (HEARTBEAT and propid telemetry) to `port`; answers MAV_CMD_PROPID_RESET with `result` (its
+    param1 appended to `received`)."""
     d = mavlink_io.dialect()
     parser = d.MAVLink(None)
-    frames = telemetry_frames(2)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.settimeout(0.02)
         while not stop.is_set():
-            for frame in frames + [heartbeat_frame()]:
+            for frame in frames:
                 sock.sendto(frame, ("127.0.0.1", port))
             try:
                 data = sock.recv(512)
@@ -142,17 +147,16 @@ def test_listen_reset_exit_code_follows_the_acknowledgement(result_name, code, r
     stop = threading.Event()
     result = getattr(mavlink_io.dialect(), result_name)
     received: list = []
-    vehicle = threading.Thread(target=_fake_vehicle, args=(port, result, stop, received))
-    timer = threading.Timer(0.3, vehicle.start)
-    timer.start()
+    # Sending starts at once (frames to a port not yet bound are lost, and the next round arrives); --duration
+    # leaves a loaded machine seconds for the HEARTBEAT, the command and its acknowledgement.
+    vehicle = threading.Thread(target=_fake_vehicle, args=(port, _vehicle_frames(), result, stop, received))
+    vehicle.start()
     try:
-        got = cli.main(["listen", "--connect", f"udp:127.0.0.1:{port}", "--reset", rotor, "--duration", "2",
+        got = cli.main(["listen", "--connect", f"udp:127.0.0.1:{port}", "--reset", rotor, "--duration", "4",
                         "--timeout", "10"])
     finally:
         stop.set()
-        timer.join()
-        if vehicle.is_alive():
-            vehicle.join()
+        vehicle.join()
     captured = capsys.readouterr()
     assert f"MAV_CMD_PROPID_RESET {label}: {result_name}" in captured.out
     assert received and set(received) == {param1}
