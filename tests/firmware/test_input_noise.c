@@ -126,6 +126,35 @@ static void test_input_noise_off_is_the_plain_prediction(void)
     TEST_ASSERT_EQUAL_MEMORY(without_noise.core.cov, with_noise.core.cov, sizeof(with_noise.core.cov));
 }
 
+/* Six prediction steps of dt from with_noise as set up: from the second step on
+ * rotor 0's speed changes every step and rotors 2 and 3 change at the fourth;
+ * each step's rate block must be the term with expected_span[step][rotor] dt
+ * (rotors past the fourth stand like rotor 1), and the state the plain step's. */
+static void check_held_spans(uint8_t rotors, float sigma, float dt, const float expected_span[6][4])
+{
+    for (uint8_t step = 0; step < 6u; ++step) {
+        if (step > 0u) {
+            memcpy(with_noise.core.input_speed_sq, with_noise.core.rotor_speed_sq,
+                   sizeof(with_noise.core.input_speed_sq));
+            with_noise.core.rotor_speed_sq[0] += 100.0f;
+            if (step == 3u) {
+                with_noise.core.rotor_speed_sq[2] += 100.0f;
+                with_noise.core.rotor_speed_sq[3] += 100.0f;
+            }
+        }
+        without_noise = with_noise;
+        without_noise.derived.input_noise_var = 0.0f; /* the same step without the term */
+        predict_both(dt);
+        float span[PROPID_MAX_ROTORS];
+        for (uint8_t i = 0; i < rotors; ++i) {
+            span[i] = dt * expected_span[step][i < 4u ? i : 1u];
+        }
+        check_block(&with_noise, &without_noise, span, sigma, dt);
+        /* Only the covariance moves: the state is the same step's. */
+        TEST_ASSERT_EQUAL_MEMORY(without_noise.core.state, with_noise.core.state, sizeof(with_noise.core.state));
+    }
+}
+
 /* rotor_speed_noise_hold (docs/math.md §14, "Hold time from the telemetry"): a
  * rotor whose value changes within the step gets one step's span dt; one whose
  * value has stood for a gets dt + 2 a, bounded by the configured time; a change
@@ -155,27 +184,7 @@ static void test_held_input_error_spans_from_the_telemetry(void)
             {1.0f, 5.0f, 1.0f, 1.0f}, /* 7 dt bounded to 5 dt */
             {1.0f, 5.0f, 3.0f, 3.0f},
         };
-        for (uint8_t step = 0; step < 6u; ++step) {
-            if (step > 0u) {
-                memcpy(with_noise.core.input_speed_sq, with_noise.core.rotor_speed_sq,
-                       sizeof(with_noise.core.input_speed_sq));
-                with_noise.core.rotor_speed_sq[0] += 100.0f;
-                if (step == 3u) {
-                    with_noise.core.rotor_speed_sq[2] += 100.0f;
-                    with_noise.core.rotor_speed_sq[3] += 100.0f;
-                }
-            }
-            without_noise = with_noise;
-            without_noise.derived.input_noise_var = 0.0f; /* the same step without the term */
-            predict_both(dt);
-            float span[PROPID_MAX_ROTORS];
-            for (uint8_t i = 0; i < rotors; ++i) {
-                span[i] = dt * expected_span[step][i < 4u ? i : 1u];
-            }
-            check_block(&with_noise, &without_noise, span, sigma, dt);
-            /* Only the covariance moves: the state is the same step's. */
-            TEST_ASSERT_EQUAL_MEMORY(without_noise.core.state, with_noise.core.state, sizeof(with_noise.core.state));
-        }
+        check_held_spans(rotors, sigma, dt, expected_span);
     }
 }
 
@@ -206,26 +215,7 @@ static void test_held_input_error_with_the_time_as_floor(void)
             {2.0f, 7.0f, 2.0f, 2.0f}, /* past the time: no ceiling at 2 dt */
             {2.0f, 9.0f, 3.0f, 3.0f},
         };
-        for (uint8_t step = 0; step < 6u; ++step) {
-            if (step > 0u) {
-                memcpy(with_noise.core.input_speed_sq, with_noise.core.rotor_speed_sq,
-                       sizeof(with_noise.core.input_speed_sq));
-                with_noise.core.rotor_speed_sq[0] += 100.0f;
-                if (step == 3u) {
-                    with_noise.core.rotor_speed_sq[2] += 100.0f;
-                    with_noise.core.rotor_speed_sq[3] += 100.0f;
-                }
-            }
-            without_noise = with_noise;
-            without_noise.derived.input_noise_var = 0.0f;
-            predict_both(dt);
-            float span[PROPID_MAX_ROTORS];
-            for (uint8_t i = 0; i < rotors; ++i) {
-                span[i] = dt * expected_span[step][i < 4u ? i : 1u];
-            }
-            check_block(&with_noise, &without_noise, span, sigma, dt);
-            TEST_ASSERT_EQUAL_MEMORY(without_noise.core.state, with_noise.core.state, sizeof(with_noise.core.state));
-        }
+        check_held_spans(rotors, sigma, dt, expected_span);
     }
 }
 
