@@ -308,8 +308,10 @@ static void test_lost_rotor_recovery_is_asked_of_an_accurate_rotor(void)
     }
 }
 
-/* A hummingbird-sized quad filter at its prior, on the nominal coefficients. */
-static void init_nominal_hummingbird_filter(propid_filter_t *filter)
+/* A hummingbird-sized quad filter at its prior, on the nominal coefficients; its
+ * first estimate and the truth it is scored against (its own coefficients, no bias). */
+static void init_nominal_hummingbird_filter(propid_filter_t *filter, propid_estimate_t *estimate, double kf[4],
+                                            double km[4], double bias[3])
 {
     propid_config_t config;
     propid_config_default(&config);
@@ -317,6 +319,12 @@ static void init_nominal_hummingbird_filter(propid_filter_t *filter)
                                                                  (float)nominal_kf, (float)nominal_km));
     propid_config_set_inertia_diag(&config, 3.65e-3f, 3.68e-3f, 7.03e-3f);
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(filter, &config));
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(filter, estimate));
+    for (int i = 0; i < 4; i++) {
+        kf[i] = nominal_kf;
+        km[i] = nominal_km;
+    }
+    bias[0] = bias[1] = bias[2] = 0.0;
 }
 
 /* The definiteness check reads the filter's whole P, not only the NEES block: the prior
@@ -326,12 +334,9 @@ static void init_nominal_hummingbird_filter(propid_filter_t *filter)
 static void test_covariance_check_reads_the_whole_p(void)
 {
     static propid_filter_t filter;
-    init_nominal_hummingbird_filter(&filter);
-    const double kf[4] = {nominal_kf, nominal_kf, nominal_kf, nominal_kf};
-    const double km[4] = {nominal_km, nominal_km, nominal_km, nominal_km};
-    const double bias[3] = {0.0, 0.0, 0.0};
     propid_estimate_t estimate;
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    double kf[4], km[4], bias[3];
+    init_nominal_hummingbird_filter(&filter, &estimate, kf, km, bias);
     sitl_honesty_t h;
     sitl_honesty_init(&h, &filter, kf, km, 1.0); /* off unless asked (--honesty-cov-check) */
     sitl_honesty_add(&h, 0.0, &estimate, &filter, kf, km, bias);
@@ -366,12 +371,9 @@ static void test_covariance_check_reads_the_whole_p(void)
 static void test_nonfinite_estimate_is_counted(void)
 {
     static propid_filter_t filter;
-    init_nominal_hummingbird_filter(&filter);
-    const double kf[4] = {nominal_kf, nominal_kf, nominal_kf, nominal_kf};
-    const double km[4] = {nominal_km, nominal_km, nominal_km, nominal_km};
-    const double bias[3] = {0.0, 0.0, 0.0};
     propid_estimate_t estimate;
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_get_estimate(&filter, &estimate));
+    double kf[4], km[4], bias[3];
+    init_nominal_hummingbird_filter(&filter, &estimate, kf, km, bias);
     sitl_honesty_t h;
     sitl_honesty_init(&h, &filter, kf, km, 1.0);
     sitl_honesty_add(&h, 0.0, &estimate, &filter, kf, km, bias);

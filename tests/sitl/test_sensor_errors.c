@@ -27,14 +27,20 @@ static double speed_of_period(double period_us, int pole_pairs)
     return 2.0 * SITL_PI * 1e6 / (period_us * (double)pole_pairs);
 }
 
+/* A preset with the default ESC and its sensor errors at the file's hover. */
+static void preset_errors(const char *preset, sitl_vehicle_t *v, sitl_esc_params_t *esc, sitl_sensor_errors_t *errors)
+{
+    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset(preset, v));
+    sitl_esc_default_params(esc);
+    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(v, esc, NULL, errors));
+}
+
 static void test_crazyflie_dshot_step_at_hover(void)
 {
     sitl_vehicle_t v;
-    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset("crazyflie-x", &v));
     sitl_esc_params_t esc;
-    sitl_esc_default_params(&esc);
     sitl_sensor_errors_t e;
-    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, NULL, &e));
+    preset_errors("crazyflie-x", &v, &esc, &e);
     double hover = sqrt(0.03 * 9.81 / (4.0 * 2.3e-8));
     TEST_ASSERT_DOUBLE_WITHIN(1e-9 * hover, hover, e.hover_speed);
     /* Hover period 501.9 us: truncated to 501, the next code 502. */
@@ -52,11 +58,9 @@ static void test_hummingbird_step_with_mantissa_shift(void)
 {
     /* Hover period 1 913 us > 511: the code keeps 9 bits, a step of 4 us. */
     sitl_vehicle_t v;
-    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset("hummingbird-x", &v));
     sitl_esc_params_t esc;
-    sitl_esc_default_params(&esc);
     sitl_sensor_errors_t e;
-    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, NULL, &e));
+    preset_errors("hummingbird-x", &v, &esc, &e);
     double period = floor(2.0 * SITL_PI * 1e6 / (e.hover_speed * 7.0));
     double coded = floor(period / 4.0) * 4.0;
     double step = speed_of_period(coded, 7) - speed_of_period(coded + 4.0, 7);
@@ -69,11 +73,9 @@ static void test_hummingbird_step_with_mantissa_shift(void)
 static void test_step_at_the_flown_hover_speed(void)
 {
     sitl_vehicle_t v;
-    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset("crazyflie-x", &v));
     sitl_esc_params_t esc;
-    sitl_esc_default_params(&esc);
     sitl_sensor_errors_t nominal;
-    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, NULL, &nominal));
+    preset_errors("crazyflie-x", &v, &esc, &nominal);
     double flown_kf[SITL_MAX_ROTORS];
     for (int i = 0; i < v.rotor_count; i++) {
         flown_kf[i] = 1.06 * v.rotor[i].thrust_coeff;
@@ -95,11 +97,9 @@ static void test_step_at_the_flown_hover_speed(void)
 static void test_middle_decode_gives_the_spread_alone(void)
 {
     sitl_vehicle_t v;
-    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset("crazyflie-x", &v));
     sitl_esc_params_t esc;
-    sitl_esc_default_params(&esc);
     sitl_sensor_errors_t edge;
-    TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, NULL, &edge));
+    preset_errors("crazyflie-x", &v, &esc, &edge);
     esc.decode_middle = 1;
     sitl_sensor_errors_t e;
     TEST_ASSERT_EQUAL_INT(0, sitl_sensor_errors(&v, &esc, NULL, &e));
