@@ -123,6 +123,39 @@ def test_thrust_terms_are_fitted_on_the_other_half_of_the_runs():
         assert fitted.thrust_climb_coeff == pytest.approx(-3e-6 if k % 2 else -1e-6, rel=1e-6)
         assert fitted.thrust_translational_coeff is None  # the climb mode fits the climb term only
     assert len(infos) == 2
+    # The per-run diagnostic fits each run on itself: the run's own coefficient, one fit per run.
+    own, infos = real_data._cross_fitted_thrust("accel_scale_walk_skip_climb_own", logs, vehicle, loaded)
+    for k, p in enumerate(logs, start=1):
+        assert own[("accel_scale_walk_skip_climb_own", p)].thrust_climb_coeff == pytest.approx(
+            -1e-6 if k % 2 else -3e-6, rel=1e-6)
+    assert len(infos) == len(logs)
+
+
+def test_a_gyro_only_mode_has_no_accelerometer_bias(cfilter_available):
+    """No accelerometer fused: the replay reports no bias (JSON null), the mode's median is None and the table
+    reads '-', not the bias state's unused 0.00; with the accelerometer the bias is a number."""
+    import json
+
+    from propid.flightlog import parse_vehicle
+    from propid.replay import ReplayOptions, replay
+    from test_scale_walk import VEHICLE, flight
+
+    vehicle, log = parse_vehicle(VEHICLE), flight(1.0, duration=16.0)
+    summaries = {aiding: replay(log, vehicle, ReplayOptions(progress=False, aiding=aiding, rotor_inertia="off"))
+                 .summary for aiding in ("gyro", "gyro+accel")}
+    assert summaries["gyro"]["accel_bias"] is None and summaries["gyro"]["accel_bias_std"] is None
+    assert '"accel_bias": null' in json.dumps(summaries["gyro"])
+    assert isinstance(summaries["gyro+accel"]["accel_bias"], float) and summaries["gyro+accel"]["accel_bias_std"] > 0
+    modes = []
+    for aiding, summary in summaries.items():
+        runs = {"run1": real_data.run_summary(summary, 3.0e-8)}
+        modes.append({"name": aiding, "what": aiding, "runs": runs, "summary": real_data.mode_summary(runs)})
+    assert modes[0]["summary"]["accel_bias_median"] is None
+    assert modes[1]["summary"]["accel_bias_median"] == pytest.approx(summaries["gyro+accel"]["accel_bias"])
+    rows = real_data.render({"reference_kf": 3.0e-8, "modes": modes}).splitlines()
+    assert next(r for r in rows if r.startswith("| gyro |")).endswith("| - |")
+    assert next(r for r in rows if r.startswith("| gyro+accel |")).endswith(
+        f"| {summaries['gyro+accel']['accel_bias']:.2f} |")
 
 
 def test_run_names_drop_any_date_token_not_one_date():

@@ -257,8 +257,9 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "gyro_scale": notes.get("gyro_scale", "none"),
         "disturbance_torque": [float(v) for v in final["disturbance_torque"]],
         "disturbance_torque_std": [float(v) for v in final["disturbance_torque_std"]],
-        "accel_bias": float(final["accel_bias"]),
-        "accel_bias_std": float(final["accel_bias_std"]),
+        # None (JSON null) when no accelerometer was fused: there is no bias state to report.
+        "accel_bias": float(final["accel_bias"]) if acc is not None else None,
+        "accel_bias_std": float(final["accel_bias_std"]) if acc is not None else None,
         "torque_scale": float(final["torque_scale"]),
         "torque_scale_std": float(final["torque_scale_std"]),
         "torque_scale_mean": torque_scale_mean,
