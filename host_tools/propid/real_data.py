@@ -31,6 +31,9 @@ reference value (the reference kf only divides the results for display):
   climb term of the rotor thrust removed from the accelerometer's z (replay/thrust_aero.py), its coefficient fitted
   on the OTHER half of the runs (odd/even as above); and, as a diagnostic only, the same with the translational term
   too, which failed the physical selection written before (its per-run sign changes with the trajectory);
+- added later (docs/real-data.md "The combined chain"; rule D was written before their first run, after the skip and
+  climb modes had been seen): the scale-walk mode with the repeated rows skipped AND the climb term fitted on the other
+  half; beside it, diagnostics only: the climb fitted on each run itself, and the same chain + the rotor inertia;
 - "square" runs are the logs whose name starts with "square", the others are the rest;
 - per run: kf = mean over rotors of the converged-part mean; rotor spread = the worst
   rotor's |kf_i / run mean - 1|; km converged = the filter's own claim at the end for all rotors (3 x the relative
