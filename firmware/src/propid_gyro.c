@@ -64,6 +64,104 @@ apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *r
     }
     return outside == 0u;
 }
+#elif PROPID_HOST_ROW_SWEEP
+/* The quad downdate on a 64-bit desktop host (PROPID_HOST_ROW_SWEEP) with the
+ * compiler's vector type of 4 floats (GNU C; SSE on x86-64, NEON on AArch64):
+ * the gains and states 4 lanes at a time, then each packed row of P in chunks
+ * of 4 consecutive elements. A length that is not a multiple of 4 ends with a
+ * chunk aligned to the end that overlaps the one before: every chunk is
+ * computed from the values as loaded before any is stored, so an overlapped
+ * element gets the same value twice. Each lane takes the row groups' operations
+ * in their order (g = h (1 / S); x + g0 nu0 + g1 nu1 + g2 nu2; p - g0 h0 - g1 h1
+ * - g2 h2, left to right; a scalar times a vector multiplies every lane): the
+ * same bits, tested against the size-lean build's loops
+ * (test_quad_build_bits_match_size_lean). */
+typedef float propid_f4_t __attribute__((vector_size(16)));
+#define PROPID_F4_CHUNKS ((PROPID_QUAD_STATES + 3u) / 4u)
+static inline __attribute__((always_inline)) propid_f4_t f4_load(const float *p)
+{
+    propid_f4_t v;
+    memcpy(&v, p, sizeof(v));
+    return v;
+}
+static inline __attribute__((always_inline)) void f4_store(float *p, propid_f4_t v)
+{
+    memcpy(p, &v, sizeof(v));
+}
+/* Where chunk c of elements first .. 13 starts (the last one ends at 13). */
+static inline __attribute__((always_inline)) uint8_t f4_chunk_at(uint8_t first, uint8_t c)
+{
+    const uint8_t at = (uint8_t)(first + 4u * c);
+    return at + 4u <= PROPID_QUAD_STATES ? at : (uint8_t)(PROPID_QUAD_STATES - 4u);
+}
+
+/* Row i of the packed triangle, columns i .. 13 (i constant where inlined). */
+static inline __attribute__((always_inline)) void
+downdate_row(float *restrict row, const uint8_t i, const float *restrict h0, const float *restrict h1,
+             const float *restrict h2, const float g0, const float g1, const float g2)
+{
+    if (PROPID_QUAD_STATES - i >= 4u) {
+        const uint8_t count = (uint8_t)((PROPID_QUAD_STATES - i + 3u) / 4u);
+        propid_f4_t chunk[PROPID_F4_CHUNKS];
+PROPID_UNROLL(4)
+        for (uint8_t c = 0u; c < count; ++c) {
+            const uint8_t j = f4_chunk_at(i, c);
+            chunk[c] = f4_load(row + j) - g0 * f4_load(h0 + j) - g1 * f4_load(h1 + j) - g2 * f4_load(h2 + j);
+        }
+PROPID_UNROLL(4)
+        for (uint8_t c = 0u; c < count; ++c) {
+            f4_store(row + f4_chunk_at(i, c), chunk[c]);
+        }
+    } else {
+PROPID_UNROLL(3)
+        for (uint8_t j = i; j < PROPID_QUAD_STATES; ++j) {
+            row[j] = row[j] - g0 * h0[j] - g1 * h1[j] - g2 * h2[j];
+        }
+    }
+}
+
+static __attribute__((noinline)) int
+apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *restrict pending,
+                 const propid_derived_t *restrict derived)
+{
+    float *state = core->state;
+    const float *h0 = pending->h0;
+    const float *h1 = core->update_vector[0];
+    const float *h2 = core->update_vector[1];
+    const float inv0 = pending->inv_var[0], inv1 = pending->inv_var[1], inv2 = pending->inv_var[2];
+    const float nu0 = core->innovation[0], nu1 = core->innovation[1], nu2 = core->innovation[2];
+    float gain[3][PROPID_QUAD_STATES];
+    propid_f4_t new_state[PROPID_F4_CHUNKS];
+PROPID_UNROLL(4)
+    for (uint8_t c = 0u; c < PROPID_F4_CHUNKS; ++c) {
+        const uint8_t j = f4_chunk_at(0u, c);
+        const propid_f4_t g0 = f4_load(h0 + j) * inv0;
+        const propid_f4_t g1 = f4_load(h1 + j) * inv1;
+        const propid_f4_t g2 = f4_load(h2 + j) * inv2;
+        f4_store(&gain[0][j], g0);
+        f4_store(&gain[1][j], g1);
+        f4_store(&gain[2][j], g2);
+        new_state[c] = f4_load(state + j) + g0 * nu0 + g1 * nu1 + g2 * nu2;
+    }
+PROPID_UNROLL(4)
+    for (uint8_t c = 0u; c < PROPID_F4_CHUNKS; ++c) {
+        f4_store(state + f4_chunk_at(0u, c), new_state[c]);
+    }
+PROPID_UNROLL(14)
+    for (uint8_t i = 0; i < PROPID_QUAD_STATES; ++i) {
+        downdate_row(propid_cov_row(cov, i), i, h0, h1, h2, gain[0][i], gain[1][i], gain[2][i]);
+    }
+    uint32_t outside = 0u;
+PROPID_UNROLL(14)
+    for (uint8_t i = 0; i < PROPID_QUAD_STATES; ++i) {
+        const uint8_t kind = i < PROPID_QUAD_FIRST_THRUST ? PROPID_KIND_RATE
+                             : (i < PROPID_QUAD_FIRST_DRAG ? PROPID_KIND_THRUST
+                                : (i < PROPID_QUAD_FIRST_BIAS ? PROPID_KIND_DRAG : PROPID_KIND_BIAS));
+        outside |= propid_outside_positive_range(cov[propid_cov_index(i, i)], propid_kind_floor_bits(derived, kind),
+                                                 derived->kind_range_bits[kind]);
+    }
+    return outside == 0u;
+}
 #else
 #if PROPID_ARM_BLOCK_MOVES
 /* The block-move kernels' registers: the vectors' values of four consecutive

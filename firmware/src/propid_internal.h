@@ -185,6 +185,18 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
 #else
 #define PROPID_ARM_BLOCK_MOVES 0
 #endif
+/* PROPID_HOST_ROW_SWEEP: on 64-bit desktop hosts (x86-64, AArch64: the SITL, the
+ * host tests, the Python binding) the quad downdate sweeps P one packed row at a
+ * time in chunks of 4 consecutive floats (GNU C vector type: SSE, NEON), each
+ * element with the row groups' operations in their order, so the same bits
+ * (propid_gyro.c). The Cortex-M4 has no float SIMD: its row groups stay.
+ * -DPROPID_NO_HOST_ROW_SWEEP keeps the row groups on the host too. */
+#if !defined(PROPID_NO_HOST_ROW_SWEEP) && defined(__GNUC__) && (defined(__x86_64__) || defined(__aarch64__)) && \
+    !PROPID_SIZE_LEAN
+#define PROPID_HOST_ROW_SWEEP 1
+#else
+#define PROPID_HOST_ROW_SWEEP 0
+#endif
 /* PROPID_UNROLL(n): the pragma before a kernel's loop that asks for it fully
  * unrolled (straight-line code: fewer instructions per step, ~4 B of flash per
  * instruction); empty in the size-lean build (PROPID_SIZE_LEAN), whose loops stay
