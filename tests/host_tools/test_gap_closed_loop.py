@@ -92,6 +92,12 @@ def test_a_cancelled_slow_torque_is_named_with_its_size_and_the_fit_above_the_lo
     for key in ("kf_roll", "kf_pitch"):
         assert result["base_fit_after"][key]["value"] == pytest.approx(thrust, rel=0.05)
     assert result["inputs"]["band_hz"][0] == entry["params"]["loop_bandwidth_hz"]
+    # the torque gain per band (requested band, least squares: no commands) reads low only where it is cancelled
+    gain = result["base_fit_details"]["torque_gain_per_band"]
+    assert gain["method"] == "least squares"
+    for axis in ("roll", "pitch"):
+        assert gain[axis][0]["band_hz"] == pytest.approx([1.0, 2**0.5]) and gain[axis][0]["over_thrust"] < 0.3
+        assert all(r["over_thrust"] == pytest.approx(1.0, abs=0.1) for r in gain[axis] if r["band_hz"][0] >= 2.0)
     # --vehicle-out carries the bandwidth (the key replay passes to the disturbance states)
     corrected, carried = corrected_vehicle(vehicle, result["effects"])
     assert corrected.loop_bandwidth_hz == entry["params"]["loop_bandwidth_hz"]
@@ -104,6 +110,8 @@ def test_without_a_cancelled_torque_nothing_is_named_and_the_band_stays_low():
     assert result["significant"] == []
     assert result["inputs"]["band_hz"][0] <= 1.0
     assert result["base_fit"]["kf_roll"]["value"] == pytest.approx(KF, rel=0.05)
+    gain = result["base_fit_details"]["torque_gain_per_band"]
+    assert all(r["over_thrust"] == pytest.approx(1.0, abs=0.1) for a in ("roll", "pitch") for r in gain[a])
     assert corrected_vehicle(vehicle, result["effects"])[0].loop_bandwidth_hz is None
 
 

@@ -438,6 +438,10 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                 if axis in instrument_scales and "inertia_error" in selected_ids:
                     params[key + "_least_squares"] = params[key]
                     params[key] = instrument_scales[axis]["scale"]
+    # the torque gain per band over the requested band (the closed loop's signature: basefit.torque_gain_per_band)
+    gain_per_band = basefit.torque_gain_per_band(
+        [replace(f, band=requested_band.for_rate(f.rate_hz)) for f in work], vehicle.positions, vehicle.yaw_signs,
+        vehicle.mass, shape, (after_shape.get("kf_thrust") or {}).get("value"))
     roll_fit = base_details.get("kf_roll") or {}
     result["base_fit_method"] = (
         "torque coefficients by instrumental variables: the motor commands (cmd_i) predict the rotor speeds"
@@ -449,7 +453,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     result["base_fit_details"] = {"before": base_details, "after": after_details,
                                   **({"torque_scale_instrument": instrument_scales} if instrument_scales else {}),
                                   "agreement_before": _agreement(base_shape),
-                                  "agreement_after": _agreement(after_shape)}
+                                  "agreement_after": _agreement(after_shape),
+                                  "torque_gain_per_band": gain_per_band}
     progress(10)
 
     # where (base model, held-out residual)

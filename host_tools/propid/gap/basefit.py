@@ -183,3 +183,80 @@ def base_fit(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, ma
         out[key] = None if fit is None else {"value": fit["value"], "ci": fit["ci"]}
         details[key] = fit
     return out, details
+
+
+GAIN_WINDOW_S = 4.0  # Hann windows, no overlap: 0.25 Hz resolution, a few bins in the lowest band
+GAIN_BAND_OCTAVES = 0.5
+GAIN_MIN_WINDOWS = 8
+
+
+def _band_edges(lo_hz: float, hi_hz: float) -> list[tuple[float, float]]:
+    out, lo = [], lo_hz
+    while lo * 2.0**GAIN_BAND_OCTAVES <= hi_hz * (1 + 1e-9):
+        out.append((lo, lo * 2.0**GAIN_BAND_OCTAVES))
+        lo *= 2.0**GAIN_BAND_OCTAVES
+    return out
+
+
+def torque_gain_per_band(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, mass: float | None,
+                         shape: dict | None = None, thrust_kf: float | None = None,
+                         rng_seed: int = 7) -> dict | None:
+    """The roll/pitch torque coefficient per half-octave band (the flights' band), from pooled cross-spectra:
+    kf(band) = Re(sum S_z,tau / sum S_z,x) over the band's bins, z the instrument (the commands' first stage)
+    or the regressor itself without commands; its phase; a 95 % interval by resampling the Welch windows.
+
+    Open loop, or in closed loop where the rotors answer a reference (not a disturbance), kf(band) is the same
+    in every band and its phase is near 0. Where the controller answers an unmodelled torque d, the rotor
+    torque is correlated with d: below the loop's crossover with the opposite sign (the gain reads low),
+    above it, where a lagged loop amplifies d (|sensitivity| > 1), with the same sign (the gain reads high).
+    A gain that rises through the band is that signature, and no lower band edge then reads the truth: the
+    band fit's value is set by the band's composition (docs/gap.md, "The torque gain per band")."""
+    if not flights:
+        return None
+    instrumented = all(f.cmd is not None for f in flights)
+    bands = _band_edges(min(f.band.highpass_hz for f in flights), min(f.band.lowpass_hz for f in flights))
+    if not bands:
+        return None
+    per_window = {axis: [] for axis in ("roll", "pitch")}  # each window: (n_bands, 2) complex [S_zy, S_zx]
+    for f in flights:
+        n = int(round(GAIN_WINDOW_S * f.rate_hz))
+        if n < 8:
+            continue
+        hann = np.hanning(n)
+        freq = np.fft.rfftfreq(n, 1.0 / f.rate_hz)
+        masks = [(freq >= lo) & (freq < hi) for lo, hi in bands]
+        resp = responses(f, mass)
+        u_hat = predicted_u(f, False) if instrumented else None
+        for axis in ("roll", "pitch"):
+            if axis not in resp:
+                return None
+            y = f.filtered(resp[axis])
+            x = f.filtered(main_regressor(axis, f.speed**2, positions, signs, shape), response=True)
+            z = main_regressor(axis, u_hat, positions, signs, shape) if instrumented else x
+            for a, b in f.segs:
+                for s in range(a, b - n + 1, n):  # no overlap: the windows resample independently
+                    fy, fx, fz = (np.fft.rfft((v[s:s + n] - v[s:s + n].mean()) * hann) for v in (y, x, z))
+                    szy, szx = np.conj(fz) * fy, np.conj(fz) * fx
+                    per_window[axis].append(np.array([[szy[m].sum(), szx[m].sum()] for m in masks]))
+    if len(per_window["roll"]) < GAIN_MIN_WINDOWS:
+        return None
+    rng = np.random.default_rng(rng_seed)
+    out = {"method": "instrumental variables (motor commands)" if instrumented else "least squares",
+           "window_s": GAIN_WINDOW_S, "windows": len(per_window["roll"])}
+    for axis, wins in per_window.items():
+        w = np.array(wins)  # (windows, bands, 2)
+        total = w.sum(axis=0)
+        boot = np.array([w[rng.integers(0, len(w), len(w))].sum(axis=0) for _ in range(scoring.BOOTSTRAP)])
+        rows = []
+        for k, (lo, hi) in enumerate(bands):
+            h = total[k, 0] / total[k, 1] if total[k, 1] != 0 else complex("nan")
+            hb = boot[:, k, 0] / np.where(boot[:, k, 1] != 0, boot[:, k, 1], np.nan)
+            hb = hb.real[np.isfinite(hb.real)]
+            row = {"band_hz": [float(lo), float(hi)], "value": float(h.real),
+                   "ci": [float(np.percentile(hb, 2.5)), float(np.percentile(hb, 97.5))] if hb.size else None,
+                   "phase_deg": float(np.degrees(np.angle(h)))}
+            if thrust_kf:
+                row["over_thrust"] = float(h.real / thrust_kf)
+            rows.append(row)
+        out[axis] = rows
+    return out

@@ -202,6 +202,18 @@ def write_report(result: dict, directory: str | Path) -> Path:
                      f"rotors, which the gyro never sees. Before = from {_fmt(p['requested_highpass_hz'])} Hz; "
                      f"after and every effect: above {_fmt(p['loop_bandwidth_hz'])} Hz.</p>")
     parts.append("<img src='base_fit.png'>")
+    gain = result["base_fit_details"].get("torque_gain_per_band")
+    if gain:
+        rel = "over_thrust" in gain["roll"][0]
+        parts.append(f"<p><b>Torque gain per band</b> ({html.escape(gain['method'])}; "
+                     f"{'over the thrust kf' if rel else 'kf'}, phase in degrees): equal in every band when the "
+                     "rotors follow a reference; rising with frequency (low, then above the truth where a lagged "
+                     "loop amplifies it) when the loop answers an unmodelled torque, and then no band edge reads "
+                     "the truth.</p>")
+        key = "over_thrust" if rel else "value"
+        parts.append(_table(["band [Hz]", "roll", "roll phase", "pitch", "pitch phase"],
+                            [[r["band_hz"], r[key], r["phase_deg"], q[key], q["phase_deg"]]
+                             for r, q in zip(gain["roll"], gain["pitch"])]))
     parts.append("<h2>Where the base model misses</h2>")
     w = result["where"]
     parts.append(_table(["axis", "residual RMS", "response RMS", "unexplained fraction"],
