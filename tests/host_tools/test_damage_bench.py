@@ -121,6 +121,34 @@ def test_share_where_the_oracle_holds_yaw():
     assert "| 67 % of 3 flights |" in damage_bench.render(result)
 
 
+def test_undamaged_twins_are_read_against_an_absolute_floor():
+    """The twins' plain ratio divides sub-millimetre errors (0.05 mm over 0.0006 mm reads 85x): the
+    rows also give both RMSEs in mm, the ratio with each RMSE held at 1 mm (below it a twin's error
+    is no tracking the target reads) and the twin Filter's RMSE over its damaged Oracle's."""
+    def record(traj, f_twin, o_twin, o_damaged):
+        spec = {"damages": [[1, 2.5, 0.3]], "effects": [], "index": 0, "trajectory": traj}
+        return {"spec": spec, "filter": {"detections": [{"rotor": 1, "time_s": 2.505}], "stable": True,
+                                         "rmse_after_damage_m": o_damaged},
+                "oracle": {"stable": True, "rmse_after_damage_m": o_damaged},
+                "filter_undamaged": {"rmse_after_damage_m": f_twin},
+                "oracle_undamaged": {"rmse_after_damage_m": o_twin}}
+    records = [record("step", 5.1e-5, 6e-7, 0.02),     # both below the floor: 85x plain, 1x floored
+               record("step", 5.1e-5, 6e-7, 0.02),
+               record("circle", 0.017, 0.0005, 0.02),  # a real 17 mm gap stays 17x, 0.85 of the Oracle
+               record("circle", 0.003, 0.0020, 0.01)]  # above the floor: the plain ratio, 1.5x
+    cells = damage_bench.summarise(records, config())["tracking_per_trajectory"]
+    step, circle = cells["step"], cells["circle"]
+    assert step["undamaged_ratio_median"] == pytest.approx(85.0)
+    assert step["undamaged_ratio_floored_median"] == pytest.approx(1.0)
+    assert step["undamaged_filter_rmse_median_mm"] == pytest.approx(0.051)
+    assert step["undamaged_oracle_rmse_median_mm"] == pytest.approx(0.0006)
+    assert step["undamaged_over_damaged_oracle_median"] == pytest.approx(5.1e-5 / 0.02)
+    assert circle["undamaged_ratio_floored_median"] == pytest.approx((17.0 + 1.5) / 2)
+    assert circle["undamaged_over_damaged_oracle_median"] == pytest.approx((0.85 + 0.3) / 2)
+    text = damage_bench.render(damage_bench.summarise(records, config()))
+    assert "| step | 1 (100 %) | 85 (0 %) | 0.051 / 0.0006 | 1 | 0.00255 | 2 |" in text
+
+
 def test_missed_damage_counts_against_the_rate():
     spec = {"damages": [[1, 2.5, 0.12]], "effects": [], "index": 0}
     records = [{"spec": spec, "filter": {"detections": [{"rotor": 1, "time_s": 2.0}], "stable": True},
