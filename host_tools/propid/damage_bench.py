@@ -55,7 +55,7 @@ TWIN_RMSE_FLOOR_M = 1e-3
 # the filter holding it as its delay (docs/math.md §12): a datasheet figure the
 # integrator knows, not fitted. Without it the filter reads speeds 1 ms late as
 # current and its kf drift before any damage is the bench's largest tracking
-# miss (docs/damage.md, "The filter holding the telemetry latency").
+# miss (docs/damage-history.md, "The filter holding the telemetry latency").
 TELEMETRY_LATENCY_S = 0.001
 MILD_EFFECTS = ("rotor_inertia", "rotor_gyroscopic", "rotor_drag", "translational_lift",
                 "thrust_nonlinearity", "aero_damping", "gyro_scale", "com_offset")
@@ -153,10 +153,45 @@ def _fly(config: BenchConfig, spec: FlightSpec, mode: str, work: Path,
             yaw_err = table1.wrap_angle(yaw - columns["ref_yaw"])
             out["rmse_yaw_after_damage_deg"] = (math.degrees(float(np.sqrt(np.mean(yaw_err[after] ** 2))))
                                                 if np.any(after) else None)
+            if mode == "filter" and np.any(after):
+                out["coefficients_at_damage"] = coefficients_at(columns, int(np.argmax(after)))
     finally:
         for path in (log, log.with_suffix(".vehicle.json"), summary):
             path.unlink(missing_ok=True)
     return out
+
+
+def coefficients_at(columns: dict, k: int) -> dict | None:
+    """The filter's kf and km at log row k over the truth, minus 1, and its claimed standard
+    deviations over the truth, per rotor; None when the log carries no estimate."""
+    count = table1.rotor_count(columns)
+    if count == 0 or f"est_kf_{count}" not in columns:
+        return None
+    out = {}
+    for name in ("kf", "km"):
+        truth = np.array([columns[f"true_{name}_{i}"][k] for i in range(1, count + 1)])
+        out[f"{name}_error"] = [float(x) for x in np.array(
+            [columns[f"est_{name}_{i}"][k] for i in range(1, count + 1)]) / truth - 1.0]
+        out[f"{name}_std"] = [float(x) for x in np.array(
+            [columns[f"std_{name}_{i}"][k] for i in range(1, count + 1)]) / truth]
+    return out
+
+
+def opposite_pair_drift(coefficients: dict | None) -> tuple[float, float] | None:
+    """The combination that drifts before a damage (docs/damage.md, "The drift before the
+    damage"): the common mode of an opposite pair's kf (rotors i and i + N/2), which the gyro sees
+    only through the pair's differential speed. Returns the pair's mean relative error with the
+    largest magnitude and that error over the pair's mean claimed standard deviation."""
+    if not coefficients:
+        return None
+    error, std = np.array(coefficients["kf_error"]), np.array(coefficients["kf_std"])
+    half = len(error) // 2
+    if half == 0 or len(error) % 2:
+        return None
+    common = 0.5 * (error[:half] + error[half:])
+    spread = 0.5 * (std[:half] + std[half:])
+    worst = int(np.argmax(np.abs(common)))
+    return float(common[worst]), float(abs(common[worst]) / max(spread[worst], 1e-12))
 
 
 def run_flight(config: BenchConfig, spec: FlightSpec) -> dict:
@@ -288,6 +323,9 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
             if f_intact is not None and o_intact:
                 cell["undamaged"].append(f_intact / o_intact)
                 cell["twins"].append((f_intact, o_intact, o_rmse))
+            drift = opposite_pair_drift(record.get("filter_undamaged", {}).get("coefficients_at_damage"))
+            if drift is not None:
+                cell.setdefault("drift", []).append(drift)
     airborne = [e for e in events if not e["on_ground"]]
     detected = [e for e in airborne if e["detected"]]
     big = [e for e in airborne if e["fraction"] >= 0.2]
@@ -339,6 +377,11 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
                    "undamaged_within_1_5x": (sum(1 for x in cell["undamaged"] if x <= 1.5) / len(cell["undamaged"])
                                              if cell["undamaged"] else None),
                    **twin_rows(cell["twins"]),
+                   # the twins' drift at the damage time: the opposite pair's kf common mode
+                   "undamaged_pair_kf_error_median": (float(np.median([abs(e) for e, _ in cell["drift"]]))
+                                                      if cell.get("drift") else None),
+                   "undamaged_pair_kf_error_over_std_median": (float(np.median([z for _, z in cell["drift"]]))
+                                                               if cell.get("drift") else None),
                    "flights": len(cell["damaged"])}
             for traj, cell in sorted(per_trajectory.items())},
         "tracking_misses": {
@@ -492,8 +535,9 @@ def render(result: dict) -> str:
               f"RMSE held at {1e3 * TWIN_RMSE_FLOOR_M:g} mm, and the twin Filter's RMSE over the damaged Oracle's "
               f"(>= {MISS_GAP_FACTOR:.3f} alone makes a miss):", "",
               "| trajectory | damaged: median (within 1.5x) | undamaged twins: median (within 1.5x) | "
-              "twins: Filter / Oracle RMSE, mm | twins, floored ratio | twin Filter / damaged Oracle | flights |",
-              "|---|---|---|---|---|---|---|"]
+              "twins: Filter / Oracle RMSE, mm | twins, floored ratio | twin Filter / damaged Oracle | "
+              "twins at the damage: an opposite pair's kf common-mode error, over its claimed std | flights |",
+              "|---|---|---|---|---|---|---|---|"]
     for traj, cell in result.get("tracking_per_trajectory", {}).items():
         lines.append(f"| {traj} | {fmt(cell['ratio_median'])} ({fmt(100 * cell['within_1_5x'], '.0f')} %) | "
                      f"{fmt(cell['undamaged_ratio_median'])} "
@@ -501,7 +545,9 @@ def render(result: dict) -> str:
                      f"{fmt(cell.get('undamaged_filter_rmse_median_mm'))} / "
                      f"{fmt(cell.get('undamaged_oracle_rmse_median_mm'))} | "
                      f"{fmt(cell.get('undamaged_ratio_floored_median'))} | "
-                     f"{fmt(cell.get('undamaged_over_damaged_oracle_median'))} | {cell['flights']} |")
+                     f"{fmt(cell.get('undamaged_over_damaged_oracle_median'))} | "
+                     f"{_pct(cell.get('undamaged_pair_kf_error_median'), 100.0, '.1f')} %, "
+                     f"{fmt(cell.get('undamaged_pair_kf_error_over_std_median'))} | {cell['flights']} |")
     return "\n".join(lines) + "\n"
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from propid import damage_bench, table1_extended
@@ -43,7 +44,7 @@ def test_extra_sitl_arguments_reach_every_flight_command(tmp_path):
 
 def test_the_filter_holds_the_telemetry_latency_in_every_flight(tmp_path):
     """Both the telemetry's latency and the filter's delay are set, to the same value, in the
-    Filter and the Oracle flights (docs/damage.md, "The filter holding the telemetry latency")."""
+    Filter and the Oracle flights (docs/damage-history.md, "The filter holding the telemetry latency")."""
     cfg = config(damaged=2, undamaged=1)
     for spec in damage_bench.flight_specs(cfg):
         for mode in ("filter", "oracle"):
@@ -146,7 +147,41 @@ def test_undamaged_twins_are_read_against_an_absolute_floor():
     assert circle["undamaged_ratio_floored_median"] == pytest.approx((17.0 + 1.5) / 2)
     assert circle["undamaged_over_damaged_oracle_median"] == pytest.approx((0.85 + 0.3) / 2)
     text = damage_bench.render(damage_bench.summarise(records, config()))
-    assert "| step | 1 (100 %) | 85 (0 %) | 0.051 / 0.0006 | 1 | 0.00255 | 2 |" in text
+    assert "| step | 1 (100 %) | 85 (0 %) | 0.051 / 0.0006 | 1 | 0.00255 | — %, — | 2 |" in text
+
+
+def test_the_twins_drift_is_read_as_an_opposite_pair_common_mode():
+    """At the damage time the undamaged twin's kf and km are read from its log over the truth; the
+    drift reported is the opposite pair (rotors i, i + N/2) whose common-mode kf error is largest,
+    with that error over the pair's claimed std. A pair that moves against itself (a difference, which
+    the pair's torque shows at any speed) does not count."""
+    t = np.array([0.0, 1.0, 2.0])
+    columns = {"t": t}
+    truth = [2.0, 2.0, 2.0, 2.0]
+    est_at_2 = [2.0 * 1.01, 2.0 * 0.80, 2.0 * 0.99, 2.0 * 0.84]   # pair 2/4 at -18 %, pair 1/3 +-1 %
+    for i in range(4):
+        columns[f"omega_{i + 1}"] = t
+        for name, scale in (("kf", 1.0), ("km", 0.01)):
+            columns[f"true_{name}_{i + 1}"] = np.full(3, truth[i] * scale)
+            columns[f"est_{name}_{i + 1}"] = np.array([truth[i], truth[i], est_at_2[i]]) * scale
+            columns[f"std_{name}_{i + 1}"] = np.full(3, 0.02 * truth[i] * scale)
+    coefficients = damage_bench.coefficients_at(columns, 2)
+    assert coefficients["kf_error"] == pytest.approx([0.01, -0.20, -0.01, -0.16])
+    assert coefficients["km_std"] == pytest.approx([0.02] * 4)
+    error, over_std = damage_bench.opposite_pair_drift(coefficients)
+    assert error == pytest.approx(-0.18) and over_std == pytest.approx(9.0)
+    assert damage_bench.coefficients_at({"t": t, "omega_1": t}, 0) is None
+
+    spec = {"damages": [[1, 2.5, 0.3]], "effects": [], "index": 0, "trajectory": "circle"}
+    record = {"spec": spec, "filter": {"detections": [{"rotor": 1, "time_s": 2.505}], "stable": True,
+                                       "rmse_after_damage_m": 0.02},
+              "oracle": {"stable": True, "rmse_after_damage_m": 0.02},
+              "filter_undamaged": {"rmse_after_damage_m": 0.017, "coefficients_at_damage": coefficients},
+              "oracle_undamaged": {"rmse_after_damage_m": 0.0005}}
+    cell = damage_bench.summarise([record], config())["tracking_per_trajectory"]["circle"]
+    assert cell["undamaged_pair_kf_error_median"] == pytest.approx(0.18)
+    assert cell["undamaged_pair_kf_error_over_std_median"] == pytest.approx(9.0)
+    assert "| 18.0 %, 9 | 1 |" in damage_bench.render(damage_bench.summarise([record], config()))
 
 
 def test_missed_damage_counts_against_the_rate():
