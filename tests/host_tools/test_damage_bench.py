@@ -147,7 +147,7 @@ def test_undamaged_twins_are_read_against_an_absolute_floor():
     assert circle["undamaged_ratio_floored_median"] == pytest.approx((17.0 + 1.5) / 2)
     assert circle["undamaged_over_damaged_oracle_median"] == pytest.approx((0.85 + 0.3) / 2)
     text = damage_bench.render(damage_bench.summarise(records, config()))
-    assert "| step | 1 (100 %) | 85 (0 %) | 0.051 / 0.0006 | 1 | 0.00255 | — %, — | 2 |" in text
+    assert "| step | 1 (100 %) | 85 (0 %) | 0.051 / 0.0006 | 1 | 0.00255 | 2 |" in text
 
 
 def test_the_twins_drift_is_read_as_an_opposite_pair_common_mode():
@@ -172,16 +172,20 @@ def test_the_twins_drift_is_read_as_an_opposite_pair_common_mode():
     assert error == pytest.approx(-0.18) and over_std == pytest.approx(9.0)
     assert damage_bench.coefficients_at({"t": t, "omega_1": t}, 0) is None
 
-    spec = {"damages": [[1, 2.5, 0.3]], "effects": [], "index": 0, "trajectory": "circle"}
+    spec = {"damages": [[1, 2.5, 0.3]], "effects": [], "index": 0, "trajectory": "circle",
+            "preset": "crazyflie-x"}
     record = {"spec": spec, "filter": {"detections": [{"rotor": 1, "time_s": 2.505}], "stable": True,
                                        "rmse_after_damage_m": 0.02},
               "oracle": {"stable": True, "rmse_after_damage_m": 0.02},
               "filter_undamaged": {"rmse_after_damage_m": 0.017, "coefficients_at_damage": coefficients},
               "oracle_undamaged": {"rmse_after_damage_m": 0.0005}}
-    cell = damage_bench.summarise([record], config())["tracking_per_trajectory"]["circle"]
-    assert cell["undamaged_pair_kf_error_median"] == pytest.approx(0.18)
-    assert cell["undamaged_pair_kf_error_over_std_median"] == pytest.approx(9.0)
-    assert "| 18.0 %, 9 | 1 |" in damage_bench.render(damage_bench.summarise([record], config()))
+    cell = damage_bench.summarise([record], config())["twin_drift"]["circle/crazyflie-x"]
+    assert cell["pair_kf_error_median"] == pytest.approx(-0.18)
+    assert cell["pair_kf_abs_error_median"] == pytest.approx(0.18)
+    assert cell["pair_kf_error_over_std_median"] == pytest.approx(9.0)
+    assert cell["filter_rmse_median_mm"] == pytest.approx(17.0) and cell["flights"] == 1
+    assert "| circle/crazyflie-x | 17 / 0.5 | -18.0 % (18.0 %) | 9 | 1 |" in damage_bench.render(
+        damage_bench.summarise([record], config()))
 
 
 def test_missed_damage_counts_against_the_rate():
