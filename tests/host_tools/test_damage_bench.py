@@ -54,6 +54,19 @@ def test_the_filter_holds_the_telemetry_latency_in_every_flight(tmp_path):
             assert float(latency) == float(delay) == damage_bench.TELEMETRY_LATENCY_S > 0.0
 
 
+def test_every_flight_flies_the_sensor_matched_filter_and_the_derived_design(tmp_path):
+    """The bench's filter flies the library's rate process noise (not the campaign's paper-sensor
+    4e-4) and the detector's derived design for a 20 % loss, in the Filter and the Oracle flights
+    alike (docs/damage.md, "D read by the paired rule"); an extra --sitl-arg still overrides."""
+    cfg = config(damaged=2, undamaged=1)
+    for spec in damage_bench.flight_specs(cfg):
+        for mode in ("filter", "oracle"):
+            cmd = damage_bench._command(cfg, spec, mode, tmp_path / "f.csv", tmp_path / "f.json")
+            assert cmd.count("--filter-rate-noise") == 1
+            assert float(cmd[cmd.index("--filter-rate-noise") + 1]) == 0.2
+            assert float(cmd[cmd.index("--damage-design-loss") + 1]) == 0.2
+
+
 def test_scoring_detection_isolation_and_false_alarms():
     spec = {"damages": [[2, 3.0, 0.3], [4, 5.5, 0.15]], "effects": [], "index": 0}
     flight = {"detections": [{"rotor": 1, "time_s": 3.004}, {"rotor": 2, "time_s": 3.6},
