@@ -56,6 +56,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the stream lag's held-out evidence: 'raw' (2 s blocks of the band-passed rows, the "
                              "default) or 'whitened' (the effects' replication test on whitened rows, each log's own lag "
                              "on its own rows when there are several; evaluated, docs/gap.md 'Stream alignment')")
+    parser.add_argument("--ground-effect-height", choices=("com", "hub"), default="com",
+                        help="ground_effect's height: 'com' (the logged pz for every rotor, the default) or 'hub' "
+                             "(each rotor's hub height from the logged attitude; evaluated, not the default: "
+                             "docs/gap.md 'Effect library')")
     parser.add_argument("--no-progress", "--quiet", dest="quiet", action="store_true",
                         help="no progress bar (--quiet: the older spelling)")
 
@@ -160,7 +164,8 @@ def run(args: argparse.Namespace) -> int:
     logs = canonical_order([read_flightlog(p, vehicle) for p in args.log])
     holdout = canonical_order([read_flightlog(p, vehicle) for p in args.holdout])
     options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
-                               repeats=args.repeats, lag_evidence=args.lag_evidence)
+                               repeats=args.repeats, lag_evidence=args.lag_evidence,
+                               ground_effect_height=args.ground_effect_height)
     logs, left_out = without_unflown_logs(logs, vehicle, options)
     for entry in left_out:
         print(f"propid gap: left out {entry['why']}", file=sys.stderr)

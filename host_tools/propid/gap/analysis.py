@@ -40,6 +40,9 @@ class Options:
     # the stream lag's held-out evidence: "raw" (2 s blocks of the band-passed rows, the default) or
     # "whitened" (the effects' replication test on whitened rows; evaluated, docs/gap.md "Stream alignment")
     lag_evidence: str = "raw"
+    # ground_effect's height: "com" (pz for every rotor, the default) or "hub" (each rotor's hub height
+    # from the attitude; evaluated, not the default: docs/gap.md "Effect library")
+    ground_effect_height: str = "com"
 
 
 HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0, 5.0)
@@ -232,7 +235,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         vehicle = copy.deepcopy(vehicle)
         vehicle.inertia = np.eye(3)
     progress = Progress(options.progress, total=60 + 12 * 6)
-    flights = [prepare_flight(log, vehicle, options.band, repeats=options.repeats) for log in logs]
+    hub = options.ground_effect_height == "hub"
+    flights = [prepare_flight(log, vehicle, options.band, repeats=options.repeats, attitude=hub) for log in logs]
     band_rule = None
     requested_band = options.band
     if options.auto_highpass:  # the band the stream lag is searched in (the rule on unaligned logs)
@@ -240,7 +244,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         flights = [replace(f, band=search_band.for_rate(f.rate_hz)) for f in flights]
     else:
         search_band = options.band
-    held_flights = [prepare_flight(log, vehicle, search_band, repeats=options.repeats) for log in holdout]
+    held_flights = [prepare_flight(log, vehicle, search_band, repeats=options.repeats, attitude=hub)
+                    for log in holdout]
     progress(5)
     present = columns_present(logs + holdout, vehicle)
     with_thrust = bool(present["acc"] and present["mass"])

@@ -174,9 +174,24 @@ def ground_gain(height: np.ndarray, radius: float) -> np.ndarray:
     return 1.0 / (1.0 - (radius / (4.0 * h)) ** 2) - 1.0
 
 
+def hub_heights(f: Flight, c: Context) -> np.ndarray:
+    """(n, N) height of each rotor hub above the ground: pz plus the hub's world-z offset from the
+    CoM, (R(q) r_i)_z; pz for every rotor when the log has no attitude."""
+    if f.quat is None:
+        return np.repeat(f.height[:, None], c.positions.shape[0], axis=1)
+    w, x, y, z = np.asarray(f.quat, dtype=float).T
+    norm = np.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = (q / np.where(norm > 0, norm, 1.0) for q in (w, x, y, z))
+    # third row of the body -> world rotation: the world z of a body vector
+    row_z = np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1)
+    return f.height[:, None] + row_z @ c.positions.T
+
+
 def _ground_effect(f: Flight, c: Context) -> dict:
-    gain = ground_gain(f.height, c.rotor_radius)
-    thrusts = _thrusts(f, c) * gain[:, None]
+    # per rotor at its own hub height: tilted near the ground the lower rotors gain more thrust
+    # (a restoring roll/pitch torque that the CoM height alone misses)
+    gain = ground_gain(hub_heights(f, c), c.rotor_radius)
+    thrusts = _thrusts(f, c) * gain
     roll, pitch = _moments_of(thrusts, c)
     return {"roll": roll[:, None], "pitch": pitch[:, None], "thrust": thrusts.sum(axis=1)[:, None]}
 

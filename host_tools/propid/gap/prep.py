@@ -84,6 +84,7 @@ class Flight:
     held_rotor_fraction: float = 0.0
     repeated_rows: dict = field(default_factory=dict)  # stream quality: copies of the previous row (repeated_row_stats)
     blocks: list[tuple[int, int]] = field(default_factory=list)  # [start, stop) inside segments
+    quat: np.ndarray | None = None  # (n,4) attitude w, x, y, z (body -> world): ground_effect at each hub
 
     @property
     def rows(self) -> int:
@@ -190,7 +191,7 @@ def repeated_row_stats(copy: np.ndarray, rows: np.ndarray) -> dict:
 
 
 def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | None = None,
-                   repeats: str = "samples") -> Flight:
+                   repeats: str = "samples", attitude: bool = False) -> Flight:
     """Build a Flight from a validated log. Raises UserError if nothing usable. What the
     vehicle file already models (gyro_scale, aero_damping, esc_delay_s) is applied here, so
     the base model includes it. `repeats`: "missing" treats copies of the previous row (per
@@ -272,6 +273,9 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
     vel = log_body_velocity(log, missing=0.0)
     height = log.extra.get("pz")
     height = _interp_missing(height) if height is not None and np.isfinite(height).any() else None
+    # the attitude, kept only for ground_effect at each hub's height (--ground-effect-height hub)
+    quat = log.quat if attitude else None
+    quat = _interp_missing(quat) if quat is not None and np.isfinite(quat).all(axis=1).any() else None
     cmd = log.group(tuple(f"cmd_{i + 1}" for i in range(log.rotor_count)))
     cmd = _interp_missing(cmd) if cmd is not None and np.isfinite(cmd).mean() > 0.5 else None
     vbat = log.extra.get("vbat")
@@ -281,7 +285,7 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
         gyro=gyro, rate_dot=rate_dot, speed=speeds, speed_dot=speed_dot, torque=torque,
         specific_force_z=None if acc is None else acc[:, 2], acc=acc, body_velocity=vel, height=height,
         cmd=cmd, vbat=vbat, segs=segs, band=band.for_rate(rate), repaired_rotor_samples=repaired,
-        held_rotor_fraction=held_fraction)
+        held_rotor_fraction=held_fraction, quat=quat)
     in_segments = np.concatenate([np.arange(a, b) for a, b in segs])
     flight.repeated_rows = {"gyro": repeated_row_stats(gyro_copy, in_segments),
                             "rotor": repeated_row_stats(rotor_copy, in_segments), "treated_as": repeats}
