@@ -5,6 +5,7 @@ columns and the thrust column read the same ground gain."""
 from __future__ import annotations
 
 import subprocess
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -97,3 +98,27 @@ def test_ground_effect_roll_pitch_and_thrust_columns_read_the_same_gain(tmp_path
     com = gains(prepare_flight(log, vehicle, Band()))
     assert com[("roll", "pitch")] > 4.0
     assert com[("thrust",)] == pytest.approx(2.0, rel=0.3)
+
+
+@pytest.mark.parametrize("height,attitude", [("com", False), ("hub", True)])
+def test_the_option_reaches_the_data_preparation(height, attitude, monkeypatch):
+    """analysis.Options.ground_effect_height (the CLI's --ground-effect-height) decides whether the
+    flights keep their attitude, i.e. whether ground_effect is taken at each hub."""
+    from propid.gap import analysis
+    from propid.gap.prep import Band
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def record(log, vehicle, band, name=None, repeats="samples", attitude=False):
+        seen.append(attitude)
+        raise Stop
+
+    monkeypatch.setattr(analysis, "prepare_flight", record)
+    monkeypatch.setattr(analysis, "canonical_order", lambda logs: list(logs))
+    vehicle = SimpleNamespace(inertia=np.eye(3))
+    with pytest.raises(Stop):
+        analysis.run([object()], vehicle, [], analysis.Options(Band(), progress=False, ground_effect_height=height))
+    assert seen == [attitude]
