@@ -388,6 +388,9 @@ def effect_test(gr, current: list[int], effect_cols: list[int], nonnegative: boo
     bw = andrews_bandwidth(s_n @ direction)
     omega = bartlett_long_run_covariance(s_n, bw)
     stat = float(b @ np.linalg.lstsq(omega, b, rcond=None)[0])
+    # the coefficients' sandwich standard errors (scaled columns): A^-1 Omega A^-1
+    a_inv = np.linalg.pinv(a_n)
+    se = np.sqrt(np.maximum(np.diag(a_inv @ omega @ a_inv), 0.0)) / scale
     rank = max(int(np.linalg.matrix_rank(omega, tol=1e-10 * max(np.abs(omega).max(), 1e-300))), 1)
     # Hotelling: W with a covariance estimated on nu degrees of freedom
     nu = variance_dof(n, bw)
@@ -403,4 +406,4 @@ def effect_test(gr, current: list[int], effect_cols: list[int], nonnegative: boo
             p, stat = chi_bar_p(theta_e * scale, 0.5 * (precision + precision.T), constrained, nu)
         except np.linalg.LinAlgError:
             pass  # a singular covariance: the two-sided test stands
-    return {"statistic": stat, "dof": rank, "variance_dof": nu, "p_value": p, "bandwidth": bw}
+    return {"statistic": stat, "dof": rank, "variance_dof": nu, "p_value": p, "bandwidth": bw, "se": se}
