@@ -74,8 +74,8 @@ apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *r
  * element gets the same value twice. Each lane takes the row groups' operations
  * in their order (g = h (1 / S); x + g0 nu0 + g1 nu1 + g2 nu2; p - g0 h0 - g1 h1
  * - g2 h2, left to right; a scalar times a vector multiplies every lane): the
- * same bits, tested against the size-lean build's loops
- * (test_quad_build_bits_match_size_lean). */
+ * same bits, tested against the row groups in portable C
+ * (propid_quad_row_groups_shared, test_quad_build_bits_match_row_groups). */
 typedef float propid_f4_t __attribute__((vector_size(16)));
 #define PROPID_F4_CHUNKS ((PROPID_QUAD_STATES + 3u) / 4u)
 static inline __attribute__((always_inline)) propid_f4_t f4_load(const float *p)
