@@ -66,6 +66,7 @@ void propid_config_default(propid_config_t *config)
     config->motor_time_constant = 0.01f;
     config->input_error_compensation = 0u;
     config->rotor_speed_noise_hold = 0u;
+    config->rotor_speed_noise_split = 0u;
     config->motor_command_instrument = 0u;
     config->motor_command_lag = 0.03f;
     config->motor_command_memory = 10.0f;
@@ -685,6 +686,12 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         (config->rotor_speed_noise_hold && (!(config->rotor_speed_noise > 0.0f) || config->input_error_compensation))) {
         PROPID_BAD("rotor_speed_noise_hold");
     }
+    /* The split divides an error of the configured size; the compensation assumes
+     * independent errors. */
+    if (config->rotor_speed_noise_split > 1u ||
+        (config->rotor_speed_noise_split && (!(config->rotor_speed_noise > 0.0f) || config->input_error_compensation))) {
+        PROPID_BAD("rotor_speed_noise_split");
+    }
 
     /* The commands' first stage (propid_instrument.c): compiled out, only 0. A lag
      * or memory is needed only with it on; off, any finite non-negative value. */
@@ -711,6 +718,10 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 #if PROPID_WITH_INPUT_NOISE
     /* Var(Omega^2) = (2 Omega sigma)^2 = input_noise_var Omega^2 (docs/math.md §14). */
     out.input_noise_var = 4.0f * config->rotor_speed_noise * config->rotor_speed_noise;
+    if (config->rotor_speed_noise_split) {
+        out.input_noise_var *= 0.25f; /* the spread's (q^2 / 12 of q^2 / 3); the mean's 3x that */
+    }
+    out.input_noise_split = config->rotor_speed_noise_split;
     out.input_noise_time = config->rotor_speed_noise_time;
     out.input_compensation = config->input_error_compensation;
     out.input_noise_hold = config->rotor_speed_noise_hold;

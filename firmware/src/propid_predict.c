@@ -501,12 +501,25 @@ static void add_input_block(float *cov, const float (*gain)[PROPID_MAX_ROTORS], 
     }
 }
 
+/* An error common to every rotor (rotor_speed_noise_split; docs/math.md §14, "An
+ * error common to every rotor"): rank one, along = B c with c_i the common error's
+ * white-equivalent std in rotor i's input; adds along along^T to the rate block. */
+static void add_common_block(float *cov, const float along[3])
+{
+    for (uint8_t b = 0; b < 3u; ++b) {
+        for (uint8_t a = 0; a <= b; ++a) {
+            cov[propid_cov_index(a, b)] += along[a] * along[b];
+        }
+    }
+}
+
 /* The quad layout (propid_internal.h): entries 2..5 of each row are rotors 0..3,
  * thrust columns in the roll and pitch rows, drag columns in the yaw row;
  * straight-line. */
 static __attribute__((noinline)) void add_input_noise_quad(const propid_derived_t *derived,
                                                            propid_core_t *core, const float *kf_rel,
-                                                           const float *km_rel, const float *weight)
+                                                           const float *km_rel, const float *weight,
+                                                           const float *common)
 {
     float input_var[4];
     float gain[3][4];
@@ -528,12 +541,21 @@ PROPID_UNROLL(3)
                                            gain[a][3] * gain[b][3] * input_var[3];
         }
     }
+    if (common != NULL) {
+        float along[3];
+        for (uint8_t a = 0; a < 3u; ++a) {
+            along[a] = gain[a][0] * common[0] + gain[a][1] * common[1] + gain[a][2] * common[2] +
+                       gain[a][3] * common[3];
+        }
+        add_common_block(cov, along);
+    }
 }
 
 /* Any vehicle, over the sparsity lists. */
 static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t *derived,
                                                           propid_core_t *core, const float *kf_rel,
-                                                          const float *km_rel, const float *weight)
+                                                          const float *km_rel, const float *weight,
+                                                          const float *common)
 {
     const uint8_t rotor_count = (uint8_t)(derived->layout.drag - derived->layout.thrust);
     float input_var[PROPID_MAX_ROTORS];
@@ -554,6 +576,15 @@ static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t
         }
     }
     add_input_block(core->cov, (const float (*)[PROPID_MAX_ROTORS])gain, input_var, rotor_count);
+    if (common != NULL) {
+        float along[3] = {0.0f, 0.0f, 0.0f};
+        for (uint8_t a = 0; a < 3u; ++a) {
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                along[a] += gain[a][i] * common[i];
+            }
+        }
+        add_common_block(core->cov, along);
+    }
 }
 
 /* The held error's span per rotor (docs/math.md §14, "Hold time from the
@@ -603,6 +634,13 @@ static __attribute__((noinline)) void add_input_noise(const propid_derived_t *de
     const uint8_t rotor_count = (uint8_t)(derived->layout.drag - derived->layout.thrust);
     const float span = derived->input_noise_time > dt ? derived->input_noise_time : dt;
     float weight[PROPID_MAX_ROTORS];
+    /* The truncation's mean, common to every rotor: Cov(e_i, e_j) = common_var Omega_i
+     * Omega_j in u (common_var = 3 input_noise_var: (q / 2)^2 against the spread's
+     * q^2 / 12), each rotor's share over its own span, so c_i = sqrt(common_var u_i dt
+     * span_i), u_i the trapezoid mean; rank one, positive semi-definite. */
+    float common[PROPID_MAX_ROTORS];
+    const int with_common = derived->input_noise_split != 0u;
+    const float common_var = 3.0f * derived->input_noise_var;
     for (uint8_t i = 0; i < rotor_count; ++i) {
         float rotor_span = span;
         if (derived->input_noise_hold == 1u) {
@@ -611,7 +649,12 @@ static __attribute__((noinline)) void add_input_noise(const propid_derived_t *de
             rotor_span = held_span_floor(core, i, dt, span);
         }
         weight[i] = 0.5f * derived->input_noise_var * dt * rotor_span;
+        if (with_common) {
+            const float speed_sq = 0.5f * (core->input_speed_sq[i] + core->rotor_speed_sq[i]);
+            common[i] = sqrtf(common_var * dt * rotor_span * speed_sq);
+        }
     }
+    const float *common_or_null = with_common ? common : NULL;
     /* B at the drag coefficients per rotor (kept in their yaw basis; this term is
      * in the general build only, whose derived data holds the basis). */
     const propid_reflection_t basis = {derived->drag_basis, derived->drag_basis_scale,
@@ -626,9 +669,9 @@ static __attribute__((noinline)) void add_input_noise(const propid_derived_t *de
     float kf_rel[PROPID_MAX_ROTORS];
     propid_thrust_per_rotor(&thrust_basis, core, kf_rel, NULL);
     if (derived->quad_layout) {
-        add_input_noise_quad(derived, core, kf_rel, km_rel, weight);
+        add_input_noise_quad(derived, core, kf_rel, km_rel, weight, common_or_null);
     } else {
-        add_input_noise_any(derived, core, kf_rel, km_rel, weight);
+        add_input_noise_any(derived, core, kf_rel, km_rel, weight, common_or_null);
     }
 }
 #endif

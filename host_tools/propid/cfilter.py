@@ -163,6 +163,7 @@ _OPTIONAL_FIELDS = [
     ("input_error_compensation", ctypes.c_uint8),
     ("motor_command_instrument", ctypes.c_uint8),
     ("rotor_speed_noise_hold", ctypes.c_uint8),
+    ("rotor_speed_noise_split", ctypes.c_uint8),
     ("motor_command_lag", ctypes.c_float),
     ("motor_command_memory", ctypes.c_float),
     ("motor_command_min_f", ctypes.c_float),
@@ -305,6 +306,9 @@ DEFAULT_TUNING: dict[str, float | int] = {
     # The input error's correlation time per rotor from how long its value has stood
     # (docs/math.md §14; needs rotor_speed_noise > 0, the configured time its ceiling).
     "rotor_speed_noise_hold": 0,
+    # 1: the input error is a truncation's, rotor_speed_noise its RMS q / sqrt(3): mean q / 2
+    # common to every rotor, spread q / sqrt(12) per rotor (docs/math.md §14). 0: independent.
+    "rotor_speed_noise_split": 0,
 }
 
 
@@ -368,6 +372,7 @@ class FilterConfig:
     motor_command_memory: float = DEFAULT_TUNING["motor_command_memory"]
     motor_command_min_f: float = DEFAULT_TUNING["motor_command_min_f"]
     rotor_speed_noise_hold: int = DEFAULT_TUNING["rotor_speed_noise_hold"]
+    rotor_speed_noise_split: int = DEFAULT_TUNING["rotor_speed_noise_split"]
     # Known aerodynamic rate damping [N m s/rad] per body axis (body torque -d_a omega_a, docs/math.md §17);
     # None or zeros: not modelled.
     aero_damping: Optional[list] = None

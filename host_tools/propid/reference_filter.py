@@ -137,6 +137,10 @@ class ReferenceFilter:
         self.input_noise_time = _f32(config.rotor_speed_noise_time)
         self.input_compensation = bool(getattr(config, "input_error_compensation", 0))
         self.input_noise_hold = int(getattr(config, "rotor_speed_noise_hold", 0))  # 0, 1 or 2 (floor)
+        # C (propid_config.c): split, the spread's q^2 / 12 of the RMS q^2 / 3, the mean's 3x that
+        self.input_noise_split = bool(getattr(config, "rotor_speed_noise_split", 0))
+        if self.input_noise_split:
+            self.input_noise_var *= 0.25
         self.converged_var = c["converged_rel_std"] ** 2
         # C (propid_config.c): a claim counts the configured inertia's scale error too, which
         # the data cannot see (for kf not when the torque-scale state takes it).
@@ -641,6 +645,10 @@ class ReferenceFilter:
                     span = self._held_spans(dt, span[0])
                 input_var = self.input_noise_var * speed_sq * dt * span
                 self.cov[:3, :3] += (gain * input_var) @ gain.T
+                if self.input_noise_split:
+                    # C: add_common_block, an error common to every rotor over each rotor's span
+                    along = gain @ np.sqrt(3.0 * self.input_noise_var * speed_sq * dt * span)
+                    self.cov[:3, :3] += np.outer(along, along)
             self.state[:3] = rate_next
         else:
             # The rates start at the anchoring sample (C: propid_push_gyro).

@@ -363,6 +363,12 @@ static const opt_t options[] = {
          "filter: the same hold with the configured time as its floor, the\n"
          "firmware's largest time its ceiling (rotor_speed_noise_hold = 2,\n"
          "docs/math.md §14). Also with --filter-sensor-errors"),
+    FLAG(NULL, "filter-decode-error-split", filter_decode_error_split, 1,
+         "filter: with --filter-sensor-errors, the truncating decode's error\n"
+         "as its mean, half the step, common to every rotor and its spread\n"
+         "step / sqrt(12) per rotor, instead of step / sqrt(3) per rotor\n"
+         "(rotor_speed_noise_split, docs/math.md §14; the middle decode has\n"
+         "the spread alone)"),
     NUMBER(NULL, "filter-inertia-std", filter_inertia_rel_std, 0.0, 1.0, "R",
            "filter: relative std of the vehicle file's inertia scale\n"
            "(inertia_rel_std): the data cannot see it, converged claims\n"

@@ -106,6 +106,8 @@ typedef struct {
     double filter_gyro_stuck_samples;   /* gyro_stuck_samples (whole number; 0: off) */
     double filter_inertia_rel_std;      /* inertia_rel_std: the vehicle file's inertia scale std; 0: exact */
     int filter_rotor_speed_noise_hold;    /* rotor_speed_noise_hold (docs/math.md §14); 0: off */
+    int filter_decode_error_split;      /* with --filter-sensor-errors: the decode's error as its common mean and
+                                           independent spread (sensor_errors.h) */
     int filter_input_error_compensation;  /* input_error_compensation (docs/math.md §14); 0: off */
     int filter_instrument;                /* motor_command_instrument: the commands pushed to the filter
                                              as its rotor input's instrument (docs/math.md §16); 0: off */

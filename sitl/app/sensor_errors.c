@@ -32,9 +32,11 @@ int sitl_sensor_errors(const sitl_vehicle_t *v, const sitl_esc_params_t *esc, co
      * whole flight, a per-rotor coefficient error). No errors-in-variables
      * compensation: that removes the attenuation of a classical error (mean 0,
      * fresh at every sample), which this one is not (docs/math.md §14,
-     * "Validity"). */
+     * "Validity"). Split (--filter-decode-error-split): the period decode's
+     * mean step / 2 as one error common to every rotor, its spread per rotor. */
     if (esc->quantise_dshot) {
         const double step = sitl_esc_dshot_step(hover, esc->pole_pairs);
+        out->rotor_speed_noise_truncated = !esc->decode_middle;
         if (esc->decode_middle) {
             out->rotor_speed_noise = step / sqrt(12.0);
             out->rotor_speed_noise_time = (double)PROPID_ROTOR_SPEED_NOISE_TIME_MAX;

@@ -21,6 +21,9 @@ typedef struct {
     double rotor_speed_noise;      /* telemetry step at hover / sqrt(3) [rad/s]; 0: exact speeds */
     double rotor_speed_noise_time; /* its correlation time [s] (with the hold: its ceiling) */
     int rotor_speed_noise_hold;    /* 1: the hold from the telemetry (middle decode) */
+    int rotor_speed_noise_truncated; /* 1: that error is a truncation's (the period decode): mean
+                                        step / 2, common to every rotor, and spread step / sqrt(12)
+                                        (--filter-decode-error-split: rotor_speed_noise_split) */
     double rotor_delay_s;          /* telemetry latency [s] */
 } sitl_sensor_errors_t;
 

@@ -220,6 +220,7 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
         c->rotor_delay_us = (int32_t)lround(e.rotor_delay_s * 1e6);
         c->input_error_compensation = 0u; /* the truncation's error is not classical (sensor_errors.c) */
         held_by_rule = e.rotor_speed_noise_hold;
+        c->rotor_speed_noise_split = (uint8_t)(opts->filter_decode_error_split && e.rotor_speed_noise_truncated);
         if (opts->filter_rotor_speed_noise_hold == 2) {
             /* The hold as a floor: the rule's fixed time is the floor, whatever the decode. */
             c->rotor_speed_noise_time = (float)SITL_HELD_STEP_TIME_S;

@@ -8,6 +8,8 @@
  * - with rotor_speed_noise_hold, the span per rotor from how long its value
  *   has stood (dt + 2 age, a change renews it, the configured time its ceiling;
  *   with hold = 2 its floor);
+ * - rotor_speed_noise_split adds the rank-one block of the truncation's mean, common to
+ *   every rotor, to its spread's;
  * - the configuration check refuses bad values by name.
  */
 #include <math.h>
@@ -42,31 +44,35 @@ static void predict_both(float dt)
 /* The block one prediction step added (`with` after the step minus `plain`, the
  * same filter stepped without the term) against B Sigma_u B^T dt span_i, B computed
  * densely from the model's Jacobian; everything outside the rate block bit for bit. */
-static void check_block(const propid_filter_t *with, const propid_filter_t *plain, const float *span, float sigma,
-                        float dt)
+/* B_ai = d(omega_dot_a)/d(u_i) densely: the model's coefficient columns (per rotor:
+ * the filter keeps the coefficient blocks in their bases) divided by u_i. */
+static void dense_input_gain(const propid_filter_t *filter, float gain[3][PROPID_MAX_ROTORS])
 {
-    const uint8_t rotors = with->config.rotor_count;
-    /* B_ai = d(omega_dot_a)/d(u_i): the model's coefficient columns divided by u_i. */
+    const uint8_t rotors = filter->config.rotor_count;
     float rows[3][PROPID_MAX_STATES];
     float unit_speed_sq[PROPID_MAX_ROTORS];
     for (uint8_t i = 0; i < rotors; ++i) {
         unit_speed_sq[i] = 1.0f;
     }
-    /* The model per rotor (the filter keeps the coefficient blocks in their bases). */
-    const propid_core_t per_rotor = per_rotor_core(with);
+    const propid_core_t per_rotor = per_rotor_core(filter);
     const float *x = per_rotor.state;
-    propid_model_rate_jacobian(&with->config, &with->derived, x, unit_speed_sq, rows);
+    propid_model_rate_jacobian(&filter->config, &filter->derived, x, unit_speed_sq, rows);
+    for (uint8_t a = 0; a < 3u; ++a) {
+        for (uint8_t i = 0; i < rotors; ++i) {
+            gain[a][i] = rows[a][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
+                         rows[a][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
+        }
+    }
+}
+
+/* The rate block's expected increment `expected[a][b]` against what `with` added over
+ * `plain`; everything outside the rate block bit for bit. */
+static void check_rate_block_added(const propid_filter_t *with, const propid_filter_t *plain,
+                                   const float expected_block[3][3])
+{
     for (uint8_t a = 0; a < 3u; ++a) {
         for (uint8_t b = a; b < 3u; ++b) {
-            float expected = 0.0f;
-            for (uint8_t i = 0; i < rotors; ++i) {
-                const float gain_a = rows[a][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
-                                     rows[a][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
-                const float gain_b = rows[b][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
-                                     rows[b][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
-                const float mean_u = 0.5f * (with->core.input_speed_sq[i] + with->core.rotor_speed_sq[i]);
-                expected += gain_a * gain_b * 4.0f * sigma * sigma * mean_u * dt * span[i];
-            }
+            const float expected = expected_block[a][b];
             const uint32_t k = propid_cov_index(a, b);
             const float added = with->core.cov[k] - plain->core.cov[k];
             TEST_ASSERT_FLOAT_WITHIN(1.0e-3f * fabsf(expected) + 1.0e-6f * fabsf(with->core.cov[k]), expected,
@@ -86,6 +92,23 @@ static void check_block(const propid_filter_t *with, const propid_filter_t *plai
             TEST_ASSERT_EQUAL_MEMORY(&plain->core.cov[k], &with->core.cov[k], sizeof(float));
         }
     }
+}
+
+static void check_block(const propid_filter_t *with, const propid_filter_t *plain, const float *span, float sigma,
+                        float dt)
+{
+    float gain[3][PROPID_MAX_ROTORS];
+    dense_input_gain(with, gain);
+    float expected[3][3] = {{0.0f}};
+    for (uint8_t a = 0; a < 3u; ++a) {
+        for (uint8_t b = a; b < 3u; ++b) {
+            for (uint8_t i = 0; i < with->config.rotor_count; ++i) {
+                const float mean_u = 0.5f * (with->core.input_speed_sq[i] + with->core.rotor_speed_sq[i]);
+                expected[a][b] += gain[a][i] * gain[b][i] * 4.0f * sigma * sigma * mean_u * dt * span[i];
+            }
+        }
+    }
+    check_rate_block_added(with, plain, (const float (*)[3])expected);
 }
 
 static void check_added_block(uint8_t rotors, int full_inertia, float time)
@@ -124,6 +147,52 @@ static void test_input_noise_off_is_the_plain_prediction(void)
     input_error_off_prior(&with_noise, &config);
     predict_both(0.002f);
     TEST_ASSERT_EQUAL_MEMORY(without_noise.core.cov, with_noise.core.cov, sizeof(with_noise.core.cov));
+}
+
+/* The truncation split (rotor_speed_noise_split): the root mean square sigma = q / sqrt(3)
+ * becomes the spread q / sqrt(12) = sigma / 2 per rotor (the filter without the split at
+ * sigma / 2) plus the mean q / 2, common to every rotor: exactly the rank-one block along
+ * along^T on top, along_a = sum_i B_ai sqrt(3 sigma^2 u_i dt span_i), B dense; nothing
+ * outside the rate block. */
+static void check_common_block(uint8_t rotors, int full_inertia, float time)
+{
+    const float sigma = 3.0f;
+    const float dt = 0.002f;
+    propid_config_t config;
+    input_error_configure(&config, rotors, full_inertia);
+    config.rotor_speed_noise = 0.5f * sigma;
+    config.rotor_speed_noise_time = time;
+    input_error_off_prior(&without_noise, &config);
+    config.rotor_speed_noise = sigma;
+    config.rotor_speed_noise_split = 1u;
+    input_error_off_prior(&with_noise, &config);
+
+    predict_both(dt);
+    const float span = time > dt ? time : dt;
+    float gain[3][PROPID_MAX_ROTORS];
+    dense_input_gain(&with_noise, gain);
+    float along[3] = {0.0f, 0.0f, 0.0f};
+    for (uint8_t a = 0; a < 3u; ++a) {
+        for (uint8_t i = 0; i < rotors; ++i) {
+            const float mean_u = 0.5f * (with_noise.core.input_speed_sq[i] + with_noise.core.rotor_speed_sq[i]);
+            along[a] += gain[a][i] * sqrtf(3.0f * sigma * sigma * mean_u * dt * span);
+        }
+    }
+    float expected[3][3] = {{0.0f}};
+    for (uint8_t a = 0; a < 3u; ++a) {
+        for (uint8_t b = a; b < 3u; ++b) {
+            expected[a][b] = along[a] * along[b];
+        }
+    }
+    check_rate_block_added(&with_noise, &without_noise, (const float (*)[3])expected);
+}
+
+static void test_common_input_error_adds_its_rank_one_block(void)
+{
+    check_common_block(4u, 0, 0.0f);  /* quad layout, one step */
+    check_common_block(4u, 0, 1.0f);  /* quad layout, held 1 s */
+    check_common_block(4u, 1, 0.01f); /* general lists (full inertia) */
+    check_common_block(6u, 0, 0.5f);  /* hexa */
 }
 
 /* Six prediction steps of dt from with_noise as set up: from the second step on
@@ -236,24 +305,34 @@ static void test_held_input_error_within_one_step_is_the_plain_term(void)
     }
 }
 
+/* The configuration is refused by the field's name. */
+static void check_refused(const propid_config_t *config, const char *name)
+{
+    const char *bad = NULL;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(config, &bad));
+    TEST_ASSERT_EQUAL_STRING(name, bad);
+}
+
+/* Each of `values` in `*field` is refused by that field's name. */
+static void check_values_refused(propid_config_t *config, float *field, const float *values, uint8_t count,
+                                 const char *name)
+{
+    for (uint8_t k = 0; k < count; ++k) {
+        *field = values[k];
+        check_refused(config, name);
+    }
+}
+
 static void test_input_noise_config_is_checked(void)
 {
     propid_config_t config;
     input_error_configure(&config, 4u, 0);
     const char *bad = NULL;
     const float bad_noise[] = {-1.0f, NAN, INFINITY, 1.0e5f};
-    for (uint8_t k = 0; k < 4u; ++k) {
-        config.rotor_speed_noise = bad_noise[k];
-        TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
-        TEST_ASSERT_EQUAL_STRING("rotor_speed_noise", bad);
-    }
+    check_values_refused(&config, &config.rotor_speed_noise, bad_noise, 4u, "rotor_speed_noise");
     config.rotor_speed_noise = 2.0f;
     const float bad_time[] = {-0.1f, NAN, 1.01f * PROPID_ROTOR_SPEED_NOISE_TIME_MAX};
-    for (uint8_t k = 0; k < 3u; ++k) {
-        config.rotor_speed_noise_time = bad_time[k];
-        TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
-        TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_time", bad);
-    }
+    check_values_refused(&config, &config.rotor_speed_noise_time, bad_time, 3u, "rotor_speed_noise_time");
     config.rotor_speed_noise_time = PROPID_ROTOR_SPEED_NOISE_TIME_MAX;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
     config.rotor_speed_noise_time = 0.002f;
@@ -261,24 +340,34 @@ static void test_input_noise_config_is_checked(void)
     /* The hold: 0, 1 or 2 (the time as floor), with an error size, not with the
      * compensation. */
     config.rotor_speed_noise_hold = 3u;
-    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
-    TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_hold", bad);
+    check_refused(&config, "rotor_speed_noise_hold");
     config.rotor_speed_noise_hold = 2u;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
     config.rotor_speed_noise_hold = 1u;
     config.input_error_compensation = 1u;
-    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
-    TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_hold", bad);
+    check_refused(&config, "rotor_speed_noise_hold");
     config.input_error_compensation = 0u;
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
+    /* The split: 0 or 1, of an error of a size, not with the compensation. */
+    config.rotor_speed_noise_split = 2u;
+    check_refused(&config, "rotor_speed_noise_split");
+    config.rotor_speed_noise_split = 1u;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_config_check(&config, &bad));
+    config.rotor_speed_noise_hold = 0u;
+    config.input_error_compensation = 1u;
+    check_refused(&config, "rotor_speed_noise_split");
+    config.input_error_compensation = 0u;
+    config.rotor_speed_noise_hold = 1u;
     config.rotor_speed_noise = 0.0f;
-    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
-    TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_hold", bad);
+    check_refused(&config, "rotor_speed_noise_hold");
+    config.rotor_speed_noise_hold = 0u;
+    check_refused(&config, "rotor_speed_noise_split");
 }
 
 /* The largest accepted error (sigma = max_rotor_speed, correlated over 1 s, and over
  * the largest time with the hold from the telemetry, whose held speed here stands for
- * the whole run, and with the hold above a floor of 1 s, growing to that time) at full speed with wild body rates: every push is accepted or gated
+ * the whole run, and with the hold above a floor of 1 s, growing to that time, split into a
+ * common mean and a spread) at full speed with wild body rates: every push is accepted or gated
  * by a status, the estimates stay finite and the variances positive. */
 static void test_largest_input_noise_keeps_the_filter_finite(void)
 {
@@ -289,6 +378,7 @@ static void test_largest_input_noise_keeps_the_filter_finite(void)
         config.rotor_speed_noise = config.max_rotor_speed;
         config.rotor_speed_noise_time = times[run];
         config.rotor_speed_noise_hold = run;
+        config.rotor_speed_noise_split = run == 2u; /* and split, a common part */
         TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&with_noise, &config));
         uint64_t t = 1000u;
         for (uint32_t k = 0; k < 2000u; ++k) {
@@ -323,6 +413,10 @@ static void test_input_noise_compiled_out_refuses_the_option(void)
     const char *bad = NULL;
     TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
     TEST_ASSERT_EQUAL_STRING("rotor_speed_noise", bad);
+    config.rotor_speed_noise = 0.0f;
+    config.rotor_speed_noise_split = 1u;
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_CONFIG, propid_config_check(&config, &bad));
+    TEST_ASSERT_EQUAL_STRING("rotor_speed_noise_split", bad);
 }
 #endif
 
@@ -332,6 +426,7 @@ int main(void)
 #if PROPID_WITH_INPUT_NOISE
     RUN_TEST(test_input_noise_adds_its_block_to_the_rate_covariance);
     RUN_TEST(test_input_noise_off_is_the_plain_prediction);
+    RUN_TEST(test_common_input_error_adds_its_rank_one_block);
     RUN_TEST(test_held_input_error_spans_from_the_telemetry);
     RUN_TEST(test_held_input_error_with_the_time_as_floor);
     RUN_TEST(test_held_input_error_within_one_step_is_the_plain_term);

@@ -231,26 +231,44 @@ def test_c_agrees_with_reference_with_input_noise(flight, options):
     assert cov_off > 10.0 * COV_TOL_REL
 
 
+def check_quantised_against_reference(flight, config, without, label):
+    """On the flight's speeds quantised to a 25 rad/s grid (values stand for several samples):
+    C and the reference filter within the bounds with `config`, and C without the term under test
+    (`without`) outside them (the comparison would see it missing on one side)."""
+    quantised = [(t, kind, [25.0 * round(v / 25.0) for v in values] if kind == "rotor" else values)
+                 for t, kind, values in flight]
+    trace_ref = replay(ReferenceFilter(config), quantised)
+    trace_c = replay(CFilter(config), quantised)
+    state_err, cov_err = disagreement(trace_c, trace_ref)
+    print(f"C vs reference, {label}: max |dx|/std = {state_err:.3g}, max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+    _, cov_without = disagreement(replay(CFilter(without), quantised), trace_ref)
+    assert cov_without > 10.0 * COV_TOL_REL
+
+
 @pytest.mark.parametrize("options", ["plain", "all"])
 @pytest.mark.parametrize("hold", [1, 2])
 def test_c_agrees_with_reference_with_held_input_noise(flight, options, hold):
     """The input error's correlation time per rotor from how long its value has stood
-    (rotor_speed_noise_hold, docs/math.md §14; 2: the configured time its floor), on the
-    flight's speeds quantised to a 25 rad/s grid so that values stand for several samples:
-    same bounds, and the hold changes the run."""
-    quantised = [(t, kind, [25.0 * round(v / 25.0) for v in values] if kind == "rotor" else values)
-                 for t, kind, values in flight]
+    (rotor_speed_noise_hold, docs/math.md §14; 2: the configured time its floor): same bounds on
+    the quantised flight, and the hold changes the run."""
     noisy = make_config(options).with_overrides(rotor_speed_noise=20.0, rotor_speed_noise_time=0.05)
-    config = noisy.with_overrides(rotor_speed_noise_hold=hold)
-    trace_ref = replay(ReferenceFilter(config), quantised)
-    trace_c = replay(CFilter(config), quantised)
-    state_err, cov_err = disagreement(trace_c, trace_ref)
-    print(f"C vs reference, held input noise ({options}, hold {hold}): max |dx|/std = {state_err:.3g}, "
-          f"max |dP_ii|/P_ii = {cov_err:.3g}")
-    assert state_err < STATE_TOL_SIGMA
-    assert cov_err < COV_TOL_REL
-    _, cov_fixed = disagreement(replay(CFilter(noisy), quantised), trace_ref)
-    assert cov_fixed > 10.0 * COV_TOL_REL
+    check_quantised_against_reference(flight, noisy.with_overrides(rotor_speed_noise_hold=hold), noisy,
+                                      f"held input noise ({options}, hold {hold})")
+
+
+@pytest.mark.parametrize("options", ["plain", "all"])
+@pytest.mark.parametrize("hold", [0, 2])
+def test_c_agrees_with_reference_with_split_input_noise(flight, options, hold):
+    """The input error split into a truncation's mean, common to every rotor, and its spread
+    per rotor, over the same spans (rotor_speed_noise_split, docs/math.md §14), with the configured
+    time and with the hold as a floor: same bounds on the quantised flight, and the split changes
+    the run."""
+    independent = make_config(options).with_overrides(rotor_speed_noise=20.0, rotor_speed_noise_time=0.05,
+                                                      rotor_speed_noise_hold=hold)
+    check_quantised_against_reference(flight, independent.with_overrides(rotor_speed_noise_split=1),
+                                      independent, f"split input noise ({options}, hold {hold})")
 
 
 @pytest.mark.parametrize("options", ["plain", "all"])

@@ -50,6 +50,7 @@ static void test_crazyflie_dshot_step_at_hover(void)
     /* The truncation's error is uniform over [0, step): RMS about 0 step / sqrt(3). */
     TEST_ASSERT_DOUBLE_WITHIN(1e-9, step / sqrt(3.0), e.rotor_speed_noise);
     TEST_ASSERT_DOUBLE_WITHIN(0.05, 2.06, e.rotor_speed_noise);
+    TEST_ASSERT_EQUAL_INT(1, e.rotor_speed_noise_truncated); /* the split has a mean to share */
     TEST_ASSERT_EQUAL_DOUBLE(SITL_HELD_STEP_TIME_S, e.rotor_speed_noise_time);
     TEST_ASSERT_EQUAL_DOUBLE(esc.latency_s, e.rotor_delay_s);
 }
@@ -107,6 +108,7 @@ static void test_middle_decode_gives_the_spread_alone(void)
     double step = speed_of_period(period, 7) - speed_of_period(period + 1.0, 7);
     TEST_ASSERT_DOUBLE_WITHIN(1e-9, step / sqrt(12.0), e.rotor_speed_noise);
     TEST_ASSERT_DOUBLE_WITHIN(1e-9, 0.5 * edge.rotor_speed_noise, e.rotor_speed_noise);
+    TEST_ASSERT_EQUAL_INT(0, e.rotor_speed_noise_truncated); /* no mean to share */
     /* Held as long as the rotor's code stands, up to the firmware's largest time. */
     TEST_ASSERT_EQUAL_INT(1, e.rotor_speed_noise_hold);
     TEST_ASSERT_EQUAL_DOUBLE((double)PROPID_ROTOR_SPEED_NOISE_TIME_MAX, e.rotor_speed_noise_time);

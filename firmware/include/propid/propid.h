@@ -197,6 +197,13 @@ typedef struct {
                                          same hold with rotor_speed_noise_time its floor and
                                          PROPID_ROTOR_SPEED_NOISE_TIME_MAX its ceiling. 0: the
                                          configured time for every rotor */
+    uint8_t rotor_speed_noise_split;  /* 1 (needs rotor_speed_noise > 0, no compensation): the error is
+                                         a truncation's (a decode at the code's period), rotor_speed_noise
+                                         its root mean square q / sqrt(3): its mean q / 2 is one error
+                                         common to every rotor, its spread q / sqrt(12) each rotor's
+                                         own, both over each rotor's span (docs/math.md §14, "An error
+                                         common to every rotor"; in the padding: the struct's size and
+                                         offsets unchanged). 0: independent per rotor */
     float motor_command_lag;          /* [s] first-order lag of the rotor speed behind its command
                                          in the first stage (> 0 with the instrument on) */
     float motor_command_memory;       /* [s] forgetting time of the first stage's fit (battery sag);
@@ -425,6 +432,9 @@ typedef struct {
     float input_noise_time;                         /* rotor_speed_noise_time */
     uint8_t input_compensation;                     /* config.input_error_compensation */
     uint8_t input_noise_hold;                       /* config.rotor_speed_noise_hold */
+    uint8_t input_noise_split;                      /* config.rotor_speed_noise_split (input_noise_var is
+                                                       then the spread's, the common part 3x it; in the
+                                                       padding before quad_gyro) */
 #endif
 #if PROPID_WITH_INPUT_NOISE || PROPID_WITH_GYRO_STUCK_CHECK
     uint8_t rare_gyro_update;                       /* input compensation on or gyro_stuck_samples > 0:
