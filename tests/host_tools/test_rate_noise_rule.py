@@ -54,3 +54,21 @@ def test_cli_refuses_an_output_that_is_a_directory(tmp_path):
                           capture_output=True, text=True)
     assert proc.returncode == 2
     assert "it is a directory" in proc.stderr
+
+
+def test_default_args_reach_the_flight_of_a_default_sensor_case(tmp_path, soak_script):
+    """The options `--default-args` gives (e.g. the input-noise hold as a floor) reach the
+    simulator's command line of a default-sensor case: a stand-in simulator records its
+    arguments (and fails, so only the first flight runs)."""
+    rule = soak_script("rate_noise_rule")
+    soak = rule.load_soak()
+    record = tmp_path / "argv.txt"
+    fake = tmp_path / "fake_sitl"
+    fake.write_text(f"#!/bin/sh\necho \"$@\" >> {record}\nexit 1\n")
+    fake.chmod(0o755)
+    rng = rule.random.Random(5)
+    cases = [soak.plan_case(rng, index) for index in range(200)]
+    default = next(case for case in cases if case["clean"] and case["sensors"] == "default")
+    result = rule.fly_case((None, str(fake), default, False, ["--filter-rotor-speed-noise-hold-floor"]))
+    assert result["error"] == "no log"
+    assert "--filter-rotor-speed-noise-hold-floor" in record.read_text()

@@ -38,6 +38,7 @@ import json
 import math
 import os
 import random
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -181,12 +182,12 @@ def nees_figures(summary: str, proc: subprocess.CompletedProcess) -> dict:
 
 
 def fly_case(job: tuple) -> dict:
-    soak_path, sitl, case, truth = job
+    soak_path, sitl, case, truth, extra = job
     soak = load_soak()
     with tempfile.TemporaryDirectory(prefix="rate-noise-") as work:
         log = os.path.join(work, "matched.csv")
         summary = os.path.join(work, "matched.json")
-        proc = subprocess.run(soak.command(sitl, case, "filter", summary) + ["--log", log],
+        proc = subprocess.run(soak.command(sitl, case, "filter", summary) + extra + ["--log", log],
                               capture_output=True, text=True)
         matched = nees_figures(summary, proc)
         if not os.path.exists(log):
@@ -194,7 +195,7 @@ def fly_case(job: tuple) -> dict:
         derived = derive(log, log[:-4] + ".vehicle.json", case["vehicle"], case["sensors"],
                          truth and case["sensors"] == "paper")
         summary = os.path.join(work, "derived.json")
-        proc = subprocess.run(soak.command(sitl, case, "filter", summary)
+        proc = subprocess.run(soak.command(sitl, case, "filter", summary) + extra
                               + ["--filter-rate-noise", f"{derived['q_rate']:.6g}"], capture_output=True, text=True)
         return {"case": case, "matched": matched, "derived_q": derived, "derived": nees_figures(summary, proc)}
 
@@ -234,6 +235,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--log", help="derive q_rate of one existing propid_sitl log instead (needs --vehicle, --sensors)")
     parser.add_argument("--vehicle", help="with --log: the SITL preset flown")
     parser.add_argument("--sensors", choices=sorted(SENSORS), help="with --log: paper or default")
+    parser.add_argument("--default-args", default="",
+                        help="extra propid_sitl options for both flights of the default-sensor cases, one string "
+                             "(e.g. \"--filter-rotor-speed-noise-hold-floor\"; default none)")
     args = parser.parse_args(argv)
     if args.log:
         if not (args.vehicle and args.sensors):
@@ -262,17 +266,18 @@ def main(argv: list[str] | None = None) -> int:
         from tqdm import tqdm
     except ImportError:  # the bar is a convenience
         tqdm = None
-    jobs = [(str(HERE / "soak.py"), args.sitl, case, args.truth) for case in clean]
+    extra = {"default": shlex.split(args.default_args), "paper": []}
+    jobs = [(str(HERE / "soak.py"), args.sitl, case, args.truth, extra[case["sensors"]]) for case in clean]
     with ProcessPoolExecutor(args.jobs) as pool:
         iterator = pool.map(fly_case, jobs)
         if tqdm:
             iterator = tqdm(iterator, total=len(jobs), unit="flight", desc=f"plan {args.seed}", file=sys.stderr)
         results = list(iterator)
-    out = {"plan_seed": args.seed, "matched": pooled(results, "matched"), "derived": pooled(results, "derived"),
-           "flights": results}
+    out = {"plan_seed": args.seed, "default_args": args.default_args, "matched": pooled(results, "matched"),
+           "derived": pooled(results, "derived"), "flights": results}
     if args.out:
         write_text(args.out, json.dumps(out, indent=1) + "\n")
-    print(json.dumps({"plan_seed": args.seed, "matched": out["matched"], "derived": out["derived"]}, indent=1))
+    print(json.dumps({key: out[key] for key in ("plan_seed", "default_args", "matched", "derived")}, indent=1))
     return 0
 
 
