@@ -79,7 +79,7 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
         # alternative one-sided, so the test is too (docs/gap.md, Scoring)
         lm = significance.effect_test(gr, given, own, nonnegative=nonnegative)
         reason, edge = implausible(gr, given, own, design.scale[own], by_id(effect_id).params,
-                                   (bounds or {}).get(effect_id), with_edge=True, se=lm.get("se"))
+                                   (bounds or {}).get(effect_id), se=lm.get("se"))
         return test, lm, physical_sign(gr, given, own, nonnegative), (reason, edge)
 
     test, lm, physical, (reason, edge) = evidence(current, held_current, held)
@@ -131,28 +131,33 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
 
 def implausible(gr: scoring.Grams, current: list[int], effect_cols: list[int], scale: np.ndarray,
                 names: tuple[str, ...], bounds: list[tuple[float, float]] | None,
-                with_edge: bool = False, se: np.ndarray | None = None):
-    """Why the effect's fit is physically implausible, or None: a coefficient's all-data
-    estimate outside its physical range (effects.py bounds, docs/gap.md). By default no
-    standard-error margin: the point estimate is what the after-fit and the corrected vehicle use.
-    `scale`: raw coefficient = scaled coefficient / scale.
-    With `with_edge`: (reason, edge); with RANGE_EDGE on, an effect whose estimates outside their
-    ranges all lie within RANGE_EDGE_SIGMAS standard errors of them gets (None, edge text) instead.
-    `se`: the effect's coefficients' standard errors (scaled columns; the Wald test's sandwich
-    ones), by default the all-data fit's residual-variance ones."""
+                se: np.ndarray | None = None) -> tuple[str | None, str | None]:
+    """(reason, edge): why the effect's fit is physically implausible, or None: a coefficient's
+    all-data estimate outside its physical range (effects.py bounds, docs/gap.md). By default
+    (RANGE_EDGE off) no standard-error margin: the point estimate is what the after-fit and the
+    corrected vehicle use. `scale`: raw coefficient = scaled coefficient / scale.
+    With RANGE_EDGE on, an effect whose estimates outside their ranges all lie within
+    RANGE_EDGE_SIGMAS standard errors of them gets (None, edge text) instead. `se`: the effect's
+    coefficients' standard errors (scaled columns; the Wald test's sandwich ones), by default
+    the all-data fit's residual-variance ones (computed only then)."""
     if not bounds:
-        return (None, None) if with_edge else None
-    theta, gls_se = scoring.coefficients_with_se(gr, current + effect_cols)
+        return None, None
+    theta = scoring.solve(gr, current + effect_cols, np.arange(gr.s.shape[0]))
     value = theta[len(current):] / scale
-    value_se = (gls_se[len(current):] if se is None else np.asarray(se)) / np.abs(scale)
-    reason, near = None, True
-    for name, v, e, (lo, hi) in zip(names, value, value_se, bounds):
-        if not lo <= v <= hi:
-            reason = reason or f"implausible: {name} = {v:.3g} outside its physical range [{lo:.3g}, {hi:.3g}]"
-            near = near and lo - RANGE_EDGE_SIGMAS * e <= v <= hi + RANGE_EDGE_SIGMAS * e
-    if not with_edge:
-        return reason
-    if reason is not None and near and RANGE_EDGE != "off":
+    outside = [(name, v, k) for k, (name, v, (lo, hi)) in enumerate(zip(names, value, bounds)) if not lo <= v <= hi]
+    if not outside:
+        return None, None
+    name, v, k = outside[0]
+    lo, hi = bounds[k]
+    reason = f"implausible: {name} = {v:.3g} outside its physical range [{lo:.3g}, {hi:.3g}]"
+    if RANGE_EDGE == "off":
+        return reason, None
+    if se is None:
+        se = scoring.coefficients_with_se(gr, current + effect_cols)[1][len(current):]
+    value_se = np.asarray(se) / np.abs(scale)
+    near = all(bounds[k][0] - RANGE_EDGE_SIGMAS * value_se[k] <= v <= bounds[k][1] + RANGE_EDGE_SIGMAS * value_se[k]
+               for _, v, k in outside)
+    if near:
         return None, reason.replace("implausible: ", "at the edge of its range: ")
     return reason, None
 
