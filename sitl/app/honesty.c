@@ -254,7 +254,13 @@ static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const dou
     }
     h->nees_samples++;
     h->nees_sum += nees;
-    if (nees >= chi_square_quantile(n, -1.959964) && nees <= chi_square_quantile(n, 1.959964)) {
+    /* Below the interval the filter's sigma is too large (underconfident, the safe side);
+     * above it too small (overconfident). */
+    if (nees < chi_square_quantile(n, -1.959964)) {
+        h->nees_below_bounds++;
+    } else if (nees > chi_square_quantile(n, 1.959964)) {
+        h->nees_above_bounds++;
+    } else {
         h->nees_in_bounds++;
     }
 }

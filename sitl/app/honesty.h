@@ -17,6 +17,8 @@ typedef struct {
     long steps;                 /* control steps seen */
     long nees_samples;          /* NEES samples (every 10th step) with a usable covariance block */
     long nees_in_bounds;        /* ... whose NEES lay in the 95 % chi-square interval */
+    long nees_below_bounds;     /* ... below it (sigma too large: underconfident) */
+    long nees_above_bounds;     /* ... above it (sigma too small: overconfident) */
     double nees_sum;
     int check_cov;              /* check the whole P for definiteness at every NEES sample (set after
                                    init; --honesty-cov-check: +3 % of a flight's instructions) */

@@ -171,6 +171,8 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
     cJSON_AddNumberToObject(honesty, "cov_checks", (double)h->cov_checks);
     cJSON_AddNumberToObject(honesty, "cov_not_pd", (double)h->cov_not_pd);
     cJSON_AddNumberToObject(honesty, "nees_in_bounds", (double)h->nees_in_bounds);
+    cJSON_AddNumberToObject(honesty, "nees_below_bounds", (double)h->nees_below_bounds);
+    cJSON_AddNumberToObject(honesty, "nees_above_bounds", (double)h->nees_above_bounds);
     add_number(honesty, "nees_mean", h->nees_samples > 0 ? h->nees_sum / (double)h->nees_samples : 0.0);
     cJSON_AddNumberToObject(honesty, "nonfinite_estimates", (double)h->nonfinite_estimates);
     cJSON_AddNumberToObject(honesty, "converged_claims", (double)h->converged_claims);

@@ -366,6 +366,53 @@ static void test_covariance_check_reads_the_whole_p(void)
     TEST_ASSERT_EQUAL_INT(0, h.nees_samples);
 }
 
+/* Each NEES sample falls on one side of its 95 % interval or in it: a filter on the truth
+ * (NEES 0) is below it, the same error direction scaled to a NEES of the dof is inside, and
+ * scaled to 4 times that it is above (chi-square(11) interval about [3.8, 21.9]). */
+static void test_nees_sample_counted_below_inside_or_above_its_interval(void)
+{
+    static propid_filter_t filter;
+    propid_estimate_t estimate;
+    double kf[4], km[4], bias[3];
+    init_nominal_hummingbird_filter(&filter, &estimate, kf, km, bias);
+    const double direction_kf[4] = {0.05, -0.03, 0.02, 0.04}; /* relative errors */
+    const double direction_km[4] = {-0.02, 0.06, 0.01, -0.04};
+    const double direction_bias[3] = {2e-3, -1e-3, 3e-3};     /* rad/s */
+    double unit_nees = 0.0;
+    const double scales[4] = {0.0, 1.0, -1.0, -1.0}; /* -1: set from unit_nees below */
+    const long below[4] = {1, -1, 0, 0}, inside[4] = {0, -1, 1, 0}, above[4] = {0, -1, 0, 1};
+    for (int c = 0; c < 4; c++) {
+        double scale = scales[c];
+        if (c == 2) {
+            scale = sqrt(11.0 / unit_nees);
+        } else if (c == 3) {
+            scale = 2.0 * sqrt(11.0 / unit_nees); /* NEES 44 */
+        }
+        double true_kf[4], true_km[4], true_bias[3];
+        for (int i = 0; i < 4; i++) {
+            true_kf[i] = kf[i] * (1.0 + scale * direction_kf[i]);
+            true_km[i] = km[i] * (1.0 + scale * direction_km[i]);
+        }
+        for (int a = 0; a < 3; a++) {
+            true_bias[a] = bias[a] + scale * direction_bias[a];
+        }
+        sitl_honesty_t h;
+        sitl_honesty_init(&h, &filter, true_kf, true_km, 1.0);
+        TEST_ASSERT_EQUAL_INT(11, h.nees_dof);
+        sitl_honesty_add(&h, 0.0, &estimate, &filter, true_kf, true_km, true_bias);
+        TEST_ASSERT_EQUAL_INT(1, h.nees_samples);
+        TEST_ASSERT_EQUAL_INT(1, h.nees_below_bounds + h.nees_in_bounds + h.nees_above_bounds);
+        if (c == 1) {
+            unit_nees = h.nees_sum;
+            TEST_ASSERT_TRUE(unit_nees > 0.0);
+            continue;
+        }
+        TEST_ASSERT_EQUAL_INT(below[c], h.nees_below_bounds);
+        TEST_ASSERT_EQUAL_INT(inside[c], h.nees_in_bounds);
+        TEST_ASSERT_EQUAL_INT(above[c], h.nees_above_bounds);
+    }
+}
+
 /* A step counts as non-finite when any reported value or std is Inf or NaN, and not
  * when all are finite, however large (FLT_MAX in every field). */
 static void test_nonfinite_estimate_is_counted(void)
@@ -408,6 +455,7 @@ int main(void)
 {
     UNITY_BEGIN();
     RUN_TEST(test_covariance_check_reads_the_whole_p);
+    RUN_TEST(test_nees_sample_counted_below_inside_or_above_its_interval);
     RUN_TEST(test_nonfinite_estimate_is_counted);
     RUN_TEST(test_true_torque_scale_is_the_file_over_the_true_inertia);
     RUN_TEST(test_truth_with_the_scale_state_is_s_kf_and_1_over_s);

@@ -172,7 +172,8 @@ def nees_figures(summary: str, proc: subprocess.CompletedProcess) -> dict:
     data = json.loads(Path(summary).read_text())
     honesty = data.get("honesty", {})
     inside, samples = int(honesty.get("nees_in_bounds", 0)), int(honesty.get("nees_samples", 0))
-    return {"exit": proc.returncode, "inside": inside, "samples": samples,
+    below, above = int(honesty.get("nees_below_bounds", 0)), int(honesty.get("nees_above_bounds", 0))
+    return {"exit": proc.returncode, "inside": inside, "below": below, "above": above, "samples": samples,
             "in_band_pct": round(100 * inside / samples, 2) if samples else None,
             "nees_per_dof": round(honesty.get("nees_mean", 0.0) / max(1, honesty.get("nees_dof", 1)), 3),
             "cov_repairs": int(data.get("cov_repairs", 0)), "cov_not_pd": int(honesty.get("cov_not_pd", 0)),
@@ -200,7 +201,15 @@ def fly_case(job: tuple) -> dict:
         return {"case": case, "matched": matched, "derived_q": derived, "derived": nees_figures(summary, proc)}
 
 
+# A flight counts as outside the band when fewer of its NEES samples than this lie in it
+# (the target's 90 %); it is underconfident when more of the others lie below than above.
+FLIGHT_IN_BAND_PCT = 90.0
+
+
 def pooled(results: list[dict], key: str) -> dict:
+    """Per sensor set: the share of NEES samples in their 95 % band, below it (the sigma too
+    large, the safe side) and above it (overconfident); the flights under FLIGHT_IN_BAND_PCT
+    in band, by the side most of their other samples lie on; the totals."""
     groups: dict[str, list[int]] = {}
     totals = {"cov_repairs": 0, "cov_not_pd": 0, "cov_checks": 0, "false_converged": 0, "converged_claims": 0,
               "nonfinite": 0, "errors": 0}
@@ -212,13 +221,24 @@ def pooled(results: list[dict], key: str) -> dict:
         for name in totals:
             if name != "errors":
                 totals[name] += figures[name]
-        group = groups.setdefault(result["case"]["sensors"], [0, 0, 0])
+        group = groups.setdefault(result["case"]["sensors"], [0, 0, 0, 0, 0, 0, 0])
+        below, above = figures.get("below", 0), figures.get("above", 0)
         group[0] += figures["inside"]
         group[1] += figures["samples"]
         group[2] += 1
+        group[3] += below
+        group[4] += above
+        if figures["samples"] and 100 * figures["inside"] < FLIGHT_IN_BAND_PCT * figures["samples"]:
+            group[5 if below >= above else 6] += 1
     inside, samples = sum(g[0] for g in groups.values()), sum(g[1] for g in groups.values())
-    return {"in_band_pct": round(100 * inside / samples, 2) if samples else None,
-            **{f"{name} sensors": {"in_band_pct": round(100 * g[0] / g[1], 2), "flights": g[2]}
+
+    def share(part: int, whole: int) -> float | None:
+        return round(100 * part / whole, 2) if whole else None
+
+    return {"in_band_pct": share(inside, samples),
+            **{f"{name} sensors": {"in_band_pct": share(g[0], g[1]), "below_band_pct": share(g[3], g[1]),
+                                   "above_band_pct": share(g[4], g[1]), "flights": g[2],
+                                   "flights_outside_under": g[5], "flights_outside_over": g[6]}
                for name, g in sorted(groups.items())}, **totals}
 
 

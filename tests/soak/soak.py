@@ -29,7 +29,9 @@ Figures:
 - nees_in_bounds_pct: over fault-free, effect-free flights without a rotor loss
   (mode filter), the share of control steps whose NEES of coefficients and gyro
   biases (full covariance block) lies inside its 95 % chi-square interval; also
-  per tuning and sensor set, and per flight (nees_flights). These flights use
+  per tuning and sensor set, and per flight (nees_flights), with the shares
+  below the interval (underconfident: the sigma too large, the safe side) and
+  above it (overconfident): nees_below_bounds_pct / nees_above_bounds_pct. These flights use
   the "matched" tuning (--nees-tuning): the filter's priors and random walks
   are the distribution the simulator draws the truth from, without which a
   NEES is not chi-square distributed;
@@ -212,17 +214,29 @@ def expected_steps(case: dict) -> float:
     return rate * case["duration_s"]
 
 
+def percent(part: int, whole: int) -> float | None:
+    return round(100.0 * part / whole, 2) if whole else None
+
+
+def group_shares(group: list[int]) -> dict:
+    """A group's [inside, samples, flights, below, above] NEES counts as shares of its samples."""
+    inside, samples, flights, below, above = group
+    return {"in_bounds_pct": percent(inside, samples), "below_bounds_pct": percent(below, samples),
+            "above_bounds_pct": percent(above, samples), "samples": samples, "flights": flights}
+
+
 def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
     out = {"steps": 0, "flights": 0, "cases": len(cases), "flown_s": 0.0,
            "faults_injected": {}, "nan_count": 0, "max_recovery_s": None, "rotor_losses": 0,
            "unrecovered": 0, "losses_from_accurate": 0, "recovered_from_accurate": 0,
            "lost_rotor_recovered": 0, "max_lost_rotor_recovery_s": None,
-           "lost_rotor_from_accurate": 0, "lost_rotor_recovered_from_accurate": 0, "nees_in_bounds_pct": None, "nees_samples": 0, "nees_by_group": {},
+           "lost_rotor_from_accurate": 0, "lost_rotor_recovered_from_accurate": 0, "nees_in_bounds_pct": None,
+           "nees_below_bounds_pct": None, "nees_above_bounds_pct": None, "nees_samples": 0, "nees_by_group": {},
            "false_converged": 0, "converged_claims": 0, "false_converged_pct": None,
            "false_converged_by_group": {}, "false_converged_flights": [], "nees_flights": [],
            "cov_repairs": 0, "cov_checks": 0, "cov_not_pd": 0, "model_mismatch_windows": 0, "diverged_filter": 0, "diverged_oracle": 0,
            "filter_only_diverged": 0, "filter_only_diverged_cases": [], "errors": []}
-    nees_in = nees_all = 0
+    nees_in = nees_below = nees_above = nees_all = 0
     groups: dict[str, list[int]] = {}
     false_groups: dict[str, list[int]] = {}
     for case in cases:
@@ -279,18 +293,24 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
                 out["max_lost_rotor_recovery_s"] = max(out["max_lost_rotor_recovery_s"] or 0.0, float(recovery))
             if case["clean"] and data["exit"] == 0:
                 inside, samples = int(honesty.get("nees_in_bounds", 0)), int(honesty.get("nees_samples", 0))
+                below, above = int(honesty.get("nees_below_bounds", 0)), int(honesty.get("nees_above_bounds", 0))
                 nees_in += inside
+                nees_below += below
+                nees_above += above
                 nees_all += samples
                 key = f"{case['tuning']} tuning, {case['sensors']} sensors"
-                group = groups.setdefault(key, [0, 0, 0])
+                group = groups.setdefault(key, [0, 0, 0, 0, 0])
                 group[0] += inside
                 group[1] += samples
                 group[2] += 1
+                group[3] += below
+                group[4] += above
                 out["nees_flights"].append({
                     "case": case["case"], "vehicle": case["vehicle"], "trajectory": case["trajectory"],
                     "duration_s": case["duration_s"], "sensors": case["sensors"], "tuning": case["tuning"],
                     "dof": int(honesty.get("nees_dof", 0)), "nees_mean": honesty.get("nees_mean"),
-                    "in_bounds_pct": round(100.0 * inside / samples, 2) if samples else None,
+                    "in_bounds_pct": percent(inside, samples), "below_bounds_pct": percent(below, samples),
+                    "above_bounds_pct": percent(above, samples),
                     "first_all_claimed_s": honesty.get("first_all_claimed_s"),
                     "all_claimed_at_end": bool(honesty.get("all_claimed_at_end", 0)),
                     "false_converged": int(honesty.get("false_converged", 0)),
@@ -307,21 +327,22 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
         if not case["clean"] or data is None or "error" in data or data.get("exit") != 0:
             continue
         honesty = data.get("honesty", {})
-        group = exact.setdefault(f"{case['sensors']} sensors", [0, 0, 0])
+        group = exact.setdefault(f"{case['sensors']} sensors", [0, 0, 0, 0, 0])
         group[0] += int(honesty.get("nees_in_bounds", 0))
         group[1] += int(honesty.get("nees_samples", 0))
         group[2] += 1
+        group[3] += int(honesty.get("nees_below_bounds", 0))
+        group[4] += int(honesty.get("nees_above_bounds", 0))
     if exact:
         inside, samples = sum(g[0] for g in exact.values()), sum(g[1] for g in exact.values())
         out["nees_exact_inputs"] = {
             "in_bounds_pct": round(100.0 * inside / samples, 2) if samples else None,
-            **{key: {"in_bounds_pct": round(100.0 * g[0] / g[1], 2) if g[1] else None,
-                     "samples": g[1], "flights": g[2]} for key, g in sorted(exact.items())}}
+            **{key: group_shares(g) for key, g in sorted(exact.items())}}
     out["nees_samples"] = nees_all
-    if nees_all:
-        out["nees_in_bounds_pct"] = round(100.0 * nees_in / nees_all, 2)
-    out["nees_by_group"] = {key: {"in_bounds_pct": round(100.0 * g[0] / g[1], 2) if g[1] else None,
-                                  "samples": g[1], "flights": g[2]} for key, g in sorted(groups.items())}
+    out["nees_in_bounds_pct"] = percent(nees_in, nees_all)
+    out["nees_below_bounds_pct"] = percent(nees_below, nees_all)
+    out["nees_above_bounds_pct"] = percent(nees_above, nees_all)
+    out["nees_by_group"] = {key: group_shares(g) for key, g in sorted(groups.items())}
     # Honest flights (the clean ones): do they still claim convergence, and when?
     firsts = sorted(f["first_all_claimed_s"] for f in out["nees_flights"] if f["first_all_claimed_s"] is not None)
     fractions = sorted(f["first_all_claimed_s"] / f["duration_s"] for f in out["nees_flights"]
