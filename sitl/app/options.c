@@ -42,7 +42,7 @@ void sitl_options_default(sitl_options_t *o)
     o->yaw_amplitude_rad = -1.0;
     o->yaw_cycles = -1.0;
     o->lissajous_climb_m = -1.0;
-    o->physics_rate_hz = 2000.0;
+    o->physics_rate_hz = 0.0; /* derived from the vehicle (physics_rate.h) */
     o->control_rate_hz = 500.0;
     o->coeff_spread = 0.2;
     o->incorrect_random = 0;
@@ -112,6 +112,23 @@ static int parse_path(const char *opt, const char *text, char *out)
         return -1;
     }
     snprintf(out, SITL_PATH_MAX, "%s", text);
+    return 0;
+}
+
+static int parse_physics_rate(sitl_options_t *o, const char *opt, const char *val)
+{
+    if (strcmp(val, "auto") == 0) {
+        o->physics_rate_hz = 0.0;
+        return 0;
+    }
+    char *end = NULL;
+    errno = 0;
+    double v = strtod(val, &end);
+    if (end == val || *end != '\0' || errno != 0 || !isfinite(v) || v < 1.0 || v > 1e6) {
+        fprintf(stderr, "propid_sitl: %s: '%s' is neither auto nor a rate in [1, 1e6] Hz\n", opt, val);
+        return -1;
+    }
+    o->physics_rate_hz = v;
     return 0;
 }
 
@@ -301,7 +318,11 @@ static const opt_t options[] = {
     FLAG(NULL, "honesty-cov-check", honesty_cov_check, 1,
          "check the filter's whole covariance for positive\ndefiniteness at every NEES sample (summary honesty.\n"
          "cov_checks / cov_not_pd; make soak sets it; ~ 3 % of\nthe flight's instructions)"),
-    NUMBER(NULL, "physics-rate", physics_rate_hz, 1.0, 1e6, "HZ", "RK4 rate (default 2000, >= control rate)"),
+    CUSTOM(NULL, "physics-rate", parse_physics_rate, "HZ|auto",
+           "RK4 rate, >= control rate (default auto: the smallest\n"
+           "multiple of the control rate with a step <= tau_m / 10\n"
+           "and <= 0.1 / (2000 deg/s); 500 Hz for the Crazyflie\n"
+           "presets, 2000 Hz for the Hummingbird)"),
     NUMBER(NULL, "control-rate", control_rate_hz, 1.0, 1e5, "HZ", "controller/allocation rate (default 500)"),
     NUMBER(NULL, "realtime", realtime, 0.0, 1e6, "FACTOR",
            "pace at FACTOR x wall clock (default: as fast as possible)"),
@@ -653,7 +674,7 @@ int sitl_options_parse(sitl_options_t *o, int argc, char **argv)
     if (o->esc.rate_hz == 0.0) {
         o->esc.rate_hz = o->control_rate_hz;
     }
-    if (o->physics_rate_hz < o->control_rate_hz) {
+    if (o->physics_rate_hz > 0.0 && o->physics_rate_hz < o->control_rate_hz) {
         fprintf(stderr, "propid_sitl: --physics-rate (%g) must be >= --control-rate (%g)\n",
                 o->physics_rate_hz, o->control_rate_hz);
         return SITL_EXIT_USAGE;

@@ -54,7 +54,7 @@ typedef struct {
     double log_rate_hz;                 /* 0 = every control step */
     char mavlink_url[SITL_PATH_MAX];    /* "" = no link */
     double realtime;                    /* 0 = as fast as possible */
-    double physics_rate_hz;
+    double physics_rate_hz;             /* 0 = derived from the vehicle (physics_rate.h) */
     double control_rate_hz;
     double coeff_spread;                /* true = nominal * U(1-s, 1+s) */
     int incorrect_random;               /* 0: Incorrect uses nominal; 1: random around truth */

@@ -16,6 +16,7 @@
 
 #include "flight_log.h"
 #include "output_path.h"
+#include "physics_rate.h"
 #include "propid/propid_damage.h"
 #include "sitl_math.h"
 
@@ -339,7 +340,11 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
     sitl_imu_init(&f->imu, &o->imu, sitl_options_vehicle_seed(o), o->seed, &o->effects);
     sitl_faults_init(&f->faults, &o->faults, o->seed);
     sitl_rng_init(&f->disturbance_rng, o->seed, SITL_RNG_DISTURBANCE_TORQUE);
-    double history_rate = o->physics_rate_hz + o->imu.rate_hz + o->esc.rate_hz +
+    /* --physics-rate auto (the default): the accuracy rule's rate for this vehicle's motors. */
+    r->physics_rate_hz = o->physics_rate_hz > 0.0
+                             ? o->physics_rate_hz
+                             : sitl_physics_rate_for(f->vehicle.motor_time_constant, o->control_rate_hz);
+    double history_rate = r->physics_rate_hz + o->imu.rate_hz + o->esc.rate_hz +
                           o->control_rate_hz;
     if (sitl_esc_init(&f->esc, &o->esc, n, sitl_effects_esc_extra_delay(&o->effects),
                       history_rate, o->seed) != 0) {
@@ -579,7 +584,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     }
     schedule_init(&imu, o->imu_sample_at_start ? 0.0 : 1.0 / o->imu.rate_hz, o->imu.rate_hz);
     schedule_init(&esc, o->esc.phase_s, o->esc.rate_hz);
-    schedule_init(&physics, 0.0, o->physics_rate_hz);
+    schedule_init(&physics, 0.0, r->physics_rate_hz);
     schedule_advance(&physics);
     schedule_init(&logsched, 0.0, o->log_rate_hz > 0.0 ? o->log_rate_hz : o->control_rate_hz);
     schedule_init(&live, 0.0, 2.0);

@@ -31,6 +31,7 @@ typedef struct {
     double flown_s;
     double wall_time_s;
     double flight_cpu_s;         /* process CPU time of the flight loop (no set-up) */
+    double physics_rate_hz;      /* RK4 rate flown: --physics-rate, or the rule's (physics_rate.h) */
     double rmse[3];                       /* [m] */
     double rmse_yaw_deg;
     double final_position_error_m;        /* norm */

@@ -91,6 +91,7 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
     cJSON_AddBoolToObject(root, "paper_sensors", o->paper);
     add_number(root, "duration_s", o->duration_s);
     add_number(root, "trajectory_period_s", o->trajectory_period_s);
+    add_number(root, "physics_rate_hz", r->physics_rate_hz);
     add_number(root, "flown_s", r->flown_s);
     cJSON_AddNumberToObject(root, "exit_code", r->exit_code);
     cJSON_AddBoolToObject(root, "stable", !r->diverged);

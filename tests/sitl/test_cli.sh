@@ -29,6 +29,25 @@ expect_rc 2 "bad number" "$SITL" --duration ten
 expect_rc 2 "unknown effect" "$SITL" --effect warp_drive
 expect_rc 2 "unknown vehicle" "$SITL" --vehicle no-such-quad --quiet
 expect_rc 2 "physics slower than control" "$SITL" --physics-rate 100 --quiet
+expect_rc 2 "bad physics rate" "$SITL" --physics-rate fast --quiet
+grep -q "neither auto nor a rate" "$WORK/err.txt" || fail "bad physics rate message: $(cat "$WORK/err.txt")"
+
+# The physics step's rule (docs/sitl.md "The physics step"): the rate flown is in the summary,
+# derived from the vehicle's motor time constant unless --physics-rate gives it.
+physics_rate() { # summary.json -> its physics_rate_hz
+    sed -n 's/.*"physics_rate_hz":[[:space:]]*\([0-9.e+]*\).*/\1/p' "$1"
+}
+expect_rc 0 "rule, crazyflie" "$SITL" --duration 0.1 --quiet --summary-json "$WORK/rate_cf.json"
+[ "$(physics_rate "$WORK/rate_cf.json")" = "500" ] || fail "crazyflie physics rate: $(physics_rate "$WORK/rate_cf.json")"
+expect_rc 0 "rule, hummingbird" "$SITL" --vehicle hummingbird-plus --duration 0.1 --quiet \
+    --summary-json "$WORK/rate_hb.json"
+[ "$(physics_rate "$WORK/rate_hb.json")" = "2000" ] || fail "hummingbird physics rate: $(physics_rate "$WORK/rate_hb.json")"
+expect_rc 0 "rule, --motor-tau" "$SITL" --motor-tau 0.004 --physics-rate auto --duration 0.1 --quiet \
+    --summary-json "$WORK/rate_tau.json"
+[ "$(physics_rate "$WORK/rate_tau.json")" = "2500" ] || fail "tau 4 ms physics rate: $(physics_rate "$WORK/rate_tau.json")"
+expect_rc 0 "given physics rate" "$SITL" --physics-rate 2000 --duration 0.1 --quiet \
+    --summary-json "$WORK/rate_given.json"
+[ "$(physics_rate "$WORK/rate_given.json")" = "2000" ] || fail "given physics rate: $(physics_rate "$WORK/rate_given.json")"
 
 cat >"$WORK/nomass.vehicle.json" <<'JSON'
 {"name": "x", "mass": null, "inertia": [1e-3, 1e-3, 2e-3],

@@ -7,6 +7,7 @@
 #include <math.h>
 #include <string.h>
 
+#include "physics_rate.h"
 #include "plant.h"
 #include "sitl_math.h"
 #include "unity.h"
@@ -219,6 +220,61 @@ static void test_step_size_independence(void)
     }
 }
 
+/* The physics step's rule (physics_rate.h): the smallest multiple of the control
+ * rate with h <= tau_m / 10 and h <= 0.1 / (2000 deg/s). */
+static void test_physics_rate_rule(void)
+{
+    TEST_ASSERT_EQUAL_DOUBLE(500.0, sitl_physics_rate_for(0.072, 500.0));  /* Crazyflie */
+    TEST_ASSERT_EQUAL_DOUBLE(2000.0, sitl_physics_rate_for(0.005, 500.0)); /* Hummingbird, exact */
+    TEST_ASSERT_EQUAL_DOUBLE(2500.0, sitl_physics_rate_for(0.0049, 500.0));
+    TEST_ASSERT_EQUAL_DOUBLE(500.0, sitl_physics_rate_for(0.03, 500.0));   /* file without motor data */
+    /* the attitude bound: 349 Hz needs two steps per 300 Hz control period */
+    TEST_ASSERT_EQUAL_DOUBLE(600.0, sitl_physics_rate_for(0.072, 300.0));
+    TEST_ASSERT_EQUAL_DOUBLE(1000.0, sitl_physics_rate_for(0.072, 1000.0));
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, sitl_physics_rate_for(0.0, 500.0));
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, sitl_physics_rate_for(NAN, 500.0));
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, sitl_physics_rate_for(0.072, -1.0));
+    TEST_ASSERT_EQUAL_DOUBLE(0.0, sitl_physics_rate_for(INFINITY, 500.0));
+}
+
+/* What the rule promises: at its step, on every preset, a full-range motor step (rotors
+ * stopped, command at the top speed) stays within 8.4e-7 of the speed range of the exact
+ * first-order response at every step; the next coarser multiple of the control rate
+ * breaks one of the rule's bounds. */
+static void test_physics_rate_rule_bounds_the_motor_error(void)
+{
+    for (int p = 0; sitl_vehicle_preset_names[p] != NULL; p++) {
+        make_plant(sitl_vehicle_preset_names[p]);
+        plant.ground_enabled = 0;
+        const double tau = vehicle.motor_time_constant;
+        const double rate = sitl_physics_rate_for(tau, 500.0);
+        TEST_ASSERT_TRUE(rate >= 500.0);
+        const double h = 1.0 / rate;
+        TEST_ASSERT_TRUE(h <= 0.1 * tau * (1.0 + 1e-12));
+        if (rate > 500.0) {
+            TEST_ASSERT_TRUE(1.0 / (rate - 500.0) > 0.1 * tau);
+        }
+        sitl_state_t s;
+        memset(&s, 0, sizeof(s));
+        s.quat[0] = 1.0;
+        s.position[2] = 100.0;
+        double cmd[SITL_MAX_ROTORS];
+        for (int i = 0; i < SITL_MAX_ROTORS; i++) {
+            cmd[i] = vehicle.rotor_speed_max;
+        }
+        const double range = vehicle.rotor_speed_max - vehicle.rotor_speed_min;
+        double worst = 0.0;
+        for (int k = 1; k <= (int)lround(5.0 * tau / h); k++) {
+            sitl_plant_step(&plant, &s, cmd, h);
+            const double exact = vehicle.rotor_speed_max * (1.0 - exp(-(double)k * h / tau));
+            for (int i = 0; i < vehicle.rotor_count; i++) {
+                worst = fmax(worst, fabs(s.rotor_speed[i] - exact));
+            }
+        }
+        TEST_ASSERT_TRUE_MESSAGE(worst <= 8.4e-7 * range, sitl_vehicle_preset_names[p]);
+    }
+}
+
 /* A flight prepares the plant once per command (sitl_plant_prepare) and steps
  * it several times with unequal steps: the state is the one sitl_plant_step
  * gives (which prepares at every call), bit for bit, on the quad path, the
@@ -277,5 +333,7 @@ int main(void)
     RUN_TEST(test_ground_holds_and_releases);
     RUN_TEST(test_step_size_independence);
     RUN_TEST(test_prepared_steps_match_plain_steps);
+    RUN_TEST(test_physics_rate_rule);
+    RUN_TEST(test_physics_rate_rule_bounds_the_motor_error);
     return UNITY_END();
 }
