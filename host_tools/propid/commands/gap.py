@@ -14,6 +14,7 @@ import numpy as np
 from propid.errors import UserError
 from propid.flightlog import other_vehicle_files, read_flightlog, read_vehicle, vehicle_path_for, write_vehicle
 from propid.gap.log_order import canonical_order
+from propid.gap.significance import REPLICATION_STATISTICS
 from propid.outputs import check_directory, check_not_inputs, check_writable, write_text
 
 NAME = "gap"
@@ -60,6 +61,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ground_effect's height: 'com' (the logged pz for every rotor, the default) or 'hub' "
                              "(each rotor's hub height from the logged attitude; evaluated, not the default: "
                              "docs/gap.md 'Effect library')")
+    parser.add_argument("--replication", choices=REPLICATION_STATISTICS, default="improvement",
+                        help="the effects' held-out replication statistic: 'improvement' (the held-out residual "
+                             "reduction, the default) or 'prediction' (the held-out residual along what the effect's "
+                             "training-fold fit predicts; evaluated, not the default: docs/gap.md, SITL accuracy 'The score test "
+                             "again')")
     parser.add_argument("--no-progress", "--quiet", dest="quiet", action="store_true",
                         help="no progress bar (--quiet: the older spelling)")
 
@@ -165,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
     holdout = canonical_order([read_flightlog(p, vehicle) for p in args.holdout])
     options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
                                repeats=args.repeats, lag_evidence=args.lag_evidence,
-                               ground_effect_height=args.ground_effect_height)
+                               ground_effect_height=args.ground_effect_height, replication=args.replication)
     logs, left_out = without_unflown_logs(logs, vehicle, options)
     for entry in left_out:
         print(f"propid gap: left out {entry['why']}", file=sys.stderr)

@@ -43,6 +43,10 @@ class Options:
     # ground_effect's height: "com" (pz for every rotor, the default) or "hub" (each rotor's hub height
     # from the attitude; evaluated, not the default: docs/gap.md "Effect library")
     ground_effect_height: str = "com"
+    # the effects' held-out replication statistic: "improvement" (the held-out SSE reduction, the
+    # default) or "prediction" (the held-out residual along the effect's training-fold prediction;
+    # evaluated, not the default: docs/gap.md, SITL accuracy "The score test again")
+    replication: str = "improvement"
 
 
 HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0, 5.0)
@@ -329,7 +333,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     gr_w.weight = scoring.axis_weights(design_w, base_cols)
     progress(10)
     sel = selection.forward_select(design_w, gr_w, candidates, base_cols, progress=lambda n: progress(n),
-                                   size_gr=gr, bounds={e.id: e.bounds(ctx) for e in effects if e.bounds})
+                                   size_gr=gr, bounds={e.id: e.bounds(ctx) for e in effects if e.bounds},
+                                   replication=options.replication)
 
     # final model on all training data
     final_cols = sel["columns"]

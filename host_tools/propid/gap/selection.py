@@ -62,7 +62,7 @@ def _look_alike(a: str, b: str) -> bool:
 
 def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
           held_current: np.ndarray, candidates: int = 1, size_gr: scoring.Grams | None = None,
-          bounds: dict | None = None) -> dict:
+          bounds: dict | None = None, replication: str = "improvement") -> dict:
     cols = current + design.groups[effect_id]
     held = scoring.cv_sse(gr, cols)
     axes = by_id(effect_id).axes
@@ -74,7 +74,8 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
 
     def evidence(given, held_given, held_with):
         weights = significance.block_weights(held_with, gr.count, design.fold_group)
-        test = significance.paired_test(held_given, held_with, idx, scoring.cv_cross(gr, given, given + own), weights)
+        test = significance.paired_test(held_given, held_with, idx, scoring.cv_cross(gr, given, given + own), weights,
+                                        replication)
         # one parameter that physics keeps >= 0: the physical-sign rule already makes the
         # alternative one-sided, so the test is too (docs/gap.md, Scoring)
         lm = significance.effect_test(gr, given, own, nonnegative=nonnegative)
@@ -178,7 +179,8 @@ def physical_sign(gr: scoring.Grams, current: list[int], effect_cols: list[int],
 
 
 def backward_check(design: Design, gr: scoring.Grams, base_cols: list[int], selected: list[dict],
-                   size_gr: scoring.Grams | None = None, bounds: dict | None = None) -> dict:
+                   size_gr: scoring.Grams | None = None, bounds: dict | None = None,
+                   replication: str = "improvement") -> dict:
     """Step 5 of the rule: drop (from `selected`, in place) the named effects that are not
     significant on top of all the other named ones, one at a time, largest Wald p first.
     Returns {dropped id: why}."""
@@ -188,7 +190,7 @@ def backward_check(design: Design, gr: scoring.Grams, base_cols: list[int], sele
         for s in selected:
             given = list(base_cols) + [c for o in selected if o is not s for c in design.groups[o["id"]]]
             checks.append(score(design, gr, given, s["id"], scoring.cv_sse(gr, given), len(selected),
-                                size_gr, bounds))
+                                size_gr, bounds, replication))
         wald = significance.holm([c["p_value"] for c in checks], FAMILY_LEVEL)
         held = significance.holm([c["held_out_p_value"] for c in checks], significance.REPLICATION_LEVEL)
         failing = [(c["p_value"], k) for k, (c, w, h) in enumerate(zip(checks, wald, held))
@@ -205,8 +207,10 @@ def backward_check(design: Design, gr: scoring.Grams, base_cols: list[int], sele
 
 
 def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], base_cols: list[int],
-                   progress=None, size_gr: scoring.Grams | None = None, bounds: dict | None = None) -> dict:
-    """`bounds`: effect id -> physical range per coefficient (Effect.bounds of the context)."""
+                   progress=None, size_gr: scoring.Grams | None = None, bounds: dict | None = None,
+                   replication: str = "improvement") -> dict:
+    """`bounds`: effect id -> physical range per coefficient (Effect.bounds of the context);
+    `replication`: the held-out replication's statistic (significance.REPLICATION_STATISTICS)."""
     current = list(base_cols)
     held_current = scoring.cv_sse(gr, current)
     held_base = held_current
@@ -214,7 +218,8 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
     ambiguous: list[dict] = []
     remaining = list(candidates)
     while remaining and len(selected) < MAX_EFFECTS:
-        scores = [score(design, gr, current, e, held_current, len(remaining), size_gr, bounds) for e in remaining]
+        scores = [score(design, gr, current, e, held_current, len(remaining), size_gr, bounds, replication)
+                  for e in remaining]
         if progress:
             progress(len(scores))
         rejected = significance.holm([s["p_value"] for s in scores], FAMILY_LEVEL)
@@ -259,11 +264,11 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
             for cand in amb["candidates"]:
                 if cand in remaining and amb["kept"] == best["id"]:
                     remaining.remove(cand)
-    dropped = backward_check(design, gr, base_cols, selected, size_gr, bounds)
+    dropped = backward_check(design, gr, base_cols, selected, size_gr, bounds, replication)
     if dropped:
         current = list(base_cols) + [c for s in selected for c in design.groups[s["id"]]]
         held_current = scoring.cv_sse(gr, current)
-    others = [score(design, gr, current, e, held_current, 1, size_gr, bounds) for e in candidates
+    others = [score(design, gr, current, e, held_current, 1, size_gr, bounds, replication) for e in candidates
               if e not in {s["id"] for s in selected}]
     for o in others:
         if o["id"] in dropped:

@@ -45,6 +45,10 @@ from propid.signals import bartlett_long_run_covariance
 
 FAMILY_LEVEL = 0.05  # per selection step: chance of naming an effect that adds nothing
 REPLICATION_LEVEL = 0.05  # held-out confirmation, family-wise over a step's candidates (Holm)
+# the replication's statistic: "improvement" (the held-out SSE reduction, the default) or
+# "prediction" (the held-out residual along the effect's training-fold prediction, mean 0 under
+# "adds nothing"; evaluated, not the default: docs/gap.md, SITL accuracy "The score test again")
+REPLICATION_STATISTICS = ("improvement", "prediction")
 
 
 def block_contributions(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[int]) -> np.ndarray:
@@ -172,10 +176,22 @@ def block_weights(sse_with: np.ndarray, rows: np.ndarray, group: np.ndarray | No
     return weights
 
 
+def effective_blocks(u: np.ndarray) -> float:
+    """Kish's effective number of blocks of a sum of centred block terms u:
+    (sum u^2)^2 / sum u^4 (B for equal terms, 1 when one block carries them all). A variance
+    estimated from B blocks whose noise sits in a few of them has the few's degrees of freedom."""
+    d = u - u.mean()
+    q = float((d**4).sum())
+    return float((d @ d) ** 2 / q) if q > 0 else float(u.shape[0])
+
+
 def _improvement_p(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[int],
-                   cross: np.ndarray | None) -> tuple[float, float, float, float, float]:
-    """The held-out improvement test on (possibly weighted) block sums: p, value, se, dof and
-    the Newey-West bandwidth."""
+                   cross: np.ndarray | None, statistic: str = "improvement") -> tuple[float, float, float, float, float]:
+    """The held-out replication test on (possibly weighted) block sums: p, value (the improvement
+    fraction), se, dof and the Newey-West bandwidth. `statistic` (REPLICATION_STATISTICS):
+    "improvement" tests sum c_b (below); "prediction" tests sum_b r_without,b' delta_b, the
+    current model's held-out residual along what the effect's training-fold fit adds (needs
+    `cross`)."""
     c = block_contributions(sse_without, sse_with, axis_idx)
     value = float(c.sum())
     # c_b = |delta_b|^2 + 2 r_b' delta_b (delta: what the effect changed in the prediction,
@@ -186,6 +202,18 @@ def _improvement_p(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list
         total = sse_without[:, axis_idx].sum(axis=0)
         ok = total > 0
         noise = (2.0 * cross[:, axis_idx][:, ok] / total[ok]).sum(axis=1) / max(ok.sum(), 1)
+    if statistic == "prediction" and cross is not None:
+        # r_without' delta = |delta|^2 + r_with' delta = c_b - (its noise part) / 2: under "adds
+        # nothing" the training-fold delta is independent of the held-out noise, so its mean is 0
+        # (the improvement's is -E|delta|^2: conservative, about half the effect's t); noise part
+        # r_with' delta; degrees of freedom at most the noise's effective number of blocks
+        half = noise / 2.0
+        stat = value - float(half.sum())
+        var, bw = long_run_variance(half)
+        se = math.sqrt(var)
+        dof = min(variance_dof(c.shape[0], bw), max(effective_blocks(half), 1.0))
+        p = t_sf(stat / se, dof) if se > 0 else (0.0 if stat > 0 else 1.0)
+        return p, value, 2.0 * se, dof, bw
     var, bw = long_run_variance(noise)
     se = math.sqrt(var)
     dof = variance_dof(c.shape[0], bw)
@@ -194,21 +222,28 @@ def _improvement_p(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list
 
 
 def paired_test(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[int],
-                cross: np.ndarray | None = None, weights: np.ndarray | None = None) -> dict:
+                cross: np.ndarray | None = None, weights: np.ndarray | None = None,
+                statistic: str = "improvement") -> dict:
     """Paired held-out test: c_b per block as in the module text, t = sum c_b / sqrt(Var) on
     B - 1 degrees of freedom (under "adds nothing" the held-out improvement has mean <= 0:
     extra columns only add estimation noise, so the test is conservative). Returns the
     explained fraction, its 95 % interval and that p-value. Blocks in time order. With
     `weights` (block_weights) the p-value is the same test on the weighted block sums; the
-    fraction and its interval stay unweighted."""
+    fraction and its interval stay unweighted. `statistic`: the p-value's statistic
+    (REPLICATION_STATISTICS, _improvement_p); the fraction and its interval are the improvement's
+    either way."""
+    if statistic not in REPLICATION_STATISTICS:
+        raise ValueError(f"unknown replication statistic {statistic!r}")
     n = sse_without.shape[0]
     if n < 3:
         value = float(block_contributions(sse_without, sse_with, axis_idx).sum())
         return {"value": value, "ci": [float("-inf"), float("inf")], "p_value": 1.0, "blocks": n, "bandwidth": 0.0}
     p, value, se, dof, bw = _improvement_p(sse_without, sse_with, axis_idx, cross)
+    if weights is None and statistic != "improvement":
+        p = _improvement_p(sse_without, sse_with, axis_idx, cross, statistic)[0]
     if weights is not None:
         p = _improvement_p(sse_without * weights, sse_with * weights, axis_idx,
-                           None if cross is None else cross * weights)[0]
+                           None if cross is None else cross * weights, statistic)[0]
     half = t_quantile(0.025, dof) * se
     return {"value": value, "ci": [value - half, value + half], "p_value": float(p), "blocks": n, "bandwidth": bw}
 
