@@ -153,6 +153,8 @@ def _fly(config: BenchConfig, spec: FlightSpec, mode: str, work: Path,
         out["detections"] = data.get("detections", [])
         out["on_ground"] = [bool(d.get("on_ground")) for d in data.get("damage", [])]
         out["after_touchdown"] = [bool(d.get("after_touchdown")) for d in data.get("damage", [])]
+        if data.get("accel") is not None:  # the filter's accelerometer aiding (--filter-accel)
+            out["accel"] = data["accel"]
         if after_s is not None and log.is_file():
             columns = table1.read_log_columns(log)
             after = columns["t"] >= after_s
@@ -285,6 +287,32 @@ def twin_rows(twins: list[tuple[float, float, float]]) -> dict:
             "undamaged_oracle_rmse_median_mm": float(1e3 * np.median(values[:, 1])),
             "undamaged_ratio_floored_median": float(np.median(floored)),
             "undamaged_over_damaged_oracle_median": float(np.median(values[:, 0] / values[:, 2]))}
+
+
+def accel_bias_rows(records: list[dict]) -> dict | None:
+    """With the filter's accelerometer aiding: its z bias state at the end of the flight against
+    the sensor's bias, per group of Filter flights not lost (damaged; their undamaged twins;
+    the undamaged flights with effects). A collective thrust loss the bias absorbed would make the
+    damaged flights' error stand out from their twins'. None without the aiding."""
+    groups = {"damaged": [r["filter"] for r in records if r["spec"]["damages"]],
+              "undamaged_twins": [r["filter_undamaged"] for r in records if "filter_undamaged" in r],
+              "undamaged_with_effects": [r["filter"] for r in records if not r["spec"]["damages"]]}
+    if not any("accel" in f for flights in groups.values() for f in flights):
+        return None
+    out = {}
+    for name, flights in groups.items():
+        rows = [f["accel"] for f in flights if "accel" in f and not lost(f)]
+        error = np.array([row["est_bias_z"] - row["true_bias_z"] for row in rows], dtype=float)
+        std = np.array([row["est_bias_std_z"] for row in rows], dtype=float)
+        out[name] = {
+            "flights": len(rows),
+            "abs_error_median_m_s2": float(np.median(np.abs(error))) if len(rows) else None,
+            "abs_error_p95_m_s2": float(np.percentile(np.abs(error), 95)) if len(rows) else None,
+            "error_over_std_median": (float(np.median(np.abs(error) / np.maximum(std, 1e-12)))
+                                      if len(rows) else None),
+            "gated_samples": int(sum(row["gated"] for row in rows)),
+            "reanchored_flights": sum(1 for row in rows if row["reanchored"] > 0)}
+    return out
 
 
 def summarise(records: list[dict], config: BenchConfig) -> dict:
@@ -432,6 +460,7 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
         "stable_pct": 100.0 * sum(stable) / len(stable) if stable else None,
         "oracle_stable_pct": (100.0 * sum(r["oracle"].get("stable", False) for r in damaged if "oracle" in r)
                               / len(damaged)) if damaged else None,
+        "accel_bias": accel_bias_rows(records),
         "errors": [r["filter"]["error"] for r in records if "error" in r["filter"]][:5],
         "conditions": {"duration_s": config.duration_s, "base_seed": config.base_seed,
                        "presets": list(PRESETS), "trajectories": list(table1.TRAJECTORIES),
@@ -574,6 +603,15 @@ def render(result: dict) -> str:
                          f"{_pct(cell['pair_kf_error_median'], 100.0, '+.1f')} % "
                          f"({_pct(cell['pair_kf_abs_error_median'], 100.0, '.1f')} %) | "
                          f"{fmt(cell['pair_kf_error_over_std_median'])} | {cell['flights']} |")
+    if result.get("accel_bias"):
+        lines += ["", "The filter's accelerometer z bias at the end of the flight against the sensor's "
+                  "(Filter flights not lost):", "",
+                  "| flights | count | abs error median (p95), m/s^2 | abs error / claimed std, median | "
+                  "gated samples | flights re-anchored |", "|---|---|---|---|---|---|"]
+        for name, cell in result["accel_bias"].items():
+            lines.append(f"| {name.replace('_', ' ')} | {cell['flights']} | {fmt(cell['abs_error_median_m_s2'])} "
+                         f"({fmt(cell['abs_error_p95_m_s2'])}) | {fmt(cell['error_over_std_median'])} | "
+                         f"{cell['gated_samples']} | {cell['reanchored_flights']} |")
     return "\n".join(lines) + "\n"
 
 

@@ -790,6 +790,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
         r->rmse[k] = sitl_metrics_rmse(&f->metrics, k);
         r->true_bias[k] = f->imu.gyro_bias[k];
     }
+    r->true_accel_bias_z = f->imu.accel_bias[2];
     r->rmse_yaw_deg = sitl_metrics_rmse_yaw_deg(&f->metrics);
     r->final_position_error_m = sitl_vec3_norm(f->metrics.position_error);
     r->final_yaw_error_deg = f->metrics.yaw_error * 180.0 / SITL_PI;

@@ -45,6 +45,7 @@ typedef struct {
     double true_kf[SITL_MAX_ROTORS], true_km[SITL_MAX_ROTORS];
     double used_kf[SITL_MAX_ROTORS], used_km[SITL_MAX_ROTORS]; /* controller's, at the end */
     double true_bias[3];
+    double true_accel_bias_z;             /* the accelerometer's z bias at the end [m/s^2] */
     propid_estimate_t estimate;           /* final */
     propid_counters_t counters;
     sitl_honesty_t honesty;               /* NEES, false "converged", recovery (honesty.h) */

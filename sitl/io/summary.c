@@ -128,6 +128,18 @@ int sitl_write_summary_json(const char *path, const sitl_options_t *o, const sit
         cJSON_AddItemToArray(true_bias, number9(r->true_bias[a]));
         cJSON_AddItemToArray(est_bias, number9((double)r->estimate.gyro_bias[a]));
     }
+    if (r->estimate.model_terms & PROPID_TERM_ACCEL) {
+        /* The accelerometer aiding (--filter-accel): what its z bias state holds against the
+         * sensor's, and how often the gate held samples off or re-anchored the bias
+         * (a collective thrust loss it absorbs would show here, docs/damage.md). */
+        cJSON *accel = cJSON_AddObjectToObject(root, "accel");
+        add_number(accel, "true_bias_z", r->true_accel_bias_z);
+        add_number(accel, "est_bias_z", (double)r->estimate.accel_bias);
+        add_number(accel, "est_bias_std_z", (double)r->estimate.accel_bias_std);
+        cJSON_AddNumberToObject(accel, "accepted", (double)r->counters.accel_accepted);
+        cJSON_AddNumberToObject(accel, "gated", (double)r->counters.accel_gated);
+        cJSON_AddNumberToObject(accel, "reanchored", (double)r->counters.accel_reanchored);
+    }
     cJSON *damages = cJSON_AddArrayToObject(root, "damage");
     for (int k = 0; k < o->damage_count; k++) {
         cJSON *item = cJSON_CreateObject();

@@ -24,6 +24,7 @@
 #define GYRO_RATE 500.0f
 #define GYRO_DENSITY 2.443e-4f /* 0.014 deg/s/sqrt(Hz) */
 #define SUBSTEPS 4
+#define ACCEL_SIGMA 0.05f /* BMI088-class z specific force noise per sample at 500 Hz [m/s^2] */
 
 static const float inertia[3] = {1.43e-5f, 1.43e-5f, 2.89e-5f};
 
@@ -44,6 +45,8 @@ typedef struct {
     float kf[4], km[4];
     float rate[3];
     float bias[3];
+    int accel;        /* push the accelerometer's z specific force after each gyro sample */
+    float accel_bias; /* its true z bias [m/s^2] */
     rng_t rng;
     propid_filter_t filter;
     propid_damage_t detector;
@@ -52,7 +55,7 @@ typedef struct {
 /* speed_noise > 0: the filter carries the rotor-speed input error of held
  * telemetry (std speed_noise, held 1 s: the rate form, docs/math.md §14) while
  * the test still reports the speeds exactly. */
-static void setup_flight_with(flight_t *f, uint32_t seed, float speed_noise)
+static void setup_flight_with(flight_t *f, uint32_t seed, float speed_noise, float mass)
 {
     memset(f, 0, sizeof(*f));
     f->rng.state = seed * 2654435761u + 1u;
@@ -79,6 +82,11 @@ static void setup_flight_with(flight_t *f, uint32_t seed, float speed_noise)
     c.gyro_bias_walk = 0.0f;
     c.rotor_speed_noise = speed_noise;
     c.rotor_speed_noise_time = speed_noise > 0.0f ? 1.0f : 0.0f;
+    if (mass > 0.0f) { /* the accelerometer aiding, its noise and bias at the library's tuning */
+        c.mass = mass;
+        f->accel = 1;
+        f->accel_bias = 0.2f * (2.0f * uniform(&f->rng) - 1.0f); /* within +-20 mg */
+    }
     TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_init(&f->filter, &c));
     propid_damage_config_t dc;
     propid_damage_config_default(&dc);
@@ -87,7 +95,7 @@ static void setup_flight_with(flight_t *f, uint32_t seed, float speed_noise)
 
 static void setup_flight(flight_t *f, uint32_t seed)
 {
-    setup_flight_with(f, seed, 0.0f);
+    setup_flight_with(f, seed, 0.0f, 0.0f);
 }
 
 /* The detector with the derived design, tuned for a 20 % loss. */
@@ -168,6 +176,15 @@ static float fly(flight_t *f, float t0, float t1, int8_t *rotor_out)
         }
         const propid_status_t st = propid_push_gyro(&f->filter, t_us, gyro);
         TEST_ASSERT_TRUE(st == PROPID_OK || st == PROPID_OK_GATED);
+        if (f->accel) { /* same sample, same stamp, as the SITL's --filter-accel */
+            float thrust = 0.0f;
+            for (int i = 0; i < 4; i++) {
+                thrust += f->kf[i] * u[i];
+            }
+            const float force[3] = {0.0f, 0.0f, thrust / MASS + f->accel_bias + ACCEL_SIGMA * normal(&f->rng)};
+            const propid_status_t sa = propid_push_accel(&f->filter, t_us, force);
+            TEST_ASSERT_TRUE(sa == PROPID_OK || sa == PROPID_OK_GATED);
+        }
         int8_t rotor = -1;
         TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_damage_step(&f->detector, &f->filter, &rotor));
         if (rotor >= 0 && detected_at < 0.0f) {
@@ -314,7 +331,7 @@ static void test_loss_detected_under_the_input_error_model(void)
     const float speed_noise = 4.0f;
     for (uint8_t damaged = 0; damaged < 4; damaged++) {
         flight_t f;
-        setup_flight_with(&f, 51u + damaged, speed_noise);
+        setup_flight_with(&f, 51u + damaged, speed_noise, 0.0f);
         use_derived_design(&f);
         int8_t rotor;
         TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 2.0f, &rotor));
@@ -325,9 +342,58 @@ static void test_loss_detected_under_the_input_error_model(void)
         TEST_ASSERT_EQUAL_INT(damaged, rotor);
     }
     flight_t f;
-    setup_flight_with(&f, 61u, speed_noise);
+    setup_flight_with(&f, 61u, speed_noise, 0.0f);
     use_derived_design(&f);
     int8_t rotor;
+    TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 8.0f, &rotor));
+}
+
+/* With the accelerometer aiding (mass > 0, the library's accelerometer
+ * tuning: docs/math.md §9) a loss also drops the collective thrust the
+ * accelerometer reads, by 0.2 g / 4 = 0.49 m/s^2 for 20 % of one rotor at
+ * hover. The detector reads the gyro's innovations only, so it must still
+ * detect and isolate within 50 ms; after the re-open the accelerometer's
+ * residual belongs to the re-opened rotor, and the z bias state must not
+ * absorb it: the damaged kf re-learnt within 2 % and the bias, 2 s after the
+ * loss, within a tenth of the loss's 0.49 m/s^2 of where the undamaged twin
+ * of the same flight (same noise) holds it. (Against the sensor's truth the
+ * bias is off by 0.02-0.06 m/s^2 in both, 2-5 claimed std: this flight's
+ * gyro leaves the plus pair 1 / 3's kf common mode 0.6-1 % low, with or
+ * without the accelerometer, and the bias takes the disagreement.) No alarm
+ * on a healthy 8 s flight with the aiding. */
+static void test_accel_aiding_keeps_detection_and_relearning(void)
+{
+    int8_t rotor;
+    for (uint8_t damaged = 0; damaged < 4; damaged++) {
+        flight_t twin;
+        setup_flight_with(&twin, 71u + damaged, 0.0f, MASS);
+        use_derived_design(&twin);
+        TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&twin, 0.0f, 4.0f, &rotor));
+        flight_t f;
+        setup_flight_with(&f, 71u + damaged, 0.0f, MASS);
+        use_derived_design(&f);
+        TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 2.0f, &rotor));
+        f.kf[damaged] *= 0.8f; /* 20 % loss of kf and km */
+        f.km[damaged] *= 0.8f;
+        const float at = fly(&f, 2.0f, 2.2f, &rotor);
+        TEST_ASSERT_TRUE_MESSAGE(at > 2.0f && at <= 2.05f, "detected within 50 ms");
+        TEST_ASSERT_EQUAL_INT(damaged, rotor);
+        fly(&f, 2.2f, 4.0f, &rotor);
+        TEST_ASSERT_EQUAL_UINT32(1u, f.detector.detections);
+        propid_estimate_t e, e_twin;
+        propid_get_estimate(&f.filter, &e);
+        propid_get_estimate(&twin.filter, &e_twin);
+        TEST_ASSERT_FLOAT_WITHIN(0.02f * f.kf[damaged], f.kf[damaged], e.thrust_coeff[damaged]);
+        TEST_ASSERT_FLOAT_WITHIN_MESSAGE(0.049f, e_twin.accel_bias, e.accel_bias,
+                                         "the bias did not absorb the loss");
+        propid_counters_t counters;
+        propid_get_counters(&f.filter, &counters);
+        TEST_ASSERT_EQUAL_UINT32(0u, counters.accel_reanchored);
+        TEST_ASSERT_TRUE(counters.accel_accepted > 1900u);
+    }
+    flight_t f;
+    setup_flight_with(&f, 79u, 0.0f, MASS);
+    use_derived_design(&f);
     TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 8.0f, &rotor));
 }
 
@@ -526,5 +592,6 @@ int main(void)
     RUN_TEST(test_correlated_innovations_keep_the_design_rate);
     RUN_TEST(test_reanchor_is_not_a_loss);
     RUN_TEST(test_landed_input_holds_the_bank);
+    RUN_TEST(test_accel_aiding_keeps_detection_and_relearning);
     return UNITY_END();
 }

@@ -201,6 +201,46 @@ def test_the_twins_drift_is_read_as_an_opposite_pair_common_mode():
         damage_bench.summarise([record], config()))
 
 
+def test_the_accelerometer_bias_is_read_per_group_of_flights():
+    """With the filter's accelerometer aiding the SITL summary carries its z bias state and the
+    sensor's; the bench reads |error| and |error| / claimed std per group (damaged, their undamaged
+    twins, the undamaged flights with effects), leaving lost flights out, and counts gated samples
+    and re-anchored flights. Without the aiding there is no such row."""
+    def accel(error, std=0.05, gated=0, reanchored=0):
+        return {"true_bias_z": 0.1, "est_bias_z": 0.1 + error, "est_bias_std_z": std,
+                "accepted": 5999, "gated": gated, "reanchored": reanchored}
+
+    damaged = {"damages": [[1, 2.5, 0.3]], "effects": [], "index": 0, "trajectory": "circle",
+               "preset": "crazyflie-x"}
+    records = [
+        {"spec": damaged, "filter": {"stable": True, "detections": [{"rotor": 1, "time_s": 2.505}],
+                                     "rmse_after_damage_m": 0.02, "accel": accel(0.30, gated=40, reanchored=1)},
+         "oracle": {"stable": True, "rmse_after_damage_m": 0.02}, "filter_undamaged": {"stable": True, "accel": accel(-0.02)}},
+        {"spec": dict(damaged, index=1), "filter": {"stable": True, "accel": accel(-0.10)},
+         "oracle": {"stable": True}, "filter_undamaged": {"stable": True, "accel": accel(0.04)}},
+        # lost: left out
+        {"spec": dict(damaged, index=2), "filter": {"stable": False, "accel": accel(5.0)},
+         "oracle": {"stable": True}, "filter_undamaged": {"stable": True, "touchdown_at_s": 3.0,
+                                                          "accel": accel(5.0)}},
+        {"spec": {"damages": [], "effects": ["com_offset"], "index": 3},
+         "filter": {"stable": True, "accel": accel(0.01, std=0.02)}},
+    ]
+    rows = damage_bench.accel_bias_rows(records)
+    assert rows["damaged"]["flights"] == 2
+    assert rows["damaged"]["abs_error_median_m_s2"] == pytest.approx(0.2)
+    assert rows["damaged"]["error_over_std_median"] == pytest.approx(4.0)
+    assert rows["damaged"]["gated_samples"] == 40 and rows["damaged"]["reanchored_flights"] == 1
+    assert rows["undamaged_twins"]["flights"] == 2
+    assert rows["undamaged_twins"]["abs_error_median_m_s2"] == pytest.approx(0.03)
+    assert rows["undamaged_with_effects"]["error_over_std_median"] == pytest.approx(0.5)
+    text = damage_bench.render(damage_bench.summarise(records, config()))
+    assert "| damaged | 2 | 0.2 (0.29) | 4 | 40 | 1 |" in text
+    for record in records:
+        for key in ("filter", "filter_undamaged"):
+            record.get(key, {}).pop("accel", None)
+    assert damage_bench.accel_bias_rows(records) is None
+
+
 def test_missed_damage_counts_against_the_rate():
     spec = {"damages": [[1, 2.5, 0.12]], "effects": [], "index": 0}
     records = [{"spec": spec, "filter": {"detections": [{"rotor": 1, "time_s": 2.0}], "stable": True},
@@ -339,6 +379,34 @@ def test_sitl_damage_is_detected_isolated_and_reported(tmp_path, sitl_binary):
     assert 2.5 <= data["detections"][0]["time_s"] <= 2.55
     assert data["health"] & 0x100  # PROPID_HEALTH_ROTOR_DAMAGE
     assert abs(data["est_kf"][4] / data["true_kf"][4] - 1) < 0.05  # re-learnt in flight
+
+
+def test_sitl_damage_with_the_accelerometer_aiding(tmp_path, sitl_binary):
+    """The detector and the re-open with the filter's accelerometer aiding on (the loss also drops
+    the collective thrust the accelerometer reads): detected on the right rotor within 50 ms, the
+    rotor re-learnt, and the summary reports the aiding's z bias against the sensor's, with the bias
+    far closer to the truth than the loss's share of the thrust (0.3 g / 4 = 0.74 m/s^2)."""
+    import json
+    import subprocess
+
+    summary = tmp_path / "s.json"
+    base = [str(sitl_binary), "--vehicle", "crazyflie-x", "--trajectory", "lissajous", "--seed", "3",
+            "--duration", "4", "--start-at-rest", "--damage", "2@2.5=0.3", "--detect-damage",
+            "--damage-design-loss", "0.2", "--filter-rate-noise", "0.2",
+            "--summary-json", str(summary), "--quiet"]
+    proc = subprocess.run(base + ["--filter-accel"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(summary.read_text())
+    assert [d["rotor"] for d in data["detections"]] == [2]
+    assert 2.5 <= data["detections"][0]["time_s"] <= 2.55
+    assert abs(data["est_kf"][1] / data["true_kf"][1] - 1) < 0.05
+    accel = data["accel"]
+    assert accel["accepted"] > 3900 and accel["reanchored"] == 0
+    assert 0 < accel["est_bias_std_z"] < 0.5
+    assert abs(accel["est_bias_z"] - accel["true_bias_z"]) < 0.15
+    proc = subprocess.run(base, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "accel" not in json.loads(summary.read_text())
 
 
 def test_sitl_marks_a_damage_after_the_vehicle_came_down(tmp_path, sitl_binary):
