@@ -57,7 +57,7 @@ TWIN_RMSE_FLOOR_M = 1e-3
 # current and its kf drift before any damage is the bench's largest tracking
 # miss (docs/damage-history.md, "The filter holding the telemetry latency").
 TELEMETRY_LATENCY_S = 0.001
-# The filter's configuration matched to these sensors (docs/damage.md, "D read by the paired
+# The filter's configuration matched to these sensors (docs/damage-history.md, "D read by the paired
 # rule"): the library's rate process noise (propid_config_default), not the campaign's 4e-4
 # chosen for the paper's exact-speed sensors, which makes the filter claim an opposite pair's
 # common mode 9-79x too precisely under DShot quantisation ("The drift before the damage"); and
@@ -65,6 +65,11 @@ TELEMETRY_LATENCY_S = 0.001
 # floor and shift follow that filter's own R / S (docs/math.md §4).
 FILTER_RATE_NOISE = LIBRARY_RATE_PROCESS_NOISE
 DAMAGE_DESIGN_LOSS = 0.2
+# The filter's accelerometer aiding (docs/math.md §9, the library's accelerometer tuning): every
+# flight controller has an accelerometer, and its z specific force measures the collective thrust,
+# the combination whose error the gyro leaves and the controller turns into a z offset
+# (docs/damage.md, "E read by the paired rule"). BenchConfig.filter_accel = False flies without it.
+FILTER_ACCEL = True
 MILD_EFFECTS = ("rotor_inertia", "rotor_gyroscopic", "rotor_drag", "translational_lift",
                 "thrust_nonlinearity", "aero_damping", "gyro_scale", "com_offset")
 
@@ -79,6 +84,7 @@ class BenchConfig:
     base_seed: int = 1000
     workers: int = 2
     false_alarms_per_hour: float | None = None  # detector design rate (None: library default)
+    filter_accel: bool = FILTER_ACCEL  # the filter fuses the accelerometer (--filter-accel)
     # extra propid_sitl options for every flight (e.g. a filter option), recorded in the conditions
     sitl_args: list[str] = field(default_factory=list)
 
@@ -123,6 +129,8 @@ def _command(config: BenchConfig, spec: FlightSpec, mode: str, log: Path, summar
     cmd += ["--detect-damage", "--summary-json", str(summary),
             "--esc-latency", repr(TELEMETRY_LATENCY_S), "--filter-esc-delay", repr(TELEMETRY_LATENCY_S),
             "--damage-design-loss", repr(DAMAGE_DESIGN_LOSS)]
+    if config.filter_accel:
+        cmd += ["--filter-accel"]
     if config.false_alarms_per_hour:
         cmd += ["--damage-false-alarm-rate", repr(config.false_alarms_per_hour)]
     for rotor, time_s, fraction in spec.damages:
@@ -471,6 +479,7 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
                        "filter_delay_s": TELEMETRY_LATENCY_S,
                        "filter_rate_noise": FILTER_RATE_NOISE,
                        "damage_design_loss": DAMAGE_DESIGN_LOSS,
+                       "filter_accel": config.filter_accel,
                        "false_alarms_per_hour": config.false_alarms_per_hour or 1e-3,
                        "sitl_args": list(config.sitl_args)},
         "per_flight": records,

@@ -57,7 +57,7 @@ def test_the_filter_holds_the_telemetry_latency_in_every_flight(tmp_path):
 def test_every_flight_flies_the_sensor_matched_filter_and_the_derived_design(tmp_path):
     """The bench's filter flies the library's rate process noise (not the campaign's paper-sensor
     4e-4) and the detector's derived design for a 20 % loss, in the Filter and the Oracle flights
-    alike (docs/damage.md, "D read by the paired rule"); an extra --sitl-arg still overrides."""
+    alike (docs/damage-history.md, "D read by the paired rule"); an extra --sitl-arg still overrides."""
     cfg = config(damaged=2, undamaged=1)
     for spec in damage_bench.flight_specs(cfg):
         for mode in ("filter", "oracle"):
@@ -65,6 +65,19 @@ def test_every_flight_flies_the_sensor_matched_filter_and_the_derived_design(tmp
             assert cmd.count("--filter-rate-noise") == 1
             assert float(cmd[cmd.index("--filter-rate-noise") + 1]) == 0.2
             assert float(cmd[cmd.index("--damage-design-loss") + 1]) == 0.2
+
+
+def test_every_flight_fuses_the_accelerometer_unless_asked_not_to(tmp_path):
+    """The bench's filter fuses the accelerometer's z specific force (--filter-accel, the library's
+    accelerometer tuning), Filter and Oracle flights alike (docs/damage.md, "E read by the paired
+    rule"); filter_accel=False (the CLI's --no-filter-accel) flies the former configuration."""
+    for accel in (True, False):
+        cfg = config(damaged=2, undamaged=1) if accel else config(damaged=2, undamaged=1, filter_accel=False)
+        for spec in damage_bench.flight_specs(cfg):
+            for mode in ("filter", "oracle"):
+                cmd = damage_bench._command(cfg, spec, mode, tmp_path / "f.csv", tmp_path / "f.json")
+                assert cmd.count("--filter-accel") == (1 if accel else 0)
+    assert damage_bench.BenchConfig(sitl=Path("x"), out_dir=tmp_path).filter_accel is True
 
 
 def test_scoring_detection_isolation_and_false_alarms():

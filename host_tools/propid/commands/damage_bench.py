@@ -25,6 +25,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=1000, help="base seed (default 1000)")
     parser.add_argument("--false-alarm-rate", type=float, metavar="PER_H",
                         help="detector design false alarms per flight hour (default: library's 1e-3)")
+    parser.add_argument("--no-filter-accel", action="store_true",
+                        help="the filter without its accelerometer aiding (the bench's configuration "
+                             "before it was adopted, docs/damage.md)")
     parser.add_argument("--sitl-arg", action="append", default=[], metavar="ARG",
                         help="extra propid_sitl argument for every flight, repeatable, e.g. "
                              "--sitl-arg=--filter-rate-noise --sitl-arg=0.001")
@@ -45,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
         sitl=Path(args.sitl) if args.sitl else locate_sitl(None), out_dir=Path(args.out),
         damaged=args.damaged, undamaged=args.undamaged, duration_s=args.duration,
         base_seed=args.seed, workers=args.workers, false_alarms_per_hour=args.false_alarm_rate,
-        sitl_args=list(args.sitl_arg))
+        filter_accel=not args.no_filter_accel, sitl_args=list(args.sitl_arg))
     result = damage_bench.run_bench(config, progress=not args.no_progress)
     print(damage_bench.render(result), end="")
     for error in result["errors"]:
