@@ -41,7 +41,7 @@ typedef struct {
  * and per state in the same order, so the same results, row by row over loops
  * (small code, more instructions: the loop control and each element's three
  * vector values loaded per element). */
-static __attribute__((noinline)) int
+static __attribute__((noinline)) uint32_t
 apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *restrict pending,
                  const propid_derived_t *restrict derived)
 {
@@ -62,7 +62,7 @@ apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *r
         outside |= propid_outside_positive_range(row[i], propid_floor_bits(derived, i), propid_range_bits(derived, i));
         row += PROPID_MAX_STATES - 1u - i;
     }
-    return outside == 0u;
+    return outside;
 }
 #elif PROPID_HOST_ROW_SWEEP
 /* The quad downdate on a 64-bit desktop host (PROPID_HOST_ROW_SWEEP) with the
@@ -120,7 +120,7 @@ PROPID_UNROLL(3)
     }
 }
 
-static __attribute__((noinline)) int
+static __attribute__((noinline)) uint32_t
 apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *restrict pending,
                  const propid_derived_t *restrict derived)
 {
@@ -160,7 +160,7 @@ PROPID_UNROLL(14)
         outside |= propid_outside_positive_range(cov[propid_cov_index(i, i)], propid_kind_floor_bits(derived, kind),
                                                  derived->kind_range_bits[kind]);
     }
-    return outside == 0u;
+    return outside;
 }
 #else
 #if PROPID_ARM_BLOCK_MOVES
@@ -340,6 +340,20 @@ downdate_triangle_4(float *restrict cov, const uint32_t first, const float *h0, 
 }
 #endif
 
+/* count + ((bits - floor_bits) <= range_bits, unsigned): the test of
+ * propid_outside_positive_range, inverted, its carry added (SUB, CMP, ADC; the
+ * compiler makes a compare, a conditional block and an add of it). */
+static inline __attribute__((always_inline)) uint32_t count_inside(uint32_t count, uint32_t bits,
+                                                                 uint32_t floor_bits, uint32_t range_bits)
+{
+    uint32_t above_floor;
+    __asm__("sub %[above], %[bits], %[floor]\n\tcmp %[range], %[above]\n\tadc %[count], %[count], #0"
+            : [count] "+r"(count), [above] "=&r"(above_floor)
+            : [bits] "r"(bits), [floor] "r"(floor_bits), [range] "r"(range_bits)
+            : "cc");
+    return count;
+}
+
 /* Rows first .. first + rows - 1 of the quad's three-term pass: their gains
  * g_k,i = h_k,i / S_k and state updates, the upper triangle of their diagonal
  * block, then every column to the right, where each h_j triple is loaded once
@@ -449,15 +463,15 @@ PROPID_UNROLL(5)
 
 /* P_ij -= sum_k g_k,i h_k,j on the stored upper triangle, x += sum_k g_k nu_k,
  * for three pending terms of a quad: n constant, fully unrolled, rows in groups
- * of 5 + 5 + 4. Also tests every new variance against its floor and ceiling; returns 1
- * when all are inside. Not inlined: with the covariance as its own pointer every
+ * of 5 + 5 + 4. Also tests every new variance against its floor and ceiling; returns 0
+ * when all are inside (else non-zero: how many are outside, or a flag). Not inlined: with the covariance as its own pointer every
  * element is within the 1 KiB reach of a VFP load (from the filter's base the
  * compiler folds the offsets and needs an address computation per element).
  * Without the scheduling pass before register allocation: it hoists the later
  * groups' loads, which then outlive the registers (measured: 17 instructions
  * more per step with it, every element still one load, three multiply-adds and
  * one store). */
-static __attribute__((noinline)) PROPID_NO_EARLY_SCHEDULE int
+static __attribute__((noinline)) PROPID_NO_EARLY_SCHEDULE uint32_t
 apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *restrict pending,
                  const propid_derived_t *restrict derived)
 {
@@ -475,7 +489,9 @@ apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *r
     outside |= apply_row_group(cov, core, pending, derived, 10u, 4u);
 #if PROPID_ARM_BLOCK_MOVES
     /* The new variances' tests, on their bit patterns read from memory (tested
-     * inside the groups, the compiler loads them early and spills them). */
+     * inside the groups, the compiler loads them early and spills them): the
+     * count of those inside (each test's carry added, no flag per test). */
+    uint32_t inside = 0u;
 PROPID_UNROLL(14)
     for (uint8_t i = 0; i < PROPID_QUAD_STATES; ++i) {
         const uint8_t kind = i < PROPID_QUAD_FIRST_THRUST ? PROPID_KIND_RATE
@@ -483,10 +499,13 @@ PROPID_UNROLL(14)
                                 : (i < PROPID_QUAD_FIRST_BIAS ? PROPID_KIND_DRAG : PROPID_KIND_BIAS));
         uint32_t bits;
         memcpy(&bits, &cov[propid_cov_index(i, i)], sizeof(bits));
-        outside |= (uint32_t)(bits - propid_kind_floor_bits(derived, kind)) > derived->kind_range_bits[kind] ? 1u : 0u;
+        inside = count_inside(inside, bits, propid_kind_floor_bits(derived, kind), derived->kind_range_bits[kind]);
     }
+    (void)outside;
+    return PROPID_QUAD_STATES - inside;
+#else
+    return outside;
 #endif
-    return outside == 0u;
 }
 #endif
 
@@ -932,7 +951,7 @@ static PROPID_QUAD_INLINE int fuse_one_pass(propid_filter_t *filter, const float
         if (!fuse_quad_usual(cov, core, derived, &pending, gyro)) {
             return 0;
         }
-        inside = apply_three_quad(core->cov, core, &pending, derived);
+        inside = apply_three_quad(core->cov, core, &pending, derived) == 0u;
     }
     /* Variance floors and ceilings: tested inside the pass; the full pass (which
      * also repairs) only when one is outside. */
