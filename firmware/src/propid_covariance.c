@@ -226,13 +226,15 @@ PROPID_UNROLL(3)
         }
         const float *v0 = thrust.vector[0];
         const float along0 = kf_rel[0] * v0[0] + kf_rel[1] * v0[1] + kf_rel[2] * v0[2] + kf_rel[3] * v0[3];
+        uint32_t inside = 0u; /* (counted: a carry added per test, propid_count_inside) */
 PROPID_UNROLL(4)
         for (uint8_t i = 0; i < 4u; ++i) {
             km_rel[i] = z[i] - along * v[i];
             kf_rel[i] -= along0 * v0[i];
-            outside |= propid_outside_positive_range(kf_rel[i], min_bits, range_bits);
-            outside |= propid_outside_positive_range(km_rel[i], min_bits, range_bits);
+            inside = propid_count_inside(inside, propid_float_bits(kf_rel[i]), min_bits, range_bits);
+            inside = propid_count_inside(inside, propid_float_bits(km_rel[i]), min_bits, range_bits);
         }
+        outside = inside != 8u;
     }
 #if PROPID_GENERAL_VEHICLES
     else {

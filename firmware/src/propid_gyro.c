@@ -340,20 +340,6 @@ downdate_triangle_4(float *restrict cov, const uint32_t first, const float *h0, 
 }
 #endif
 
-/* count + ((bits - floor_bits) <= range_bits, unsigned): the test of
- * propid_outside_positive_range, inverted, its carry added (SUB, CMP, ADC; the
- * compiler makes a compare, a conditional block and an add of it). */
-static inline __attribute__((always_inline)) uint32_t count_inside(uint32_t count, uint32_t bits,
-                                                                 uint32_t floor_bits, uint32_t range_bits)
-{
-    uint32_t above_floor;
-    __asm__("sub %[above], %[bits], %[floor]\n\tcmp %[range], %[above]\n\tadc %[count], %[count], #0"
-            : [count] "+r"(count), [above] "=&r"(above_floor)
-            : [bits] "r"(bits), [floor] "r"(floor_bits), [range] "r"(range_bits)
-            : "cc");
-    return count;
-}
-
 /* Rows first .. first + rows - 1 of the quad's three-term pass: their gains
  * g_k,i = h_k,i / S_k and state updates, the upper triangle of their diagonal
  * block, then every column to the right, where each h_j triple is loaded once
@@ -499,7 +485,7 @@ PROPID_UNROLL(14)
                                 : (i < PROPID_QUAD_FIRST_BIAS ? PROPID_KIND_DRAG : PROPID_KIND_BIAS));
         uint32_t bits;
         memcpy(&bits, &cov[propid_cov_index(i, i)], sizeof(bits));
-        inside = count_inside(inside, bits, propid_kind_floor_bits(derived, kind), derived->kind_range_bits[kind]);
+        inside = propid_count_inside(inside, bits, propid_kind_floor_bits(derived, kind), derived->kind_range_bits[kind]);
     }
     (void)outside;
     return PROPID_QUAD_STATES - inside;

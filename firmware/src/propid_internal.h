@@ -713,6 +713,32 @@ static inline uint32_t propid_outside_positive_range(float value, uint32_t floor
     return (uint32_t)(bits - floor_bits) > range_bits ? 1u : 0u;
 }
 
+/* count + 1 when bits is inside [floor_bits, floor_bits + range_bits] (the
+ * inverse of propid_outside_positive_range's test on a value's bit pattern),
+ * for straight-line kernels that count the values inside: on the Cortex-M4 the
+ * test's carry added (SUB, CMP, ADC; the compiler makes a compare, a
+ * conditional block and an add of it), the same test in C elsewhere. */
+static inline __attribute__((always_inline)) uint32_t propid_count_inside(uint32_t count, uint32_t bits,
+                                                                        uint32_t floor_bits, uint32_t range_bits)
+{
+#if PROPID_ARM_BLOCK_MOVES
+    uint32_t above_floor;
+    __asm__("sub %[above], %[bits], %[floor]\n\tcmp %[range], %[above]\n\tadc %[count], %[count], #0"
+            : [count] "+r"(count), [above] "=&r"(above_floor)
+            : [bits] "r"(bits), [floor] "r"(floor_bits), [range] "r"(range_bits)
+            : "cc");
+    return count;
+#else
+    return count + ((uint32_t)(bits - floor_bits) <= range_bits ? 1u : 0u);
+#endif
+}
+static inline __attribute__((always_inline)) uint32_t propid_float_bits(float value)
+{
+    uint32_t bits;
+    memcpy(&bits, &value, sizeof(bits));
+    return bits;
+}
+
 /* Kinds of state (derived->state_kind; propid_config.h PROPID_STATE_KINDS). */
 #define PROPID_KIND_RATE 0u
 #define PROPID_KIND_THRUST 1u
