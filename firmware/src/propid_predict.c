@@ -737,6 +737,80 @@ __attribute__((noinline)) void propid_predict_covariance(const propid_derived_t 
 }
 #endif
 
+#if PROPID_FAST_QUAD_PREDICT && PROPID_ARM_BLOCK_MOVES
+/* The round-robin row check's test (propid_cov_check_row_inline: the same test
+ * per element, |P_ij|^2 <= P_ii (1 + tol) P_jj, a NaN failing it) for the quad
+ * on the Cortex-M4: row i's elements right of its diagonal in one VLDM into
+ * s(19 + j - 1).. s31 (P_ij in s(18 + j) for every row: one VLDM per row,
+ * chosen by a TBB table), then the shared tests of columns i + 1..13, each
+ * P_jj at its fixed offset (no pointer arithmetic, no loop: 6 instructions an
+ * element where the C loop took 12), leaving at the first failure. Returns 1
+ * when row i is bad; writes nothing (the caller repairs). */
+static inline __attribute__((always_inline)) int quad_row_bad(const float *cov, uint8_t row)
+{
+    if (row >= PROPID_QUAD_STATES) {
+        return 0;
+    }
+    const float pii = cov[propid_cov_index(row, row)];
+    int bad = !(pii > 0.0f && pii <= FLT_MAX);
+    const float pii_tol = pii * (1.0f + PROPID_ROUNDING_TOL);
+    const uint32_t index = row;
+    __asm__("tbb [pc, %[row]]\n"
+                     ".Lrc%=table:\n\t"
+                     ".byte (.Lrc%=row0 - .Lrc%=table) / 2, (.Lrc%=row1 - .Lrc%=table) / 2, (.Lrc%=row2 - .Lrc%=table) / 2, (.Lrc%=row3 - .Lrc%=table) / 2, (.Lrc%=row4 - .Lrc%=table) / 2, (.Lrc%=row5 - .Lrc%=table) / 2, (.Lrc%=row6 - .Lrc%=table) / 2, (.Lrc%=row7 - .Lrc%=table) / 2, (.Lrc%=row8 - .Lrc%=table) / 2, (.Lrc%=row9 - .Lrc%=table) / 2, (.Lrc%=row10 - .Lrc%=table) / 2, (.Lrc%=row11 - .Lrc%=table) / 2, (.Lrc%=row12 - .Lrc%=table) / 2, (.Lrc%=row13 - .Lrc%=table) / 2\n\t"
+                     ".align 1\n"
+                     ".Lrc%=row0: vldmia %[elements], {s19-s31}\n\tb .Lrc%=column1\n"
+                     ".Lrc%=row1: vldmia %[elements], {s20-s31}\n\tb .Lrc%=column2\n"
+                     ".Lrc%=row2: vldmia %[elements], {s21-s31}\n\tb .Lrc%=column3\n"
+                     ".Lrc%=row3: vldmia %[elements], {s22-s31}\n\tb .Lrc%=column4\n"
+                     ".Lrc%=row4: vldmia %[elements], {s23-s31}\n\tb .Lrc%=column5\n"
+                     ".Lrc%=row5: vldmia %[elements], {s24-s31}\n\tb .Lrc%=column6\n"
+                     ".Lrc%=row6: vldmia %[elements], {s25-s31}\n\tb .Lrc%=column7\n"
+                     ".Lrc%=row7: vldmia %[elements], {s26-s31}\n\tb .Lrc%=column8\n"
+                     ".Lrc%=row8: vldmia %[elements], {s27-s31}\n\tb .Lrc%=column9\n"
+                     ".Lrc%=row9: vldmia %[elements], {s28-s31}\n\tb .Lrc%=column10\n"
+                     ".Lrc%=row10: vldmia %[elements], {s29-s31}\n\tb .Lrc%=column11\n"
+                     ".Lrc%=row11: vldmia %[elements], {s30-s31}\n\tb .Lrc%=column12\n"
+                     ".Lrc%=row12: vldmia %[elements], {s31}\n\tb .Lrc%=column13\n"
+                     ".Lrc%=row13: b .Lrc%=done\n"
+                     ".Lrc%=column1: vldr s16, [%[cov], #56]\n\tvmul.f32 s17, s19, s19\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column2: vldr s16, [%[cov], #108]\n\tvmul.f32 s17, s20, s20\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column3: vldr s16, [%[cov], #156]\n\tvmul.f32 s17, s21, s21\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column4: vldr s16, [%[cov], #200]\n\tvmul.f32 s17, s22, s22\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column5: vldr s16, [%[cov], #240]\n\tvmul.f32 s17, s23, s23\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column6: vldr s16, [%[cov], #276]\n\tvmul.f32 s17, s24, s24\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column7: vldr s16, [%[cov], #308]\n\tvmul.f32 s17, s25, s25\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column8: vldr s16, [%[cov], #336]\n\tvmul.f32 s17, s26, s26\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column9: vldr s16, [%[cov], #360]\n\tvmul.f32 s17, s27, s27\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column10: vldr s16, [%[cov], #380]\n\tvmul.f32 s17, s28, s28\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column11: vldr s16, [%[cov], #396]\n\tvmul.f32 s17, s29, s29\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column12: vldr s16, [%[cov], #408]\n\tvmul.f32 s17, s30, s30\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     ".Lrc%=column13: vldr s16, [%[cov], #416]\n\tvmul.f32 s17, s31, s31\n\t"
+                     "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
+                     "\tb .Lrc%=done\n"
+                     ".Lrc%=bad: movs %[bad], #1\n"
+                     ".Lrc%=done:\n"
+                     : [bad] "+r"(bad)
+                     : [row] "r"(index), [elements] "r"(&cov[propid_cov_index(row, row) + 1u]), [cov] "r"(cov),
+                       [pii_tol] "t"(pii_tol), "m"(*(const float(*)[PROPID_COV_SIZE])cov)
+                     : "s16", "s17", "s19", "s20", "s21", "s22", "s23", "s24", "s25", "s26", "s27", "s28", "s29",
+                       "s30", "s31", "cc");
+    return bad;
+}
+#endif
+
 /* The accepted sample's prediction (propid_internal.h). The fast quad build
  * runs its two straight-line kernels in this one frame, the 18 Jacobian entries
  * passed in a local array the compiler keeps in registers (no store to and
@@ -753,6 +827,12 @@ __attribute__((noinline)) propid_status_t propid_predict_step(propid_filter_t *f
     float (*rate_jacobian_dt)[PROPID_JAC_ROW] = (float (*)[PROPID_JAC_ROW])(void *)core->update_vector;
 #else
     float rate_jacobian_dt[3][PROPID_JAC_ROW];
+#endif
+#if PROPID_FAST_QUAD_PREDICT && PROPID_ARM_BLOCK_MOVES
+    /* The row check's test first, while the FPU registers are free (it reads P,
+     * which the rate step does not change); the repair, if any, after the rate
+     * step is accepted, as propid_check_next_row does it. */
+    const int row_bad = quad_row_bad(core->cov, core->check_row);
 #endif
 #if PROPID_FAST_QUAD_PREDICT
     const propid_reflection_t basis = propid_drag_basis(&filter->derived, &filter->config);
@@ -774,7 +854,15 @@ __attribute__((noinline)) propid_status_t propid_predict_step(propid_filter_t *f
         core->health |= PROPID_HEALTH_STATE_CLAMPED;
         filter->counters.state_clamps++;
     }
+#if PROPID_FAST_QUAD_PREDICT && PROPID_ARM_BLOCK_MOVES
+    if (row_bad && propid_cov_repair(&filter->derived, core)) {
+        core->health |= PROPID_HEALTH_COV_REPAIRED;
+        filter->counters.cov_repairs++;
+    }
+    core->check_row = (uint8_t)(core->check_row + 1u >= PROPID_QUAD_STATES ? 0u : core->check_row + 1u);
+#else
     propid_check_next_row(filter, PROPID_FAST_QUAD_PREDICT);
+#endif
 #if PROPID_FAST_QUAD_PREDICT
     predict_covariance_quad_layout(&filter->derived, core->cov, dt,
                                    (const float (*)[PROPID_JAC_ROW])rate_jacobian_dt, drag_loading_factor(core));
