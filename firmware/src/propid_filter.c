@@ -317,7 +317,10 @@ static propid_status_t gyro_time_check(const propid_kept_config_t *config, uint6
     if (time_us <= previous) {
         return PROPID_ERR_TIME_BACKWARDS;
     }
-    return time_us - previous > (uint64_t)config->max_gyro_gap_us ? PROPID_ERR_TIME_JUMP : PROPID_OK;
+    /* Later: a jump when the difference's high word is set or its low word is
+     * beyond the gap (a 64-bit compare takes twice the instructions). */
+    const uint64_t gap = time_us - previous;
+    return (uint32_t)(gap >> 32) != 0u || (uint32_t)gap > config->max_gyro_gap_us ? PROPID_ERR_TIME_JUMP : PROPID_OK;
 }
 
 /* Every check of a gyro sample that does not need the rotor data: pointer,
@@ -369,7 +372,17 @@ static PROPID_GYRO_CHECK_LINK propid_status_t gyro_sample_check(propid_filter_t 
     return PROPID_OK;
 }
 
-static propid_status_t fuse_gyro_timed(propid_filter_t *filter, uint64_t time_us, const float gyro_rad_s[3]);
+/* Without the delay buffer propid_push_gyro is the only caller of the step
+ * (fuse_gyro_timed) and takes it inline: one frame, the sample's time and
+ * anchor state read once for the checks and the step. With the buffer it is a
+ * function of its own, which the buffer's releases call too (propid_fuse_gyro). */
+#if PROPID_DELAY_SLOTS > 0
+#define PROPID_GYRO_STEP_LINK __attribute__((noinline))
+#else
+#define PROPID_GYRO_STEP_LINK inline __attribute__((always_inline))
+#endif
+static PROPID_GYRO_STEP_LINK propid_status_t fuse_gyro_timed(propid_filter_t *filter, uint64_t time_us,
+                                                               const float gyro_rad_s[3]);
 
 propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
                                  const float gyro_rad_s[3])
@@ -392,6 +405,7 @@ propid_status_t propid_push_gyro(propid_filter_t *filter, uint64_t time_us,
     return fuse_gyro_timed(filter, time_us, gyro_rad_s);
 }
 
+#if PROPID_DELAY_SLOTS > 0
 propid_status_t propid_fuse_gyro(propid_filter_t *filter, uint64_t time_us, const float gyro_rad_s[3])
 {
     const propid_status_t timing =
@@ -401,6 +415,7 @@ propid_status_t propid_fuse_gyro(propid_filter_t *filter, uint64_t time_us, cons
     }
     return fuse_gyro_timed(filter, time_us, gyro_rad_s);
 }
+#endif
 
 #if PROPID_WITH_INPUT_NOISE || PROPID_WITH_GYRO_STUCK_CHECK
 /* The gyro update with either rare option (one test in the step for both): the
@@ -437,15 +452,25 @@ static __attribute__((noinline)) uint32_t update_gyro_rare(propid_filter_t *filt
 }
 #endif
 
+/* 1 when rotor data stamped rotor_time_us is stale at rotor_clock: older than
+ * rotor_stale_us, or stamped beyond any plausible gap after it (a clock fault). */
+static __attribute__((noinline)) PROPID_RARE int rotor_stale(const propid_filter_t *filter, uint64_t rotor_clock)
+{
+    const propid_kept_config_t *config = &filter->config;
+    const uint64_t rotor_time_us = filter->core.rotor_time_us;
+    if (rotor_clock > rotor_time_us) {
+        return rotor_clock - rotor_time_us > (uint64_t)config->rotor_stale_us;
+    }
+    return rotor_time_us - rotor_clock > (uint64_t)config->max_gyro_gap_us;
+}
+
 /* propid_fuse_gyro after its time test (time_us is later than the filter's
  * clock by at most the largest gap, or anchors it). */
-static __attribute__((noinline)) propid_status_t fuse_gyro_timed(propid_filter_t *filter, uint64_t time_us,
-                                                                 const float gyro_rad_s[3])
+static PROPID_GYRO_STEP_LINK propid_status_t fuse_gyro_timed(propid_filter_t *filter, uint64_t time_us,
+                                                               const float gyro_rad_s[3])
 {
     const propid_kept_config_t *config = &filter->config;
     propid_core_t *core = &filter->core;
-    const int anchor = !core->has_time; /* first sample after init/reset/resync */
-    const float dt = anchor ? 0.0f : (float)(uint32_t)(time_us - core->time_us) * 1.0e-6f;
     if (!core->has_rotor_data) {
         return reject(filter, PROPID_ERR_NO_ROTOR_DATA);
     }
@@ -454,13 +479,18 @@ static __attribute__((noinline)) propid_status_t fuse_gyro_timed(propid_filter_t
      * Compared on the rotor clock (the gyro stamp + the delay when the rotor
      * speeds lag). */
     const uint64_t rotor_clock = time_us + propid_delay_imu_shift(config);
-    if (rotor_clock > core->rotor_time_us) {
-        if (rotor_clock - core->rotor_time_us > (uint64_t)config->rotor_stale_us) {
+    const uint64_t rotor_age = rotor_clock - core->rotor_time_us; /* wraps when stamped after the gyro */
+    if ((uint32_t)(rotor_age >> 32) != 0u || (uint32_t)rotor_age > config->rotor_stale_us) {
+        /* Not the usual age (0 .. rotor_stale_us): the full test. */
+        if (rotor_stale(filter, rotor_clock)) {
             return reject(filter, PROPID_ERR_ROTOR_STALE);
         }
-    } else if (core->rotor_time_us - rotor_clock > (uint64_t)config->max_gyro_gap_us) {
-        return reject(filter, PROPID_ERR_ROTOR_STALE);
+        /* (Nothing of the checks above kept across this rare call: read again
+         * below, no stack for it on the usual path.) */
+        PROPID_SCHEDULE_BARRIER();
     }
+    const int anchor = !core->has_time; /* first sample after init/reset/resync */
+    const float dt = anchor ? 0.0f : (float)(uint32_t)(time_us - core->time_us) * 1.0e-6f;
 
     const propid_status_t stepped = anchor ? anchor_step(filter, gyro_rad_s) : propid_predict_step(filter, dt);
     if (stepped != PROPID_OK) {
