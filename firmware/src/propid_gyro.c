@@ -544,21 +544,21 @@ static __attribute__((noinline)) PROPID_RARE uint32_t fuse_axis(propid_filter_t 
 }
 
 #if PROPID_ARM_BLOCK_MOVES
-/* The one pass's vectors for columns 0..11 by block moves. For every such
- * column i the bias values P_(b_a)i = P_i,11..13 are the last three elements of
- * packed row i (one VLDM), and the rate values P_ai (a = 0..2) lie on the rate
- * rows, consecutive across the columns right of the row's diagonal: each rate
- * row's four columns in one VLDM (the row's pointer written back), left of the
- * diagonal (columns 0..2) copied from the rows above (P symmetric); each
- * vector's four values in one VSTM. Per element the C loop's operations in its
- * order: h_0 = P_0i + P_b0i, h_1 = (P_1i + P_b1i) - c10 h_0,
+/* The one pass's three vectors by block moves. For columns 0..11 the bias
+ * values P_(b_a)i = P_i,11..13 are the last three elements of packed row i (one
+ * VLDM), for columns 12 and 13 they lie in the bias block (one VLDM for both);
+ * the rate values P_ai (a = 0..2) lie on the rate rows, consecutive across the
+ * columns right of the row's diagonal: each rate row's four (at the end two)
+ * columns in one VLDM (the row's pointer written back), left of the diagonal
+ * (columns 0..2) copied from the rows above (P symmetric); each vector's four
+ * values in one VSTM. Per element the C loop's operations in its order:
+ * h_0 = P_0i + P_b0i, h_1 = (P_1i + P_b1i) - c10 h_0,
  * h_2 = ((P_2i + P_b2i) - c20 h_0) - c21 h_1 (fused multiply-subtracts, what
  * -ffp-contract=fast makes of the C; the first as a fused multiply-add of
  * -c10, the same bits), check summed in column order from h_2,0 (no 0 + h_2,0:
  * only the sign of a zero differs, and check only feeds a finiteness test).
  * Registers: h_0 of four columns in s16-s19, h_1 in s20-s23, h_2 in s24-s27, a
  * column's bias triple in s28-s30. */
-#define PROPID_VECTOR_BLOCK_COLUMNS 12u
 #define PROPID_VECTOR_COLUMN(at, v0, v1, v2, check)                                                  \
     "add ip, %[cov], %[" at "]\n\tvldmia ip, {s28-s30}\n\t"                                          \
     "vadd.f32 " v0 ", " v0 ", s28\n\t"                                                               \
@@ -582,24 +582,25 @@ static __attribute__((noinline)) PROPID_RARE uint32_t fuse_axis(propid_filter_t 
 #define PROPID_VECTOR_CHUNK(a0, a1, a2, a3)                                                          \
     "vldmia %[p0]!, {s16-s19}\n\tvldmia %[p1]!, {s20-s23}\n\tvldmia %[p2]!, {s24-s27}\n\t"          \
     PROPID_VECTOR_COLUMNS(a0, a1, a2, a3, PROPID_CHECK_ADD)
+/* Columns 12 and 13: each rate row's two in one VLDM, the bias block (rows
+ * 11..13 from their diagonals: P_11,11 P_11,12 P_11,13 P_12,12 P_12,13 P_13,13,
+ * consecutive) in one VLDM into s26-s31, column 12's triple s27 s29 s30,
+ * column 13's s28 s30 s31. */
+#define PROPID_VECTOR_LAST_COLUMN(v0, v1, v2, b0, b1, b2)                                            \
+    "vadd.f32 " v0 ", " v0 ", " b0 "\n\t"                                                               \
+    "vadd.f32 " v1 ", " v1 ", " b1 "\n\tvfma.f32 " v1 ", %[neg_c10], " v0 "\n\t"                      \
+    "vadd.f32 " v2 ", " v2 ", " b2 "\n\tvfms.f32 " v2 ", %[c20], " v0 "\n\tvfms.f32 " v2 ", %[c21], " v1 "\n\t" \
+    "vadd.f32 %[check], %[check], " v2 "\n\t"
+#define PROPID_VECTOR_LAST_CHUNK                                                                     \
+    "vldmia %[p0]!, {s16-s17}\n\tvldmia %[p1]!, {s20-s21}\n\tvldmia %[p2]!, {s24-s25}\n\t"          \
+    "add ip, %[cov], %[b11]\n\tvldmia ip, {s26-s31}\n\t"                                            \
+    PROPID_VECTOR_LAST_COLUMN("s16", "s20", "s24", "s27", "s29", "s30")                              \
+    PROPID_VECTOR_LAST_COLUMN("s17", "s21", "s25", "s28", "s30", "s31")                              \
+    "vstmia %[h0]!, {s16-s17}\n\tvstmia %[h1]!, {s20-s21}\n\tvstmia %[h2]!, {s24-s25}\n\t"
 #define PROPID_BIAS_AT(i) "n"(4u * propid_cov_index((i), PROPID_QUAD_FIRST_BIAS))
-/* One column i of the three vectors in C (the loop's body); returns h_2,i. */
+/* Returns check (the sum of h_2,0..13). */
 static inline __attribute__((always_inline)) float
-vector_element(const float *cov, const uint8_t i, const float c10, const float c20, const float c21, float *h0,
-               float *h1, float *h2)
-{
-    const float value0 = propid_cov_at(cov, 0u, i) + propid_cov_at(cov, PROPID_QUAD_FIRST_BIAS, i);
-    const float value1 = propid_cov_at(cov, 1u, i) + propid_cov_at(cov, PROPID_QUAD_FIRST_BIAS + 1u, i) - c10 * value0;
-    const float value2 = propid_cov_at(cov, 2u, i) + propid_cov_at(cov, PROPID_QUAD_FIRST_BIAS + 2u, i) -
-                         c20 * value0 - c21 * value1;
-    h0[i] = value0;
-    h1[i] = value1;
-    h2[i] = value2;
-    return value2;
-}
-/* Returns check (the sum of h_2,0..11). */
-static inline __attribute__((always_inline)) float
-vector_columns_0_to_11(const float *cov, float *h0, float *h1, float *h2, const float c10, const float c20,
+quad_vectors(const float *cov, float *h0, float *h1, float *h2, const float c10, const float c20,
                        const float c21)
 {
     const float *p0 = cov + propid_cov_index(0u, 0u);
@@ -607,7 +608,7 @@ vector_columns_0_to_11(const float *cov, float *h0, float *h1, float *h2, const 
     const float *p2 = cov + propid_cov_index(2u, 2u);
     float check;
     __asm__ volatile(PROPID_VECTOR_FIRST_CHUNK PROPID_VECTOR_CHUNK("b4", "b5", "b6", "b7")
-                     PROPID_VECTOR_CHUNK("b8", "b9", "b10", "b11")
+                     PROPID_VECTOR_CHUNK("b8", "b9", "b10", "b11") PROPID_VECTOR_LAST_CHUNK
                      : [p0] "+&r"(p0), [p1] "+&r"(p1), [p2] "+&r"(p2), [h0] "+&r"(h0), [h1] "+&r"(h1),
                        [h2] "+&r"(h2),
                        [check] "=&t"(check)
@@ -617,7 +618,7 @@ vector_columns_0_to_11(const float *cov, float *h0, float *h1, float *h2, const 
                        [b6] PROPID_BIAS_AT(6u), [b7] PROPID_BIAS_AT(7u), [b8] PROPID_BIAS_AT(8u),
                        [b9] PROPID_BIAS_AT(9u), [b10] PROPID_BIAS_AT(10u), [b11] PROPID_BIAS_AT(11u)
                      : "s16", "s17", "s18", "s19", "s20", "s21", "s22", "s23", "s24", "s25", "s26", "s27", "s28",
-                       "s29", "s30", "ip", "memory");
+                       "s29", "s30", "s31", "ip", "memory");
     return check;
 }
 #endif
@@ -712,13 +713,9 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
     uint32_t at[6] = {0u, 1u, 2u, b0, b1, b2};
 #endif
 #if PROPID_ARM_BLOCK_MOVES
-    /* Columns 0..11 by block moves, the last two in C (the same operations per
-     * element in the same order; check summed in column order). */
-    float check = vector_columns_0_to_11(cov, h0, h1, h2, c10, c20, c21);
-PROPID_UNROLL(2)
-    for (uint8_t i = PROPID_VECTOR_BLOCK_COLUMNS; i < PROPID_QUAD_STATES; ++i) {
-        check += vector_element(cov, i, c10, c20, c21, h0, h1, h2);
-    }
+    /* By block moves (the same operations per element in the same order; check
+     * summed in column order). */
+    const float check = quad_vectors(cov, h0, h1, h2, c10, c20, c21);
 #else
     float check = 0.0f;
 PROPID_UNROLL(14)
