@@ -233,24 +233,34 @@ PROPID_UNROLL(14)
  * the compiler chooses (outputs; s0-s15, the block kernels clobber the rest),
  * and the states x_i + g_0,i nu_0 + g_1,i nu_1 + g_2,i nu_2 (three fused
  * multiply-adds in that order, as the C loop contracts), the vectors' values,
- * 1 / S, nu and the states moved by VLDM / VSTM. */
+ * 1 / S, nu and the states moved by VLDM / VSTM; and the group's first
+ * diagonal element (PROPID_FIRST_ELEMENT_*). */
 #define PROPID_GAIN(r, k, value, inv) "vmul.f32 %[" r #k "], " value ", " inv "\n\t"
 #define PROPID_STATE_ROW(r, x)                                                                       \
     "vfma.f32 " x ", %[" r "0], s29\n\tvfma.f32 " x ", %[" r "1], s30\n\tvfma.f32 " x ", %[" r "2], s31\n\t"
+/* The group's first diagonal element P_ff (f = first) in the same kernel, from
+ * the vectors' values of column f it has loaded: P_ff - g_0,f h_0,f - g_1,f h_1,f
+ * - g_2,f h_2,f, the C loop's three fused multiply-subtracts in its order (the
+ * third after h_2 is loaded). */
+#define PROPID_FIRST_ELEMENT_01(p, h0f, h1f)                                                         \
+    "vldr " p ", [%[cov], %[first]]\n\tvfms.f32 " p ", %[ga0], " h0f "\n\tvfms.f32 " p ", %[ga1], " h1f "\n\t"
+#define PROPID_FIRST_ELEMENT_2(p, h2f) "vfms.f32 " p ", %[ga2], " h2f "\n\tvstr " p ", [%[cov], %[first]]\n\t"
 #define PROPID_GAIN_OUT(r, g) [g##0] "=&t"(gain[r][0]), [g##1] "=&t"(gain[r][1]), [g##2] "=&t"(gain[r][2])
 static inline __attribute__((always_inline)) void
 gains_and_states_5(float gain[5][3], float *state, const float *h0, const float *h1, const float *h2,
-                   const float *inv_var, const float *innovation)
+                   const float *inv_var, const float *innovation, float *cov, const uint32_t first)
 {
     __asm__ volatile("vldmia %[inv], {s29-s31}\n\t"
                      "vldmia %[h0], {s16-s20}\n\tvldmia %[h1], {s21-s25}\n\t"
                      PROPID_GAIN("ga", 0, "s16", "s29") PROPID_GAIN("ga", 1, "s21", "s30")
+                     PROPID_FIRST_ELEMENT_01("s26", "s16", "s21")
                      PROPID_GAIN("gb", 0, "s17", "s29") PROPID_GAIN("gb", 1, "s22", "s30")
                      PROPID_GAIN("gc", 0, "s18", "s29") PROPID_GAIN("gc", 1, "s23", "s30")
                      PROPID_GAIN("gd", 0, "s19", "s29") PROPID_GAIN("gd", 1, "s24", "s30")
                      PROPID_GAIN("ge", 0, "s20", "s29") PROPID_GAIN("ge", 1, "s25", "s30")
                      "vldmia %[h2], {s16-s20}\n\t"
-                     PROPID_GAIN("ga", 2, "s16", "s31") PROPID_GAIN("gb", 2, "s17", "s31")
+                     PROPID_GAIN("ga", 2, "s16", "s31") PROPID_FIRST_ELEMENT_2("s26", "s16")
+                     PROPID_GAIN("gb", 2, "s17", "s31")
                      PROPID_GAIN("gc", 2, "s18", "s31") PROPID_GAIN("gd", 2, "s19", "s31")
                      PROPID_GAIN("ge", 2, "s20", "s31")
                      "vldmia %[nu], {s29-s31}\n\tvldmia %[x], {s16-s20}\n\t"
@@ -260,12 +270,12 @@ gains_and_states_5(float gain[5][3], float *state, const float *h0, const float 
                      : PROPID_GAIN_OUT(0, ga), PROPID_GAIN_OUT(1, gb), PROPID_GAIN_OUT(2, gc), PROPID_GAIN_OUT(3, gd),
                        PROPID_GAIN_OUT(4, ge)
                      : [h0] "r"(h0), [h1] "r"(h1), [h2] "r"(h2), [inv] "r"(inv_var), [nu] "r"(innovation),
-                       [x] "r"(state)
+                       [x] "r"(state), [cov] "r"(cov), [first] PROPID_AT(first, first)
                      : PROPID_BLOCK_CLOBBERS);
 }
 static inline __attribute__((always_inline)) void
 gains_and_states_4(float gain[5][3], float *state, const float *h0, const float *h1, const float *h2,
-                   const float *inv_var, const float *innovation)
+                   const float *inv_var, const float *innovation, float *cov, const uint32_t first)
 {
     __asm__ volatile("vldmia %[inv], {s29-s31}\n\t"
                      "vldmia %[h0], {s16-s19}\n\tvldmia %[h1], {s20-s23}\n\tvldmia %[h2], {s24-s27}\n\t"
@@ -273,13 +283,14 @@ gains_and_states_4(float gain[5][3], float *state, const float *h0, const float 
                      PROPID_GAIN("gb", 0, "s17", "s29") PROPID_GAIN("gb", 1, "s21", "s30") PROPID_GAIN("gb", 2, "s25", "s31")
                      PROPID_GAIN("gc", 0, "s18", "s29") PROPID_GAIN("gc", 1, "s22", "s30") PROPID_GAIN("gc", 2, "s26", "s31")
                      PROPID_GAIN("gd", 0, "s19", "s29") PROPID_GAIN("gd", 1, "s23", "s30") PROPID_GAIN("gd", 2, "s27", "s31")
+                     PROPID_FIRST_ELEMENT_01("s28", "s16", "s20") PROPID_FIRST_ELEMENT_2("s28", "s24")
                      "vldmia %[nu], {s29-s31}\n\tvldmia %[x], {s16-s19}\n\t"
                      PROPID_STATE_ROW("ga", "s16") PROPID_STATE_ROW("gb", "s17") PROPID_STATE_ROW("gc", "s18")
                      PROPID_STATE_ROW("gd", "s19")
                      "vstmia %[x], {s16-s19}\n\t"
                      : PROPID_GAIN_OUT(0, ga), PROPID_GAIN_OUT(1, gb), PROPID_GAIN_OUT(2, gc), PROPID_GAIN_OUT(3, gd)
                      : [h0] "r"(h0), [h1] "r"(h1), [h2] "r"(h2), [inv] "r"(inv_var), [nu] "r"(innovation),
-                       [x] "r"(state)
+                       [x] "r"(state), [cov] "r"(cov), [first] PROPID_AT(first, first)
                      : PROPID_BLOCK_CLOBBERS);
 }
 
@@ -366,9 +377,11 @@ apply_row_group(float *restrict cov, propid_core_t *restrict core,
 #if PROPID_ARM_BLOCK_MOVES
     (void)inv0, (void)inv1, (void)inv2, (void)nu0, (void)nu1, (void)nu2;
     if (rows == 5u) {
-        gains_and_states_5(gain, &state[first], &h0[first], &h1[first], &h2[first], pending->inv_var, core->innovation);
+        gains_and_states_5(gain, &state[first], &h0[first], &h1[first], &h2[first], pending->inv_var, core->innovation,
+                           cov, first);
     } else {
-        gains_and_states_4(gain, &state[first], &h0[first], &h1[first], &h2[first], pending->inv_var, core->innovation);
+        gains_and_states_4(gain, &state[first], &h0[first], &h1[first], &h2[first], pending->inv_var, core->innovation,
+                           cov, first);
     }
 #else
 PROPID_UNROLL(5)
@@ -384,9 +397,9 @@ PROPID_UNROLL(5)
 #if PROPID_ARM_BLOCK_MOVES
     /* Block moves (PROPID_ARM_BLOCK_MOVES): the columns right of the group four
      * at a time while only the gains are live, the diagonal block but its first
-     * element, that element and the columns left over one at a time; then the
-     * variances' tests on their bit patterns read from memory (as floats the
-     * compiler would load them early and spill them). */
+     * element (done with the gains), the columns left over one at a time; then
+     * the variances' tests on their bit patterns read from memory (as floats
+     * the compiler would load them early and spill them). */
     uint8_t j = (uint8_t)(first + rows);
     if (rows == 5u) {
 PROPID_UNROLL(2)
@@ -396,10 +409,6 @@ PROPID_UNROLL(2)
         downdate_triangle_5(cov, first, h0, h1, h2, (const float (*)[3])gain);
     } else {
         downdate_triangle_4(cov, first, h0, h1, h2, (const float (*)[3])gain);
-    }
-    {
-        float *p = &cov[propid_cov_index(first, first)];
-        *p = *p - gain[0][0] * h0[first] - gain[0][1] * h1[first] - gain[0][2] * h2[first];
     }
 PROPID_UNROLL(10)
     for (; j < PROPID_QUAD_STATES; ++j) {
