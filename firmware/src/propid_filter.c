@@ -347,10 +347,14 @@ static PROPID_GYRO_CHECK_LINK propid_status_t gyro_sample_check(propid_filter_t 
         return reject(filter, PROPID_ERR_NULL);
     }
     const propid_kept_config_t *config = &filter->config;
-    /* One test per axis for the usual sample (NaN fails it, infinity is out of
-     * range); which of the two checks failed is sorted out after. */
-    if (!(fabsf(gyro_rad_s[0]) <= config->gyro_range) || !(fabsf(gyro_rad_s[1]) <= config->gyro_range) ||
-        !(fabsf(gyro_rad_s[2]) <= config->gyro_range)) {
+    /* One test per axis for the usual sample, |g| <= gyro_range, on the bit
+     * patterns shifted left by one (the sign dropped; gyro_range is positive and
+     * finite, so NaN and infinity are above it): a compare of two integers, no
+     * float compare and flag transfer; which of the two checks failed is sorted
+     * out after. */
+    const uint32_t range_bits_2 = propid_float_bits(config->gyro_range) << 1;
+    if ((propid_float_bits(gyro_rad_s[0]) << 1) > range_bits_2 || (propid_float_bits(gyro_rad_s[1]) << 1) > range_bits_2 ||
+        (propid_float_bits(gyro_rad_s[2]) << 1) > range_bits_2) {
         for (uint8_t a = 0; a < 3u; ++a) {
             if (!isfinite(gyro_rad_s[a])) {
                 return reject(filter, PROPID_ERR_NOT_FINITE);
