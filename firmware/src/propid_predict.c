@@ -738,41 +738,54 @@ __attribute__((noinline)) void propid_predict_covariance(const propid_derived_t 
 #endif
 
 #if PROPID_FAST_QUAD_PREDICT && PROPID_ARM_BLOCK_MOVES
-/* The round-robin row check's test (propid_cov_check_row_inline: the same test
- * per element, |P_ij|^2 <= P_ii (1 + tol) P_jj, a NaN failing it) for the quad
- * on the Cortex-M4: row i's elements right of its diagonal in one VLDM into
- * s(19 + j - 1).. s31 (P_ij in s(18 + j) for every row: one VLDM per row,
- * chosen by a TBB table), then the shared tests of columns i + 1..13, each
- * P_jj at its fixed offset (no pointer arithmetic, no loop: 6 instructions an
- * element where the C loop took 12), leaving at the first failure. Returns 1
- * when row i is bad; writes nothing (the caller repairs). */
+/* The round-robin row check's test (propid_cov_check_row_inline: the same tests,
+ * |P_ij|^2 <= P_ii (1 + tol) P_jj per element and 0 < P_ii <= FLT_MAX, a NaN
+ * failing each) for the quad on the Cortex-M4: a TBB table chooses row i's
+ * stub, which loads P_ii and row i's elements right of its diagonal in one
+ * VLDM into s(19 + j - 1).. s31 (P_ij in s(18 + j) for every row), all at
+ * fixed offsets; then the shared tests of columns i + 1..13, each P_jj at its
+ * fixed offset (no pointer arithmetic, no loop: 6 instructions an element where
+ * the C loop took 12), and P_ii's, leaving at the first failure. Returns 1 when
+ * row i is bad; writes nothing (the caller repairs). */
 static inline __attribute__((always_inline)) int quad_row_bad(const float *cov, uint8_t row)
 {
     if (row >= PROPID_QUAD_STATES) {
         return 0;
     }
-    const float pii = cov[propid_cov_index(row, row)];
-    int bad = !(pii > 0.0f && pii <= FLT_MAX);
-    const float pii_tol = pii * (1.0f + PROPID_ROUNDING_TOL);
+    int bad = 0;
+    float pii_tol;
     const uint32_t index = row;
     __asm__("tbb [pc, %[row]]\n"
                      ".Lrc%=table:\n\t"
                      ".byte (.Lrc%=row0 - .Lrc%=table) / 2, (.Lrc%=row1 - .Lrc%=table) / 2, (.Lrc%=row2 - .Lrc%=table) / 2, (.Lrc%=row3 - .Lrc%=table) / 2, (.Lrc%=row4 - .Lrc%=table) / 2, (.Lrc%=row5 - .Lrc%=table) / 2, (.Lrc%=row6 - .Lrc%=table) / 2, (.Lrc%=row7 - .Lrc%=table) / 2, (.Lrc%=row8 - .Lrc%=table) / 2, (.Lrc%=row9 - .Lrc%=table) / 2, (.Lrc%=row10 - .Lrc%=table) / 2, (.Lrc%=row11 - .Lrc%=table) / 2, (.Lrc%=row12 - .Lrc%=table) / 2, (.Lrc%=row13 - .Lrc%=table) / 2\n\t"
                      ".align 1\n"
-                     ".Lrc%=row0: vldmia %[elements], {s19-s31}\n\tb .Lrc%=column1\n"
-                     ".Lrc%=row1: vldmia %[elements], {s20-s31}\n\tb .Lrc%=column2\n"
-                     ".Lrc%=row2: vldmia %[elements], {s21-s31}\n\tb .Lrc%=column3\n"
-                     ".Lrc%=row3: vldmia %[elements], {s22-s31}\n\tb .Lrc%=column4\n"
-                     ".Lrc%=row4: vldmia %[elements], {s23-s31}\n\tb .Lrc%=column5\n"
-                     ".Lrc%=row5: vldmia %[elements], {s24-s31}\n\tb .Lrc%=column6\n"
-                     ".Lrc%=row6: vldmia %[elements], {s25-s31}\n\tb .Lrc%=column7\n"
-                     ".Lrc%=row7: vldmia %[elements], {s26-s31}\n\tb .Lrc%=column8\n"
-                     ".Lrc%=row8: vldmia %[elements], {s27-s31}\n\tb .Lrc%=column9\n"
-                     ".Lrc%=row9: vldmia %[elements], {s28-s31}\n\tb .Lrc%=column10\n"
-                     ".Lrc%=row10: vldmia %[elements], {s29-s31}\n\tb .Lrc%=column11\n"
-                     ".Lrc%=row11: vldmia %[elements], {s30-s31}\n\tb .Lrc%=column12\n"
-                     ".Lrc%=row12: vldmia %[elements], {s31}\n\tb .Lrc%=column13\n"
-                     ".Lrc%=row13: b .Lrc%=done\n"
+                     ".Lrc%=row0: vldr s18, [%[cov], #0]\n\t"
+                     "add ip, %[cov], #4\n\tvldmia ip, {s19-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column1\n"
+                     ".Lrc%=row1: vldr s18, [%[cov], #56]\n\t"
+                     "add ip, %[cov], #60\n\tvldmia ip, {s20-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column2\n"
+                     ".Lrc%=row2: vldr s18, [%[cov], #108]\n\t"
+                     "add ip, %[cov], #112\n\tvldmia ip, {s21-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column3\n"
+                     ".Lrc%=row3: vldr s18, [%[cov], #156]\n\t"
+                     "add ip, %[cov], #160\n\tvldmia ip, {s22-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column4\n"
+                     ".Lrc%=row4: vldr s18, [%[cov], #200]\n\t"
+                     "add ip, %[cov], #204\n\tvldmia ip, {s23-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column5\n"
+                     ".Lrc%=row5: vldr s18, [%[cov], #240]\n\t"
+                     "add ip, %[cov], #244\n\tvldmia ip, {s24-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column6\n"
+                     ".Lrc%=row6: vldr s18, [%[cov], #276]\n\t"
+                     "add ip, %[cov], #280\n\tvldmia ip, {s25-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column7\n"
+                     ".Lrc%=row7: vldr s18, [%[cov], #308]\n\t"
+                     "add ip, %[cov], #312\n\tvldmia ip, {s26-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column8\n"
+                     ".Lrc%=row8: vldr s18, [%[cov], #336]\n\t"
+                     "add ip, %[cov], #340\n\tvldmia ip, {s27-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column9\n"
+                     ".Lrc%=row9: vldr s18, [%[cov], #360]\n\t"
+                     "add ip, %[cov], #364\n\tvldmia ip, {s28-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column10\n"
+                     ".Lrc%=row10: vldr s18, [%[cov], #380]\n\t"
+                     "add ip, %[cov], #384\n\tvldmia ip, {s29-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column11\n"
+                     ".Lrc%=row11: vldr s18, [%[cov], #396]\n\t"
+                     "add ip, %[cov], #400\n\tvldmia ip, {s30-s31}\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column12\n"
+                     ".Lrc%=row12: vldr s18, [%[cov], #408]\n\t"
+                     "vldr s31, [%[cov], #412]\n\tvmul.f32 %[pii_tol], s18, %[tol]\n\tb .Lrc%=column13\n"
+                     ".Lrc%=row13: vldr s18, [%[cov], #416]\n\tb .Lrc%=diagonal\n"
                      ".Lrc%=column1: vldr s16, [%[cov], #56]\n\tvmul.f32 s17, s19, s19\n\t"
                      "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
                      ".Lrc%=column2: vldr s16, [%[cov], #108]\n\tvmul.f32 s17, s20, s20\n\t"
@@ -799,14 +812,15 @@ static inline __attribute__((always_inline)) int quad_row_bad(const float *cov, 
                      "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
                      ".Lrc%=column13: vldr s16, [%[cov], #416]\n\tvmul.f32 s17, s31, s31\n\t"
                      "vmul.f32 s16, %[pii_tol], s16\n\tvcmpe.f32 s17, s16\n\tvmrs APSR_nzcv, fpscr\n\tbhi .Lrc%=bad\n"
-                     "\tb .Lrc%=done\n"
+                     ".Lrc%=diagonal: vcmpe.f32 s18, #0\n\tvmrs APSR_nzcv, fpscr\n\tble .Lrc%=bad\n\t"
+                     "vcmpe.f32 s18, %[largest]\n\tvmrs APSR_nzcv, fpscr\n\tbls .Lrc%=done\n"
                      ".Lrc%=bad: movs %[bad], #1\n"
                      ".Lrc%=done:\n"
-                     : [bad] "+r"(bad)
-                     : [row] "r"(index), [elements] "r"(&cov[propid_cov_index(row, row) + 1u]), [cov] "r"(cov),
-                       [pii_tol] "t"(pii_tol), "m"(*(const float(*)[PROPID_COV_SIZE])cov)
-                     : "s16", "s17", "s19", "s20", "s21", "s22", "s23", "s24", "s25", "s26", "s27", "s28", "s29",
-                       "s30", "s31", "cc");
+                     : [bad] "+r"(bad), [pii_tol] "=&t"(pii_tol)
+                     : [row] "r"(index), [cov] "r"(cov), [tol] "t"(1.0f + PROPID_ROUNDING_TOL), [largest] "t"(FLT_MAX),
+                       "m"(*(const float(*)[PROPID_COV_SIZE])cov)
+                     : "s16", "s17", "s18", "s19", "s20", "s21", "s22", "s23", "s24", "s25", "s26", "s27", "s28",
+                       "s29", "s30", "s31", "ip", "cc");
     return bad;
 }
 #endif
