@@ -863,6 +863,13 @@ __attribute__((noinline)) propid_status_t propid_predict_step(propid_filter_t *f
         return PROPID_ERR_NUMERIC;
     }
     /* Accepted: from here on the filter changes (no rejection follows). */
+#if PROPID_FAST_QUAD_PREDICT
+    /* The rates now, from the registers (the covariance kernels below read P
+     * and the Jacobian only; kept to the end they were stored and loaded again). */
+    core->state[0] = rate_next[0];
+    core->state[1] = rate_next[1];
+    core->state[2] = rate_next[2];
+#endif
     core->health &= ~(PROPID_HEALTH_GATED | PROPID_HEALTH_STATE_CLAMPED);
     if (staged != PROPID_OK) { /* the prediction was bounded */
         core->health |= PROPID_HEALTH_STATE_CLAMPED;
@@ -883,8 +890,10 @@ __attribute__((noinline)) propid_status_t propid_predict_step(propid_filter_t *f
 #else
     propid_predict_covariance(&filter->derived, core, dt, rate_jacobian_dt);
 #endif
+#if !PROPID_FAST_QUAD_PREDICT
     core->state[0] = rate_next[0];
     core->state[1] = rate_next[1];
     core->state[2] = rate_next[2];
+#endif
     return PROPID_OK;
 }
