@@ -44,6 +44,8 @@ static PROPID_BOUND_RATES_INLINE propid_status_t bound_rates(float rate_next[3],
         return PROPID_ERR_NUMERIC;
     }
     propid_status_t status = PROPID_OK;
+    /* (Unrolled: constant indices keep an inlined caller's rates in registers.) */
+PROPID_UNROLL(3)
     for (uint8_t a = 0; a < 3u; ++a) {
         if (fabsf(rate_next[a]) > limit) {
             rate_next[a] = rate_next[a] > 0.0f ? limit : -limit;
