@@ -508,7 +508,6 @@ static PROPID_GYRO_STEP_LINK propid_status_t fuse_gyro_timed(propid_filter_t *fi
 #else
     const uint32_t gated_mask = propid_update_gyro(filter, gyro_rad_s);
 #endif
-    const int gated = gated_mask != 0u;
 #if PROPID_CONSISTENCY
     propid_consistency_observe(filter, gated_mask);
 #endif
@@ -520,8 +519,10 @@ static PROPID_GYRO_STEP_LINK propid_status_t fuse_gyro_timed(propid_filter_t *fi
         core->health |= PROPID_HEALTH_STATE_CLAMPED;
         filter->counters.state_clamps += clamped;
     }
-    if (gated) {
+    propid_status_t accepted = PROPID_OK;
+    if (gated_mask != 0u) {
         core->health |= PROPID_HEALTH_GATED;
+        accepted = PROPID_OK_GATED;
     }
     /* The latest rotor speeds start the next interval (whole arrays: a constant
      * size compiles to a few load/store-multiple instructions, not a call). */
@@ -530,5 +531,5 @@ static PROPID_GYRO_STEP_LINK propid_status_t fuse_gyro_timed(propid_filter_t *fi
     core->has_time = 1u;
     core->stale_mark = filter->counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_ROTOR_STALE)];
     filter->counters.gyro_accepted++;
-    return gated ? PROPID_OK_GATED : PROPID_OK;
+    return accepted;
 }
