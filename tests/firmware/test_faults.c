@@ -7,6 +7,7 @@
  *   range, covariance definiteness.
  */
 #include <math.h>
+#include <stdio.h>
 #include <stdint.h>
 #include <string.h>
 
@@ -15,6 +16,7 @@
 #include "cov_positive_definite.h"
 #include "test_rng.h"
 #include "test_vehicle.h"
+#include "../../firmware/src/propid_internal.h"
 
 #define ROTORS 4u
 #define GYRO_PERIOD_US 2000u
@@ -716,6 +718,50 @@ static void test_covariance_definite_with_one_drag_coefficient_measured_alone(vo
 }
 #endif
 
+/* The round-robin integrity check of the row it visits finds a fault in any of
+ * the row's elements (every element of the stored triangle: an over-correlated
+ * off-diagonal element, 0.1 % beyond a correlation of 1, or a NaN; a negative
+ * or NaN diagonal) and repairs P in that prediction; a sound row is left alone.
+ * The quad build's check is straight-line code per column on the Cortex-M4
+ * (propid_predict.c, quad_row_bad): one column it skipped fails this. */
+static void check_row_fault_found(uint8_t row, uint8_t column, float value)
+{
+    init_filter();
+    filter.core.cov[propid_cov_index(row, column)] = value;
+    filter.core.check_row = row;
+    const uint32_t repairs = filter.counters.cov_repairs;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_step(&filter, 0.002f));
+    char message[48];
+    snprintf(message, sizeof(message), "fault at (%u, %u) not found", (unsigned)row, (unsigned)column);
+    TEST_ASSERT_EQUAL_UINT32_MESSAGE(repairs + 1u, filter.counters.cov_repairs, message);
+    TEST_ASSERT_TRUE((filter.core.health & PROPID_HEALTH_COV_REPAIRED) != 0u);
+}
+
+static void test_row_check_finds_a_fault_in_every_element(void)
+{
+    init_filter();
+    const uint8_t n = filter.derived.state_count;
+    for (uint8_t i = 0; i < n; ++i) {
+        /* Sound: no repair. */
+        init_filter();
+        filter.core.check_row = i;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_step(&filter, 0.002f));
+        TEST_ASSERT_EQUAL_UINT32(0u, filter.counters.cov_repairs);
+        for (uint8_t j = i; j < n; ++j) {
+            init_filter();
+            const float pii = filter.core.cov[propid_cov_index(i, i)];
+            const float pjj = filter.core.cov[propid_cov_index(j, j)];
+            if (i == j) {
+                check_row_fault_found(i, j, -pii);
+            } else {
+                check_row_fault_found(i, j, 1.001f * sqrtf(pii * pjj));
+                check_row_fault_found(i, j, -1.001f * sqrtf(pii * pjj));
+            }
+            check_row_fault_found(i, j, NAN);
+        }
+    }
+}
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -727,6 +773,7 @@ int main(void)
     RUN_TEST(test_esc_spike_within_range_refused);
     RUN_TEST(test_first_sample_fused_at_high_rate);
     RUN_TEST(test_config_bounds_noise_fields);
+    RUN_TEST(test_row_check_finds_a_fault_in_every_element);
     RUN_TEST(test_covariance_stays_positive_definite_under_random_calls);
     RUN_TEST(test_covariance_definite_after_gyroscopic_rate_inflation);
 #if PROPID_MAX_ROTORS >= 5
