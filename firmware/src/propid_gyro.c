@@ -592,9 +592,17 @@ static __attribute__((noinline)) PROPID_RARE uint32_t fuse_axis(propid_filter_t 
     "vldmia %[p0]!, {s16-s19}\n\tvldmia %[p1]!, {s20-s23}\n\tvldmia %[p2]!, {s24-s27}\n\t"          \
     PROPID_VECTOR_COLUMNS(a0, a1, a2, a3, PROPID_CHECK_ADD)
 /* Columns 12 and 13: each rate row's two in one VLDM, the bias block (rows
- * 11..13 from their diagonals: P_11,11 P_11,12 P_11,13 P_12,12 P_12,13 P_13,13,
- * consecutive) in one VLDM into s26-s31, column 12's triple s27 s29 s30,
- * column 13's s28 s30 s31. */
+ * 11..13 from their diagonals: P_11,11 P_11,12 P_11,13 P_12,12 P_12,13 P_13,13)
+ * into s26-s31, column 12's triple s27 s29 s30, column 13's s28 s30 s31. In the
+ * quad build (14 states) the block is consecutive, one VLDM; in the full build
+ * (longer packed rows) the three rows' parts apart. */
+#if PROPID_MAX_STATES == 14
+#define PROPID_LOAD_BIAS_BLOCK "add ip, %[cov], %[b11]\n\tvldmia ip, {s26-s31}\n\t"
+#else
+#define PROPID_LOAD_BIAS_BLOCK                                                                       \
+    "add ip, %[cov], %[b11]\n\tvldmia ip, {s26-s28}\n\tadd ip, %[cov], %[b12]\n\tvldmia ip, {s29-s30}\n\t" \
+    "add ip, %[cov], %[b13]\n\tvldr s31, [ip]\n\t"
+#endif
 #define PROPID_VECTOR_LAST_COLUMN(v0, v1, v2, b0, b1, b2)                                            \
     "vadd.f32 " v0 ", " v0 ", " b0 "\n\t"                                                               \
     "vadd.f32 " v1 ", " v1 ", " b1 "\n\tvfma.f32 " v1 ", %[neg_c10], " v0 "\n\t"                      \
@@ -602,7 +610,7 @@ static __attribute__((noinline)) PROPID_RARE uint32_t fuse_axis(propid_filter_t 
     "vadd.f32 %[check], %[check], " v2 "\n\t"
 #define PROPID_VECTOR_LAST_CHUNK                                                                     \
     "vldmia %[p0]!, {s16-s17}\n\tvldmia %[p1]!, {s20-s21}\n\tvldmia %[p2]!, {s24-s25}\n\t"          \
-    "add ip, %[cov], %[b11]\n\tvldmia ip, {s26-s31}\n\t"                                            \
+    PROPID_LOAD_BIAS_BLOCK                                                                           \
     PROPID_VECTOR_LAST_COLUMN("s16", "s20", "s24", "s27", "s29", "s30")                              \
     PROPID_VECTOR_LAST_COLUMN("s17", "s21", "s25", "s28", "s30", "s31")                              \
     "vstmia %[h0]!, {s16-s17}\n\tvstmia %[h1]!, {s20-s21}\n\tvstmia %[h2]!, {s24-s25}\n\t"
@@ -617,17 +625,26 @@ quad_vectors(const float *cov, float *h0, float *h1, float *h2, const float c10,
     const float *p2 = cov + propid_cov_index(2u, 2u);
     float check;
     __asm__ volatile(PROPID_VECTOR_FIRST_CHUNK PROPID_VECTOR_CHUNK("b4", "b5", "b6", "b7")
-                     PROPID_VECTOR_CHUNK("b8", "b9", "b10", "b11") PROPID_VECTOR_LAST_CHUNK
+                     PROPID_VECTOR_CHUNK("b8", "b9", "b10", "b11")
                      : [p0] "+&r"(p0), [p1] "+&r"(p1), [p2] "+&r"(p2), [h0] "+&r"(h0), [h1] "+&r"(h1),
-                       [h2] "+&r"(h2),
-                       [check] "=&t"(check)
+                       [h2] "+&r"(h2), [check] "=&t"(check)
                      : [cov] "r"(cov), [neg_c10] "t"(-c10), [c20] "t"(c20), [c21] "t"(c21),
                        [b0] PROPID_BIAS_AT(0u), [b1] PROPID_BIAS_AT(1u), [b2] PROPID_BIAS_AT(2u),
                        [b3] PROPID_BIAS_AT(3u), [b4] PROPID_BIAS_AT(4u), [b5] PROPID_BIAS_AT(5u),
                        [b6] PROPID_BIAS_AT(6u), [b7] PROPID_BIAS_AT(7u), [b8] PROPID_BIAS_AT(8u),
                        [b9] PROPID_BIAS_AT(9u), [b10] PROPID_BIAS_AT(10u), [b11] PROPID_BIAS_AT(11u)
                      : "s16", "s17", "s18", "s19", "s20", "s21", "s22", "s23", "s24", "s25", "s26", "s27", "s28",
-                       "s29", "s30", "s31", "ip", "memory");
+                       "s29", "s30", "ip", "memory");
+    /* (The last chunk apart: an asm statement takes at most 30 operands.) */
+    __asm__ volatile(PROPID_VECTOR_LAST_CHUNK
+                     : [p0] "+&r"(p0), [p1] "+&r"(p1), [p2] "+&r"(p2), [h0] "+&r"(h0), [h1] "+&r"(h1),
+                       [h2] "+&r"(h2), [check] "+t"(check)
+                     : [cov] "r"(cov), [neg_c10] "t"(-c10), [c20] "t"(c20), [c21] "t"(c21),
+                       [b11] PROPID_BIAS_AT(11u),
+                       [b12] PROPID_AT(PROPID_QUAD_FIRST_BIAS + 1u, PROPID_QUAD_FIRST_BIAS + 1u),
+                       [b13] PROPID_AT(PROPID_QUAD_FIRST_BIAS + 2u, PROPID_QUAD_FIRST_BIAS + 2u)
+                     : "s16", "s17", "s20", "s21", "s24", "s25", "s26", "s27", "s28", "s29", "s30", "s31", "ip",
+                       "memory");
     return check;
 }
 #endif

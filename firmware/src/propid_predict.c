@@ -751,6 +751,7 @@ __attribute__((noinline)) void propid_predict_covariance(const propid_derived_t 
  * row i is bad; writes nothing (the caller repairs). */
 static inline __attribute__((always_inline)) int quad_row_bad(const float *cov, uint8_t row)
 {
+    _Static_assert(PROPID_MAX_STATES == 14, "the offsets below are those of the 14-state packed triangle");
     if (row >= PROPID_QUAD_STATES) {
         return 0;
     }
