@@ -39,7 +39,6 @@ Prints a table and writes every figure to --out (default BUILD/results/bench.jso
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import os
 import pathlib
@@ -51,7 +50,9 @@ import subprocess
 import sys
 import time
 
-ROTORPY_VERSION = "3.0.0"
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from bench_venv import ROTORPY_VERSION, ensure_bench_venv  # noqa: E402
+
 CPU = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard"]
 TARGET_CFLAGS = CPU + ["-std=c11", "-O2", "-DNDEBUG", "-fno-math-errno", "-ffp-contract=fast",
                        "-ffunction-sections", "-fdata-sections"]
@@ -363,21 +364,12 @@ def bench_sitl(build: pathlib.Path, work: pathlib.Path) -> dict:
 
 
 def bench_rotorpy(repo: pathlib.Path, build: pathlib.Path, sitl: dict | None) -> dict:
-    venv = build / "bench-venv"
-    python = venv / "bin/python"
     # RotorPy's speed depends on numpy/scipy: the bench venv installs every package
-    # pinned with its hash (host_tools/setup/bench-requirements.txt), rebuilt when the pins change.
+    # pinned with its hash (host_tools/setup/bench-requirements.txt, tests/bench/bench_venv.py).
     pins = repo / "host_tools/setup/bench-requirements.txt"
-    stamp = venv / "bench-requirements.sha256"
-    wanted = hashlib.sha256(pins.read_bytes()).hexdigest()
     result: dict = {"rotorpy_pinned": ROTORPY_VERSION, "rotorpy_requirements": str(pins.relative_to(repo))}
     try:
-        if not python.exists() or not stamp.exists() or stamp.read_text().strip() != wanted:
-            say(f"installing rotorpy=={ROTORPY_VERSION} and its pinned dependencies into {venv} (bench only)...")
-            run([sys.executable, "-m", "venv", "--clear", str(venv)])
-            run([str(python), "-m", "pip", "install", "--quiet", "--disable-pip-version-check",
-                 "--require-hashes", "--only-binary=:all:", "-r", str(pins)])
-            stamp.write_text(wanted + "\n")
+        python = ensure_bench_venv(repo, build, say)
     except (subprocess.CalledProcessError, OSError) as error:
         detail = getattr(error, "stderr", "") or str(error)
         result["rotorpy_error"] = f"rotorpy {ROTORPY_VERSION} could not be installed: " + \
