@@ -66,6 +66,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "reduction, the default) or 'prediction' (the held-out residual along what the effect's "
                              "training-fold fit predicts; evaluated, not the default: docs/gap.md, SITL accuracy 'The score test "
                              "again')")
+    parser.add_argument("--gyro-bias", choices=("off", "attitude"), default="off",
+                        help="the gyro's constant bias before the measured torque's gyroscopic term w x (J w): "
+                             "'off' (the default: the gyro as logged) or 'attitude' (measured against the logged "
+                             "attitude and removed; evaluated, docs/gap.md 'Data preparation')")
     parser.add_argument("--no-progress", "--quiet", dest="quiet", action="store_true",
                         help="no progress bar (--quiet: the older spelling)")
 
@@ -171,7 +175,8 @@ def run(args: argparse.Namespace) -> int:
     holdout = canonical_order([read_flightlog(p, vehicle) for p in args.holdout])
     options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
                                repeats=args.repeats, lag_evidence=args.lag_evidence,
-                               ground_effect_height=args.ground_effect_height, replication=args.replication)
+                               ground_effect_height=args.ground_effect_height, replication=args.replication,
+                               gyro_bias=args.gyro_bias)
     logs, left_out = without_unflown_logs(logs, vehicle, options)
     for entry in left_out:
         print(f"propid gap: left out {entry['why']}", file=sys.stderr)

@@ -47,6 +47,9 @@ class Options:
     # default) or "prediction" (the held-out residual along the effect's training-fold prediction;
     # evaluated, not the default: docs/gap.md, SITL accuracy "The score test again")
     replication: str = "improvement"
+    # the gyro's constant bias before the measured torque: "off" (the default) or "attitude" (measured
+    # against the logged attitude; evaluated, not the default: docs/gap.md "Data preparation")
+    gyro_bias: str = "off"
 
 
 HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0, 5.0)
@@ -240,7 +243,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         vehicle.inertia = np.eye(3)
     progress = Progress(options.progress, total=60 + 12 * 6)
     hub = options.ground_effect_height == "hub"
-    flights = [prepare_flight(log, vehicle, options.band, repeats=options.repeats, attitude=hub) for log in logs]
+    flights = [prepare_flight(log, vehicle, options.band, repeats=options.repeats, attitude=hub,
+                              gyro_bias=options.gyro_bias) for log in logs]
     band_rule = None
     requested_band = options.band
     if options.auto_highpass:  # the band the stream lag is searched in (the rule on unaligned logs)
@@ -248,7 +252,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         flights = [replace(f, band=search_band.for_rate(f.rate_hz)) for f in flights]
     else:
         search_band = options.band
-    held_flights = [prepare_flight(log, vehicle, search_band, repeats=options.repeats, attitude=hub)
+    held_flights = [prepare_flight(log, vehicle, search_band, repeats=options.repeats, attitude=hub,
+                                   gyro_bias=options.gyro_bias)
                     for log in holdout]
     progress(5)
     present = columns_present(logs + holdout, vehicle)
@@ -401,6 +406,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                    "inertia": ("unit: the vehicle file has no inertia, so torque coefficients (kf_roll, kf_pitch, "
                                "km_yaw, rotor_inertia, damping) are divided by the axis inertia [1/(kg m^2)]"
                                if unit_inertia else "vehicle file")},
+        "gyro_bias": {"mode": options.gyro_bias,
+                      "per_log": {str(f.path or f.name): f.gyro_bias for f in [*flights, *held_flights]}},
         "stream_quality": stream_quality(flights, held_flights, options.repeats),
         "alignment": {k: v for k, v in align.items() if k not in ("held_zero", "held_best")},
         "base_model": {"kf_per_rotor": kf_rotor.tolist(), "km_per_rotor": km_rotor.tolist(),

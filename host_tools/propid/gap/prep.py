@@ -37,6 +37,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
+from propid.gap.gyro_bias import MODES as GYRO_BIAS_MODES, gyro_bias_from_attitude
 from propid.realdata_checks import _hold_rotor_rows, absurd_speed_limit, bandpass, \
     clean_rotor_speeds, flying_mask
 from propid.signals import log_body_velocity, measured_torque, repeats_previous_row, segments
@@ -85,6 +86,7 @@ class Flight:
     repeated_rows: dict = field(default_factory=dict)  # stream quality: copies of the previous row (repeated_row_stats)
     blocks: list[tuple[int, int]] = field(default_factory=list)  # [start, stop) inside segments
     quat: np.ndarray | None = None  # (n,4) attitude w, x, y, z (body -> world): ground_effect at each hub
+    gyro_bias: dict = field(default_factory=dict)  # the constant gyro bias removed (gyro_bias.py), or why not
 
     @property
     def rows(self) -> int:
@@ -191,12 +193,13 @@ def repeated_row_stats(copy: np.ndarray, rows: np.ndarray) -> dict:
 
 
 def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | None = None,
-                   repeats: str = "samples", attitude: bool = False) -> Flight:
+                   repeats: str = "samples", attitude: bool = False, gyro_bias: str = "off") -> Flight:
     """Build a Flight from a validated log. Raises UserError if nothing usable. What the
     vehicle file already models (gyro_scale, aero_damping, esc_delay_s) is applied here, so
     the base model includes it. `repeats`: "missing" treats copies of the previous row (per
     stream) as missing samples (evaluated, not the default: docs/gap.md), "samples" fuses them
-    as measurements."""
+    as measurements. `gyro_bias`: "attitude" removes the gyro's constant bias measured against
+    the logged attitude before the torque (gyro_bias.py), "off" (the default) keeps the gyro."""
     if repeats not in REPEATS:
         raise UserError(f"repeats {repeats!r}: choose one of {', '.join(REPEATS)}")
     where = str(log.path) if log.path else (name or "log")
@@ -259,6 +262,13 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
     segs = segments(fly & uniform, min_length=int(max(MIN_SEGMENT_S * rate, 50)))
     if not segs:
         raise NoFlyingSegment(f"{where}: no flying segment of {MIN_SEGMENT_S:.0f} s or more with uniform timing")
+    bias = {"applied": False, "value": None, "why": "--gyro-bias off"}
+    if gyro_bias == "attitude":
+        bias = gyro_bias_from_attitude(log.t, gyro, log.quat, np.concatenate([np.arange(a, b) for a, b in segs]))
+        if bias["applied"]:
+            gyro = gyro - np.asarray(bias["value"])[None, :]
+    elif gyro_bias != "off":
+        raise UserError(f"gyro_bias {gyro_bias!r}: choose one of {', '.join(GYRO_BIAS_MODES)}")
     inertia = np.asarray(vehicle.inertia, dtype=float)
     rate_dot = np.gradient(gyro, log.t, axis=0)
     torque = measured_torque(gyro, rate_dot, inertia)
@@ -285,7 +295,7 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
         gyro=gyro, rate_dot=rate_dot, speed=speeds, speed_dot=speed_dot, torque=torque,
         specific_force_z=None if acc is None else acc[:, 2], acc=acc, body_velocity=vel, height=height,
         cmd=cmd, vbat=vbat, segs=segs, band=band.for_rate(rate), repaired_rotor_samples=repaired,
-        held_rotor_fraction=held_fraction, quat=quat)
+        held_rotor_fraction=held_fraction, quat=quat, gyro_bias=bias)
     in_segments = np.concatenate([np.arange(a, b) for a, b in segs])
     flight.repeated_rows = {"gyro": repeated_row_stats(gyro_copy, in_segments),
                             "rotor": repeated_row_stats(rotor_copy, in_segments), "treated_as": repeats}
