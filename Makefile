@@ -50,6 +50,8 @@ help:
 	@echo "  make table1   run the Table 1 campaign (see docs/results.md)"
 	@echo "  make gap-bench  blind benchmark of propid gap on SITL flights with known effects,"
 	@echo "                next to a least-squares baseline (see docs/gap-bench.md)"
+	@echo "  make xsim     propid gap and propid replay on RotorPy flights, scored against the"
+	@echo "                expectations of docs/xsim.md; writes build/results/xsim.json"
 	@echo "  make bench    benchmark (not a test): Cortex-M4 instructions per filter step (QEMU),"
 	@echo "                dense baseline, flash/RAM/stack, SITL speed vs RotorPy, make table1 time;"
 	@echo "                prints a table, writes build/results/bench.json (docs/performance.md)"
@@ -207,6 +209,7 @@ cppcheck: setup
 include $(REPO)/sitl/sitl.mk
 include $(REPO)/sitl/table1.mk
 include $(REPO)/host_tools/gap_bench.mk
+include $(REPO)/tests/xsim/xsim.mk
 include $(REPO)/sitl/damage_bench.mk
 include $(REPO)/sitl/table1_extended.mk
 include $(REPO)/sitl/effects_demo.mk
