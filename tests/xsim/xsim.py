@@ -9,7 +9,8 @@ simulator, pinned, in the bench-only venv) flies a few short flights with its ow
 dynamics, motors, aerodynamics and IMU (tests/xsim/rotorpy_flightlog.py writes each as a
 flight log v1 and a vehicle file, and its truth to an answer key the tools never read);
 `propid gap` and `propid replay` (gyro only, with its default aiding, and gyro only with the
-vehicle file `propid gap --vehicle-out` corrected, its aero damping carried) run on each;
+vehicle file `propid gap --vehicle-out` corrected, its aero damping carried, and with the
+accelerometer's thrust airspeed terms fitted by `--thrust-aero-out` and removed) run on each;
 every answer is scored against the expectations written before the first run
 (docs/xsim.md, "Expected answers"). Prints a table and writes --result
 (default BUILD/results/xsim.json). Exits non-zero only when a step cannot run.
@@ -133,6 +134,16 @@ def score_replay(replay: dict, truth: dict) -> dict:
             "gyro_bias": replay.get("gyro_bias"), "gyro_bias_true": truth["gyro_bias"]}
 
 
+def thrust_aero_fit(path: pathlib.Path, truth: dict) -> dict:
+    """The airspeed terms `propid replay --thrust-aero-out` fitted, beside RotorPy's: its axial
+    inflow -k_z per rotor (the climb term) and its translational lift k_h."""
+    fitted = json.loads(path.read_text())
+    return {"thrust_climb_coeff": fitted.get("thrust_climb_coeff"),
+            "rotorpy_minus_k_z": -truth["rotor_drag"]["k_z"],
+            "thrust_translational_coeff": fitted.get("thrust_translational_coeff"),
+            "rotorpy_k_h": truth["translational_lift_k_h"]}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repo", type=pathlib.Path, required=True)
@@ -182,9 +193,14 @@ def main() -> int:
                 run([str(propid), "gap", "--log", csv, "--json", str(path), "--no-filter", "--no-progress"] + extra)
                 gaps[label or "default"] = score_gap(json.loads(path.read_text()), truth)
             replays = {}
+            # the thrust's airspeed terms fitted from the accelerometer (replay --thrust-aero-out) for the
+            # accelerometer-aided replay with --thrust-aero on
+            thrust_aero = out / f"{name}.thrust-aero.vehicle.json"
+            run([str(propid), "replay", "--log", csv, "--thrust-aero-out", str(thrust_aero), "--no-progress"])
             for label, extra in (("gyro", ["--aiding", "gyro"]), ("default", []),
                                  ("gyro_corrected", ["--aiding", "gyro", "--vehicle", str(corrected),
-                                                     "--aero-damping", "auto"])):
+                                                     "--aero-damping", "auto"]),
+                                 ("default_thrust_aero", ["--vehicle", str(thrust_aero), "--thrust-aero", "on"])):
                 path = out / f"{name}.replay-{label}.json"
                 run([str(propid), "replay", "--log", csv, "--json", str(path), "--no-progress"] + extra)
                 replays[label] = score_replay(json.loads(path.read_text()), truth)
@@ -192,7 +208,7 @@ def main() -> int:
                                         "log_rate_hz": log_rate, "esc_rate_hz": esc_rate, "seed": seed,
                                         "duration_s": args.duration},
                              "gap": gaps["default"], "gap_gyro_bias_attitude": gaps["-gyro-bias-attitude"],
-                             "replay": replays,
+                             "replay": replays, "thrust_aero_fit": thrust_aero_fit(thrust_aero, truth),
                              "wall_s": round(time.time() - t0, 1)}
     except RuntimeError as error:
         print(f"xsim: error: {error}", file=sys.stderr)
@@ -213,7 +229,7 @@ def print_table(results: dict) -> None:
     head = ("flight", "gap verdict (significant)", "expected", "ok", "--gyro-bias attitude", "ok",
             "kf thr/roll/pitch, km yaw / truth",
             "fit ok", "replay gyro: fleet kf, max|kf err| sd, max|km err| sd", "ok",
-            "gap's file: fleet kf")
+            "gap's file: fleet kf", "+accel: fleet kf, thrust-aero on")
     rows = []
     for name, r in results.items():
         g, ga, rep = r["gap"], r["gap_gyro_bias_attitude"], r["replay"]["gyro"]
@@ -226,8 +242,9 @@ def print_table(results: dict) -> None:
             "yes" if g["base_fit_right"] else "NO",
             f"{rep['fleet_kf_ratio']:.3f}, {max(abs(s) for s in rep['kf_error_sigmas']):.1f}, "
             f"{max(abs(s) for s in rep['km_error_sigmas']):.1f}",
-            "yes" if rep["right"] else "NO",
-            f"{r['replay']['gyro_corrected']['fleet_kf_ratio']:.3f}"))
+            ("yes" if rep["right"] else "NO") if r["flight"]["aero"] == "off" else "not judged",
+            f"{r['replay']['gyro_corrected']['fleet_kf_ratio']:.3f}",
+            f"{r['replay']['default']['fleet_kf_ratio']:.3f} -> {r['replay']['default_thrust_aero']['fleet_kf_ratio']:.3f}"))
     widths = [max(len(str(x)) for x in col) for col in zip(head, *rows)]
     for row in (head, *rows):
         print("  ".join(str(x).ljust(w) for x, w in zip(row, widths)))
