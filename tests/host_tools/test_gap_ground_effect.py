@@ -112,7 +112,7 @@ def test_the_option_reaches_the_data_preparation(height, attitude, monkeypatch):
     class Stop(Exception):
         pass
 
-    def record(log, vehicle, band, name=None, repeats="samples", attitude=False):
+    def record(log, vehicle, band, name=None, repeats="samples", attitude=False, gyro_bias="off"):
         seen.append(attitude)
         raise Stop
 
