@@ -602,6 +602,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     accel_read |= f->link != NULL;
 #endif
     const double tilt_limit_cos = cos(o->divergence_tilt_deg * SITL_PI / 180.0);
+    const double esc_read_delay_s = f->esc.params.latency_s + f->esc.extra_delay_s;
     f->plant_prepared_stale = 1;
     const double cpu_start = cpu_seconds();
 
@@ -610,15 +611,18 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
         const uint64_t t_us = (uint64_t)((now_ns + 500) / 1000);
         apply_damage(f, o, r, t);
 
-        if (now_ns == esc.next_ns) {
+        /* A report is handled at its instant, or at the first instant after it when its
+         * reading (its instant less the ESC's latency) was already in the history (below). */
+        while (esc.next_ns <= now_ns) {
+            const double esc_t = (double)esc.next_ns * 1e-9;
             double speed[SITL_MAX_ROTORS];
-            if (sitl_esc_report(&f->esc, t, speed)) {
+            if (sitl_esc_report(&f->esc, esc_t, speed)) {
                 float speed_f[SITL_MAX_ROTORS];
                 for (int i = 0; i < n; i++) {
                     speed_f[i] = (float)speed[i];
                     f->last_omega[i] = speed[i];
                 }
-                uint64_t esc_us = t_us;
+                uint64_t esc_us = (uint64_t)((esc.next_ns + 500) / 1000);
                 if (sitl_faults_esc(&f->faults, &esc_us, speed_f, n)) {
                     propid_push_rotor_speeds(&f->filter, esc_us, speed_f, (uint8_t)n);
                 }
@@ -756,9 +760,6 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
 
         /* Integrate to the next instant anything happens. */
         int64_t next = physics.next_ns;
-        if (esc.next_ns < next) {
-            next = esc.next_ns;
-        }
         if (imu.next_ns < next) {
             next = imu.next_ns;
         }
@@ -767,6 +768,16 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
         }
         if (end_ns < next) {
             next = end_ns;
+        }
+        /* A report reads the speeds of its instant less the latency from the history:
+         * when that reading is already recorded (now or before) and no second report
+         * falls inside the step, the step need not end at it; the report is handled at
+         * the step's end with its own time (above). Otherwise the step ends there. */
+        if (esc.next_ns < next &&
+            (o->esc_split_steps ||
+             (double)esc.next_ns * 1e-9 - esc_read_delay_s > (double)now_ns * 1e-9 ||
+             round_ns(esc.phase_ns + (double)(esc.k + 1) * esc.period_ns) < next)) {
+            next = esc.next_ns;
         }
         if (next > now_ns) {
             if (f->plant_prepared_stale) {
