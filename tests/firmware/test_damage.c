@@ -195,6 +195,18 @@ static float fly(flight_t *f, float t0, float t1, int8_t *rotor_out)
     return detected_at;
 }
 
+/* At 2.0 s the rotor keeps only `kept` of its kf and km (0.8f: a 20 % loss);
+ * fly to 2.2 s and expect that rotor detected within 50 ms. */
+static void lose_and_expect_detection(flight_t *f, uint8_t damaged, float kept)
+{
+    int8_t rotor;
+    f->kf[damaged] *= kept;
+    f->km[damaged] *= kept;
+    const float at = fly(f, 2.0f, 2.2f, &rotor);
+    TEST_ASSERT_TRUE_MESSAGE(at > 2.0f && at <= 2.05f, "detected within 50 ms");
+    TEST_ASSERT_EQUAL_INT(damaged, rotor);
+}
+
 static void test_threshold_inverts_the_run_length(void)
 {
     const float drift = 4.0f;
@@ -266,11 +278,7 @@ static void test_damage_detected_isolated_and_reconverged(void)
         setup_flight(&f, 11u + damaged);
         int8_t rotor;
         TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 2.0f, &rotor));
-        f.kf[damaged] *= 0.85f; /* 15 % loss of kf and km */
-        f.km[damaged] *= 0.85f;
-        const float at = fly(&f, 2.0f, 2.2f, &rotor);
-        TEST_ASSERT_TRUE_MESSAGE(at > 2.0f && at <= 2.05f, "detected within 50 ms");
-        TEST_ASSERT_EQUAL_INT(damaged, rotor);
+        lose_and_expect_detection(&f, damaged, 0.85f); /* 15 % loss */
         TEST_ASSERT_EQUAL_UINT32(1u, f.detector.detections);
         TEST_ASSERT_EQUAL_UINT16(1u << damaged, f.detector.damaged_mask);
         propid_estimate_t e;
@@ -335,11 +343,7 @@ static void test_loss_detected_under_the_input_error_model(void)
         use_derived_design(&f);
         int8_t rotor;
         TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 2.0f, &rotor));
-        f.kf[damaged] *= 0.8f; /* 20 % loss of kf and km */
-        f.km[damaged] *= 0.8f;
-        const float at = fly(&f, 2.0f, 2.2f, &rotor);
-        TEST_ASSERT_TRUE_MESSAGE(at > 2.0f && at <= 2.05f, "detected within 50 ms");
-        TEST_ASSERT_EQUAL_INT(damaged, rotor);
+        lose_and_expect_detection(&f, damaged, 0.8f); /* 20 % loss */
     }
     flight_t f;
     setup_flight_with(&f, 61u, speed_noise, 0.0f);
@@ -373,11 +377,7 @@ static void test_accel_aiding_keeps_detection_and_relearning(void)
         setup_flight_with(&f, 71u + damaged, 0.0f, MASS);
         use_derived_design(&f);
         TEST_ASSERT_EQUAL_FLOAT(-1.0f, fly(&f, 0.0f, 2.0f, &rotor));
-        f.kf[damaged] *= 0.8f; /* 20 % loss of kf and km */
-        f.km[damaged] *= 0.8f;
-        const float at = fly(&f, 2.0f, 2.2f, &rotor);
-        TEST_ASSERT_TRUE_MESSAGE(at > 2.0f && at <= 2.05f, "detected within 50 ms");
-        TEST_ASSERT_EQUAL_INT(damaged, rotor);
+        lose_and_expect_detection(&f, damaged, 0.8f); /* 20 % loss */
         fly(&f, 2.2f, 4.0f, &rotor);
         TEST_ASSERT_EQUAL_UINT32(1u, f.detector.detections);
         propid_estimate_t e, e_twin;
