@@ -59,10 +59,16 @@ static void schedule_init(schedule_t *s, double phase_s, double rate_hz)
     s->next_ns = round_ns(s->phase_ns);
 }
 
+/* The schedule's k-th instant [ns]. */
+static int64_t schedule_instant(const schedule_t *s, uint64_t k)
+{
+    return round_ns(s->phase_ns + (double)k * s->period_ns);
+}
+
 static void schedule_advance(schedule_t *s)
 {
     s->k++;
-    s->next_ns = round_ns(s->phase_ns + (double)s->k * s->period_ns);
+    s->next_ns = schedule_instant(s, s->k);
 }
 
 static double wall_seconds(void)
@@ -776,7 +782,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
         if (esc.next_ns < next &&
             (o->esc_split_steps ||
              (double)esc.next_ns * 1e-9 - esc_read_delay_s > (double)now_ns * 1e-9 ||
-             round_ns(esc.phase_ns + (double)(esc.k + 1) * esc.period_ns) < next)) {
+             schedule_instant(&esc, esc.k + 1) < next)) {
             next = esc.next_ns;
         }
         if (next > now_ns) {
