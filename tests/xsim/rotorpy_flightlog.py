@@ -24,12 +24,18 @@ each rotor's drag torque on the body, the flight log's yaw_sign; its quaternions
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import pathlib
+import sys
 
 import numpy as np
+
+# The log and the vehicle file are written by propid's own writers (one writer per format). This
+# script runs in the bench venv, which has RotorPy but not propid installed: the package is imported
+# from the repository (its flight-log module needs numpy only).
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "host_tools"))
+from propid.flightlog import FlightLog, parse_vehicle, write_flightlog, write_vehicle  # noqa: E402
 
 SIM_RATE_HZ = 500.0          # RotorPy step (control and physics, RK45 inside each step)
 # Each rotor's thrust and drag coefficient relative to RotorPy's single value: fixed offsets
@@ -242,14 +248,15 @@ def main() -> None:
     rows, vehicle_file, truth = fly(args)
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    with open(out.with_suffix(".csv"), "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: f"{v:.9g}" for k, v in row.items()})
-    out.with_suffix(".vehicle.json").write_text(json.dumps(vehicle_file, indent=2) + "\n")
+    columns = {name: np.array([row[name] for row in rows], dtype=float) for name in rows[0]}
+    log = FlightLog(t=columns.pop("t"),
+                    gyro=np.column_stack([columns.pop(f"gyro_{axis}") for axis in "xyz"]),
+                    rotor_speed=np.column_stack([columns.pop(f"omega_{i + 1}") for i in range(4)]),
+                    extra=columns)
+    write_flightlog(out.with_suffix(".csv"), log)
+    # parse_vehicle checks the file as every propid tool will read it before it is written
+    write_vehicle(out.with_suffix(".vehicle.json"), parse_vehicle(vehicle_file, where="RotorPy vehicle"))
     out.with_suffix(".truth.json").write_text(json.dumps(truth, indent=2) + "\n")
-
 
 if __name__ == "__main__":
     main()
