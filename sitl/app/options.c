@@ -489,6 +489,8 @@ static const opt_t options[] = {
     NUMBER(NULL, "esc-rate", esc.rate_hz, 1.0, 1e5, "HZ", "ESC telemetry rate (500)"),
     NUMBER(NULL, "esc-latency", esc.latency_s, 0.0, 0.5, "S", "ESC telemetry latency (0.001)"),
     NUMBER(NULL, "esc-phase", esc.phase_s, 0.0, 1.0, "S", "time of the first report (0.00025)"),
+    FLAG(NULL, "imu-split-steps", imu_split_steps, 1,
+         "end a physics step at every IMU sample (default: the sample is read inside\nthe step from its stages)"),
     FLAG(NULL, "esc-split-steps", esc_split_steps, 1,
          "end a physics step at every ESC report (default: only\nwhere the report's reading is not yet in the history)"),
     NUMBER(NULL, "esc-dropout", esc.dropout_prob, 0.0, 1.0, "P", "probability a report is lost (0.01)"),

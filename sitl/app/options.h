@@ -71,6 +71,7 @@ typedef struct {
     int start_trimmed;                  /* start on the trajectory's attitude, rate and thrust */
     int honesty_cov_check;              /* the whole P checked for definiteness (summary cov_checks) */
     int esc_split_steps;                /* end a physics step at every ESC report (the earlier loop) */
+    int imu_split_steps;                /* end a physics step at every IMU sample (the earlier loop) */
     int ground_enabled;
     double divergence_distance_m;       /* stop when farther than this from the reference */
     double divergence_tilt_deg;         /* stop when tilted more than this */

@@ -565,6 +565,25 @@ static void fill_row(const flight_t *f, double t, const sitl_flat_output_t *ref,
     row->status = f->last_status;
 }
 
+/* A step from now may cross the IMU instant sample_ns (and the sample read from the step's
+ * stages) when nothing else happens at or before it that changes the plant: a damage or the
+ * rotor-loss fault falling due, or a vehicle resting on the ground (its contact is resolved at
+ * step ends; a contact inside the step is found after it, sim's loop). One sample per step
+ * (the caller checks the next one). --imu-split-steps: never. */
+static int imu_instant_crossable(const flight_t *f, const sitl_options_t *o, int64_t sample_ns)
+{
+    if (o->imu_split_steps || f->state.on_ground) {
+        return 0;
+    }
+    const double sample_t = (double)sample_ns * 1e-9;
+    for (int k = 0; k < o->damage_count; k++) {
+        if (!f->damage_applied[k] && !(sample_t < o->damage[k].time_s)) {
+            return 0;
+        }
+    }
+    return !sitl_faults_rotor_loss_due(&f->faults, sample_t);
+}
+
 int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
 {
     static flight_t flight; /* large (filter, history): keep it off the stack */
@@ -610,6 +629,10 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
     const double tilt_limit_cos = cos(o->divergence_tilt_deg * SITL_PI / 180.0);
     const double esc_read_delay_s = f->esc.params.latency_s + f->esc.extra_delay_s;
     f->plant_prepared_stale = 1;
+    sitl_state_t step_end; /* a step across an IMU instant: its end, handled after the instant */
+    memset(&step_end, 0, sizeof(step_end));
+    int64_t step_end_ns = 0;
+    int step_end_pending = 0;
     const double cpu_start = cpu_seconds();
 
     for (;;) {
@@ -764,10 +787,12 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
             schedule_advance(&control);
         }
 
-        /* Integrate to the next instant anything happens. */
+        /* Integrate to the next instant anything happens but an IMU sample a step can
+         * cross (imu_instant_crossable). */
         int64_t next = physics.next_ns;
-        if (imu.next_ns < next) {
-            next = imu.next_ns;
+        if (imu.next_ns < next && (!imu_instant_crossable(f, o, imu.next_ns) ||
+                                   schedule_instant(&imu, imu.k + 1) < next)) {
+            next = imu.next_ns; /* or a second sample inside the step: split at the first */
         }
         if (control.next_ns < next) {
             next = control.next_ns;
@@ -785,13 +810,43 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
              schedule_instant(&esc, esc.k + 1) < next)) {
             next = esc.next_ns;
         }
-        if (next > now_ns) {
+        if (step_end_pending) {
+            /* The IMU instant inside the step was handled: on to the step's end. */
+            f->state = step_end;
+            now_ns = step_end_ns;
+            step_end_pending = 0;
+            sitl_esc_record(&f->esc, (double)now_ns * 1e-9, f->state.rotor_speed);
+        } else if (next > now_ns) {
             if (f->plant_prepared_stale) {
                 sitl_plant_prepare(&f->plant, f->command, &f->plant_prepared);
                 f->plant_prepared_stale = 0;
             }
-            sitl_plant_step_prepared(&f->plant, &f->plant_prepared, &f->state,
-                                     (double)(next - now_ns) * 1e-9);
+            const int64_t sample_ns = imu.next_ns;
+            if (sample_ns > now_ns && sample_ns < next) { /* crossable (above) */
+                /* One step across the IMU instant, the sample read from the step's stages;
+                 * the instant is then handled like any other with that state. */
+                step_end = f->state;
+                sitl_state_t sample;
+                sitl_plant_step_prepared_sampled(&f->plant, &f->plant_prepared, &step_end,
+                                                 (double)(next - now_ns) * 1e-9,
+                                                 (double)(sample_ns - now_ns) /
+                                                     (double)(next - now_ns),
+                                                 &sample);
+                if (!step_end.on_ground) {
+                    f->state = sample;
+                    step_end_ns = next;
+                    step_end_pending = 1;
+                    next = sample_ns;
+                } else {
+                    /* A contact inside the step: split it at the instant, as before. */
+                    next = sample_ns;
+                    sitl_plant_step_prepared(&f->plant, &f->plant_prepared, &f->state,
+                                             (double)(next - now_ns) * 1e-9);
+                }
+            } else {
+                sitl_plant_step_prepared(&f->plant, &f->plant_prepared, &f->state,
+                                         (double)(next - now_ns) * 1e-9);
+            }
             now_ns = next;
             sitl_esc_record(&f->esc, (double)now_ns * 1e-9, f->state.rotor_speed);
         }

@@ -162,6 +162,12 @@ void sitl_faults_gyro(sitl_faults_t *f, uint64_t *time_us, float gyro[3], double
     }
 }
 
+int sitl_faults_rotor_loss_due(const sitl_faults_t *f, double t)
+{
+    const double at = f->config.rate[SITL_FAULT_ROTOR_LOSS];
+    return !f->rotor_lost && at > 0.0 && !(t < at);
+}
+
 int sitl_faults_rotor_loss_now(sitl_faults_t *f, double t)
 {
     const double at = f->config.rate[SITL_FAULT_ROTOR_LOSS];

@@ -60,5 +60,7 @@ void sitl_faults_gyro(sitl_faults_t *faults, uint64_t *time_us, float gyro[3], d
 /* 1 once, at the first call with t >= the rotor-loss time: the caller then
  * multiplies rotor 0's true thrust coefficient by 0.7. */
 int sitl_faults_rotor_loss_now(sitl_faults_t *faults, double t);
+/* Whether sitl_faults_rotor_loss_now(t) would fire, without firing it. */
+int sitl_faults_rotor_loss_due(const sitl_faults_t *faults, double t);
 
 #endif

@@ -356,11 +356,11 @@ void sitl_plant_step(const sitl_plant_t *plant, sitl_state_t *state, const doubl
     sitl_plant_step_prepared(plant, &prepared, state, dt);
 }
 
-void sitl_plant_step_prepared(const sitl_plant_t *plant, const sitl_plant_prepared_t *c,
-                              sitl_state_t *state, double dt)
+/* The four stages of one RK4 step from state (either derivative). */
+SITL_INLINE void rk4_stages(const sitl_plant_t *plant, const sitl_plant_prepared_t *c,
+                            const sitl_state_t *state, double dt, sitl_state_derivative_t stage[4])
 {
     const int n = plant->rotor_count;
-    sitl_state_derivative_t stage[4];
     if (c->plain) {
         if (n == 4 && c->diagonal_inertia) {
             plain_stages(plant, 4, 1, state, c, dt, stage);
@@ -378,6 +378,13 @@ void sitl_plant_step_prepared(const sitl_plant_t *plant, const sitl_plant_prepar
         add_scaled(n, state, &stage[2], dt, &tmp);
         sitl_plant_derivative(plant, &tmp, rotor_command, &stage[3], NULL);
     }
+}
+
+/* state <- the RK4 step's end from its stages, normalised, clamped, on the ground. */
+SITL_INLINE void rk4_finish(const sitl_plant_t *plant, const sitl_state_derivative_t stage[4],
+                            sitl_state_t *state, double dt)
+{
+    const int n = plant->rotor_count;
     const sitl_state_derivative_t *k1 = &stage[0], *k2 = &stage[1], *k3 = &stage[2],
                                   *k4 = &stage[3];
 
@@ -411,6 +418,50 @@ void sitl_plant_step_prepared(const sitl_plant_t *plant, const sitl_plant_prepar
             state->on_ground = 0;
         }
     }
+}
+
+void sitl_plant_step_prepared(const sitl_plant_t *plant, const sitl_plant_prepared_t *c,
+                              sitl_state_t *state, double dt)
+{
+    sitl_state_derivative_t stage[4];
+    rk4_stages(plant, c, state, dt, stage);
+    rk4_finish(plant, stage, state, dt);
+}
+
+void sitl_plant_step_prepared_sampled(const sitl_plant_t *plant, const sitl_plant_prepared_t *c,
+                                      sitl_state_t *state, double dt, double theta,
+                                      sitl_state_t *sample)
+{
+    sitl_state_derivative_t stage[4];
+    rk4_stages(plant, c, state, dt, stage);
+    /* Classic RK4's free continuous extension (third order, from the stages alone). */
+    const double t2 = theta * theta, t3 = t2 * theta;
+    const double b1 = dt * (theta - 1.5 * t2 + (2.0 / 3.0) * t3);
+    const double b23 = dt * (t2 - (2.0 / 3.0) * t3);
+    const double b4 = dt * (-0.5 * t2 + (2.0 / 3.0) * t3);
+    const sitl_state_derivative_t *k1 = &stage[0], *k2 = &stage[1], *k3 = &stage[2],
+                                  *k4 = &stage[3];
+    for (int k = 0; k < 3; k++) {
+        sample->position[k] = state->position[k] + (b1 * k1->position[k] +
+                              b23 * (k2->position[k] + k3->position[k]) + b4 * k4->position[k]);
+        sample->velocity[k] = state->velocity[k] + (b1 * k1->velocity[k] +
+                              b23 * (k2->velocity[k] + k3->velocity[k]) + b4 * k4->velocity[k]);
+        sample->body_rate[k] = state->body_rate[k] + (b1 * k1->body_rate[k] +
+                               b23 * (k2->body_rate[k] + k3->body_rate[k]) + b4 * k4->body_rate[k]);
+    }
+    for (int k = 0; k < 4; k++) {
+        sample->quat[k] = state->quat[k] +
+                          (b1 * k1->quat[k] + b23 * (k2->quat[k] + k3->quat[k]) + b4 * k4->quat[k]);
+    }
+    for (int i = 0; i < plant->rotor_count; i++) {
+        sample->rotor_speed[i] = sitl_motor_clamp(
+            &plant->motor, state->rotor_speed[i] + (b1 * k1->rotor_speed[i] +
+                                                    b23 * (k2->rotor_speed[i] + k3->rotor_speed[i]) +
+                                                    b4 * k4->rotor_speed[i]));
+    }
+    sitl_quat_normalise(sample->quat);
+    sample->on_ground = state->on_ground;
+    rk4_finish(plant, stage, state, dt);
 }
 
 int sitl_plant_hover_speeds(const sitl_plant_t *plant, double *rotor_speed)

@@ -110,6 +110,16 @@ void sitl_plant_prepare(const sitl_plant_t *plant, const double *rotor_command,
 void sitl_plant_step_prepared(const sitl_plant_t *plant, const sitl_plant_prepared_t *prepared,
                               sitl_state_t *state, double dt);
 
+/* sitl_plant_step_prepared (the same end state, bit for bit), and the state at
+ * t + theta dt (0 < theta < 1) from the step's own stages: classic RK4's free
+ * continuous extension, third order (local error O(dt^4); the step's O(dt^5)),
+ * quaternion normalised, rotor speeds clamped, on_ground of the start. For a
+ * sensor sample inside a step (docs/sitl.md "The loop"): nothing of it goes back
+ * into the plant. */
+void sitl_plant_step_prepared_sampled(const sitl_plant_t *plant, const sitl_plant_prepared_t *prepared,
+                                      sitl_state_t *state, double dt, double theta,
+                                      sitl_state_t *sample);
+
 /* Rotor speeds (true coefficients) that hold the vehicle still in the air:
  * total thrust m g, zero torque (minimum norm for N != 4). Returns 0, or -1
  * if that needs speeds outside the motor limits (speeds are then clipped). */
