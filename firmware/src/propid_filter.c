@@ -468,6 +468,34 @@ static __attribute__((noinline)) PROPID_RARE int rotor_stale(const propid_filter
     return rotor_time_us - rotor_clock > (uint64_t)config->max_gyro_gap_us;
 }
 
+/* The accepted sample's time starts the next interval: its rotor speeds are the
+ * latest ones, the stale mark and the clock are the sample's. Whole arrays; on
+ * the Cortex-M4 the quad's speeds and the mark, adjacent in propid_core_t, in
+ * one load-multiple and one store-multiple and the stamp in one 64-bit store
+ * from the same base (GCC makes a load and a store per word of the copy and two
+ * stores of the stamp). */
+static inline __attribute__((always_inline)) void start_next_interval(propid_core_t *core, uint32_t stale_mark,
+                                                                      uint64_t time_us)
+{
+#if PROPID_ARM_BLOCK_MOVES && PROPID_MAX_ROTORS == 4
+    _Static_assert(offsetof(propid_core_t, input_speed_sq) == offsetof(propid_core_t, rotor_speed_sq) + 16u &&
+                       offsetof(propid_core_t, stale_mark) == offsetof(propid_core_t, input_speed_sq) + 16u,
+                   "the speeds and the stale mark are adjacent");
+    float *speeds = core->rotor_speed_sq;
+    __asm__ volatile("ldmia %[at]!, {r0, r1, r2, r3}\n\t"
+                     "stmia %[at], {r0, r1, r2, r3, %[mark]}\n\t"
+                     "strd %Q[time], %R[time], [%[at], %[time_at]]"
+                     : [at] "+&r"(speeds)
+                     : [mark] "r"(stale_mark), [time] "r"(time_us),
+                       [time_at] "i"(offsetof(propid_core_t, time_us) - offsetof(propid_core_t, input_speed_sq))
+                     : "r0", "r1", "r2", "r3", "memory");
+#else
+    memcpy(core->input_speed_sq, core->rotor_speed_sq, sizeof(core->input_speed_sq));
+    core->stale_mark = stale_mark;
+    core->time_us = time_us;
+#endif
+}
+
 /* propid_fuse_gyro after its time test (time_us is later than the filter's
  * clock by at most the largest gap, or anchors it). */
 static PROPID_GYRO_STEP_LINK propid_status_t fuse_gyro_timed(propid_filter_t *filter, uint64_t time_us,
@@ -482,6 +510,10 @@ static PROPID_GYRO_STEP_LINK propid_status_t fuse_gyro_timed(propid_filter_t *fi
      * unless it is stamped beyond any plausible gap (a clock fault: stale).
      * Compared on the rotor clock (the gyro stamp + the delay when the rotor
      * speeds lag). */
+    /* The interval, read where the time check has just read the clock (the
+     * compiler reuses its difference); read again after the rare call below. */
+    int anchor = !core->has_time; /* first sample after init/reset/resync */
+    uint32_t interval_us = (uint32_t)time_us - (uint32_t)core->time_us;
     const uint64_t rotor_clock = time_us + propid_delay_imu_shift(config);
     const uint64_t rotor_age = rotor_clock - core->rotor_time_us; /* wraps when stamped after the gyro */
     if ((uint32_t)(rotor_age >> 32) != 0u || (uint32_t)rotor_age > config->rotor_stale_us) {
@@ -492,9 +524,10 @@ static PROPID_GYRO_STEP_LINK propid_status_t fuse_gyro_timed(propid_filter_t *fi
         /* (Nothing of the checks above kept across this rare call: read again
          * below, no stack for it on the usual path.) */
         PROPID_SCHEDULE_BARRIER();
+        anchor = !core->has_time;
+        interval_us = (uint32_t)time_us - (uint32_t)core->time_us;
     }
-    const int anchor = !core->has_time; /* first sample after init/reset/resync */
-    const float dt = anchor ? 0.0f : (float)(uint32_t)(time_us - core->time_us) * 1.0e-6f;
+    const float dt = anchor ? 0.0f : (float)interval_us * 1.0e-6f;
 
     const propid_status_t stepped = anchor ? anchor_step(filter, gyro_rad_s) : propid_predict_step(filter, dt);
     if (stepped != PROPID_OK) {
@@ -524,12 +557,8 @@ static PROPID_GYRO_STEP_LINK propid_status_t fuse_gyro_timed(propid_filter_t *fi
         core->health |= PROPID_HEALTH_GATED;
         accepted = PROPID_OK_GATED;
     }
-    /* The latest rotor speeds start the next interval (whole arrays: a constant
-     * size compiles to a few load/store-multiple instructions, not a call). */
-    memcpy(core->input_speed_sq, core->rotor_speed_sq, sizeof(core->input_speed_sq));
-    core->time_us = time_us;
+    start_next_interval(core, filter->counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_ROTOR_STALE)], time_us);
     core->has_time = 1u;
-    core->stale_mark = filter->counters.rejected[PROPID_REJECT_SLOT(PROPID_ERR_ROTOR_STALE)];
     filter->counters.gyro_accepted++;
     return accepted;
 }
