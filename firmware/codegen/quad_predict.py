@@ -25,12 +25,14 @@ on the packed upper triangle (firmware/src/propid_quad_predict.h): column by
 column, each P_cj of the 11 non-bias rows loaded once and shared by the three
 rows of T = F_rate P, the rate block's six elements collected in registers
 during the sweep (every term, the rate columns' too: no T_ab is kept for the
-end; the rate block is written last). Every element the kernel writes is checked, symbolically,
+end; each element of the rate block is written after the last column that adds
+to it, which frees its register for the later columns). Every element the kernel writes is checked, symbolically,
 against F P F^T + Q of the model before the file is written: the C is the
 model's arithmetic, only ordered for the Cortex-M4 (one multiply-add per term,
 the own element last so each sum starts in a fresh register, but in the yaw
-row, which starts from it: OWN_FIRST_ROW; a variance's
-loading and noise, (1 + L) P_jj + q, in one).
+row, which starts from it: OWN_FIRST_ROW, after the other rows' first two
+products have read that element (PROPID_REGISTER_ORDER3: no copy of it); a
+variance's loading and noise, (1 + L) P_jj + q, in one).
 
 The same file holds the size-lean build's kernel (PROPID_SIZE_LEAN): the same
 sums per element (its rate block's terms, also collected in the sweep, in
@@ -166,7 +168,29 @@ def generate() -> str:
     block: dict[tuple[int, int], sympy.Expr] = {(a, b): sympy.Integer(0)
                                                for a in range(3) for b in range(a, 3)}
     block_terms: dict[tuple[int, int], list[str]] = {key: [] for key in block}
+    # Each element of the rate block is written after the last column that adds to
+    # it (row b's Jacobian columns, its own rate column), not at the end: its
+    # register is free for the later columns.
+    block_done = {(a, b): max([b] + list(structure[b])) for (a, b) in block}
+
+    def write_block(after: int) -> None:
+        done = [key for key in sorted(block) if block_done[key] == after]
+        if not done:
+            return
+        emit(f"    /* The rate block's elements complete after column {after}: (T F^T)_ab = T_ab + sum_p")
+        emit("     * T_a,(column p of row b) G_bp, on the diagonal with the loading c (P_aa + sum_p G_ap^2 P_pp)")
+        emit("     * and Q dt. */")
+        for a, b in done:
+            if a == b:
+                emit(f"    cov[propid_cov_index({a}u, {b}u)] = block{a}{b} + q_rate;")
+                checked[(a, b)] = block[(a, b)] + q["rate"]
+            else:
+                emit(f"    cov[propid_cov_index({a}u, {b}u)] = block{a}{b};")
+                checked[(a, b)] = block[(a, b)]
+
     for j in range(N):
+        if j > 0:
+            write_block(j - 1)
         emit(f"    {{ /* column {j} */")
         sym = {}
         loads = []
@@ -176,13 +200,26 @@ def generate() -> str:
         emit("        const float " + ", ".join(loads[:3]) + ";")
         emit("        const float " + ", ".join(loads[3:7]) + ";")
         emit("        const float " + ", ".join(loads[7:]) + ";")
+        # The rows' sums in the C's order. The two rows that end with their own
+        # element start with products of the rate elements, one of which is the
+        # element the third row starts from: those two heads are formed first and
+        # the third row's start taken as renamed after them (no instruction), so
+        # its sum accumulates in that element's register instead of a copy.
         t = []
+        heads = []
+        own = names[OWN_FIRST_ROW]
+        for a in range(3):
+            products = [f"g{a}_{p} * {names[col]}" for p, col in enumerate(structure[a])]
+            if a != OWN_FIRST_ROW:
+                heads.append(f"head{a} = {products[0]} + {products[1]}")
+        emit("        float " + ", ".join(heads) + f", {own}_sum = {own};")
+        emit("        PROPID_REGISTER_ORDER3(" + ", ".join(h.split(" =")[0] for h in heads) + f", {own}_sum);")
         for a in range(3):
             products = [f"g{a}_{p} * {names[col]}" for p, col in enumerate(structure[a])]
             if a == OWN_FIRST_ROW:
-                emit(f"        const float t{a} = {names[a]} + {' + '.join(products)};")
+                emit(f"        const float t{a} = {own}_sum + {' + '.join(products)};")
             else:
-                emit(f"        const float t{a} = ({' + '.join(products)}) + {names[a]};")
+                emit(f"        const float t{a} = (head{a} + {' + '.join(products[2:])}) + {names[a]};")
             t.append(sum(g[a][p] * sym[col] for p, col in enumerate(structure[a])) + sym[a])
         if j < FIRST_THRUST:
             # A rate column's share of the rate block, collected here like the
@@ -250,17 +287,9 @@ def generate() -> str:
             checked[(j, j)] = (1 + loading) * p_symbol(j, j) + q[kind(j)]
         emit("        PROPID_SCHEDULE_BARRIER();")
         emit("    }")
-    # The rate block: every term collected in the sweep.
-    emit("    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp, and on the")
-    emit("     * diagonal the loading c (P_aa + sum_p G_ap^2 P_pp), all collected in the sweep. */")
-    for a in range(3):
-        for b in range(a, 3):
-            if a == b:
-                emit(f"    cov[propid_cov_index({a}u, {b}u)] = block{a}{b} + q_rate;")
-                checked[(a, b)] = block[(a, b)] + q["rate"]
-            else:
-                emit(f"    cov[propid_cov_index({a}u, {b}u)] = block{a}{b};")
-                checked[(a, b)] = block[(a, b)]
+    write_block(N - 1)
+    if len([key for key in block if key in checked]) != len(block):
+        raise SystemExit("quad_predict: an element of the rate block is not written")
 
     check_against_model(checked, "element")
 
@@ -387,7 +416,8 @@ def generate() -> str:
  * rate rows only: column by column, the 11 non-bias P_cj loaded once for the
  * three rows of T = F_rate P, the 18 G entries in registers, the rate block's
  * six elements collected in registers during the sweep (every term: T_ab, the
- * rate and coefficient columns' T_aj G_bp, the loading) and written last. Every element
+ * rate and coefficient columns' T_aj G_bp, the loading) and each written after the
+ * last column that adds to it. Every element
  * written was checked against the model's F P F^T + Q by the generator. */
 #ifndef PROPID_QUAD_PREDICT_H
 #define PROPID_QUAD_PREDICT_H

@@ -185,6 +185,17 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
 #else
 #define PROPID_ARM_BLOCK_MOVES 0
 #endif
+/* PROPID_REGISTER_ORDER3(a, b, c): three float variables count as read and
+ * rewritten here, no instruction emitted (GNU inline assembly on the FPU
+ * registers, with the block moves; nothing elsewhere). The generated prediction
+ * kernel forms two sums' first products of an element before the sum that starts
+ * from that element: ordered so, the sum accumulates in the element's own
+ * register, where GCC otherwise copies it first (propid_quad_predict.h). */
+#if PROPID_ARM_BLOCK_MOVES
+#define PROPID_REGISTER_ORDER3(a, b, c) __asm__("" : "+t"(a), "+t"(b), "+t"(c))
+#else
+#define PROPID_REGISTER_ORDER3(a, b, c) ((void)0)
+#endif
 /* PROPID_HOST_ROW_SWEEP: on 64-bit desktop hosts (x86-64, AArch64: the SITL, the
  * host tests, the Python binding) the quad downdate sweeps P one packed row at a
  * time in chunks of 4 consecutive floats (GNU C vector type: SSE, NEON), each

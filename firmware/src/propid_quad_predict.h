@@ -7,7 +7,8 @@
  * rate rows only: column by column, the 11 non-bias P_cj loaded once for the
  * three rows of T = F_rate P, the 18 G entries in registers, the rate block's
  * six elements collected in registers during the sweep (every term: T_ab, the
- * rate and coefficient columns' T_aj G_bp, the loading) and written last. Every element
+ * rate and coefficient columns' T_aj G_bp, the loading) and each written after the
+ * last column that adds to it. Every element
  * written was checked against the model's F P F^T + Q by the generator. */
 #ifndef PROPID_QUAD_PREDICT_H
 #define PROPID_QUAD_PREDICT_H
@@ -112,9 +113,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 0u)], p1 = cov[propid_cov_index(0u, 1u)], p2 = cov[propid_cov_index(0u, 2u)];
         const float k0 = cov[propid_cov_index(0u, 3u)], k1 = cov[propid_cov_index(0u, 4u)], k2 = cov[propid_cov_index(0u, 5u)], k3 = cov[propid_cov_index(0u, 6u)];
         const float d0 = cov[propid_cov_index(0u, 7u)], d1 = cov[propid_cov_index(0u, 8u)], d2 = cov[propid_cov_index(0u, 9u)], d3 = cov[propid_cov_index(0u, 10u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float p0_loaded = (7.0f * PROPID_RATE_LOADING) * p0;
         block00 = t0 + p0_loaded;
         block01 = t0 * g1_0;
@@ -128,9 +131,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 1u)], p1 = cov[propid_cov_index(1u, 1u)], p2 = cov[propid_cov_index(1u, 2u)];
         const float k0 = cov[propid_cov_index(1u, 3u)], k1 = cov[propid_cov_index(1u, 4u)], k2 = cov[propid_cov_index(1u, 5u)], k3 = cov[propid_cov_index(1u, 6u)];
         const float d0 = cov[propid_cov_index(1u, 7u)], d1 = cov[propid_cov_index(1u, 8u)], d2 = cov[propid_cov_index(1u, 9u)], d3 = cov[propid_cov_index(1u, 10u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float p1_loaded = (7.0f * PROPID_RATE_LOADING) * p1;
         block00 += (t0 + g0_0 * p1_loaded) * g0_0;
         block01 += t0;
@@ -145,9 +150,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 2u)], p1 = cov[propid_cov_index(1u, 2u)], p2 = cov[propid_cov_index(2u, 2u)];
         const float k0 = cov[propid_cov_index(2u, 3u)], k1 = cov[propid_cov_index(2u, 4u)], k2 = cov[propid_cov_index(2u, 5u)], k3 = cov[propid_cov_index(2u, 6u)];
         const float d0 = cov[propid_cov_index(2u, 7u)], d1 = cov[propid_cov_index(2u, 8u)], d2 = cov[propid_cov_index(2u, 9u)], d3 = cov[propid_cov_index(2u, 10u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float p2_loaded = (7.0f * PROPID_RATE_LOADING) * p2;
         block00 += (t0 + g0_1 * p2_loaded) * g0_1;
         block01 += t0 * g1_1;
@@ -162,9 +169,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 3u)], p1 = cov[propid_cov_index(1u, 3u)], p2 = cov[propid_cov_index(2u, 3u)];
         const float k0 = cov[propid_cov_index(3u, 3u)], k1 = cov[propid_cov_index(3u, 4u)], k2 = cov[propid_cov_index(3u, 5u)], k3 = cov[propid_cov_index(3u, 6u)];
         const float d0 = cov[propid_cov_index(3u, 7u)], d1 = cov[propid_cov_index(3u, 8u)], d2 = cov[propid_cov_index(3u, 9u)], d3 = cov[propid_cov_index(3u, 10u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float k0_loaded = (7.0f * PROPID_RATE_LOADING) * k0;
         block00 += (t0 + g0_2 * k0_loaded) * g0_2;
         block01 += t0 * g1_2;
@@ -179,9 +188,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 4u)], p1 = cov[propid_cov_index(1u, 4u)], p2 = cov[propid_cov_index(2u, 4u)];
         const float k0 = cov[propid_cov_index(3u, 4u)], k1 = cov[propid_cov_index(4u, 4u)], k2 = cov[propid_cov_index(4u, 5u)], k3 = cov[propid_cov_index(4u, 6u)];
         const float d0 = cov[propid_cov_index(4u, 7u)], d1 = cov[propid_cov_index(4u, 8u)], d2 = cov[propid_cov_index(4u, 9u)], d3 = cov[propid_cov_index(4u, 10u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float k1_loaded = (7.0f * PROPID_RATE_LOADING) * k1;
         block00 += (t0 + g0_3 * k1_loaded) * g0_3;
         block01 += t0 * g1_3;
@@ -196,9 +207,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 5u)], p1 = cov[propid_cov_index(1u, 5u)], p2 = cov[propid_cov_index(2u, 5u)];
         const float k0 = cov[propid_cov_index(3u, 5u)], k1 = cov[propid_cov_index(4u, 5u)], k2 = cov[propid_cov_index(5u, 5u)], k3 = cov[propid_cov_index(5u, 6u)];
         const float d0 = cov[propid_cov_index(5u, 7u)], d1 = cov[propid_cov_index(5u, 8u)], d2 = cov[propid_cov_index(5u, 9u)], d3 = cov[propid_cov_index(5u, 10u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float k2_loaded = (7.0f * PROPID_RATE_LOADING) * k2;
         block00 += (t0 + g0_4 * k2_loaded) * g0_4;
         block01 += t0 * g1_4;
@@ -213,9 +226,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 6u)], p1 = cov[propid_cov_index(1u, 6u)], p2 = cov[propid_cov_index(2u, 6u)];
         const float k0 = cov[propid_cov_index(3u, 6u)], k1 = cov[propid_cov_index(4u, 6u)], k2 = cov[propid_cov_index(5u, 6u)], k3 = cov[propid_cov_index(6u, 6u)];
         const float d0 = cov[propid_cov_index(6u, 7u)], d1 = cov[propid_cov_index(6u, 8u)], d2 = cov[propid_cov_index(6u, 9u)], d3 = cov[propid_cov_index(6u, 10u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float k3_loaded = (7.0f * PROPID_RATE_LOADING) * k3;
         block00 += (t0 + g0_5 * k3_loaded) * g0_5;
         block01 += t0 * g1_5;
@@ -226,13 +241,21 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(6u, 6u)] = (1.0f + PROPID_VAR_LOADING) * k3 + q_thrust;
         PROPID_SCHEDULE_BARRIER();
     }
+    /* The rate block's elements complete after column 6: (T F^T)_ab = T_ab + sum_p
+     * T_a,(column p of row b) G_bp, on the diagonal with the loading c (P_aa + sum_p G_ap^2 P_pp)
+     * and Q dt. */
+    cov[propid_cov_index(0u, 0u)] = block00 + q_rate;
+    cov[propid_cov_index(0u, 1u)] = block01;
+    cov[propid_cov_index(1u, 1u)] = block11 + q_rate;
     { /* column 7 */
         const float p0 = cov[propid_cov_index(0u, 7u)], p1 = cov[propid_cov_index(1u, 7u)], p2 = cov[propid_cov_index(2u, 7u)];
         const float k0 = cov[propid_cov_index(3u, 7u)], k1 = cov[propid_cov_index(4u, 7u)], k2 = cov[propid_cov_index(5u, 7u)], k3 = cov[propid_cov_index(6u, 7u)];
         const float d0 = cov[propid_cov_index(7u, 7u)], d1 = cov[propid_cov_index(7u, 8u)], d2 = cov[propid_cov_index(7u, 9u)], d3 = cov[propid_cov_index(7u, 10u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float d0_loaded = (7.0f * PROPID_RATE_LOADING) * d0;
         block02 += t0 * g2_2;
         block12 += t1 * g2_2;
@@ -247,9 +270,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 8u)], p1 = cov[propid_cov_index(1u, 8u)], p2 = cov[propid_cov_index(2u, 8u)];
         const float k0 = cov[propid_cov_index(3u, 8u)], k1 = cov[propid_cov_index(4u, 8u)], k2 = cov[propid_cov_index(5u, 8u)], k3 = cov[propid_cov_index(6u, 8u)];
         const float d0 = cov[propid_cov_index(7u, 8u)], d1 = cov[propid_cov_index(8u, 8u)], d2 = cov[propid_cov_index(8u, 9u)], d3 = cov[propid_cov_index(8u, 10u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float d1_loaded = (7.0f * PROPID_RATE_LOADING) * d1;
         block02 += t0 * g2_3;
         block12 += t1 * g2_3;
@@ -264,9 +289,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 9u)], p1 = cov[propid_cov_index(1u, 9u)], p2 = cov[propid_cov_index(2u, 9u)];
         const float k0 = cov[propid_cov_index(3u, 9u)], k1 = cov[propid_cov_index(4u, 9u)], k2 = cov[propid_cov_index(5u, 9u)], k3 = cov[propid_cov_index(6u, 9u)];
         const float d0 = cov[propid_cov_index(7u, 9u)], d1 = cov[propid_cov_index(8u, 9u)], d2 = cov[propid_cov_index(9u, 9u)], d3 = cov[propid_cov_index(9u, 10u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float d2_loaded = (7.0f * PROPID_RATE_LOADING) * d2;
         block02 += t0 * g2_4;
         block12 += t1 * g2_4;
@@ -281,9 +308,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 10u)], p1 = cov[propid_cov_index(1u, 10u)], p2 = cov[propid_cov_index(2u, 10u)];
         const float k0 = cov[propid_cov_index(3u, 10u)], k1 = cov[propid_cov_index(4u, 10u)], k2 = cov[propid_cov_index(5u, 10u)], k3 = cov[propid_cov_index(6u, 10u)];
         const float d0 = cov[propid_cov_index(7u, 10u)], d1 = cov[propid_cov_index(8u, 10u)], d2 = cov[propid_cov_index(9u, 10u)], d3 = cov[propid_cov_index(10u, 10u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         const float d3_loaded = (7.0f * PROPID_RATE_LOADING) * d3;
         block02 += t0 * g2_5;
         block12 += t1 * g2_5;
@@ -294,13 +323,21 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(10u, 10u)] = drag_factor * d3 + q_drag;
         PROPID_SCHEDULE_BARRIER();
     }
+    /* The rate block's elements complete after column 10: (T F^T)_ab = T_ab + sum_p
+     * T_a,(column p of row b) G_bp, on the diagonal with the loading c (P_aa + sum_p G_ap^2 P_pp)
+     * and Q dt. */
+    cov[propid_cov_index(0u, 2u)] = block02;
+    cov[propid_cov_index(1u, 2u)] = block12;
+    cov[propid_cov_index(2u, 2u)] = block22 + q_rate;
     { /* column 11 */
         const float p0 = cov[propid_cov_index(0u, 11u)], p1 = cov[propid_cov_index(1u, 11u)], p2 = cov[propid_cov_index(2u, 11u)];
         const float k0 = cov[propid_cov_index(3u, 11u)], k1 = cov[propid_cov_index(4u, 11u)], k2 = cov[propid_cov_index(5u, 11u)], k3 = cov[propid_cov_index(6u, 11u)];
         const float d0 = cov[propid_cov_index(7u, 11u)], d1 = cov[propid_cov_index(8u, 11u)], d2 = cov[propid_cov_index(9u, 11u)], d3 = cov[propid_cov_index(10u, 11u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         cov[propid_cov_index(0u, 11u)] = t0;
         cov[propid_cov_index(1u, 11u)] = t1;
         cov[propid_cov_index(2u, 11u)] = t2;
@@ -312,9 +349,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 12u)], p1 = cov[propid_cov_index(1u, 12u)], p2 = cov[propid_cov_index(2u, 12u)];
         const float k0 = cov[propid_cov_index(3u, 12u)], k1 = cov[propid_cov_index(4u, 12u)], k2 = cov[propid_cov_index(5u, 12u)], k3 = cov[propid_cov_index(6u, 12u)];
         const float d0 = cov[propid_cov_index(7u, 12u)], d1 = cov[propid_cov_index(8u, 12u)], d2 = cov[propid_cov_index(9u, 12u)], d3 = cov[propid_cov_index(10u, 12u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         cov[propid_cov_index(0u, 12u)] = t0;
         cov[propid_cov_index(1u, 12u)] = t1;
         cov[propid_cov_index(2u, 12u)] = t2;
@@ -326,9 +365,11 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         const float p0 = cov[propid_cov_index(0u, 13u)], p1 = cov[propid_cov_index(1u, 13u)], p2 = cov[propid_cov_index(2u, 13u)];
         const float k0 = cov[propid_cov_index(3u, 13u)], k1 = cov[propid_cov_index(4u, 13u)], k2 = cov[propid_cov_index(5u, 13u)], k3 = cov[propid_cov_index(6u, 13u)];
         const float d0 = cov[propid_cov_index(7u, 13u)], d1 = cov[propid_cov_index(8u, 13u)], d2 = cov[propid_cov_index(9u, 13u)], d3 = cov[propid_cov_index(10u, 13u)];
-        const float t0 = (g0_0 * p1 + g0_1 * p2 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
-        const float t1 = (g1_0 * p0 + g1_1 * p2 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
-        const float t2 = p2 + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
+        float head0 = g0_0 * p1 + g0_1 * p2, head1 = g1_0 * p0 + g1_1 * p2, p2_sum = p2;
+        PROPID_REGISTER_ORDER3(head0, head1, p2_sum);
+        const float t0 = (head0 + g0_2 * k0 + g0_3 * k1 + g0_4 * k2 + g0_5 * k3) + p0;
+        const float t1 = (head1 + g1_2 * k0 + g1_3 * k1 + g1_4 * k2 + g1_5 * k3) + p1;
+        const float t2 = p2_sum + g2_0 * p0 + g2_1 * p1 + g2_2 * d0 + g2_3 * d1 + g2_4 * d2 + g2_5 * d3;
         cov[propid_cov_index(0u, 13u)] = t0;
         cov[propid_cov_index(1u, 13u)] = t1;
         cov[propid_cov_index(2u, 13u)] = t2;
@@ -336,14 +377,6 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
         cov[propid_cov_index(13u, 13u)] = (1.0f + PROPID_VAR_LOADING) * own + q_bias;
         PROPID_SCHEDULE_BARRIER();
     }
-    /* The rate block: (T F^T)_ab = T_ab + sum_p T_a,(column p of row b) G_bp, and on the
-     * diagonal the loading c (P_aa + sum_p G_ap^2 P_pp), all collected in the sweep. */
-    cov[propid_cov_index(0u, 0u)] = block00 + q_rate;
-    cov[propid_cov_index(0u, 1u)] = block01;
-    cov[propid_cov_index(0u, 2u)] = block02;
-    cov[propid_cov_index(1u, 1u)] = block11 + q_rate;
-    cov[propid_cov_index(1u, 2u)] = block12;
-    cov[propid_cov_index(2u, 2u)] = block22 + q_rate;
 }
 #endif
 
