@@ -649,16 +649,23 @@ quad_vectors(const float *cov, float *h0, float *h1, float *h2, const float c10,
 }
 #endif
 
+/* fuse_quad_usual's result when it has written nothing (apply_three_quad's are
+ * 0 when every variance is inside its bounds, else how many are outside, at
+ * most 14, or a flag below this). */
+#define PROPID_NOT_FUSED UINT32_MAX
+
 /* The usual quad sample, straight-line: all three axes pass the gate, every
  * S >= R and the vectors are finite. Same arithmetic in the same order as
  * fuse_axis (the scalars S, innovation and projections are formed from the few
- * vector entries they need before the vectors themselves). Returns 1 with the
- * three axes queued in `pending` and their innovations recorded, or 0 without
- * writing anything: the general path then handles the sample. Not inlined, and
- * given the covariance as its own pointer: offsets from the filter's base exceed
- * the 1 KiB reach of a VFP load. */
-static __attribute__((noinline)) int
-fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
+ * vector entries they need before the vectors themselves). With the three axes
+ * queued in `pending` and their innovations recorded, it ends in their
+ * downdate (apply_three_quad, a tail call: its frame replaces this one) and
+ * returns its result; else PROPID_NOT_FUSED without writing anything: the
+ * general path then handles the sample. Not inlined, and given the covariance
+ * as its own pointer: offsets from the filter's base exceed the 1 KiB reach of
+ * a VFP load. */
+static __attribute__((noinline)) uint32_t
+fuse_quad_usual(float *restrict cov, propid_core_t *restrict core,
                 const propid_derived_t *restrict derived, pending_t *restrict pending,
                 const float *restrict gyro)
 {
@@ -683,7 +690,7 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
     const float nu0_sq = nu0 * nu0;
     /* S < R (even within rounding: fuse_axis decides) leaves the fast path. */
     if (propid_outside_positive_range(var0, var_bits, var_range_bits) || !(nu0_sq <= gate_sq * var0)) {
-        return 0;
+        return PROPID_NOT_FUSED;
     }
     const float inv0 = 1.0f / var0;
     const float step0 = nu0 * inv0;
@@ -698,7 +705,7 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
     const float nu1 = gyro[1] - (state[1] + h0_r1 * step0) - (state[b1] + h0_b1 * step0);
     const float nu1_sq = nu1 * nu1;
     if (propid_outside_positive_range(var1, var_bits, var_range_bits) || !(nu1_sq <= gate_sq * var1)) {
-        return 0;
+        return PROPID_NOT_FUSED;
     }
     const float inv1 = 1.0f / var1;
     const float step1 = nu1 * inv1;
@@ -718,7 +725,7 @@ fuse_quad_usual(const float *restrict cov, propid_core_t *restrict core,
     const float nu2 = gyro[2] - (state[2] + shift_r2) - (state[b2] + shift_b2);
     const float nu2_sq = nu2 * nu2;
     if (propid_outside_positive_range(var2, var_bits, var_range_bits) || !(nu2_sq <= gate_sq * var2)) {
-        return 0;
+        return PROPID_NOT_FUSED;
     }
     const float inv2 = 1.0f / var2;
 
@@ -770,7 +777,7 @@ PROPID_UNROLL(14)
 #endif
 #undef PROPID_P
     if (!isfinite(check)) {
-        return 0;
+        return PROPID_NOT_FUSED;
     }
     const float inv_gate_sq = derived->inv_gate_sq;
     core->innovation[0] = nu0;
@@ -785,7 +792,7 @@ PROPID_UNROLL(14)
     pending->inv_var[0] = inv0;
     pending->inv_var[1] = inv1;
     pending->inv_var[2] = inv2;
-    return 1;
+    return apply_three_quad(cov, core, pending, derived);
 }
 
 #if PROPID_GENERAL_VEHICLES
@@ -957,10 +964,11 @@ static PROPID_QUAD_INLINE int fuse_one_pass(propid_filter_t *filter, const float
 #endif
     {
         pending_t pending;
-        if (!fuse_quad_usual(cov, core, derived, &pending, gyro)) {
+        const uint32_t outside = fuse_quad_usual(core->cov, core, derived, &pending, gyro);
+        if (outside == PROPID_NOT_FUSED) {
             return 0;
         }
-        inside = apply_three_quad(core->cov, core, &pending, derived) == 0u;
+        inside = outside == 0u;
     }
     /* Variance floors and ceilings: tested inside the pass; the full pass (which
      * also repairs) only when one is outside. */
