@@ -40,8 +40,9 @@ typedef struct {
 /* The size-lean build's apply_three_quad (below): the same arithmetic per element
  * and per state in the same order, so the same results, row by row over loops
  * (small code, more instructions: the loop control and each element's three
- * vector values loaded per element). */
-static __attribute__((noinline)) uint32_t
+ * vector values loaded per element). Not cloned: GCC's copy specialised for its
+ * one caller (fuse_quad_usual's tail call) took 42 instructions more a step. */
+static __attribute__((noinline)) PROPID_NO_CLONE uint32_t
 apply_three_quad(float *restrict cov, propid_core_t *restrict core, pending_t *restrict pending,
                  const propid_derived_t *restrict derived)
 {

@@ -243,6 +243,13 @@ static inline uint8_t propid_jacobian_column(const propid_derived_t *derived, ui
 #else
 #define PROPID_NO_EARLY_SCHEDULE
 #endif
+/* PROPID_NO_CLONE: a function GCC must not copy into a version specialised for
+ * its caller (GCC only, as above). */
+#if defined(__GNUC__) && !defined(__clang__)
+#define PROPID_NO_CLONE __attribute__((noclone))
+#else
+#define PROPID_NO_CLONE
+#endif
 
 /* Covariance health in float32 (docs/math.md §2 "Rounding loading", design.md
  * §12). The prediction multiplies a variance by (1 + PROPID_VAR_LOADING): a PSD
