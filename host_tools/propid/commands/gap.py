@@ -70,6 +70,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the gyro's constant bias before the measured torque's gyroscopic term w x (J w): "
                              "'off' (the default: the gyro as logged) or 'attitude' (measured against the logged "
                              "attitude and removed; evaluated, docs/gap.md 'Data preparation')")
+    parser.add_argument("--lag-nuisance", choices=("logged", "shifted"), default="logged",
+                        help="the stream alignment's nuisance columns (rotor_gyroscopic, rotor_drag, com_offset, "
+                             "aero_damping): 'logged' (built once from the logged rotor stream, the default) or "
+                             "'shifted' (built at each candidate lag from the stream shifted by it; evaluated, not "
+                             "the default: docs/gap.md 'Stream alignment')")
     parser.add_argument("--no-progress", "--quiet", dest="quiet", action="store_true",
                         help="no progress bar (--quiet: the older spelling)")
 
@@ -176,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
     options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
                                repeats=args.repeats, lag_evidence=args.lag_evidence,
                                ground_effect_height=args.ground_effect_height, replication=args.replication,
-                               gyro_bias=args.gyro_bias)
+                               gyro_bias=args.gyro_bias, lag_nuisance=args.lag_nuisance)
     logs, left_out = without_unflown_logs(logs, vehicle, options)
     for entry in left_out:
         print(f"propid gap: left out {entry['why']}", file=sys.stderr)

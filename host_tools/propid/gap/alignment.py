@@ -11,15 +11,20 @@ cross-validation on the raw rows' 2 s blocks is kept for reference; with a singl
 nothing is held out there, and its interval is undefined (NaN).
 All three torque axes; yaw with per-rotor km and the rotor-acceleration term J_r sum s_i
 dOmega_i/dt (both shifted with the stream: a lag and rotor inertia look alike on yaw, so
-they are fitted together). Rate damping (-D w) and the roll/pitch columns of the effects that do
-not depend on the rotor stream's timing (rotor_gyroscopic, rotor_drag, com_offset,
-aero_damping) are fitted with every lag: on a narrow-band signal these torques and a lag
-look alike, and the lag must not absorb them.
+they are fitted together). Rate damping (-D w) and the roll/pitch columns of rotor_gyroscopic,
+rotor_drag, com_offset and aero_damping are fitted with every lag: on a narrow-band signal
+these torques and a lag look alike, and the lag must not absorb them. By default those columns
+are built once, from the logged (unshifted) rotor stream; with `nuisance_at` (--lag-nuisance
+shifted, evaluated, not the default: docs/gap.md) they are built at each lag from the stream
+shifted by it, as every column is after the alignment (three of the four are functions of the
+rotor speeds).
 A shift commutes with the band-pass, so the band-passed rotor regressors are shifted,
 not refiltered.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
@@ -46,20 +51,28 @@ def _shift_rows(f: Flight, x: np.ndarray, delay: float) -> np.ndarray:
     return out
 
 
+def _nuisance_columns(flights: list[Flight], nuisance: list[dict], rows: list[np.ndarray]) -> dict:
+    return {a: np.concatenate([f.filtered(n[a], response=True)[r] for f, n, r in zip(flights, nuisance, rows)])
+            for a in ("roll", "pitch")}
+
+
 def delay_designs(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, grid: np.ndarray,
-                  nuisance: list[dict] | None = None) -> list[Design]:
+                  nuisance: list[dict] | None = None,
+                  nuisance_at: Callable[[float], list[dict]] | None = None) -> list[Design]:
     """Per lag: roll/pitch per-rotor kf, yaw per-rotor km and the rotor-acceleration term
     (shifted with the rotor stream), rate damping on all three axes, and the nuisance
-    effect columns on roll/pitch (not shifted)."""
+    effect columns on roll/pitch: `nuisance` (per flight, the same at every lag) or, when
+    given, `nuisance_at(d)` (per flight, built from the rotor stream shifted by d)."""
     rows = [segment_rows(f) for f in flights]
     filtered_u = [f.filtered(f.speed**2, response=True) for f in flights]
     filtered_spin = [f.filtered((f.speed_dot @ signs)[:, None]) for f in flights]
     damping = np.concatenate([f.filtered(-f.gyro, response=True)[r] for f, r in zip(flights, rows)])
     n_extra = 0
     extra = {}
-    if nuisance:
-        for a in ("roll", "pitch"):
-            extra[a] = np.concatenate([f.filtered(n[a], response=True)[r] for f, n, r in zip(flights, nuisance, rows)])
+    if nuisance_at is not None:
+        n_extra = nuisance_at(0.0)[0]["roll"].shape[1]
+    elif nuisance:
+        extra = _nuisance_columns(flights, nuisance, rows)
         n_extra = extra["roll"].shape[1]
     resp = [responses(f, None) for f in flights]
     ys = {a: np.concatenate([f.filtered(rr[a])[r] for f, rr, r in zip(flights, resp, rows)])
@@ -86,6 +99,8 @@ def delay_designs(flights: list[Flight], positions: np.ndarray, signs: np.ndarra
         z1 = np.zeros((n, 1))
         zx = np.zeros((n, n_extra))
         dmp = [np.column_stack([damping[:, k] if j == k else np.zeros(n) for j in range(3)]) for k in range(3)]
+        if nuisance_at is not None and n_extra:
+            extra = _nuisance_columns(flights, nuisance_at(float(d)), rows)
         x = {"roll": np.column_stack([u * positions[:, 1][None, :], zu, z1, dmp[0]] + ([extra["roll"]] if n_extra else [])),
              "pitch": np.column_stack([-u * positions[:, 0][None, :], zu, z1, dmp[1]] + ([extra["pitch"]] if n_extra else [])),
              "yaw": np.column_stack([zu, u * signs[None, :], spin, dmp[2]] + ([zx] if n_extra else []))}
@@ -101,12 +116,13 @@ def delay_designs(flights: list[Flight], positions: np.ndarray, signs: np.ndarra
 
 
 def search(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, progress=None,
-           nuisance: list[dict] | None = None, evidence: bool = True) -> dict:
+           nuisance: list[dict] | None = None, evidence: bool = True,
+           nuisance_at: Callable[[float], list[dict]] | None = None) -> dict:
     """The lag (all-data fit) and, with `evidence`, its held-out evidence on whitened rows
     (whitened_evidence, `whitened`); `explained_fraction` / `ci` are the raw rows' own
-    cross-validation (kept for reference)."""
+    cross-validation (kept for reference). `nuisance_at`: delay_designs."""
     grid = _grid(flights)
-    designs = delay_designs(flights, positions, signs, grid, nuisance)
+    designs = delay_designs(flights, positions, signs, grid, nuisance, nuisance_at)
     grs = []
     for d in designs:
         gr = scoring.grams(d)

@@ -24,6 +24,7 @@ NEEDS_TEXT = {"inertia": "vehicle inertia", "acc": "acc_x/y/z", "mass": "vehicle
 
 
 ALIGNMENT_NUISANCE = ("rotor_gyroscopic", "rotor_drag", "com_offset", "aero_damping")
+LAG_NUISANCE_MODES = ("logged", "shifted")
 SCALE_LIKE = ("inertia_error", "gyro_scale", "thrust_nonlinearity")  # effects a regressor attenuation mimics
 # A lag up to one log sample is the logging convention (each stream's latest sample in a
 # row), not a telemetry delay; below 5 ms the sensor chain's own lags (gyro filtering) rule.
@@ -50,6 +51,10 @@ class Options:
     # the gyro's constant bias before the measured torque: "off" (the default) or "attitude" (measured
     # against the logged attitude; evaluated, not the default: docs/gap.md "Data preparation")
     gyro_bias: str = "off"
+    # the alignment's nuisance columns (rotor_gyroscopic, rotor_drag, com_offset, aero_damping): "logged"
+    # (built once from the logged rotor stream, the default) or "shifted" (built at each candidate lag from
+    # the stream shifted by it; evaluated, not the default: docs/gap.md "Stream alignment")
+    lag_nuisance: str = "logged"
 
 
 HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0, 5.0)
@@ -188,8 +193,18 @@ def _alignment_nuisance(f: Flight, ctx: Context, candidates: list[str]) -> dict:
     return {a: np.column_stack(v) if v else np.zeros((len(f.t), 0)) for a, v in cols.items()}
 
 
+def _nuisance_at(flights: list[Flight], ctx: Context, candidates: list[str], mode: str):
+    """None ("logged": the alignment fits the nuisance columns of the logged stream at every lag) or,
+    "shifted", d -> each flight's nuisance columns built from its rotor stream shifted by d."""
+    if mode == "logged":
+        return None
+    if mode != "shifted":
+        raise UserError(f"lag_nuisance {mode!r}: choose one of {', '.join(LAG_NUISANCE_MODES)}")
+    return lambda d: [_alignment_nuisance(shifted_flight(f, d), ctx, candidates) for f in flights]
+
+
 def per_log_alignment(flights: list[Flight], held: list[Flight], vehicle: Vehicle, candidates: list[str],
-                      evidence: bool = False) -> list[dict]:
+                      evidence: bool = False, lag_nuisance: str = "logged") -> list[dict]:
     """Each log's own rotor-stream lag (the same search as the pooled one, on that log
     alone): the lag belongs to a log's telemetry schedule, not to the vehicle. A held-out
     log's lag is measured on its own stream, as the filter's per-log delay rule does; the
@@ -199,7 +214,8 @@ def per_log_alignment(flights: list[Flight], held: list[Flight], vehicle: Vehicl
     for f in flights + held:
         ctx = make_context([f], vehicle, np.ones(vehicle.rotor_count), np.ones(vehicle.rotor_count))
         one = alignment.search([f], vehicle.positions, vehicle.yaw_signs,
-                               nuisance=[_alignment_nuisance(f, ctx, candidates)], evidence=evidence)
+                               nuisance=[_alignment_nuisance(f, ctx, candidates)], evidence=evidence,
+                               nuisance_at=_nuisance_at([f], ctx, candidates, lag_nuisance))
         out.append({"delay_s": float(one["delay_s"]), **({"whitened": one["whitened"]} if evidence else {})})
     return out
 
@@ -266,7 +282,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     nuisance = [_alignment_nuisance(f, ctx_align, candidates) for f in flights]
     whitened = options.lag_evidence == "whitened"
     align = alignment.search(flights, vehicle.positions, vehicle.yaw_signs, progress=lambda: progress(0), nuisance=nuisance,
-                             evidence=whitened)
+                             evidence=whitened,
+                             nuisance_at=_nuisance_at(flights, ctx_align, candidates, options.lag_nuisance))
     progress(20)
     # the alignment is always applied (stream misalignment is part of the base fit); it is
     # reported as esc_delay when it is significant and longer than the log's sample period
@@ -284,14 +301,16 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     if whitened and len(names) > 1:
         # a lag belongs to a log: each log's own lag on its own whitened rows (per_log_lag_decision),
         # not one pooled lag tested on whole held-out logs
-        decision = per_log_lag_decision(per_log_alignment(flights, held_flights, vehicle, candidates, evidence=True),
+        decision = per_log_lag_decision(per_log_alignment(flights, held_flights, vehicle, candidates, evidence=True,
+                                                          lag_nuisance=options.lag_nuisance),
                                         names, len(flights), sample_period)
         delays, shown, delay_significant = decision["delays"], decision["shown"], decision["significant"]
         evidence = decision["evidence"]
         align["per_log_delay_s"] = dict(zip(names, delays))
         align["per_log_evidence"] = decision["per_log"]
     elif delay and len(names) > 1:
-        delays = [e["delay_s"] for e in per_log_alignment(flights, held_flights, vehicle, candidates)]
+        delays = [e["delay_s"] for e in per_log_alignment(flights, held_flights, vehicle, candidates,
+                                                          lag_nuisance=options.lag_nuisance)]
         align["per_log_delay_s"] = dict(zip(names, delays))
     work = [shifted_flight(f, d) for f, d in zip(flights, delays)]
     work_held = [shifted_flight(f, d) for f, d in zip(held_flights, delays[len(flights):])]
@@ -409,7 +428,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         "gyro_bias": {"mode": options.gyro_bias,
                       "per_log": {str(f.path or f.name): f.gyro_bias for f in [*flights, *held_flights]}},
         "stream_quality": stream_quality(flights, held_flights, options.repeats),
-        "alignment": {k: v for k, v in align.items() if k not in ("held_zero", "held_best")},
+        "alignment": {**{k: v for k, v in align.items() if k not in ("held_zero", "held_best")},
+                      "nuisance": options.lag_nuisance},
         "base_model": {"kf_per_rotor": kf_rotor.tolist(), "km_per_rotor": km_rotor.tolist(),
                        "axis_sigma": dict(zip(design.axes, (1 / np.sqrt(gr.weight)).tolist()))},
     }
