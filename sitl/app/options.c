@@ -63,6 +63,7 @@ void sitl_options_default(sitl_options_t *o)
     o->prior_km_rel_std = -1.0;
     o->prior_bias_std = -1.0;
     o->prior_rate_std = -1.0;
+    o->prior_accel_bias_std = -1.0;
     o->filter_rate_noise = -1.0;
     o->filter_coeff_walk = -1.0;
     o->filter_bias_walk = -1.0;
@@ -347,6 +348,10 @@ static const opt_t options[] = {
            "filter prior body-rate std (rate_std0; default: library).\n"
            "The filter's rate starts at 0: a small value says the\n"
            "vehicle is known to be at rest at the first gyro sample"),
+    NUMBER(NULL, "prior-accel-bias-std", prior_accel_bias_std, 1e-6, 10.0, "M_S2",
+           "filter prior accelerometer z-bias std (accel_bias_std0; with\n"
+           "--filter-accel; default: library), e.g. the IMU datasheet's\n"
+           "zero-g offset"),
     NUMBER(NULL, "filter-rate-noise", filter_rate_noise, 0.0, 1e4, "X",
            "filter rate_process_noise [rad/s^2/sqrt(Hz)] (default: library)"),
     NUMBER(NULL, "filter-coeff-walk", filter_coeff_walk, 0.0, 10.0, "X",
@@ -689,6 +694,11 @@ int sitl_options_parse(sitl_options_t *o, int argc, char **argv)
     }
     if (o->start_on_ground && !o->ground_enabled) {
         fprintf(stderr, "propid_sitl: --start-on-ground needs the ground (drop --no-ground)\n");
+        return SITL_EXIT_USAGE;
+    }
+    if (o->prior_accel_bias_std > 0.0 && !o->filter_accel) {
+        /* The filter has no accelerometer bias state without the aiding: the prior would go unused. */
+        fprintf(stderr, "propid_sitl: --prior-accel-bias-std needs --filter-accel\n");
         return SITL_EXIT_USAGE;
     }
     return 0;
