@@ -469,6 +469,10 @@ static const opt_t options[] = {
     FLAG(NULL, "damage-landed-input", damage_landed_input, 1,
          "tell the detector when the vehicle is on the ground (the\n"
          "plant's contact, an ideal land detector): no test there"),
+    NUMBER(NULL, "oracle-damage-delay", oracle_damage_delay_s, 0.0, 10.0, "S",
+           "Oracle mode: the allocation learns each loss S after it\n"
+           "strikes (default 0: at once), the best a detector that\n"
+           "takes S could give"),
     NUMBER("Excitation (docs/results.md, \"Extended campaign\")", "null-dither", null_dither, 0.0, 0.5,
            "FRACTION",
            "more than 4 rotors: excite the allocation's null space\n"
@@ -694,6 +698,10 @@ int sitl_options_parse(sitl_options_t *o, int argc, char **argv)
     }
     if (o->start_on_ground && !o->ground_enabled) {
         fprintf(stderr, "propid_sitl: --start-on-ground needs the ground (drop --no-ground)\n");
+        return SITL_EXIT_USAGE;
+    }
+    if (o->oracle_damage_delay_s > 0.0 && o->mode != SITL_MODE_ORACLE) {
+        fprintf(stderr, "propid_sitl: --oracle-damage-delay needs --mode oracle\n");
         return SITL_EXIT_USAGE;
     }
     if (o->prior_accel_bias_std > 0.0 && !o->filter_accel) {

@@ -126,6 +126,7 @@ typedef struct {
     double damage_false_alarms_per_hour; /* detector design rate (< 0 = library default) */
     double damage_design_loss;          /* detector's derived design loss (< 0 = library default: off) */
     int damage_landed_input;            /* the plant's ground contact to propid_damage_set_landed */
+    double oracle_damage_delay_s;       /* Oracle mode: the allocation learns a loss this late (0 = at once) */
     double null_dither;                 /* null-space excitation, fraction of mean Omega^2 (0 = off) */
 } sitl_options_t;
 

@@ -154,6 +154,7 @@ typedef struct {
     int last_status;
     propid_damage_t detector;
     int damage_applied[SITL_MAX_DAMAGE];
+    int oracle_informed[SITL_MAX_DAMAGE]; /* the Oracle's allocation has the loss */
     int has_flown;    /* the vehicle has been off the ground */
     int touched_down; /* and has touched it again since: down, the flight is over */
     sitl_rng_t disturbance_rng; /* its own stream: every other draw is the same with and without it */
@@ -430,6 +431,15 @@ static void teardown(flight_t *f, sitl_result_t *r)
 
 /* Damages due by time t: the plant's (true) kf and km drop; the Oracle's
  * allocation knows at once. */
+/* The Oracle's allocation takes the damaged truth (every loss applied so far). */
+static void oracle_learns_damage(flight_t *f)
+{
+    if (sitl_allocation_set_coefficients(&f->allocation, f->true_kf, f->true_km) == 0) {
+        memcpy(f->used_kf, f->true_kf, sizeof(f->used_kf));
+        memcpy(f->used_km, f->true_km, sizeof(f->used_km));
+    }
+}
+
 static void apply_damage(flight_t *f, const sitl_options_t *o, sitl_result_t *r, double t)
 {
     /* A vehicle that has flown and touched the ground again is down: its rotors
@@ -454,14 +464,25 @@ static void apply_damage(flight_t *f, const sitl_options_t *o, sitl_result_t *r,
         f->plant.thrust_coeff[d->rotor] = f->true_kf[d->rotor];
         f->plant.drag_coeff[d->rotor] = f->true_km[d->rotor];
         f->plant_prepared_stale = 1;
-        if (o->mode == SITL_MODE_ORACLE &&
-            sitl_allocation_set_coefficients(&f->allocation, f->true_kf, f->true_km) == 0) {
-            memcpy(f->used_kf, f->true_kf, sizeof(f->used_kf));
-            memcpy(f->used_km, f->true_km, sizeof(f->used_km));
+        if (o->mode == SITL_MODE_ORACLE && !(o->oracle_damage_delay_s > 0.0)) {
+            f->oracle_informed[k] = 1;
+            oracle_learns_damage(f);
         }
         if (!o->quiet) {
             fprintf(stderr, "t=%6.3f s  damage: rotor %d loses %.0f %% of kf and km\n", t,
                     d->rotor + 1, 100.0 * d->fraction);
+        }
+    }
+    if (o->mode != SITL_MODE_ORACLE || !(o->oracle_damage_delay_s > 0.0)) {
+        return;
+    }
+    /* The Oracle told late (--oracle-damage-delay): the allocation a detector that
+     * takes that long could give at best. */
+    for (int k = 0; k < o->damage_count; k++) {
+        if (f->damage_applied[k] && !f->oracle_informed[k] &&
+            t >= o->damage[k].time_s + o->oracle_damage_delay_s) {
+            f->oracle_informed[k] = 1;
+            oracle_learns_damage(f);
         }
     }
 }

@@ -422,6 +422,68 @@ def test_sitl_damage_with_the_accelerometer_aiding(tmp_path, sitl_binary):
     assert "accel" not in json.loads(summary.read_text())
 
 
+def test_sitl_sets_the_accelerometer_bias_prior(tmp_path, sitl_binary):
+    """--prior-accel-bias-std reaches the filter's z-bias prior: at the step's hover the bias and the
+    collective thrust are seen only as a sum, so the bias keeps most of its prior; with the
+    library's 0.5 m/s^2 its claimed std stays above 0.3, with a datasheet's 20 mg (0.196 m/s^2) it
+    is below that figure. Without --filter-accel the option is a usage error (no bias state)."""
+    import json
+    import subprocess
+
+    summary = tmp_path / "s.json"
+    base = [str(sitl_binary), "--vehicle", "crazyflie-plus", "--trajectory", "step", "--seed", "5",
+            "--duration", "4", "--start-at-rest", "--filter-rate-noise", "0.2",
+            "--summary-json", str(summary), "--quiet"]
+    stds = []
+    for extra in ([], ["--prior-accel-bias-std", "0.196133"]):
+        proc = subprocess.run(base + ["--filter-accel"] + extra, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        accel = json.loads(summary.read_text())["accel"]
+        assert accel["accepted"] > 3900 and accel["reanchored"] == 0
+        stds.append(accel["est_bias_std_z"])
+    assert stds[0] > 0.3
+    assert 0 < stds[1] < 0.196133
+    proc = subprocess.run(base + ["--prior-accel-bias-std", "0.196133"], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and "--prior-accel-bias-std needs --filter-accel" in proc.stderr
+
+
+def test_sitl_oracle_told_late(tmp_path, sitl_binary):
+    """--oracle-damage-delay S: the Oracle's allocation keeps the healthy coefficients for S after the
+    loss and takes the damaged truth then. Its commands match an Oracle never told up to the damage
+    plus S and leave it one control step after; delay 0 is the Oracle told at once, byte for byte.
+    Other modes reject the option (only the Oracle's allocation reads the truth)."""
+    import subprocess
+
+    from propid import table1
+
+    base = [str(sitl_binary), "--vehicle", "crazyflie-x", "--trajectory", "circle", "--mode", "oracle",
+            "--seed", "7", "--duration", "3", "--damage", "3@1.5=0.4", "--quiet"]
+
+    def fly(name, extra):
+        log = tmp_path / f"{name}.csv"
+        proc = subprocess.run(base + ["--log", str(log)] + extra, capture_output=True, text=True, timeout=120)
+        assert proc.returncode in (0, 3), proc.stderr
+        return log
+
+    at_once = fly("at_once", [])
+    assert fly("zero", ["--oracle-damage-delay", "0"]).read_bytes() == at_once.read_bytes()
+    late = table1.read_log_columns(fly("late", ["--oracle-damage-delay", "0.02"]))
+    never = table1.read_log_columns(fly("never", ["--oracle-damage-delay", "9"]))
+    told = table1.read_log_columns(at_once)
+    t = late["t"]
+    cmd = lambda cols: np.column_stack([cols[f"cmd_{i}"] for i in range(1, 5)])
+    before = t < 1.5 + 0.02 - 1e-9
+    after = t > 1.5 + 0.02 + 0.002 + 1e-9
+    assert np.array_equal(cmd(late)[before], cmd(never)[before])
+    assert not np.allclose(cmd(late)[after][:5], cmd(never)[after][:5])
+    just_after = (t > 1.5 + 0.002 + 1e-9) & before
+    assert just_after.any() and not np.allclose(cmd(late)[just_after], cmd(told)[just_after])
+    proc = subprocess.run([str(sitl_binary), "--duration", "0.1", "--oracle-damage-delay", "0.005", "--quiet"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "--oracle-damage-delay needs --mode oracle" in proc.stderr
+
+
 def test_sitl_marks_a_damage_after_the_vehicle_came_down(tmp_path, sitl_binary):
     """A 90 % loss brings a quad down from its 1 m hover; a later loss strikes a vehicle
     that has touched the ground after flying, and the summary says so."""
