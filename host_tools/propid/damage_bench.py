@@ -85,6 +85,8 @@ class BenchConfig:
     workers: int = 2
     false_alarms_per_hour: float | None = None  # detector design rate (None: library default)
     filter_accel: bool = FILTER_ACCEL  # the filter fuses the accelerometer (--filter-accel)
+    # each damaged flight's Oracle also flown told this late (--oracle-damage-delay; None: not flown)
+    late_oracle_s: float | None = None
     # extra propid_sitl options for every flight (e.g. a filter option), recorded in the conditions
     sitl_args: list[str] = field(default_factory=list)
 
@@ -220,6 +222,10 @@ def run_flight(config: BenchConfig, spec: FlightSpec) -> dict:
         record = {"spec": asdict(spec), "filter": _fly(config, spec, "filter", work)}
         if spec.damages:
             record["oracle"] = _fly(config, spec, "oracle", work)
+            if config.late_oracle_s:
+                late = replace(config, sitl_args=list(config.sitl_args)
+                               + ["--oracle-damage-delay", repr(config.late_oracle_s)])
+                record["oracle_late"] = _fly(late, spec, "oracle", work)
             # The same flights without the damage, over the same window: how much of
             # the Filter/Oracle gap is there before any damage.
             intact = replace(spec, damages=[])
@@ -321,6 +327,37 @@ def accel_bias_rows(records: list[dict]) -> dict | None:
             "gated_samples": int(sum(row["gated"] for row in rows)),
             "reanchored_flights": sum(1 for row in rows if row["reanchored"] > 0)}
     return out
+
+
+def late_oracle_rows(damaged: list[dict], delay_s: float | None) -> dict | None:
+    """The Oracle told delay_s late against the Oracle told at once (crash-aware, as the Filter is
+    read): how much of the target's 1.5x a detector that takes delay_s uses up by itself, over
+    every damaged flight and split by whether the Oracle holds yaw (its yaw RMSE after the damage
+    at most MISS_YAW_LOST_DEG); and the Filter against that late Oracle. None when not flown."""
+    rows = [r for r in damaged if "oracle_late" in r and "oracle" in r]
+    if not delay_s or not rows:
+        return None
+
+    def within(a: dict, b: dict) -> bool:
+        ratio = None
+        if a.get("rmse_after_damage_m") is not None and b.get("rmse_after_damage_m"):
+            ratio = a["rmse_after_damage_m"] / b["rmse_after_damage_m"]
+        return within_crash_aware(lost(a), lost(b), ratio)
+
+    def share(flags: list[bool]) -> float | None:
+        return sum(flags) / len(flags) if flags else None
+
+    def spins(r: dict) -> bool:
+        yaw = r["oracle"].get("rmse_yaw_after_damage_deg")
+        return yaw is not None and yaw > MISS_YAW_LOST_DEG
+    late_vs_oracle = [(within(r["oracle_late"], r["oracle"]), spins(r)) for r in rows]
+    return {"delay_s": delay_s, "flights": len(rows),
+            "late_within_1_5x_of_oracle": share([w for w, _ in late_vs_oracle]),
+            "late_within_1_5x_of_oracle_holds_yaw": share([w for w, s in late_vs_oracle if not s]),
+            "late_within_1_5x_of_oracle_spins": share([w for w, s in late_vs_oracle if s]),
+            "oracle_spins_flights": sum(1 for _, s in late_vs_oracle if s),
+            "late_lost": sum(1 for r in rows if lost(r["oracle_late"])),
+            "filter_within_1_5x_of_late_oracle": share([within(r["filter"], r["oracle_late"]) for r in rows])}
 
 
 def summarise(records: list[dict], config: BenchConfig) -> dict:
@@ -469,6 +506,7 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
         "oracle_stable_pct": (100.0 * sum(r["oracle"].get("stable", False) for r in damaged if "oracle" in r)
                               / len(damaged)) if damaged else None,
         "accel_bias": accel_bias_rows(records),
+        "late_oracle": late_oracle_rows(damaged, config.late_oracle_s),
         "errors": [r["filter"]["error"] for r in records if "error" in r["filter"]][:5],
         "conditions": {"duration_s": config.duration_s, "base_seed": config.base_seed,
                        "presets": list(PRESETS), "trajectories": list(table1.TRAJECTORIES),
@@ -480,6 +518,7 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
                        "filter_rate_noise": FILTER_RATE_NOISE,
                        "damage_design_loss": DAMAGE_DESIGN_LOSS,
                        "filter_accel": config.filter_accel,
+                       "late_oracle_s": config.late_oracle_s,
                        "false_alarms_per_hour": config.false_alarms_per_hour or 1e-3,
                        "sitl_args": list(config.sitl_args)},
         "per_flight": records,
@@ -621,6 +660,17 @@ def render(result: dict) -> str:
             lines.append(f"| {name.replace('_', ' ')} | {cell['flights']} | {fmt(cell['abs_error_median_m_s2'])} "
                          f"({fmt(cell['abs_error_p95_m_s2'])}) | {fmt(cell['error_over_std_median'])} | "
                          f"{cell['gated_samples']} | {cell['reanchored_flights']} |")
+    late = result.get("late_oracle")
+    if late:
+        lines += ["", f"The Oracle told {1e3 * late['delay_s']:g} ms late (the allocation a detector that takes "
+                  "that long could give at best) against the Oracle told at once, crash-aware:", "",
+                  "| late Oracle within 1.5x of the Oracle: all / Oracle holds yaw / Oracle spins | "
+                  "late Oracle lost | Filter within 1.5x of the late Oracle | flights |", "|---|---|---|---|",
+                  f"| {_pct(late['late_within_1_5x_of_oracle'], 100.0, '.1f')} % / "
+                  f"{_pct(late['late_within_1_5x_of_oracle_holds_yaw'], 100.0, '.1f')} % / "
+                  f"{_pct(late['late_within_1_5x_of_oracle_spins'], 100.0, '.1f')} % of "
+                  f"{late['oracle_spins_flights']} | {late['late_lost']} | "
+                  f"{_pct(late['filter_within_1_5x_of_late_oracle'], 100.0, '.1f')} % | {late['flights']} |"]
     return "\n".join(lines) + "\n"
 
 

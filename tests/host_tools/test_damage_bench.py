@@ -148,6 +148,52 @@ def test_share_where_the_oracle_holds_yaw():
     assert "| 67 % of 3 flights |" in damage_bench.render(result)
 
 
+def test_the_late_oracle_is_flown_only_when_asked(monkeypatch):
+    """late_oracle_s adds one Oracle flight per damaged flight with --oracle-damage-delay; the
+    other flights' commands are unchanged, and without it no late Oracle is flown."""
+    monkeypatch.setattr(damage_bench, "_fly", lambda cfg, spec, mode, work, after_s=None:
+                        {"mode": mode, "args": list(cfg.sitl_args), "damaged": bool(spec.damages)})
+    for late_s in (None, 0.005):
+        cfg = config(damaged=1, undamaged=1, late_oracle_s=late_s, sitl_args=["--quiet"])
+        damaged, undamaged = (damage_bench.run_flight(cfg, spec) for spec in damage_bench.flight_specs(cfg))
+        assert "oracle_late" not in undamaged
+        for key in ("filter", "oracle", "filter_undamaged", "oracle_undamaged"):
+            assert damaged[key]["args"] == ["--quiet"]
+        if late_s is None:
+            assert "oracle_late" not in damaged
+        else:
+            assert damaged["oracle_late"] == {"mode": "oracle", "damaged": True,
+                                              "args": ["--quiet", "--oracle-damage-delay", "0.005"]}
+
+
+def test_the_late_oracle_is_read_against_the_oracle_told_at_once():
+    """With late_oracle_s, each damaged flight's Oracle told late is read against the Oracle told at
+    once (crash-aware, split by the Oracle's yaw), and the Filter against the late Oracle; without
+    it the block is absent and the headline figures do not move."""
+    def record(f, o, late, oracle_yaw, late_lost=False):
+        spec = {"damages": [[1, 2.5, 0.3]], "effects": [], "index": 0}
+        flight = lambda rmse: {"stable": True, "rmse_after_damage_m": rmse}
+        oracle = dict(flight(o), rmse_yaw_after_damage_deg=oracle_yaw)
+        late_flight = dict(flight(late), **({"touchdown_at_s": 3.0} if late_lost else {}))
+        return {"spec": spec, "filter": dict(flight(f), detections=[{"rotor": 1, "time_s": 2.505}]),
+                "oracle": oracle, "oracle_late": late_flight}
+    records = [record(0.012, 0.010, 0.011, 2.0),          # holds yaw: late within, Filter within the late
+               record(0.030, 0.010, 0.013, 3.0),          # holds yaw: late within, Filter 2.3x the late
+               record(0.300, 0.100, 0.200, 60.0),         # spins: late 2x, Filter 1.5x the late
+               record(0.500, 0.100, 0.120, 80.0, True)]   # spins: late lost alone: a miss; Filter within
+    result = damage_bench.summarise(records, config(late_oracle_s=0.005))
+    late = result["late_oracle"]
+    assert late["flights"] == 4 and late["oracle_spins_flights"] == 2 and late["late_lost"] == 1
+    assert late["late_within_1_5x_of_oracle"] == pytest.approx(2 / 4)
+    assert late["late_within_1_5x_of_oracle_holds_yaw"] == pytest.approx(1.0)
+    assert late["late_within_1_5x_of_oracle_spins"] == pytest.approx(0.0)
+    assert late["filter_within_1_5x_of_late_oracle"] == pytest.approx(3 / 4)
+    assert "| 50.0 % / 100.0 % / 0.0 % of 2 | 1 | 75.0 % | 4 |" in damage_bench.render(result)
+    plain = damage_bench.summarise(records, config())
+    assert plain["late_oracle"] is None and "told" not in damage_bench.render(plain)
+    assert plain["tracking_within_1_5x"] == result["tracking_within_1_5x"] == pytest.approx(1 / 4)
+
+
 def test_undamaged_twins_are_read_against_an_absolute_floor():
     """The twins' plain ratio divides sub-millimetre errors (0.05 mm over 0.0006 mm reads 85x): the
     rows also give both RMSEs in mm, the ratio with each RMSE held at 1 mm (below it a twin's error
