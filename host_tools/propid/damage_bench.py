@@ -70,6 +70,12 @@ DAMAGE_DESIGN_LOSS = 0.2
 # the combination whose error the gyro leaves and the controller turns into a z offset
 # (docs/damage.md, "E read by the paired rule"). BenchConfig.filter_accel = False flies without it.
 FILTER_ACCEL = True
+# The accelerometer z bias's prior standard deviation [m/s^2]: the IMU datasheet's zero-g offset
+# (BMI088 class, +-20 mg typ., the figure propid_sitl's sensor draws its bias within), in place of
+# the library's 0.5 m/s^2. At a steady hover the accelerometer sees the collective thrust and its
+# bias only as a sum, and the priors' ratio splits it (docs/damage.md, "F read by the paired rule").
+# BenchConfig.accel_bias_std = None flies the library's prior.
+ACCEL_BIAS_STD = 20e-3 * 9.80665
 MILD_EFFECTS = ("rotor_inertia", "rotor_gyroscopic", "rotor_drag", "translational_lift",
                 "thrust_nonlinearity", "aero_damping", "gyro_scale", "com_offset")
 
@@ -85,6 +91,7 @@ class BenchConfig:
     workers: int = 2
     false_alarms_per_hour: float | None = None  # detector design rate (None: library default)
     filter_accel: bool = FILTER_ACCEL  # the filter fuses the accelerometer (--filter-accel)
+    accel_bias_std: float | None = ACCEL_BIAS_STD  # with filter_accel (--prior-accel-bias-std; None: library)
     # each damaged flight's Oracle also flown told this late (--oracle-damage-delay; None: not flown)
     late_oracle_s: float | None = None
     # extra propid_sitl options for every flight (e.g. a filter option), recorded in the conditions
@@ -133,6 +140,8 @@ def _command(config: BenchConfig, spec: FlightSpec, mode: str, log: Path, summar
             "--damage-design-loss", repr(DAMAGE_DESIGN_LOSS)]
     if config.filter_accel:
         cmd += ["--filter-accel"]
+        if config.accel_bias_std:
+            cmd += ["--prior-accel-bias-std", repr(config.accel_bias_std)]
     if config.false_alarms_per_hour:
         cmd += ["--damage-false-alarm-rate", repr(config.false_alarms_per_hour)]
     for rotor, time_s, fraction in spec.damages:
@@ -518,6 +527,7 @@ def summarise(records: list[dict], config: BenchConfig) -> dict:
                        "filter_rate_noise": FILTER_RATE_NOISE,
                        "damage_design_loss": DAMAGE_DESIGN_LOSS,
                        "filter_accel": config.filter_accel,
+                       "accel_bias_std": config.accel_bias_std if config.filter_accel else None,
                        "late_oracle_s": config.late_oracle_s,
                        "false_alarms_per_hour": config.false_alarms_per_hour or 1e-3,
                        "sitl_args": list(config.sitl_args)},

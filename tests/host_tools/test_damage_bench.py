@@ -80,6 +80,24 @@ def test_every_flight_fuses_the_accelerometer_unless_asked_not_to(tmp_path):
     assert damage_bench.BenchConfig(sitl=Path("x"), out_dir=tmp_path).filter_accel is True
 
 
+def test_every_flight_takes_the_datasheet_accelerometer_bias_prior(tmp_path):
+    """With the accelerometer aiding, every flight's filter takes the IMU datasheet's zero-g offset
+    (20 mg) as its z-bias prior std (docs/damage.md, "F read by the paired rule"); accel_bias_std =
+    None (the CLI's --library-accel-bias-prior) flies the library's, and without the aiding the
+    option is not passed (propid_sitl rejects it there)."""
+    assert damage_bench.ACCEL_BIAS_STD == pytest.approx(0.196133)
+    for kw, expected in (({}, damage_bench.ACCEL_BIAS_STD), ({"accel_bias_std": None}, None),
+                         ({"filter_accel": False}, None)):
+        cfg = config(damaged=2, undamaged=1, **kw)
+        for spec in damage_bench.flight_specs(cfg):
+            for mode in ("filter", "oracle"):
+                cmd = damage_bench._command(cfg, spec, mode, tmp_path / "f.csv", tmp_path / "f.json")
+                if expected is None:
+                    assert "--prior-accel-bias-std" not in cmd
+                else:
+                    assert float(cmd[cmd.index("--prior-accel-bias-std") + 1]) == expected
+
+
 def test_scoring_detection_isolation_and_false_alarms():
     spec = {"damages": [[2, 3.0, 0.3], [4, 5.5, 0.15]], "effects": [], "index": 0}
     flight = {"detections": [{"rotor": 1, "time_s": 3.004}, {"rotor": 2, "time_s": 3.6},

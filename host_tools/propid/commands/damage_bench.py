@@ -28,6 +28,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-filter-accel", action="store_true",
                         help="the filter without its accelerometer aiding (the bench's configuration "
                              "before it was adopted, docs/damage.md)")
+    parser.add_argument("--library-accel-bias-prior", action="store_true",
+                        help="the accelerometer bias prior of the library (0.5 m/s^2) in place of the "
+                             "IMU datasheet's zero-g offset (the bench's configuration before it was "
+                             "adopted, docs/damage.md)")
     parser.add_argument("--late-oracle", type=float, metavar="S",
                         help="also fly each damaged flight's Oracle told S seconds after the loss "
                              "(--oracle-damage-delay) and report it against the Oracle told at once: the "
@@ -54,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
         sitl=Path(args.sitl) if args.sitl else locate_sitl(None), out_dir=Path(args.out),
         damaged=args.damaged, undamaged=args.undamaged, duration_s=args.duration,
         base_seed=args.seed, workers=args.workers, false_alarms_per_hour=args.false_alarm_rate,
-        filter_accel=not args.no_filter_accel, late_oracle_s=args.late_oracle, sitl_args=list(args.sitl_arg))
+        filter_accel=not args.no_filter_accel,
+        accel_bias_std=None if args.library_accel_bias_prior else damage_bench.ACCEL_BIAS_STD, late_oracle_s=args.late_oracle, sitl_args=list(args.sitl_arg))
     result = damage_bench.run_bench(config, progress=not args.no_progress)
     print(damage_bench.render(result), end="")
     for error in result["errors"]:
