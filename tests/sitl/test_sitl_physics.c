@@ -275,27 +275,37 @@ static void test_physics_rate_rule_bounds_the_motor_error(void)
     }
 }
 
+/* The three paths the prepared steps take (a quad plus, the general rotor-count path,
+ * a quad X with the effects' derivative, rotor_drag): the plant of path p and its
+ * hover state at 2 m, moving forward at 0.5 m/s. */
+static const char *const step_path_presets[3] = {"crazyflie-plus", "hexa-x", "crazyflie-x"};
+
+static void make_step_path_plant(int p, sitl_state_t *start)
+{
+    char err[256];
+    sitl_effects_t effects;
+    sitl_effects_clear(&effects);
+    if (p == 2) {
+        TEST_ASSERT_EQUAL_INT(0, sitl_effects_parse(&effects, "rotor_drag", err, (int)sizeof(err)));
+    }
+    TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset(step_path_presets[p], &vehicle));
+    TEST_ASSERT_EQUAL_INT(0, sitl_plant_init(&plant, &vehicle, NULL, NULL, &effects, err,
+                                             (int)sizeof(err)));
+    double pos[3] = {0.0, 0.0, 2.0};
+    sitl_plant_hover_state(&plant, pos, 0.3, start);
+    start->velocity[0] = 0.5;
+}
+
 /* A flight prepares the plant once per command (sitl_plant_prepare) and steps
  * it several times with unequal steps: the state is the one sitl_plant_step
  * gives (which prepares at every call), bit for bit, on the quad path, the
  * general rotor-count path and the effects' derivative. */
 static void test_prepared_steps_match_plain_steps(void)
 {
-    const char *presets[3] = {"crazyflie-plus", "hexa-x", "crazyflie-x"};
+    const char *const *presets = step_path_presets;
     for (int p = 0; p < 3; p++) {
-        char err[256];
-        sitl_effects_t effects;
-        sitl_effects_clear(&effects);
-        if (p == 2) {
-            TEST_ASSERT_EQUAL_INT(0, sitl_effects_parse(&effects, "rotor_drag", err, (int)sizeof(err)));
-        }
-        TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset(presets[p], &vehicle));
-        TEST_ASSERT_EQUAL_INT(0, sitl_plant_init(&plant, &vehicle, NULL, NULL, &effects, err,
-                                                 (int)sizeof(err)));
         sitl_state_t a, b;
-        double pos[3] = {0.0, 0.0, 2.0};
-        sitl_plant_hover_state(&plant, pos, 0.3, &a);
-        a.velocity[0] = 0.5;
+        make_step_path_plant(p, &a);
         a.body_rate[1] = 0.2;
         b = a;
         double cmd[SITL_MAX_ROTORS];
@@ -332,21 +342,10 @@ static void test_prepared_steps_match_plain_steps(void)
  * (at least 6e-4 rad/s and 3.8 rad/s here). */
 static void test_sampled_step_ends_like_the_plain_step(void)
 {
-    const char *presets[3] = {"crazyflie-plus", "hexa-x", "crazyflie-x"};
+    const char *const *presets = step_path_presets;
     for (int p = 0; p < 3; p++) {
-        char err[256];
-        sitl_effects_t effects;
-        sitl_effects_clear(&effects);
-        if (p == 2) {
-            TEST_ASSERT_EQUAL_INT(0, sitl_effects_parse(&effects, "rotor_drag", err, (int)sizeof(err)));
-        }
-        TEST_ASSERT_EQUAL_INT(0, sitl_vehicle_preset(presets[p], &vehicle));
-        TEST_ASSERT_EQUAL_INT(0, sitl_plant_init(&plant, &vehicle, NULL, NULL, &effects, err,
-                                                 (int)sizeof(err)));
         sitl_state_t a, b;
-        double pos[3] = {0.0, 0.0, 2.0};
-        sitl_plant_hover_state(&plant, pos, 0.3, &a);
-        a.velocity[0] = 0.5;
+        make_step_path_plant(p, &a);
         a.body_rate[0] = -0.4;
         a.body_rate[1] = 0.2;
         double cmd[SITL_MAX_ROTORS];
