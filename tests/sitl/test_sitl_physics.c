@@ -296,6 +296,32 @@ static void make_step_path_plant(int p, sitl_state_t *start)
     start->velocity[0] = 0.5;
 }
 
+/* Rotor commands off hover: rotor i driven (i + 1) * spread of its hover speed up
+ * (even i) or down (odd i), so the vehicle turns and the motors move. */
+static void off_hover_command(double cmd[SITL_MAX_ROTORS], const sitl_state_t *hover,
+                              double spread)
+{
+    memcpy(cmd, hover->rotor_speed, sizeof(hover->rotor_speed));
+    for (int i = 0; i < vehicle.rotor_count; i++) {
+        cmd[i] *= 1.0 + spread * (double)(i + 1) * (i % 2 ? -1.0 : 1.0);
+    }
+}
+
+/* Two states bit for bit the same: position, velocity, attitude, body rate, rotor speeds. */
+static void assert_same_state(const sitl_state_t *expected, const sitl_state_t *actual,
+                              const char *name)
+{
+    TEST_ASSERT_EQUAL_MEMORY_MESSAGE(expected->position, actual->position,
+                                     sizeof(actual->position), name);
+    TEST_ASSERT_EQUAL_MEMORY_MESSAGE(expected->velocity, actual->velocity,
+                                     sizeof(actual->velocity), name);
+    TEST_ASSERT_EQUAL_MEMORY_MESSAGE(expected->quat, actual->quat, sizeof(actual->quat), name);
+    TEST_ASSERT_EQUAL_MEMORY_MESSAGE(expected->body_rate, actual->body_rate,
+                                     sizeof(actual->body_rate), name);
+    TEST_ASSERT_EQUAL_MEMORY_MESSAGE(expected->rotor_speed, actual->rotor_speed,
+                                     sizeof(actual->rotor_speed), name);
+}
+
 /* A flight prepares the plant once per command (sitl_plant_prepare) and steps
  * it several times with unequal steps: the state is the one sitl_plant_step
  * gives (which prepares at every call), bit for bit, on the quad path, the
@@ -309,10 +335,7 @@ static void test_prepared_steps_match_plain_steps(void)
         a.body_rate[1] = 0.2;
         b = a;
         double cmd[SITL_MAX_ROTORS];
-        memcpy(cmd, a.rotor_speed, sizeof(cmd));
-        for (int i = 0; i < vehicle.rotor_count; i++) {
-            cmd[i] *= 1.0 + 0.01 * (double)(i + 1) * (i % 2 ? -1.0 : 1.0);
-        }
+        off_hover_command(cmd, &a, 0.01);
         sitl_plant_prepared_t prepared;
         sitl_plant_prepare(&plant, cmd, &prepared);
         for (int k = 0; k < 40; k++) {
@@ -320,12 +343,7 @@ static void test_prepared_steps_match_plain_steps(void)
             sitl_plant_step(&plant, &a, cmd, dt);
             sitl_plant_step_prepared(&plant, &prepared, &b, dt);
         }
-        TEST_ASSERT_EQUAL_MEMORY_MESSAGE(a.position, b.position, sizeof(a.position), presets[p]);
-        TEST_ASSERT_EQUAL_MEMORY_MESSAGE(a.velocity, b.velocity, sizeof(a.velocity), presets[p]);
-        TEST_ASSERT_EQUAL_MEMORY_MESSAGE(a.quat, b.quat, sizeof(a.quat), presets[p]);
-        TEST_ASSERT_EQUAL_MEMORY_MESSAGE(a.body_rate, b.body_rate, sizeof(a.body_rate), presets[p]);
-        TEST_ASSERT_EQUAL_MEMORY_MESSAGE(a.rotor_speed, b.rotor_speed, sizeof(a.rotor_speed),
-                                         presets[p]);
+        assert_same_state(&a, &b, presets[p]);
         TEST_ASSERT_EQUAL_INT(a.on_ground, b.on_ground);
         TEST_ASSERT_TRUE(a.position[0] > 0.005); /* it moved */
     }
@@ -349,10 +367,7 @@ static void test_sampled_step_ends_like_the_plain_step(void)
         a.body_rate[0] = -0.4;
         a.body_rate[1] = 0.2;
         double cmd[SITL_MAX_ROTORS];
-        memcpy(cmd, a.rotor_speed, sizeof(cmd));
-        for (int i = 0; i < vehicle.rotor_count; i++) {
-            cmd[i] *= 1.0 + 0.05 * (double)(i + 1) * (i % 2 ? -1.0 : 1.0);
-        }
+        off_hover_command(cmd, &a, 0.05);
         sitl_plant_prepared_t prepared;
         sitl_plant_prepare(&plant, cmd, &prepared);
         const double h = 0.002;
@@ -364,12 +379,7 @@ static void test_sampled_step_ends_like_the_plain_step(void)
             for (int j = 0; j < 64; j++) {
                 sitl_plant_step_prepared(&plant, &prepared, &reference, 0.5 * h / 64.0);
             }
-            TEST_ASSERT_EQUAL_MEMORY_MESSAGE(b.position, a.position, sizeof(a.position), presets[p]);
-            TEST_ASSERT_EQUAL_MEMORY_MESSAGE(b.velocity, a.velocity, sizeof(a.velocity), presets[p]);
-            TEST_ASSERT_EQUAL_MEMORY_MESSAGE(b.quat, a.quat, sizeof(a.quat), presets[p]);
-            TEST_ASSERT_EQUAL_MEMORY_MESSAGE(b.body_rate, a.body_rate, sizeof(a.body_rate), presets[p]);
-            TEST_ASSERT_EQUAL_MEMORY_MESSAGE(b.rotor_speed, a.rotor_speed, sizeof(a.rotor_speed),
-                                             presets[p]);
+            assert_same_state(&b, &a, presets[p]);
             for (int c = 0; c < 3; c++) {
                 TEST_ASSERT_DOUBLE_WITHIN(2e-7, reference.body_rate[c], sample.body_rate[c]);
                 TEST_ASSERT_DOUBLE_WITHIN(1e-9, reference.position[c], sample.position[c]);
