@@ -48,6 +48,10 @@ class Options:
     # default) or "prediction" (the held-out residual along the effect's training-fold prediction;
     # evaluated, not the default: docs/gap.md, SITL accuracy "The score test again")
     replication: str = "improvement"
+    # the replication's folds with one or two logs: "time" (1 s blocks, index mod 5, the default) or
+    # "excitation" (a 1 s block with more than a fold's share of the effect's regressor energy split
+    # over the folds; evaluated, not the default: docs/gap.md, SITL accuracy "Folds balanced by excitation")
+    replication_folds: str = "time"
     # the gyro's constant bias before the measured torque: "off" (the default) or "attitude" (measured
     # against the logged attitude; evaluated, not the default: docs/gap.md "Data preparation")
     gyro_bias: str = "off"
@@ -358,7 +362,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     progress(10)
     sel = selection.forward_select(design_w, gr_w, candidates, base_cols, progress=lambda n: progress(n),
                                    size_gr=gr, bounds={e.id: e.bounds(ctx) for e in effects if e.bounds},
-                                   replication=options.replication)
+                                   replication=options.replication, folds=options.replication_folds)
 
     # final model on all training data
     final_cols = sel["columns"]

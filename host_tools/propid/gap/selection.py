@@ -26,6 +26,8 @@ An effect not selected is reported with its score added to the final model.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from propid.gap import significance, scoring
@@ -62,7 +64,7 @@ def _look_alike(a: str, b: str) -> bool:
 
 def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
           held_current: np.ndarray, candidates: int = 1, size_gr: scoring.Grams | None = None,
-          bounds: dict | None = None, replication: str = "improvement") -> dict:
+          bounds: dict | None = None, replication: str = "improvement", folds: str = "time") -> dict:
     cols = current + design.groups[effect_id]
     held = scoring.cv_sse(gr, cols)
     axes = by_id(effect_id).axes
@@ -72,9 +74,18 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
     own = design.groups[effect_id]
     nonnegative = by_id(effect_id).nonnegative
 
+    block_folds = int(design.block_flight.max()) + 1 < 3 if design.block_flight.size else True
+
     def evidence(given, held_given, held_with):
+        rep = gr
+        if folds == "excitation" and block_folds:
+            # the replication's folds balanced by the effect's excitation (scoring.excitation_folds)
+            fold = scoring.excitation_folds(gr, given, own, design.fold_group)
+            if not np.array_equal(fold, gr.fold):
+                rep = dataclasses.replace(gr, fold=fold)
+                held_given, held_with = scoring.cv_sse(rep, given), scoring.cv_sse(rep, given + own)
         weights = significance.block_weights(held_with, gr.count, design.fold_group)
-        test = significance.paired_test(held_given, held_with, idx, scoring.cv_cross(gr, given, given + own), weights,
+        test = significance.paired_test(held_given, held_with, idx, scoring.cv_cross(rep, given, given + own), weights,
                                         replication)
         # one parameter that physics keeps >= 0: the physical-sign rule already makes the
         # alternative one-sided, so the test is too (docs/gap.md, Scoring)
@@ -180,7 +191,7 @@ def physical_sign(gr: scoring.Grams, current: list[int], effect_cols: list[int],
 
 def backward_check(design: Design, gr: scoring.Grams, base_cols: list[int], selected: list[dict],
                    size_gr: scoring.Grams | None = None, bounds: dict | None = None,
-                   replication: str = "improvement") -> dict:
+                   replication: str = "improvement", folds: str = "time") -> dict:
     """Step 5 of the rule: drop (from `selected`, in place) the named effects that are not
     significant on top of all the other named ones, one at a time, largest Wald p first.
     Returns {dropped id: why}."""
@@ -190,7 +201,7 @@ def backward_check(design: Design, gr: scoring.Grams, base_cols: list[int], sele
         for s in selected:
             given = list(base_cols) + [c for o in selected if o is not s for c in design.groups[o["id"]]]
             checks.append(score(design, gr, given, s["id"], scoring.cv_sse(gr, given), len(selected),
-                                size_gr, bounds, replication))
+                                size_gr, bounds, replication, folds))
         wald = significance.holm([c["p_value"] for c in checks], FAMILY_LEVEL)
         held = significance.holm([c["held_out_p_value"] for c in checks], significance.REPLICATION_LEVEL)
         failing = [(c["p_value"], k) for k, (c, w, h) in enumerate(zip(checks, wald, held))
@@ -208,9 +219,12 @@ def backward_check(design: Design, gr: scoring.Grams, base_cols: list[int], sele
 
 def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], base_cols: list[int],
                    progress=None, size_gr: scoring.Grams | None = None, bounds: dict | None = None,
-                   replication: str = "improvement") -> dict:
+                   replication: str = "improvement", folds: str = "time") -> dict:
     """`bounds`: effect id -> physical range per coefficient (Effect.bounds of the context);
-    `replication`: the held-out replication's statistic (significance.REPLICATION_STATISTICS)."""
+    `replication`: the held-out replication's statistic (significance.REPLICATION_STATISTICS);
+    `folds`: the replication's folds (scoring.REPLICATION_FOLDS)."""
+    if folds not in scoring.REPLICATION_FOLDS:
+        raise ValueError(f"unknown replication folds {folds!r}")
     current = list(base_cols)
     held_current = scoring.cv_sse(gr, current)
     held_base = held_current
@@ -218,7 +232,7 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
     ambiguous: list[dict] = []
     remaining = list(candidates)
     while remaining and len(selected) < MAX_EFFECTS:
-        scores = [score(design, gr, current, e, held_current, len(remaining), size_gr, bounds, replication)
+        scores = [score(design, gr, current, e, held_current, len(remaining), size_gr, bounds, replication, folds)
                   for e in remaining]
         if progress:
             progress(len(scores))
@@ -264,11 +278,11 @@ def forward_select(design: Design, gr: scoring.Grams, candidates: list[str], bas
             for cand in amb["candidates"]:
                 if cand in remaining and amb["kept"] == best["id"]:
                     remaining.remove(cand)
-    dropped = backward_check(design, gr, base_cols, selected, size_gr, bounds, replication)
+    dropped = backward_check(design, gr, base_cols, selected, size_gr, bounds, replication, folds)
     if dropped:
         current = list(base_cols) + [c for s in selected for c in design.groups[s["id"]]]
         held_current = scoring.cv_sse(gr, current)
-    others = [score(design, gr, current, e, held_current, 1, size_gr, bounds, replication) for e in candidates
+    others = [score(design, gr, current, e, held_current, 1, size_gr, bounds, replication, folds) for e in candidates
               if e not in {s["id"] for s in selected}]
     for o in others:
         if o["id"] in dropped:
