@@ -64,6 +64,7 @@ void sitl_options_default(sitl_options_t *o)
     o->prior_bias_std = -1.0;
     o->prior_rate_std = -1.0;
     o->prior_accel_bias_std = -1.0;
+    o->filter_accel_noise = -1.0;
     o->filter_rate_noise = -1.0;
     o->filter_coeff_walk = -1.0;
     o->filter_bias_walk = -1.0;
@@ -352,6 +353,10 @@ static const opt_t options[] = {
            "filter prior accelerometer z-bias std (accel_bias_std0; with\n"
            "--filter-accel; default: library), e.g. the IMU datasheet's\n"
            "zero-g offset"),
+    NUMBER(NULL, "filter-accel-noise", filter_accel_noise, 1e-6, 100.0, "M_S2",
+           "filter accelerometer z noise std per sample (accel_noise_std;\n"
+           "with --filter-accel; default: library), e.g. the IMU datasheet's\n"
+           "noise density x sqrt(sample rate)"),
     NUMBER(NULL, "filter-rate-noise", filter_rate_noise, 0.0, 1e4, "X",
            "filter rate_process_noise [rad/s^2/sqrt(Hz)] (default: library)"),
     NUMBER(NULL, "filter-coeff-walk", filter_coeff_walk, 0.0, 10.0, "X",
@@ -707,6 +712,11 @@ int sitl_options_parse(sitl_options_t *o, int argc, char **argv)
     if (o->prior_accel_bias_std > 0.0 && !o->filter_accel) {
         /* The filter has no accelerometer bias state without the aiding: the prior would go unused. */
         fprintf(stderr, "propid_sitl: --prior-accel-bias-std needs --filter-accel\n");
+        return SITL_EXIT_USAGE;
+    }
+    if (o->filter_accel_noise > 0.0 && !o->filter_accel) {
+        /* Without the aiding no accelerometer sample is fused: the noise would go unused. */
+        fprintf(stderr, "propid_sitl: --filter-accel-noise needs --filter-accel\n");
         return SITL_EXIT_USAGE;
     }
     return 0;

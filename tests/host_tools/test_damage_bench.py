@@ -512,6 +512,40 @@ def test_sitl_sets_the_accelerometer_bias_prior(tmp_path, sitl_binary):
     assert proc.returncode == 2 and "--prior-accel-bias-std needs --filter-accel" in proc.stderr
 
 
+def test_sitl_sets_the_accelerometer_noise(tmp_path, sitl_binary):
+    """--filter-accel-noise reaches the filter's accelerometer noise: a 30 % loss on rotor 2 at the
+    plus quad's hover removes 0.74 m/s^2 of specific force, 1.5 sigma of the library's 0.5 m/s^2 per
+    sample but 13 sigma of the IMU datasheet's 0.054 (175 ug/sqrt(Hz) at 1 kHz). With the datasheet's
+    noise the samples between the loss and the detection fall outside the gate, with the library's
+    none do; the detection re-opens the rotor long before a run of gated samples re-anchors the z
+    bias, and the tighter noise leaves the bias a smaller claimed std. Without --filter-accel the
+    option is a usage error (no accelerometer sample is fused)."""
+    import json
+    import subprocess
+
+    summary = tmp_path / "s.json"
+    base = [str(sitl_binary), "--vehicle", "crazyflie-plus", "--trajectory", "step", "--seed", "5",
+            "--duration", "3", "--start-at-rest", "--filter-rate-noise", "0.2", "--detect-damage",
+            "--damage-design-loss", "0.2", "--esc-latency", "0.001", "--filter-esc-delay", "0.001",
+            "--damage", "2@2.5=0.3", "--summary-json", str(summary), "--quiet"]
+    runs = []
+    for extra in ([], ["--filter-accel-noise", "0.054269"]):
+        proc = subprocess.run(base + ["--filter-accel", "--prior-accel-bias-std", "0.196133"] + extra,
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        data = json.loads(summary.read_text())
+        detections = data["detections"]
+        assert detections and detections[0]["rotor"] == 2 and 2.5 < detections[0]["time_s"] < 2.52
+        assert data["accel"]["reanchored"] == 0
+        runs.append(data["accel"])
+    assert runs[0]["gated"] == 0
+    assert 3 <= runs[1]["gated"] <= 20
+    assert 0 < runs[1]["est_bias_std_z"] < runs[0]["est_bias_std_z"]
+    proc = subprocess.run(base + ["--filter-accel-noise", "0.054269"], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and "--filter-accel-noise needs --filter-accel" in proc.stderr
+
+
 def test_sitl_oracle_told_late(tmp_path, sitl_binary):
     """--oracle-damage-delay S: the Oracle's allocation keeps the healthy coefficients for S after the
     loss and takes the damaged truth then. Its commands match an Oracle never told up to the damage
