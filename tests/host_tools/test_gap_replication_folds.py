@@ -5,7 +5,6 @@ current model regressed out, has its test blocks dealt to the folds in turn)."""
 
 from __future__ import annotations
 
-import subprocess
 from dataclasses import replace
 
 import numpy as np
@@ -123,25 +122,3 @@ def test_forward_selection_default_is_the_time_folds_and_an_unknown_value_is_ref
     assert held_p(folds="excitation") != held_p()
     with pytest.raises(ValueError):
         selection.forward_select(design, gr, ["inertia_error"], [0], folds="random")
-
-
-@pytest.mark.parametrize("value", ["time", "excitation"])
-def test_the_cli_option_reaches_forward_selection(value, sitl_binary, tmp_path, monkeypatch):
-    """propid gap --replication-folds VALUE hands VALUE to forward selection."""
-    from propid.cli import main
-    from propid.gap import selection
-
-    log = tmp_path / "f.csv"
-    subprocess.run([str(sitl_binary), "--quiet", "--duration", "6", "--seed", "3", "--log", str(log)],
-                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120, check=True)
-    seen = []
-
-    def record(*args, folds="missing", **kwargs):
-        seen.append(folds)
-        raise RuntimeError("stop after forward selection was reached")
-
-    monkeypatch.setattr(selection, "forward_select", record)
-    with pytest.raises(RuntimeError, match="stop after forward selection"):
-        main(["gap", "--log", str(log), "--vehicle", str(log.with_name("f.vehicle.json")), "--no-filter", "--quiet",
-              "--replication-folds", value])
-    assert seen == [value]

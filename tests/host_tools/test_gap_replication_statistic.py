@@ -134,23 +134,35 @@ def test_forward_selection_takes_the_statistic_and_its_default_is_the_improvemen
     assert held_p(replication="prediction")[0] < held_p()[0]
 
 
-@pytest.mark.parametrize("value", ["improvement", "prediction"])
-def test_the_cli_option_reaches_forward_selection(value, sitl_binary, tmp_path, monkeypatch):
-    """propid gap --replication VALUE hands VALUE to forward selection."""
+@pytest.fixture(scope="module")
+def short_flight(sitl_binary, tmp_path_factory):
+    """A 6 s default SITL flight's log (flown once for the option tests below)."""
+    log = tmp_path_factory.mktemp("replication_options") / "f.csv"
+    subprocess.run([str(sitl_binary), "--quiet", "--duration", "6", "--seed", "3", "--log", str(log)],
+                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120, check=True)
+    return log
+
+
+@pytest.mark.parametrize("option, keyword, value", [
+    ("--replication", "replication", "improvement"),
+    ("--replication", "replication", "prediction"),
+    ("--replication-folds", "folds", "time"),
+    ("--replication-folds", "folds", "excitation"),
+])
+def test_the_cli_option_reaches_forward_selection(option, keyword, value, short_flight, monkeypatch):
+    """propid gap OPTION VALUE hands VALUE to forward selection as KEYWORD (the held-out
+    replication's statistic, docs/gap.md Scoring; its folds, SITL accuracy)."""
     from propid.cli import main
     from propid.gap import selection
 
-    log = tmp_path / "f.csv"
-    subprocess.run([str(sitl_binary), "--quiet", "--duration", "6", "--seed", "3", "--log", str(log)],
-                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120, check=True)
     seen = []
 
-    def record(*args, replication="missing", **kwargs):
-        seen.append(replication)
+    def record(*args, **kwargs):
+        seen.append(kwargs.get(keyword, "missing"))
         raise RuntimeError("stop after forward selection was reached")
 
     monkeypatch.setattr(selection, "forward_select", record)
     with pytest.raises(RuntimeError, match="stop after forward selection"):
-        main(["gap", "--log", str(log), "--vehicle", str(log.with_name("f.vehicle.json")), "--no-filter", "--quiet",
-              "--replication", value])
+        main(["gap", "--log", str(short_flight), "--vehicle", str(short_flight.with_name("f.vehicle.json")),
+              "--no-filter", "--quiet", option, value])
     assert seen == [value]
