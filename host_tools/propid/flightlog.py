@@ -559,13 +559,30 @@ def read_flightlog(path: str | Path, vehicle: Vehicle | None = None) -> FlightLo
     return log
 
 
+# The time column keeps this much resolution whatever its origin: nine significant digits hold
+# 1 us only up to t = 1000 s, so a log stamped from 1e6 s at 500 Hz would come back with repeated times.
+TIME_RESOLUTION_S = 1e-7
+
+
+def _time_format(t: np.ndarray) -> str:
+    """The shortest %g format (9..17 significant digits) that writes every time to TIME_RESOLUTION_S."""
+    for digits in range(9, 18):
+        fmt = f"%.{digits}g"
+        back = np.array([float(fmt % v) for v in t])
+        if np.all(np.abs(back - t) <= TIME_RESOLUTION_S):
+            return fmt
+    return "%.17g"
+
+
 def write_flightlog(path: str | Path, log: FlightLog) -> None:
     """Write a FlightLog as flight-log v1 CSV (missing values as empty fields)."""
     cols = log.columns()
     names = list(cols)
     matrix = np.column_stack([np.asarray(cols[n], dtype=float) for n in names])
     buffer = io.StringIO()
-    np.savetxt(buffer, matrix, delimiter=",", fmt="%.9g")
+    formats = ["%.9g"] * len(names)
+    formats[names.index("t")] = _time_format(matrix[:, names.index("t")])
+    np.savetxt(buffer, matrix, delimiter=",", fmt=formats)
     body = buffer.getvalue()
     # numpy writes NaN as 'nan'; the spec prefers an empty field for a missing value.
     body = _NAN_FIELD_RE.sub(r"\1", body)

@@ -84,6 +84,21 @@ def test_round_trip_keeps_values_and_missing(tmp_path):
     np.testing.assert_allclose(back.acc, log.acc, rtol=1e-8)
 
 
+@pytest.mark.parametrize("start_s, rate_hz", [(0.0, 500.0), (1.0e6, 500.0), (1.0e4, 8000.0), (-5.0, 1000.0)])
+def test_round_trip_keeps_sample_times_whatever_the_clock_origin(tmp_path, start_s, rate_hz):
+    # a log stamped from a clock far from 0 (1e6 s at 500 Hz: nine significant digits are 10 ms there)
+    n = 400
+    t = start_s + np.arange(n) / rate_hz
+    log = FlightLog(t=t, gyro=np.zeros((n, 3)), rotor_speed=np.full((n, 4), 1000.0))
+    path = tmp_path / "clock.csv"
+    write_flightlog(path, log)
+    back = read_flightlog(path)
+    np.testing.assert_allclose(back.t, t, rtol=0, atol=1e-7)
+    assert np.all(np.diff(back.t) > 0)
+    if start_s == 0.0:
+        assert path.read_text().splitlines()[2].startswith("0.002,")  # short times keep their short form
+
+
 @pytest.mark.parametrize("newline", ["\n", "\r\n"])
 def test_empty_fields_anywhere_are_missing_values(tmp_path, newline):
     # first column, runs of empties, last column, with LF and CRLF line ends
