@@ -54,7 +54,7 @@ def flying_mask(log: FlightLog, min_fraction: float = 0.33, clearance: float = G
     torques the model does not have) are left out."""
     speeds = _hold_rotor_rows(log.rotor_speed)
     if "is_flying" in log.extra:
-        mask = np.nan_to_num(log.extra["is_flying"], nan=0.0) > 0.5
+        mask = np.nan_to_num(_hold_missing(log.t, log.extra["is_flying"]), nan=0.0) > 0.5
     else:
         spinning = speeds[np.isfinite(speeds) & (speeds > 0)]
         if spinning.size == 0:
@@ -65,10 +65,23 @@ def flying_mask(log: FlightLog, min_fraction: float = 0.33, clearance: float = G
         )
     height = log.extra.get("pz")
     if height is not None and np.isfinite(height).any():
+        height = _hold_missing(log.t, height)
         ground = float(np.nanmin(height))
         if ground <= LANDED_HEIGHT_MAX_M:
             mask &= np.nan_to_num(height, nan=ground) > ground + clearance
     return mask
+
+
+def _hold_missing(t: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """A flag or height column with, in the rows that miss it (the rows of another stream in an events
+    log, a dropped sample), the value in force at their time: the latest logged at or before it (rows
+    before the first value take that one). Missing was read as 'on the ground', so an events log that
+    wrote pz or is_flying on its gyro rows only had no flying rotor row at all."""
+    logged = np.isfinite(values)
+    if logged.all() or not logged.any():
+        return values
+    index = np.searchsorted(t[logged], t, side="right") - 1
+    return values[logged][np.maximum(index, 0)]
 
 
 def _hold_rotor_rows(speeds: np.ndarray) -> np.ndarray:

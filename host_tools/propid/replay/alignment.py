@@ -21,6 +21,28 @@ def detect_streams(log: FlightLog) -> str:
     return "rows"
 
 
+def gyro_rows_view(log: FlightLog) -> FlightLog:
+    """An events log as the filter sees it: its gyro rows, each with the rotor speeds (and every other
+    column) in force at its time, i.e. the latest logged at or before it (NaN before the first).
+    What measures on rows that carry both streams (noise, accelerometer noise) measures on this; a
+    rows log is returned as it is."""
+    if detect_streams(log) != "events":
+        return log
+    gyro_rows = np.flatnonzero(np.any(np.isfinite(log.gyro), axis=1))
+    t = log.t[gyro_rows]
+
+    def in_force(values: np.ndarray, logged: np.ndarray) -> np.ndarray:
+        index = np.searchsorted(log.t[logged], t, side="right") - 1
+        held = values[logged][np.maximum(index, 0)]
+        held[index < 0] = np.nan
+        return held
+
+    speeds = in_force(log.rotor_speed, np.any(np.isfinite(log.rotor_speed), axis=1))
+    extra = {name: in_force(values, np.isfinite(values)) if np.isfinite(values).any() else values[gyro_rows]
+             for name, values in log.extra.items()}
+    return FlightLog(t=t, gyro=log.gyro[gyro_rows], rotor_speed=speeds, extra=extra, path=log.path)
+
+
 def filter_input_rule() -> str:
     """How the loaded C library turns rotor samples into the input of one prediction step
     (t_k-1, t_k]: "zoh" (the latest rotor sample) or "trapezoid" (mean of the sample that was

@@ -8,6 +8,7 @@ import numpy as np
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.realdata_checks import absurd_speed_limit, check_log, flying_mask
+from propid.replay.alignment import gyro_rows_view
 from propid.replay.noise import estimate_noise
 from propid.replay.options import ReplayOptions
 from propid.replay.vehicle_terms import resolve_aero_damping
@@ -68,8 +69,8 @@ def build_config(vehicle: Vehicle, log: FlightLog, options: ReplayOptions) -> tu
              "2x the 99.9th percentile of the log's finite rotor speeds inside a robust fence "
              "(median + 10 x 1.4826 MAD)"}
     if options.noise == "auto":
-        mask = flying_mask(log)
-        auto = estimate_noise(log, inertia, vehicle.positions, vehicle.yaw_signs, mask)
+        rows = gyro_rows_view(log)  # an events log: its gyro rows with the rotor speeds in force
+        auto = estimate_noise(rows, inertia, vehicle.positions, vehicle.yaw_signs, flying_mask(rows))
         config.update(auto)
         if auto:
             notes["noise"] = ("auto: gyro noise and unmodelled angular acceleration measured on the log "
@@ -134,7 +135,8 @@ def _optional_terms(vehicle: Vehicle, log: FlightLog, options: ReplayOptions, co
     if aiding == "gyro+accel":
         config["mass"] = float(vehicle.mass)
         if options.noise in ("auto", "nis"):
-            config["accel_noise_std"] = accel_noise(log, vehicle, flying_mask(log))
+            rows = gyro_rows_view(log)
+            config["accel_noise_std"] = accel_noise(rows, vehicle, flying_mask(rows))
             notes["accel_noise_std"] = "auto: residual of acc_z = c sum Omega^2 + b on the flying rows"
     if options.torque_scale not in ("auto", "on", "off"):
         raise UserError(f"--torque-scale {options.torque_scale!r}: choose auto, on or off")

@@ -1,0 +1,115 @@
+"""Metamorphic checks of `propid replay`: copies of one synthetic flight that mean the same thing
+(the rotors relabelled with the vehicle file, the mirror image, another clock origin, the events
+layout) give the same estimates (docs/real-data.md, "The same flight written differently")."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from propid.flightlog import FlightLog, parse_vehicle
+from propid.replay import ReplayOptions, replay
+from test_replay import KF_TRUE, VEHICLE, synthetic_log
+
+GROUND_S = 0.5  # the synthetic flight's first half second is 'on the ground'
+
+
+def flight(duration: float = 8.0, rate: float = 200.0) -> FlightLog:
+    """synthetic_log's rate-loop flight with what a real log adds: is_flying, height, an accelerometer
+    (collective thrust / mass + noise), an attitude and a velocity that nothing here needs."""
+    log = synthetic_log(duration=duration, rate=rate, seed=11)
+    n = len(log)
+    rng = np.random.default_rng(12)
+    on_ground = log.t < GROUND_S
+    thrust = np.nansum(KF_TRUE * log.rotor_speed**2, axis=1)
+    extra = {
+        "acc_x": rng.normal(0, 0.2, n), "acc_y": rng.normal(0, 0.2, n),
+        "acc_z": thrust / VEHICLE["mass"] + rng.normal(0, 0.3, n),
+        "qw": np.ones(n), "qx": np.zeros(n), "qy": np.zeros(n), "qz": np.zeros(n),
+        "vx": rng.normal(0, 0.1, n), "vy": rng.normal(0, 0.1, n), "vz": np.zeros(n),
+        "px": np.zeros(n), "py": np.zeros(n), "pz": np.where(on_ground, 0.04, 1.0),
+        "is_flying": np.where(on_ground, 0.0, 1.0),
+    }
+    return FlightLog(t=log.t, gyro=log.gyro, rotor_speed=log.rotor_speed, extra=extra)
+
+
+def run(log: FlightLog, vehicle: dict) -> dict:
+    # the Python API's defaults (streams as recorded: esc_delay 0) with the noise measured on the log
+    return replay(log, parse_vehicle(vehicle), ReplayOptions(segment="flying", noise="auto", progress=False)).summary
+
+
+@pytest.fixture(scope="module")
+def original(cfilter_available):
+    log = flight()
+    return log, run(log, VEHICLE)
+
+
+def events_layout(log: FlightLog) -> FlightLog:
+    """Each row as two: its rotor speeds, then its gyro sample with every other column (a log that
+    merges each sensor's own stream, as the ULog and tlog importers write)."""
+    n = len(log)
+
+    def spread(values, on_rotor_row):
+        out = np.full((2 * n,) + values.shape[1:], np.nan)
+        out[(0 if on_rotor_row else 1)::2] = values
+        return out
+
+    return FlightLog(t=np.repeat(log.t, 2), gyro=spread(log.gyro, False), rotor_speed=spread(log.rotor_speed, True),
+                     extra={k: spread(v, False) for k, v in log.extra.items()})
+
+
+def test_the_events_layout_replays_like_the_rows(original):
+    # The flag, height and accelerometer sit on the gyro rows only: the rotor rows used to count as 'on the
+    # ground' (no rotor speed replayed), and the noise and accelerometer-noise rules, which needed both
+    # streams on one row, fell back to library values.
+    log, rows = original
+    events = run(events_layout(log), VEHICLE)
+    assert events["streams"] == "events"
+    for key in ("gyro_noise_density", "rate_process_noise", "gyro_sample_rate_hz", "accel_noise_std"):
+        assert events["config"][key] == pytest.approx(rows["config"][key], rel=1e-12), key
+    assert events["gyro_samples_accepted"] == rows["gyro_samples_accepted"]
+    np.testing.assert_allclose(events["kf_mean"], rows["kf_mean"], rtol=1e-9)
+    np.testing.assert_allclose(events["km_mean"], rows["km_mean"], rtol=1e-9)
+
+
+@pytest.mark.parametrize("perm", [[3, 2, 1, 0], [1, 2, 3, 0], [0, 2, 1, 3]])
+def test_relabelled_rotors_give_the_same_rotors_estimates(original, perm):
+    # new rotor j is old rotor perm[j], in the log's columns and in the vehicle file alike
+    log, rows = original
+    vehicle = copy.deepcopy(VEHICLE)
+    vehicle["rotors"] = [VEHICLE["rotors"][p] for p in perm]
+    relabelled = FlightLog(t=log.t, gyro=log.gyro, rotor_speed=log.rotor_speed[:, perm], extra=log.extra)
+    result = run(relabelled, vehicle)
+    # the filter's float32 sums run in rotor order: rounding, far below the std
+    np.testing.assert_allclose(result["kf_mean"], np.asarray(rows["kf_mean"])[perm], rtol=1e-4)
+    np.testing.assert_allclose(result["km_mean"], np.asarray(rows["km_mean"])[perm], rtol=1e-4)
+
+
+def test_the_mirror_image_gives_the_same_coefficients(original):
+    # Reflected across the body x-z plane: rotor y and the spin (yaw_sign) flip; body rates are a pseudovector
+    # (-M w: x and z flip, y stays); accelerations, velocities, positions are vectors (M v: y flips); the
+    # attitude M R M is the quaternion (w, -x, y, -z). Torques: roll and yaw flip with their rates, so every kf
+    # and km is unchanged.
+    log, rows = original
+    vehicle = copy.deepcopy(VEHICLE)
+    for rotor in vehicle["rotors"]:
+        rotor["position"][1] *= -1
+        rotor["yaw_sign"] *= -1
+    extra = dict(log.extra)
+    for key in ("acc_y", "vy", "py", "qx", "qz"):
+        extra[key] = -extra[key]
+    mirrored = FlightLog(t=log.t, gyro=log.gyro * [-1.0, 1.0, -1.0], rotor_speed=log.rotor_speed, extra=extra)
+    result = run(mirrored, vehicle)
+    np.testing.assert_allclose(result["kf_mean"], rows["kf_mean"], rtol=1e-6)
+    np.testing.assert_allclose(result["km_mean"], rows["km_mean"], rtol=1e-6)
+
+
+@pytest.mark.parametrize("origin_s", [-5.0, 1.0e5, 1.0e6])
+def test_the_clock_origin_changes_nothing(original, origin_s):
+    log, rows = original
+    shifted = FlightLog(t=log.t + origin_s, gyro=log.gyro, rotor_speed=log.rotor_speed, extra=log.extra)
+    result = run(shifted, VEHICLE)
+    assert result["kf_mean"] == rows["kf_mean"] and result["km_mean"] == rows["km_mean"]
+    assert result["rows_replayed"] == rows["rows_replayed"]
