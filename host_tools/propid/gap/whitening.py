@@ -86,7 +86,11 @@ def whitening_gain(residual_parts: list[np.ndarray], rate_hz: float, band: tuple
     psd = _smooth_log(freqs, psd)
     lo_edge = 1.25 * band[0] if band[0] else freqs[1]
     hi_edge = 0.75 * band[1]
-    inside = (freqs >= lo_edge) & (freqs <= hi_edge)
+    # A bin on an edge (2.5 Hz = 1.25 x a 2 Hz high-pass, on the 0.5 Hz grid of 2 s windows) is inside
+    # whatever the last bit of the log's rate: a median step of 0.0100000001 s (a clock origin at 1e6 s)
+    # dropped it and moved every effect's held-out fraction by up to 0.008.
+    tie = 1e-6 * freqs[1]
+    inside = (freqs >= lo_edge - tie) & (freqs <= hi_edge + tie)
     if inside.sum() < 2 or not np.all(psd[inside] > 0):
         return None
     f_in, s_in = freqs[inside], psd[inside]
