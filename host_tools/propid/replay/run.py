@@ -163,6 +163,12 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
                 rec_conv_kf.append([est["thrust_coeff_std"][k] < converged_rel_std * kf_nominal[k] for k in range(n)])
                 rec_conv_km.append([est["drag_coeff_std"][k] < converged_rel_std * km_nominal[k] for k in range(n)])
                 rec_nis.append(est["innovation_test_ratio"] if status >= 0 else [np.nan] * 3)
+        elif has_acc is not None and has_acc[i]:
+            # an accelerometer row of its own (events log): at its own time, as the gyro
+            status = filt.push_accel(int(t_us[i]), acc[i])
+            if status < 0:
+                name = "accel " + filt.status_name(status)
+                status_counts[name] = status_counts.get(name, 0) + 1
     if not rec_t:
         raise UserError("no gyro sample was replayed")
     if gyro_accepted == 0:
