@@ -53,6 +53,8 @@ import sys
 
 import sympy
 
+import quad_predict_arm
+
 N_RATE, N_ROTOR, N_BIAS = 3, 4, 3
 N = N_RATE + 2 * N_ROTOR + N_BIAS          # 14 states
 FIRST_THRUST, FIRST_DRAG, FIRST_BIAS = 3, 7, 11
@@ -441,6 +443,29 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
 
 #endif /* PROPID_QUAD_PREDICT_H */
 """
+    # The Cortex-M4 assembly kernel: its graph checked against the model like the C.
+    arm_graph, arm_stores, arm_lines, arm_counts = quad_predict_arm.kernel(structure)
+    symbols = {}
+
+    def leaf_symbol(node):
+        if node.kind == "P":
+            return p_symbol(*node.key)
+        if node.kind == "G":
+            return g[node.key[0]][node.key[1]]
+        return {"c7": scale_factor, "c1l": 1 + loading, "drag_factor": 1 + drag_loading,
+                "dt": sympy.Symbol("dt"), "psd_rate": q["rate"] / sympy.Symbol("dt"),
+                "psd_thrust": q["thrust"] / sympy.Symbol("dt"), "psd_drag": q["drag"] / sympy.Symbol("dt"),
+                "psd_bias": q["bias"] / sympy.Symbol("dt")}[node.key]
+    values = quad_predict_arm.evaluate(arm_graph, leaf_symbol)
+    check_against_model({(i, j): values[node] for i, j, node, _after in arm_stores}, "assembly kernel's element")
+    arm_text = quad_predict_arm.c_function(structure, arm_lines, arm_counts)
+    header = header.replace("#endif /* PROPID_QUAD_PREDICT_H */", f"""#if !PROPID_SIZE_LEAN && PROPID_ARM_BLOCK_MOVES && !PROPID_GENERAL_VEHICLES
+#define PROPID_ARM_PREDICT_KERNEL 1
+{arm_text}#else
+#define PROPID_ARM_PREDICT_KERNEL 0
+#endif
+
+#endif /* PROPID_QUAD_PREDICT_H */""")
     return header
 
 

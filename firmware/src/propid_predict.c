@@ -476,10 +476,14 @@ static PROPID_QUAD_INLINE void
 predict_covariance_quad_layout(const propid_derived_t *derived, float *restrict cov,
                                float dt, const float jacobian_dt[3][PROPID_JAC_ROW], float drag_factor)
 {
+#if PROPID_ARM_PREDICT_KERNEL
+    propid_quad_predict_covariance_arm(cov, jacobian_dt, derived->kind_process_psd, dt, drag_factor);
+#else
     propid_quad_predict_covariance(cov, jacobian_dt, derived->kind_process_psd[PROPID_KIND_RATE] * dt,
                                    derived->kind_process_psd[PROPID_KIND_THRUST] * dt,
                                    derived->kind_process_psd[PROPID_KIND_DRAG] * dt,
                                    derived->kind_process_psd[PROPID_KIND_BIAS] * dt, drag_factor);
+#endif
 }
 
 #if PROPID_WITH_INPUT_NOISE
