@@ -220,6 +220,81 @@ static int full_cov_positive_definite(const propid_filter_t *filter)
     return 1;
 }
 
+int sitl_honesty_dump_open(sitl_honesty_t *h, const propid_filter_t *filter, const char *path)
+{
+    h->dump = fopen(path, "w");
+    if (h->dump == NULL) {
+        return -1;
+    }
+    const int n_rotor = filter->config.rotor_count;
+    const int n = h->nees_dof;
+    fprintf(h->dump, "# propid_sitl NEES samples (docs/reliability.md, \"The NEES sample by sample\"): "
+                     "%d rotors, %d states: kf_rel per rotor, km_rel per rotor, gyro bias x y z%s\n",
+            n_rotor, n, n > 2 * n_rotor + 3 ? ", torque scale" : "");
+    propid_thrust_basis_t thrust;
+    propid_thrust_basis_init(&thrust, &filter->derived, &filter->config);
+    const propid_reflection_t drag = propid_drag_basis(&filter->derived, &filter->config);
+    /* Row k of each basis: its matrix applied to the unit vectors, transposed (H is symmetric). */
+    for (int block = 0; block < 2; block++) {
+        float rows[PROPID_MAX_ROTORS][PROPID_MAX_ROTORS];
+        for (int j = 0; j < n_rotor; j++) {
+            float x[PROPID_MAX_ROTORS] = {0.0f};
+            x[j] = 1.0f;
+            if (block == 0) {
+                propid_thrust_to_basis(&thrust, x);
+            } else {
+                propid_reflection_transform(&drag, x);
+            }
+            for (int k = 0; k < n_rotor; k++) {
+                rows[k][j] = x[k];
+            }
+        }
+        for (int k = 0; k < n_rotor; k++) {
+            fprintf(h->dump, "# %s_basis_%d", block == 0 ? "kf" : "km", k);
+            for (int j = 0; j < n_rotor; j++) {
+                fprintf(h->dump, ",%.9g", (double)rows[k][j]);
+            }
+            fputc('\n', h->dump);
+        }
+    }
+    fprintf(h->dump, "t,nees");
+    for (int i = 0; i < n; i++) {
+        fprintf(h->dump, ",e_%d", i);
+    }
+    for (int i = 0; i < n; i++) {
+        for (int j = 0; j <= i; j++) {
+            fprintf(h->dump, ",p_%d_%d", i, j);
+        }
+    }
+    return fputc('\n', h->dump) == EOF ? -1 : 0;
+}
+
+int sitl_honesty_dump_close(sitl_honesty_t *h)
+{
+    if (h->dump == NULL) {
+        return 0;
+    }
+    const int closed = fclose(h->dump);
+    h->dump = NULL;
+    return closed != 0 || h->dump_write_errors > 0 ? -1 : 0;
+}
+
+static void dump_sample(sitl_honesty_t *h, double nees, const double *e,
+                        const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], int n)
+{
+    int failed = fprintf(h->dump, "%.6f,%.9g", h->dump_time_s, nees) < 0;
+    for (int i = 0; i < n; i++) {
+        failed |= fprintf(h->dump, ",%.9g", e[i]) < 0;
+    }
+    for (int i = 0; i < n; i++) {
+        for (int j = 0; j <= i; j++) {
+            failed |= fprintf(h->dump, ",%.9g", p[i][j]) < 0;
+        }
+    }
+    failed |= fputc('\n', h->dump) == EOF;
+    h->dump_write_errors += failed;
+}
+
 static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const double *true_kf,
                      const double *true_km, const double true_bias[3])
 {
@@ -249,6 +324,9 @@ static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const dou
         }
     }
     const double nees = nees_of(p, e, n);
+    if (h->dump != NULL) {
+        dump_sample(h, nees, e, p, n);
+    }
     if (nees < 0.0 || !isfinite(nees)) {
         return;
     }
@@ -346,6 +424,7 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
      * cost the simulator several per cent, and 50 Hz samples a 10 s flight
      * 500 times. */
     if (h->steps++ % HONESTY_NEES_EVERY == 0) {
+        h->dump_time_s = t;
         if (h->check_cov) {
             h->cov_checks++;
             h->cov_not_pd += !full_cov_positive_definite(filter);

@@ -10,6 +10,8 @@
 #ifndef SITL_HONESTY_H
 #define SITL_HONESTY_H
 
+#include <stdio.h>
+
 #include "propid/propid.h"
 #include "vehicle.h"
 
@@ -50,6 +52,9 @@ typedef struct {
     int rotor_changes_from_inside; /* changes whose changed rotors were within 10 % just before */
     int rotor_recovered_from_inside; /* ... of them: the changed rotors came back within 10 % and stayed */
     double max_rotor_recovery_s; /* longest such recovery, -1: none */
+    FILE *dump;                 /* --nees-dump: every NEES sample's error and covariance (NULL: none) */
+    double dump_time_s;         /* the time of the step add_nees is called at */
+    long dump_write_errors;     /* rows the dump could not write */
 } sitl_honesty_t;
 
 /* filter: initialised (its configuration gives the states the NEES reads); true_torque_scale:
@@ -68,6 +73,16 @@ void sitl_honesty_init(sitl_honesty_t *h, const propid_filter_t *filter, const d
 #define SITL_HONESTY_MAX_DOF (2 * SITL_MAX_ROTORS + 4)
 int sitl_honesty_truth(const propid_filter_t *filter, double true_torque_scale, const double *true_kf,
                        const double *true_km, const double true_bias[3], int *index, double *truth);
+
+/* --nees-dump (docs/reliability.md, "The NEES sample by sample"): open path and write its
+ * head: comment lines with the states and the coefficient blocks' bases (each row of the kf
+ * basis Q, z = Q kf_rel, and of the km basis H, w = H km_rel, per rotor), then the column
+ * names. Every later NEES sample adds a row: t, nees (-1: P not positive definite), the error
+ * (estimate - truth) of the NEES states (sitl_honesty_truth's order, per rotor), and the lower
+ * triangle of their covariance row by row (p_i_j, j <= i). 0 on success, -1 when the file
+ * cannot be written. sitl_honesty_dump_close closes it: 0, or -1 when a row or the close failed. */
+int sitl_honesty_dump_open(sitl_honesty_t *h, const propid_filter_t *filter, const char *path);
+int sitl_honesty_dump_close(sitl_honesty_t *h);
 
 /* One control step: estimate, the filter (for its covariance), the truth. */
 void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *estimate,

@@ -35,9 +35,9 @@ int main(int argc, char **argv)
     }
     /* Output paths checked before the flight: a bad one fails now, not
      * after it (their missing directories are created when written). */
-    const char *outputs[2] = {opts.log_path, opts.summary_json};
-    const char *output_names[2] = {"--log", "--summary-json"};
-    for (int k = 0; k < 2; k++) {
+    const char *outputs[3] = {opts.log_path, opts.summary_json, opts.nees_dump};
+    const char *output_names[3] = {"--log", "--summary-json", "--nees-dump"};
+    for (int k = 0; k < 3; k++) {
         char why[300];
         if (outputs[k][0] != '\0' && sitl_output_path_check(outputs[k], why, sizeof(why)) != 0) {
             fprintf(stderr, "propid_sitl: cannot write %s %s: %s\n", output_names[k], outputs[k], why);

@@ -519,6 +519,9 @@ static const opt_t options[] = {
     NUMBER(NULL, "log-rate", log_rate_hz, 0.0, 1e6, "HZ",
            "log rows per second (default: every control step)"),
     PATH(NULL, "summary-json", summary_json, "FILE", "final metrics as JSON"),
+    PATH(NULL, "nees-dump", nees_dump, "FILE.csv",
+         "every NEES sample (50 Hz): time, NEES, the error and covariance of\n"
+         "kf, km and biases, with the coefficient bases (docs/reliability.md)"),
     PATH(NULL, "mavlink", mavlink_url, "udp:HOST:PORT", "MAVLink 2 telemetry (off unless given)"),
     FLAG(NULL, "quiet", quiet, 1, "no live summary"),
     FLAG(NULL, "help", help, 1, "this text (also -h)"),

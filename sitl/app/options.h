@@ -63,6 +63,7 @@ typedef struct {
     sitl_fault_config_t faults;         /* --fault (all off by default) */
     int quiet;
     char summary_json[SITL_PATH_MAX];   /* "" = none */
+    char nees_dump[SITL_PATH_MAX];      /* "" = none: every NEES sample's error and covariance */
     int paper;                          /* --paper was given */
     int help;                           /* --help or -h was given */
     double start_height_m;              /* trajectory origin z */

@@ -324,6 +324,17 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
     sitl_honesty_init(&f->honesty, &f->filter, f->true_kf, f->true_km,
                       sitl_setup_true_torque_scale(&o->effects));
     f->honesty.check_cov = o->honesty_cov_check;
+    if (o->nees_dump[0] != '\0') {
+        char why[300];
+        if (sitl_output_path_make_parents(o->nees_dump, why, sizeof(why)) != 0) {
+            snprintf(err, sizeof(err), "cannot write --nees-dump '%.100s': %.120s", o->nees_dump, why);
+            return fail(r, SITL_EXIT_ERROR, err);
+        }
+        if (sitl_honesty_dump_open(&f->honesty, &f->filter, o->nees_dump) != 0) {
+            snprintf(err, sizeof(err), "cannot write --nees-dump '%.200s'", o->nees_dump);
+            return fail(r, SITL_EXIT_ERROR, err);
+        }
+    }
     for (int k = 0; k < o->damage_count; k++) {
         if (o->damage[k].rotor >= n) {
             snprintf(err, sizeof(err), "--damage: rotor %d but the vehicle has %d", o->damage[k].rotor + 1, n);
@@ -420,6 +431,9 @@ static void teardown(flight_t *f, sitl_result_t *r)
         fail(r, SITL_EXIT_ERROR, "error while writing the log");
     }
     f->log_open = 0;
+    if (sitl_honesty_dump_close(&f->honesty) != 0 && r->exit_code == SITL_EXIT_OK) {
+        fail(r, SITL_EXIT_ERROR, "error while writing --nees-dump");
+    }
     sitl_esc_free(&f->esc);
 #ifdef PROPID_SITL_WITH_MAVLINK
     if (f->link != NULL) {
