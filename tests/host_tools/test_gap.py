@@ -118,7 +118,8 @@ def test_a_long_lag_is_shown_on_whitened_rows_and_not_taken_for_rotor_inertia(fl
     """A 50 ms telemetry lag whose evidence on the raw rows sits in the first 2 s (the fold
     without it picked -12 / 0 ms): the raw held-out interval reached 0, the lag was not applied
     and its yaw share was named rotor_inertia. On whitened rows (the effects' replication test)
-    every fold finds the lag and it is shown and named."""
+    every fold finds the lag and it is shown and named; its reported interval is the decision's own
+    (the block-weighted statistic), as every held-out entry's."""
     from propid.gap import analysis
     from propid.gap.prep import Band
 
@@ -134,7 +135,16 @@ def test_a_long_lag_is_shown_on_whitened_rows_and_not_taken_for_rotor_inertia(fl
     entry = _entry(result, "esc_delay")
     assert result["verdict"] == "esc_delay" and "rotor_inertia" not in result["significant"]
     assert entry["params"]["delay_s"] == pytest.approx(0.05, abs=0.006)
-    assert entry["held_out_p_value"] < 1e-3 and entry["ci"][0] > 0
+    # the decision (p < 1e-3, 25x below its bar) and its own interval (the weighted statistic the p
+    # tests: above 0, holding its centre); the unweighted fraction above 0 as well
+    assert entry["held_out_p_value"] < 1e-3 and entry["ci"][0] > 0 and entry["explained_fraction"] > 0
+    assert entry["ci"][0] <= entry["held_out_weighted_fraction"] <= entry["ci"][1]
+    # no entry's interval contradicts the p beside it (the unweighted one reported before could)
+    for e in result["effects"]:
+        if "held_out_weighted_fraction" in e:
+            p = e["held_out_p_value"]
+            assert (e["ci"][0] > 0) == (p < 0.025), e["id"]
+            assert (e["ci"][0] > 0 or e["ci"][1] < 0) == (2.0 * min(p, 1.0 - p) < 0.05), e["id"]
     assert all(abs(d - 0.05) < 0.02 for d in result["alignment"]["whitened"]["fold_delays_s"].values())
     # the default (raw rows) does not show it: what the option is for (docs/gap.md, Stream alignment)
     raw = analysis.run([log], vehicle, [], analysis.Options(Band(), progress=False, auto_highpass=True))
@@ -264,6 +274,11 @@ def test_cli_writes_json_report_and_a_corrected_vehicle_that_replays(flights, tm
     result = json.loads(out.read_text())
     assert result["verdict"] == "inertia_error"
     assert (tmp_path / "rep" / "index.html").is_file() and (tmp_path / "rep" / "effects.png").is_file()
+    # the report's table says whose interval it shows: the weighted statistic's, beside its p
+    page = (tmp_path / "rep" / "index.html").read_text()
+    assert "<th>weighted</th><th>95 % CI (of the weighted where given)</th><th>held-out p</th>" in page
+    tested = [e for e in result["effects"] if "held_out_p_value" in e]
+    assert tested and all(e["ci"][0] <= e["held_out_weighted_fraction"] <= e["ci"][1] for e in tested)
     fixed = read_vehicle(corrected)
     original = read_vehicle(log_path.with_name(log_path.stem + ".vehicle.json"))
     assert fixed.inertia[0, 0] == pytest.approx(1.1 * original.inertia[0, 0], rel=0.04)

@@ -229,5 +229,7 @@ def whitened_evidence(flights: list[Flight], designs: list[Design], grid: np.nda
     test = significance.paired_test(held_zero, held_best, axes, cross, weights)
     if len(fold_delay) < 2:
         test = {**test, "ci": [float("nan"), float("nan")], "p_value": 1.0}
-    return {"explained_fraction": test["value"], "ci": test["ci"], "p_value": test["p_value"],
-            "fold_delays_s": fold_delay}
+    # ci: the interval of the weighted statistic p tests (centred on held_out_weighted_fraction):
+    # its lower edge is above 0 exactly when p < EVIDENCE_LEVEL
+    return {"explained_fraction": test["value"], "held_out_weighted_fraction": test["weighted_value"],
+            "ci": test["ci"], "p_value": test["p_value"], "fold_delays_s": fold_delay}

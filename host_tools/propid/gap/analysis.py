@@ -239,6 +239,7 @@ def per_log_lag_decision(per_log: list[dict], names: list[str], fitted: int, sam
                       and abs(per_log[k]["delay_s"]) > floor for k in range(fitted))
     strongest = min(range(fitted), key=lambda k: p_values[k])
     table = {name: {"delay_s": e["delay_s"], "explained_fraction": e["whitened"]["explained_fraction"],
+                    "held_out_weighted_fraction": e["whitened"]["held_out_weighted_fraction"],
                     "ci": e["whitened"]["ci"], "p_value": e["whitened"]["p_value"], "aligned": ok,
                     "role": "fit" if k < fitted else "holdout"}
              for k, (name, e, ok) in enumerate(zip(names, per_log, shown))}
@@ -371,7 +372,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
 
     entries = []
     esc_entry = {"id": ESC_DELAY, "explained_fraction": evidence["explained_fraction"], "ci": evidence["ci"],
-                 **({"held_out_p_value": evidence["p_value"]} if whitened else {}),
+                 **({"held_out_p_value": evidence["p_value"],
+                     "held_out_weighted_fraction": evidence["held_out_weighted_fraction"]} if whitened else {}),
                  "axes": ["roll", "pitch", "yaw"], "params": {"delay_s": align["delay_s"],
                             **({"per_log_delay_s": align["per_log_delay_s"]} if "per_log_delay_s" in align else {})},
                  "significant": delay_significant}
@@ -390,7 +392,9 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                         "explained_fraction_all_axes": s["explained_fraction_all_axes"],
                         **({"implausible": s["implausible"]} if "implausible" in s else {}),
                         "p_value": s["p_value"], "effect_test": s["effect_test"],
-                        "held_out_p_value": s["held_out_p_value"], "physical_sign": s["physical_sign"],
+                        "held_out_p_value": s["held_out_p_value"],
+                        "held_out_weighted_fraction": s["held_out_weighted_fraction"],
+                        "physical_sign": s["physical_sign"],
                         "significant": s["significant"], **({"step": s["step"]} if "step" in s else {}),
                         **({"conditioned_on": s["conditioned_on"]} if "conditioned_on" in s else {}),
                         **({"dropped": s["dropped"]} if "dropped" in s else {})})

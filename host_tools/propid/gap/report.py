@@ -72,6 +72,12 @@ def plot_where(result: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def interval_centre(entry: dict):
+    """The value an entry's `ci` is an interval of: the block-weighted held-out fraction where the
+    entry has a held-out replication test (its p-value's statistic), else the explained fraction."""
+    return entry.get("held_out_weighted_fraction", entry.get("explained_fraction"))
+
+
 def plot_effects(result: dict, path: Path) -> None:
     plt = _plt()
     effects = result["effects"]
@@ -79,18 +85,19 @@ def plot_effects(result: dict, path: Path) -> None:
     y = np.arange(len(effects))[::-1]
 
     def reach(e, k):  # an interval that is undefined (null: e.g. no held-out block) draws no bar
-        v, lo_hi = e["explained_fraction"], e.get("ci") or [None, None]
+        v, lo_hi = interval_centre(e), e.get("ci") or [None, None]
         if v is None or lo_hi[k] is None:
             return 0.0
         return abs(v - lo_hi[k])
 
-    vals = [e["explained_fraction"] or 0.0 for e in effects]
+    vals = [interval_centre(e) or 0.0 for e in effects]
     err = [[reach(e, 0) for e in effects], [reach(e, 1) for e in effects]]
     colors = ["C3" if e["significant"] else "C7" for e in effects]
     ax.barh(y, vals, xerr=err, color=colors, capsize=2)
     ax.set_yticks(y)
     ax.set_yticklabels([e["id"] for e in effects], fontsize=8)
-    ax.set_xlabel("held-out explained fraction of the residual (red: significant)")
+    ax.set_xlabel("held-out explained fraction, block-weighted where tested, with its 95 % interval "
+                  "(red: significant)", fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path)
@@ -224,10 +231,16 @@ def write_report(result: dict, directory: str | Path) -> Path:
     parts.append(_table(["band", "roll", "pitch", "yaw"], [[b, v["roll"], v["pitch"], v["yaw"]] for b, v in w["per_band"].items()]))
     parts.append(f"<p>Per rotor (relative to the fleet mean): kf {_fmt(w['per_rotor']['kf_relative'])}, "
                  f"km {_fmt(w['per_rotor']['km_relative'])}.</p><img src='where.png'>")
-    parts.append("<h2>Which effects</h2><p>Held-out explained fraction of the current residual, 95 % block-bootstrap "
-                 "interval, effect size (RMS of its own contribution / response variation).</p>")
-    parts.append(_table(["effect", "explained", "95 % CI", "effect size", "axes", "significant", "parameters"],
-                        [[e["id"], e["explained_fraction"], e["ci"], e.get("effect_size"), e["axes"], str(e["significant"]),
+    parts.append("<h2>Which effects</h2><p>Held-out explained fraction of the current residual (unweighted: "
+                 "the ranking's); the held-out replication's statistic, each second weighted by the inverse of "
+                 "its residual power, with its two-sided 95 % interval (it excludes 0 exactly when the two-sided "
+                 "p is below 5 %) and the one-sided held-out p-value; where an entry has no held-out test (the "
+                 "raw-row lag, closed-loop cancellation) the interval is its block-bootstrap interval of the "
+                 "explained fraction. Effect size: RMS of its own contribution / response variation.</p>")
+    parts.append(_table(["effect", "explained", "weighted", "95 % CI (of the weighted where given)", "held-out p",
+                         "effect size", "axes", "significant", "parameters"],
+                        [[e["id"], e["explained_fraction"], e.get("held_out_weighted_fraction"), e["ci"],
+                          e.get("held_out_p_value"), e.get("effect_size"), e["axes"], str(e["significant"]),
                           e["params"]] for e in result["effects"]]))
     parts.append("<img src='effects.png'><h3>Stream alignment (esc_delay)</h3><img src='alignment.png'>")
     parts.append(f"<h2>How far ({html.escape(result['shrink_on'])})</h2>")

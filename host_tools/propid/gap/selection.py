@@ -112,6 +112,8 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
         physical = physical and c_physical
         reason = reason or c_reason
         edge = edge or c_edge
+    # ci: the interval of the statistic held_out_p_value tests (the block-weighted held-out sums),
+    # centred on held_out_weighted_fraction; frac (ranking, reports) stays the unweighted fraction
     frac, ci = test["value"], test["ci"]
     replicated = test["p_value"] <= significance.REPLICATION_LEVEL / max(candidates, 1)
     per_axis = {a: scoring.explained(held_current, held, [k], bootstrap=False)[0] for k, a in enumerate(design.axes)}
@@ -134,7 +136,7 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
             **({"implausible": reason} if reason else {}),
             **({"at_range_edge": edge} if edge and reason is None else {}),
             # the family's multiplicity is applied by forward_select (Holm over the step's candidates)
-            "held_out_p_value": test["p_value"],
+            "held_out_p_value": test["p_value"], "held_out_weighted_fraction": test["weighted_value"],
             # replicated: the effect predicts blocks its fit did not see better than without it
             "admissible": bool(physical and reason is None and size >= floor),
             "significant": bool(physical and reason is None and size >= floor and replicated

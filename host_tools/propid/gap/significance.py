@@ -11,8 +11,8 @@ Rules (docs/gap.md, "Scoring"):
   test (paired_test), Holm at REPLICATION_LEVEL = 5 % over the same candidates, each
   held-out block weighted per axis by the inverse of its 1 s block's held-out residual power
   (block_weights: a residual whose level changes in time, e.g. a start transient or a gust,
-  would otherwise let one loud second set the test's variance; the reported fraction and
-  interval stay unweighted): the Wald
+  would otherwise let one loud second set the test's variance; the reported explained fraction
+  stays unweighted, the reported interval is the weighted statistic's, the decision's own): the Wald
   test on a whole flight also flags fits that soak up what the model gets wrong
   everywhere (the sensor chain's lag, a drifting gyro bias: on effect-free benchmark
   flights gyro_scale reached p ~ 1e-14 with a negative held-out fraction); they do not
@@ -28,11 +28,15 @@ Rules (docs/gap.md, "Scoring"):
   FAMILY_LEVEL = 5 % (the chance of naming any effect when none adds anything is at most
   that, per step); forward selection (selection.py) then scores the rest conditionally on
   the effects already in;
-- the reported interval of the held-out fraction: each held-out block b contributes
+- the held-out fraction: each held-out block b contributes
   c_b = mean over the effect's axes of (SSE_without[b, a] - SSE_with[b, a]) / SSE_without[all, a]
-  (sum_b c_b is the fraction), the variance of its noise part Newey-West as above,
-  two-sided 95 % with Student's t on variance_dof degrees of freedom (a Bartlett window
-  of M blocks over B blocks has about 3 B / (2 M) of them).
+  (sum_b c_b is the fraction), the variance of its noise part Newey-West as above, Student's t
+  on variance_dof degrees of freedom (a Bartlett window of M blocks over B blocks has about
+  3 B / (2 M) of them);
+- the reported interval is that of the statistic the p-value tests (the block-weighted sums,
+  same variance and degrees of freedom), two-sided 95 %: it excludes 0 exactly when the
+  two-sided p is below 5 % (its lower edge is above 0 exactly when the one-sided p is below
+  2.5 %), so an interval never contradicts the p printed beside it.
 """
 
 from __future__ import annotations
@@ -186,12 +190,13 @@ def effective_blocks(u: np.ndarray) -> float:
 
 
 def _improvement_p(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[int],
-                   cross: np.ndarray | None, statistic: str = "improvement") -> tuple[float, float, float, float, float]:
-    """The held-out replication test on (possibly weighted) block sums: p, value (the improvement
-    fraction), se, dof and the Newey-West bandwidth. `statistic` (REPLICATION_STATISTICS):
-    "improvement" tests sum c_b (below); "prediction" tests sum_b r_without,b' delta_b, the
-    current model's held-out residual along what the effect's training-fold fit adds (needs
-    `cross`)."""
+                   cross: np.ndarray | None, statistic: str = "improvement") -> dict:
+    """The held-out replication test on (possibly weighted) block sums. `statistic`
+    (REPLICATION_STATISTICS): "improvement" tests sum c_b (below); "prediction" tests
+    sum_b r_without,b' delta_b, the current model's held-out residual along what the effect's
+    training-fold fit adds (needs `cross`). Returns value (the improvement fraction of these
+    sums), stat / se / dof (the tested statistic, its noise's standard error and degrees of
+    freedom: p = P(T_dof > stat / se)), p and the Newey-West bandwidth."""
     c = block_contributions(sse_without, sse_with, axis_idx)
     value = float(c.sum())
     # c_b = |delta_b|^2 + 2 r_b' delta_b (delta: what the effect changed in the prediction,
@@ -210,15 +215,22 @@ def _improvement_p(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list
         half = noise / 2.0
         stat = value - float(half.sum())
         var, bw = long_run_variance(half)
-        se = math.sqrt(var)
         dof = min(variance_dof(c.shape[0], bw), max(effective_blocks(half), 1.0))
-        p = t_sf(stat / se, dof) if se > 0 else (0.0 if stat > 0 else 1.0)
-        return p, value, 2.0 * se, dof, bw
-    var, bw = long_run_variance(noise)
+    else:
+        stat = value
+        var, bw = long_run_variance(noise)
+        dof = variance_dof(c.shape[0], bw)
     se = math.sqrt(var)
-    dof = variance_dof(c.shape[0], bw)
-    p = t_sf(value / se, dof) if se > 0 else (0.0 if value > 0 else 1.0)
-    return p, value, se, dof, bw
+    p = t_sf(stat / se, dof) if se > 0 else (0.0 if stat > 0 else 1.0)
+    return {"value": value, "stat": stat, "se": se, "dof": dof, "p": p, "bandwidth": bw}
+
+
+def _interval(test: dict) -> list[float]:
+    """Two-sided 95 % interval of a test's statistic (stat +- t_{0.975, dof} se): its lower edge is
+    above 0 exactly when the test's one-sided p is below 0.025, i.e. it excludes 0 exactly when the
+    two-sided p (2 min(p, 1 - p)) is below 0.05."""
+    half = t_quantile(0.025, test["dof"]) * test["se"]
+    return [test["stat"] - half, test["stat"] + half]
 
 
 def paired_test(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[int],
@@ -226,26 +238,28 @@ def paired_test(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[in
                 statistic: str = "improvement") -> dict:
     """Paired held-out test: c_b per block as in the module text, t = sum c_b / sqrt(Var) on
     B - 1 degrees of freedom (under "adds nothing" the held-out improvement has mean <= 0:
-    extra columns only add estimation noise, so the test is conservative). Returns the
-    explained fraction, its 95 % interval and that p-value. Blocks in time order. With
-    `weights` (block_weights) the p-value is the same test on the weighted block sums; the
-    fraction and its interval stay unweighted. `statistic`: the p-value's statistic
-    (REPLICATION_STATISTICS, _improvement_p); the fraction and its interval are the improvement's
-    either way."""
+    extra columns only add estimation noise, so the test is conservative). With `weights`
+    (block_weights) the test is on the weighted block sums. Returns `value` (the unweighted
+    explained fraction), `p_value` (the test's one-sided p), `weighted_value` (the tested
+    statistic: the weighted fraction, or with statistic "prediction" the weighted fraction along
+    the prediction) and `ci` its two-sided 95 % interval (_interval: the decision's own statistic,
+    so ci[0] > 0 exactly when p < 0.025). Blocks in time order."""
     if statistic not in REPLICATION_STATISTICS:
         raise ValueError(f"unknown replication statistic {statistic!r}")
     n = sse_without.shape[0]
     if n < 3:
         value = float(block_contributions(sse_without, sse_with, axis_idx).sum())
-        return {"value": value, "ci": [float("-inf"), float("inf")], "p_value": 1.0, "blocks": n, "bandwidth": 0.0}
-    p, value, se, dof, bw = _improvement_p(sse_without, sse_with, axis_idx, cross)
+        return {"value": value, "weighted_value": value, "ci": [float("-inf"), float("inf")], "p_value": 1.0,
+                "blocks": n, "bandwidth": 0.0}
+    plain = _improvement_p(sse_without, sse_with, axis_idx, cross)
+    test = plain
     if weights is None and statistic != "improvement":
-        p = _improvement_p(sse_without, sse_with, axis_idx, cross, statistic)[0]
+        test = _improvement_p(sse_without, sse_with, axis_idx, cross, statistic)
     if weights is not None:
-        p = _improvement_p(sse_without * weights, sse_with * weights, axis_idx,
-                           None if cross is None else cross * weights, statistic)[0]
-    half = t_quantile(0.025, dof) * se
-    return {"value": value, "ci": [value - half, value + half], "p_value": float(p), "blocks": n, "bandwidth": bw}
+        test = _improvement_p(sse_without * weights, sse_with * weights, axis_idx,
+                              None if cross is None else cross * weights, statistic)
+    return {"value": plain["value"], "weighted_value": test["stat"], "ci": _interval(test),
+            "p_value": float(test["p"]), "blocks": n, "bandwidth": plain["bandwidth"]}
 
 
 def difference_interval(sse_base: np.ndarray, sse_a: np.ndarray, sse_b: np.ndarray, axis_idx: list[int]) -> list[float]:
