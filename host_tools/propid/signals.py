@@ -82,11 +82,13 @@ def segment_starts(mask: np.ndarray, t: np.ndarray, dt: float) -> np.ndarray:
 
 
 def repeats_previous_row(values: np.ndarray) -> np.ndarray:
-    """Mask of the rows whose every column equals the previous row's bit for bit (NaN never does): a
-    logger that samples separately streamed blocks by sample-and-hold writes a lost packet as such a
-    copy (docs/real-data.md "Repeated rows")."""
+    """Mask of the rows whose every column equals, bit for bit, the previous row that logs this stream
+    (NaN never does): a logger that samples separately streamed blocks by sample-and-hold writes a lost
+    packet as such a copy (docs/real-data.md "Repeated rows"). The previous row logging the stream, not
+    the previous row: in an events log the other stream's rows lie between two samples of this one."""
     same = np.zeros(len(values), dtype=bool)
-    same[1:] = np.all(values[1:] == values[:-1], axis=1)
+    logged = np.flatnonzero(np.any(np.isfinite(values), axis=1))
+    same[logged[1:]] = np.all(values[logged[1:]] == values[logged[:-1]], axis=1)
     return same
 
 

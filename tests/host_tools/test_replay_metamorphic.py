@@ -144,3 +144,36 @@ def test_the_clock_origin_changes_nothing(original, origin_s):
     result = run(shifted, VEHICLE)
     assert result["kf_mean"] == rows["kf_mean"] and result["km_mean"] == rows["km_mean"]
     assert result["rows_replayed"] == rows["rows_replayed"]
+
+
+@pytest.fixture(scope="module")
+def long_flight(cfilter_available):
+    """A 24 s flight (the walk rules need several 4 s windows) whose gyro repeats the previous sample on
+    every fifth row (a logger's sample-and-hold copies of lost packets)."""
+    log = flight(duration=24.0)
+    gyro = log.gyro.copy()
+    gyro[5::5] = gyro[4::5][: len(gyro[5::5])]
+    return FlightLog(t=log.t, gyro=gyro, rotor_speed=log.rotor_speed, extra=log.extra)
+
+
+@pytest.mark.parametrize("rule, options, measured", [
+    ("rotor-speed noise", dict(rotor_speed_noise="auto"), ("rotor_speed_noise", "rotor_speed_noise_time")),
+    ("kf walk", dict(aiding="gyro", thrust_coeff_walk="auto"), ("thrust_coeff_rel_walk",)),
+    ("scale walk", dict(aiding="gyro+accel", torque_scale_walk="auto"), ("torque_scale_walk",)),
+])
+def test_the_per_log_rules_measure_the_events_layout_like_the_rows(long_flight, rule, options, measured):
+    # They read the rows log's rows as samples: on the events layout the other stream's rows lay between two
+    # samples (the walks found no window with both streams and fell back to the library's value; the
+    # rotor-speed noise read the interpolated fill of the gyro rows as samples, 80x too small on a real run;
+    # the repeated-gyro check compared a gyro row with a rotor row and never warned).
+    def summary(log):
+        return replay(log, parse_vehicle(VEHICLE), ReplayOptions(segment="flying", noise="auto", esc_delay=0.0,
+                                                                 progress=False, **options)).summary
+
+    rows, events = summary(long_flight), summary(events_layout(long_flight))
+    assert events["streams"] == "events" and rows["streams"] == "rows"
+    for key in measured:
+        assert rows["config"][key] > 0.0, (rule, key)
+        assert events["config"][key] == pytest.approx(rows["config"][key], rel=1e-9), (rule, key)
+    repeated = [w for w in rows["warnings"] if "repeat the previous gyro sample" in w]
+    assert repeated and [w for w in events["warnings"] if "repeat the previous gyro sample" in w] == repeated

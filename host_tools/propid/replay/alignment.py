@@ -43,6 +43,13 @@ def gyro_rows_view(log: FlightLog) -> FlightLog:
     return FlightLog(t=t, gyro=log.gyro[gyro_rows], rotor_speed=speeds, extra=extra, path=log.path)
 
 
+def gyro_rows_with_mask(log: FlightLog, mask: np.ndarray) -> tuple[FlightLog, np.ndarray]:
+    """gyro_rows_view and the row mask carried to its rows (a rows log and its mask as they are)."""
+    if detect_streams(log) != "events":
+        return log, mask
+    return gyro_rows_view(log), mask[np.any(np.isfinite(log.gyro), axis=1)]
+
+
 def filter_input_rule() -> str:
     """How the loaded C library turns rotor samples into the input of one prediction step
     (t_k-1, t_k]: "zoh" (the latest rotor sample) or "trapezoid" (mean of the sample that was

@@ -32,6 +32,7 @@ import numpy as np
 
 from propid.flightlog import FlightLog
 from propid.realdata_checks import absurd_speed_limit, clean_rotor_speeds
+from propid.signals import repeats_previous_row
 
 MIN_SAMPLES = 50
 QUANT_BAND = 0.1  # +-10 % of the median speed: where the quantisation step is measured
@@ -54,9 +55,11 @@ def estimate_rotor_speed_noise(log: FlightLog, mask: np.ndarray) -> dict:
     t = np.asarray(log.t, dtype=float)
     sigmas, times, parts = [], [], []
     for i in range(speeds.shape[1]):
-        column = speeds[:, i]
-        keep = mask & np.isfinite(column)
-        keep[1:] &= column[1:] != column[:-1]
+        # The stream's own samples: the rows that log it (clean_rotor_speeds fills the others, e.g. an
+        # events log's gyro rows, by interpolation: no samples), a value equal to the previous sample
+        # being no new sample.
+        column = np.where(np.isfinite(log.rotor_speed[:, i]), speeds[:, i], np.nan)
+        keep = mask & np.isfinite(column) & ~repeats_previous_row(column[:, None])
         values, stamps = column[keep], t[keep]
         if len(values) < MIN_SAMPLES:
             continue

@@ -11,7 +11,7 @@ from propid.cfilter import DEFAULT_TUNING
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.km_evidence import combination_std
-from propid.replay.alignment import detect_streams, estimate_esc_delay, filter_input_rule
+from propid.replay.alignment import detect_streams, estimate_esc_delay, filter_input_rule, gyro_rows_with_mask
 from propid.replay.config import build_config
 from propid.replay.instrument import resolve_instrument
 from propid.replay.noise import nis_mean, replay_nis
@@ -366,8 +366,10 @@ def stream_rates(log: FlightLog, rows: np.ndarray) -> dict:
 
 
 def repeated_gyro_share(log: FlightLog, rows: np.ndarray) -> float:
-    """Share of `rows` (indices) whose gyro triple equals the previous row's, every axis finite."""
-    rows = rows[rows > 0]
+    """Share of the gyro samples among `rows` (indices) whose triple equals the previous gyro sample's, every
+    axis finite (the log's first gyro sample has none before it; an events log's rotor rows are no gyro sample)."""
+    logged = np.flatnonzero(np.any(np.isfinite(log.gyro), axis=1))
+    rows = rows[np.isin(rows, logged[1:])]
     if rows.size == 0:
         return 0.0
     return float(np.sum(repeats_previous_row(log.gyro)[rows])) / rows.size
@@ -441,8 +443,9 @@ def resolve_thrust_coeff_walk(log: FlightLog, vehicle: Vehicle, mask: np.ndarray
                         "state carries the changing gain: --torque-scale-walk auto)")
     from propid.replay.scale_walk import estimate_scale_walk
 
-    lag = int(round(-esc_delay_s / median_dt(log.t)))
-    info = estimate_scale_walk(log, vehicle, mask, lag, filter_input_rule() == "trapezoid")
+    rows, rows_mask = gyro_rows_with_mask(log, mask)  # the torque gain needs both streams on each row
+    lag = int(round(-esc_delay_s / median_dt(rows.t)))
+    info = estimate_scale_walk(rows, vehicle, rows_mask, lag, filter_input_rule() == "trapezoid")
     base = float(DEFAULT_TUNING["thrust_coeff_rel_walk"])
     walk = float(np.hypot(base, info["walk"]))
     config_fields["thrust_coeff_rel_walk"] = walk
@@ -462,8 +465,9 @@ def resolve_scale_walk(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, optio
     if walk == "auto":
         from propid.replay.scale_walk import estimate_scale_walk
 
-        lag = int(round(-esc_delay_s / median_dt(log.t)))
-        info = estimate_scale_walk(log, vehicle, mask, lag, filter_input_rule() == "trapezoid")
+        rows, rows_mask = gyro_rows_with_mask(log, mask)  # the torque gain needs both streams on each row
+        lag = int(round(-esc_delay_s / median_dt(rows.t)))
+        info = estimate_scale_walk(rows, vehicle, rows_mask, lag, filter_input_rule() == "trapezoid")
         config_fields["torque_scale_walk"] = info["walk"]
         notes["torque_scale_walk"] = info
         return
