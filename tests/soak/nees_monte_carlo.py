@@ -41,12 +41,11 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-REPO = HERE.parents[1]
 sys.path.insert(0, str(HERE))
 
 import rate_noise_rule  # noqa: E402  (the soak's loader)
 from propid.errors import UserError  # noqa: E402
-from propid.outputs import check_writable, write_text  # noqa: E402
+from propid.outputs import write_text  # noqa: E402
 
 Z95 = 1.959964
 REPORT_TIMES_S = (0.5, 1.0, 2.0, 5.0, 10.0, float("inf"))
@@ -195,10 +194,7 @@ def pooled(reports: list[dict], rng: np.random.Generator, draws: int = 20_000) -
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--sitl", default=str(REPO / "build" / "host" / "sitl" / "propid_sitl"),
-                        help="propid_sitl binary (default: build/host/sitl/propid_sitl)")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the soak plan (default 1, make soak's)")
-    parser.add_argument("--steps", type=float, default=1e7, help="the plan's filter steps, as make soak (default 1e7)")
+    rate_noise_rule.add_plan_arguments(parser)
     parser.add_argument("--case", type=int, action="append",
                         help="a clean case of the plan (repeatable; default: every clean case of --sensors)")
     parser.add_argument("--sensors", choices=("all", "default", "paper"), default="paper",
@@ -211,15 +207,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="flights in parallel (default 2)")
     parser.add_argument("--out", help="write the report here (JSON)")
     args = parser.parse_args(argv)
-    if not os.access(args.sitl, os.X_OK):
-        parser.error(f"--sitl: {args.sitl} is not an executable (build it: make host)")
+    rate_noise_rule.check_sitl_and_out(parser, args)
     if args.runs < 2 or args.jobs < 1 or args.steps <= 0:
         parser.error("--runs must be >= 2, --jobs >= 1 and --steps > 0")
-    if args.out:
-        try:
-            check_writable(args.out, "--out")
-        except UserError as exc:
-            parser.error(str(exc))
     import nees_options  # noqa: E402  (the plan's clean cases)
     cases = nees_options.clean_cases(args.seed, args.steps)
     if args.case:

@@ -26,12 +26,10 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-REPO = HERE.parents[1]
 sys.path.insert(0, str(HERE))
 
 import rate_noise_rule  # noqa: E402  (the soak's loader and the NEES figures of one flight)
-from propid.errors import UserError  # noqa: E402
-from propid.outputs import check_writable, write_text  # noqa: E402
+from propid.outputs import write_text  # noqa: E402
 
 
 def clean_cases(seed: int, steps: float) -> list[dict]:
@@ -58,10 +56,7 @@ def fly_case(job: tuple) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--sitl", default=str(REPO / "build" / "host" / "sitl" / "propid_sitl"),
-                        help="propid_sitl binary (default: build/host/sitl/propid_sitl)")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the soak plan (default 1, make soak's)")
-    parser.add_argument("--steps", type=float, default=1e7, help="the plan's filter steps, as make soak (default 1e7)")
+    rate_noise_rule.add_plan_arguments(parser)
     parser.add_argument("--jobs", type=int, default=2, help="flights in parallel (default 2)")
     parser.add_argument("--sensors", choices=("all", "default", "paper"), default="all",
                         help="fly only the clean flights with this sensor set (default all)")
@@ -72,15 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--limit", type=int, default=0, help="fly only the first N selected flights (0: all)")
     parser.add_argument("--out", help="write the figures and the per-flight results here (JSON)")
     args = parser.parse_args(argv)
-    if not os.access(args.sitl, os.X_OK):
-        parser.error(f"--sitl: {args.sitl} is not an executable (build it: make host)")
+    rate_noise_rule.check_sitl_and_out(parser, args)
     if args.jobs < 1 or args.steps <= 0 or args.limit < 0:
         parser.error("--jobs must be >= 1, --steps > 0 and --limit >= 0")
-    if args.out:
-        try:  # the host tools' rule (README "Output files"): checked now, directories made at the write
-            check_writable(args.out, "--out")
-        except UserError as exc:
-            parser.error(str(exc))
     extra = {"default": shlex.split(args.default_args), "paper": shlex.split(args.paper_args)}
     cases = [case for case in clean_cases(args.seed, args.steps)
              if args.sensors in ("all", case["sensors"])]

@@ -242,12 +242,29 @@ def pooled(results: list[dict], key: str) -> dict:
                for name, g in sorted(groups.items())}, **totals}
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def add_plan_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options every NEES tool here shares: the SITL binary, and the soak plan's seed and size."""
     parser.add_argument("--sitl", default=str(REPO / "build" / "host" / "sitl" / "propid_sitl"),
                         help="propid_sitl binary (default: build/host/sitl/propid_sitl)")
-    parser.add_argument("--seed", type=int, default=1, help="seed of the soak plan (default 1)")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the soak plan (default 1, make soak's)")
     parser.add_argument("--steps", type=float, default=1e7, help="the plan's filter steps, as make soak (default 1e7)")
+
+
+def check_sitl_and_out(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """--sitl must be an executable; --out is checked writable now (the host tools' rule, README "Output
+    files"), its directories made at the write."""
+    if not os.access(args.sitl, os.X_OK):
+        parser.error(f"--sitl: {args.sitl} is not an executable (build it: make host)")
+    if args.out:
+        try:
+            check_writable(args.out, "--out")
+        except UserError as exc:
+            parser.error(str(exc))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    add_plan_arguments(parser)
     parser.add_argument("--jobs", type=int, default=2, help="flights in parallel (default 2)")
     parser.add_argument("--truth", action="store_true",
                         help="also the truth residual's white equivalent on exact-speed flights")
@@ -267,13 +284,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(derive(args.log, args.log[:-4] + ".vehicle.json", args.vehicle, args.sensors,
                                 args.truth and args.sensors == "paper")))
         return 0
-    if not os.access(args.sitl, os.X_OK):
-        parser.error(f"--sitl: {args.sitl} is not an executable (build it: make host)")
-    if args.out:
-        try:  # the host tools' rule (README "Output files"): checked now, directories made at the write
-            check_writable(args.out, "--out")
-        except UserError as exc:
-            parser.error(str(exc))
+    check_sitl_and_out(parser, args)
     soak = load_soak()
     rng = random.Random(args.seed)
     cases, planned = [], 0.0
