@@ -317,12 +317,23 @@ def resolve_esc_delay(log: FlightLog, vehicle: Vehicle, mask: np.ndarray, option
         value = float(vehicle.esc_delay_s or 0.0)
         return value, "vehicle file esc_delay_s" if vehicle.esc_delay_s is not None else "vehicle file: none (0)"
     if choice == "auto":
-        if streams != "rows":
-            return 0.0, "auto: 0 for an event-style log (each stream keeps its own time stamps)"
-        return (estimate_esc_delay(log, vehicle, mask, unit_inertia=options.unit_inertia),
+        if streams != "rows" and rotor_stream_is_slower(log, mask):
+            return 0.0, ("auto: 0 for an events log whose rotor stream is slower than its gyro (the hold between "
+                         "rotor samples is itself a lag that varies sample to sample; no whole-sample shift fits it)")
+        # On an events log the rule reads the gyro rows with the rotor speeds in force at each: the input the
+        # filter's hold gives the step, as on the rows copy of the same samples.
+        rows, rows_mask = gyro_rows_with_mask(log, mask)
+        return (estimate_esc_delay(rows, vehicle, rows_mask, unit_inertia=options.unit_inertia),
                 "auto: whole-sample lag (-50..50 ms) maximising the 2-10 Hz R^2 of measured vs modelled "
                 "roll/pitch torque in the filter's Euler step")
     return float(choice), "given"
+
+
+def rotor_stream_is_slower(log: FlightLog, mask: np.ndarray) -> bool:
+    """Fewer rows of `mask` log a rotor sample than log a gyro sample (by more than a tenth)."""
+    logs_rotor = np.any(np.isfinite(log.rotor_speed[mask]), axis=1).sum()
+    logs_gyro = np.any(np.isfinite(log.gyro[mask]), axis=1).sum()
+    return bool(logs_rotor < 0.9 * logs_gyro)
 
 
 def estimates_finite(series: dict) -> bool:
