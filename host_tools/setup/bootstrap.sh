@@ -67,8 +67,27 @@ step_apt() {
         echo "DEBIAN_FRONTEND=noninteractive apt-get install -y ${missing[*]}"
         return 0
     fi
-    apt-get update
-    DEBIAN_FRONTEND=noninteractive apt-get install -y "${missing[@]}"
+    apt_waiting_for_lock update
+    DEBIAN_FRONTEND=noninteractive apt_waiting_for_lock install -y "${missing[@]}"
+}
+
+# A fresh machine often runs another apt at boot (unattended upgrades), and several checkouts set up at
+# once: wait for apt's locks (up to 10 min) instead of failing on them. `update` does not honour
+# DPkg::Lock::Timeout for the lists lock, hence the retries.
+apt_waiting_for_lock() {
+    local attempt log
+    log=$(mktemp)
+    for attempt in $(seq 1 120); do
+        if apt-get -o DPkg::Lock::Timeout=5 "$@" >"$log" 2>&1; then
+            cat "$log"; rm -f "$log"; return 0
+        fi
+        cat "$log"
+        grep -q "Could not get lock" "$log" || { rm -f "$log"; die "apt-get $* failed"; }
+        say "apt is locked by another process; waiting (attempt $attempt of 120)"
+        sleep 5
+    done
+    rm -f "$log"
+    die "apt-get $*: apt stayed locked for 10 minutes"
 }
 
 step_venv() {
