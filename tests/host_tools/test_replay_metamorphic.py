@@ -195,3 +195,64 @@ def test_the_delay_rule_reads_the_events_layout_like_the_rows(cfilter_available)
     assert rows["esc_delay_s"] == pytest.approx(0.015, abs=0.0051)  # found on the rows, within a sample
     assert events["esc_delay_s"] == rows["esc_delay_s"]
     np.testing.assert_allclose(events["kf_mean"], rows["kf_mean"], rtol=1e-9)
+
+
+def with_commands(log: FlightLog) -> FlightLog:
+    """The flight with motor commands cmd_1..cmd_N in 0..1: each rotor's speed 30 ms later, normalised (the
+    speed follows its command with a lag); the rows that lost a rotor sample keep their command."""
+    lead = int(round(0.03 / float(np.median(np.diff(log.t)))))
+    speeds = np.nan_to_num(np.clip(log.rotor_speed, 0.0, None), nan=0.0)
+    ahead = np.vstack([speeds[lead:], np.repeat(speeds[-1:], lead, axis=0)])
+    commands = np.clip(ahead / (1.2 * np.percentile(speeds, 99.0)), 0.0, 1.0)
+    extra = dict(log.extra)
+    extra.update({f"cmd_{i + 1}": commands[:, i] for i in range(log.rotor_count)})
+    return FlightLog(t=log.t, gyro=log.gyro, rotor_speed=log.rotor_speed, extra=extra)
+
+
+def commands_on_rotor_rows(events: FlightLog, rotor_count: int) -> FlightLog:
+    """An events log with its cmd_* moved from each gyro row to the rotor row before it (the same stamp)."""
+    extra = dict(events.extra)
+    for i in range(rotor_count):
+        values = extra[f"cmd_{i + 1}"]
+        moved = np.full_like(values, np.nan)
+        moved[0::2] = values[1::2]
+        extra[f"cmd_{i + 1}"] = moved
+    return FlightLog(t=events.t, gyro=events.gyro, rotor_speed=events.rotor_speed, extra=extra)
+
+
+def test_the_command_instrument_runs_on_the_events_layout_like_the_rows(original):
+    # The commands were pushed only from rows that carry rotor speeds: an events log with its commands on the
+    # gyro rows (the layout events_layout writes) fed the filter no command at all, silently (the first stage
+    # never ran; square_20251017_run2's events copy: 0 of 2,267 commands, kf 0.7-5.6 % apart); and the lag
+    # rule's first stage started from 0 where the log's first row is another stream's.
+    log = with_commands(original[0])
+
+    def summary(flight):
+        return replay(flight, parse_vehicle(VEHICLE), ReplayOptions(
+            segment="flying", noise="auto", esc_delay=0.0, aiding="gyro", instrument="commands", command_lag="auto",
+            progress=False)).summary
+
+    rows = summary(log)
+    assert rows["counters"]["command_accepted"] > 0.9 * len(log)
+    events = events_layout(log)
+    for copy in (events, commands_on_rotor_rows(events, log.rotor_count)):
+        result = summary(copy)
+        assert result["streams"] == "events"
+        assert result["config_notes"]["instrument"] == rows["config_notes"]["instrument"]
+        assert result["counters"]["command_accepted"] == rows["counters"]["command_accepted"]
+        assert result["counters"]["instrument_inputs"] == rows["counters"]["instrument_inputs"]
+        np.testing.assert_allclose(result["kf_mean"], rows["kf_mean"], rtol=1e-9)
+        np.testing.assert_allclose(result["km_mean"], rows["km_mean"], rtol=1e-9)
+
+
+def test_the_lag_rule_starts_at_the_first_logged_command():
+    # The firmware's first stage starts at its first command's steady state; the rule's copy started at 0
+    # when the log's first row carried no command (an events log's rotor or gyro row).
+    from propid.replay.instrument import lagged
+
+    t = np.arange(6) * 0.01
+    commands = np.array([[np.nan, np.nan], [0.4, 0.6], [0.5, 0.6], [np.nan, np.nan], [0.5, 0.7], [0.5, 0.7]])
+    out = lagged(commands, t, 0.03)
+    np.testing.assert_allclose(out[:3], [[0.4, 0.6]] * 3)  # held at the first command until it changes
+    decay = np.exp(-0.01 / 0.03)
+    np.testing.assert_allclose(out[3], [0.5 + (0.4 - 0.5) * decay, 0.6])

@@ -35,9 +35,12 @@ def command_columns(log: FlightLog) -> np.ndarray:
 
 
 def lagged(commands: np.ndarray, t: np.ndarray, lag_s: float) -> np.ndarray:
-    """The first stage's lag as the firmware runs it: the previous command held over each interval."""
+    """The first stage's lag as the firmware runs it: the previous command held over each interval,
+    starting at the first logged command's steady state (an events log's first row may be another
+    stream's)."""
     out = np.empty_like(commands)
-    state = np.nan_to_num(commands[0])
+    logged = np.flatnonzero(np.all(np.isfinite(commands), axis=1))
+    state = commands[logged[0]].copy() if logged.size else np.zeros(commands.shape[1])
     held = state.copy()
     out[0] = state
     for k in range(1, len(commands)):

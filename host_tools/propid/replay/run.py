@@ -24,6 +24,32 @@ from propid.replay.vehicle_terms import undo_gyro_scale
 from propid.signals import median_dt, repeats_previous_row
 
 
+COMMAND_PUSH, ROTOR_PUSH = 0, 1
+
+
+def input_pushes(rows: np.ndarray, streams: str, logged_streams: str, has_rotor: np.ndarray,
+                 commands: np.ndarray | None, t_us: np.ndarray) -> list[tuple[int, int]]:
+    """The filter's input pushes in order, (COMMAND_PUSH or ROTOR_PUSH, row): a row's command before its
+    rotor speeds. A log written as rows pushes its commands with its rotor rows (each row's command, then
+    its speeds). A log written as events may carry the commands on other rows (on the gyro rows, or on
+    rows of their own): each finite command is pushed at its own stamp, before the rotor speeds of an
+    equal stamp, as the rows copy of the same samples pushes them."""
+    has_command = (np.all(np.isfinite(commands), axis=1) if commands is not None
+                   else np.zeros(has_rotor.shape, dtype=bool))
+    if logged_streams == "rows":
+        pushes = []
+        for j in rows:
+            if streams == "rows" or has_rotor[j]:
+                if has_command[j]:
+                    pushes.append((COMMAND_PUSH, int(j)))
+                pushes.append((ROTOR_PUSH, int(j)))
+        return pushes
+    keyed = [(int(t_us[j]), COMMAND_PUSH, int(j)) for j in rows if has_command[j]]
+    keyed += [(int(t_us[j]), ROTOR_PUSH, int(j)) for j in rows if has_rotor[j]]
+    keyed.sort()
+    return [(kind, j) for _, kind, j in keyed]
+
+
 def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = None) -> ReplayResult:
     """Run the log through the C filter; return the summary (JSON-ready) and time series."""
     options = options or ReplayOptions()
@@ -110,20 +136,21 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         from tqdm import tqdm
 
         iterator = tqdm(rows, desc="replay", unit="row", mininterval=0.5, leave=False)
-    # Every sample at its logged time, the two streams interleaved in time order (rotor speeds
-    # first at equal stamps); the filter realigns them by its configured delay.
-    rotor_rows = [i for i in rows if streams == "rows" or has_rotor[i]]
-    next_rotor = 0
+    # Every sample at its logged time, the streams interleaved in time order (commands, then rotor
+    # speeds, then the gyro at equal stamps); the filter realigns them by its configured delay.
+    inputs = input_pushes(rows, streams, logged_streams, has_rotor, commands, t_us)
+    next_input = 0
     for i in iterator:
-        while next_rotor < len(rotor_rows) and t_us[rotor_rows[next_rotor]] <= t_us[i]:
-            j = rotor_rows[next_rotor]
-            next_rotor += 1
-            if commands is not None and np.all(np.isfinite(commands[j])):
-                # The command of this row first: the lag holds the previous one up to this stamp.
+        while next_input < len(inputs) and t_us[inputs[next_input][1]] <= t_us[i]:
+            kind, j = inputs[next_input]
+            next_input += 1
+            if kind == COMMAND_PUSH:
+                # The lag holds the previous command up to this stamp.
                 status = filt.push_motor_command(int(t_us[j]), commands[j])
                 if status < 0:
                     name = "command " + filt.status_name(status)
                     status_counts[name] = status_counts.get(name, 0) + 1
+                continue
             status = filt.push_rotor_speeds(int(t_us[j]), speeds[j])
             if status < 0:
                 name = filt.status_name(status)
