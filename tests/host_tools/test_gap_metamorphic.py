@@ -80,3 +80,25 @@ def test_gap_gives_the_same_diagnosis_of_the_relabelled_mirrored_late_copy(tmp_p
     for key, fit in first["base_fit"].items():
         if fit is not None:
             assert abs(second["base_fit"][key]["value"] / fit["value"] - 1) < 1e-6, key
+
+
+def test_the_events_layout_carries_the_rotor_streams_copies():
+    # gap flagged a copy of the previous rotor row on the log's own rows, then kept the gyro rows only: on an
+    # events log every rotor copy was dropped with its row, so the stream-quality report read 0 % (a SITL
+    # flight's sample-and-held telemetry: 53.5 % on the rows log) and --repeats missing interpolated none.
+    from propid.flightlog import parse_vehicle
+    from propid.gap.prep import Band, prepare_flight
+    from test_gap_repeats import with_lost_packets
+    from test_replay import VEHICLE, synthetic_log
+    from test_replay_metamorphic import events_layout
+
+    lossy, _, rotor_rows = with_lost_packets(synthetic_log(duration=20.0, rate=100.0, seed=7), seed=107)
+    vehicle = parse_vehicle(VEHICLE)
+    for repeats in ("samples", "missing"):
+        rows = prepare_flight(lossy, vehicle, Band(), name="log", repeats=repeats)
+        events = prepare_flight(events_layout(lossy), vehicle, Band(), name="log", repeats=repeats)
+        assert rows.repeated_rows["rotor"]["count"] > 0.3 * len(lossy.t)
+        assert events.repeated_rows == rows.repeated_rows
+        np.testing.assert_array_equal(events.t, rows.t)
+        np.testing.assert_allclose(events.speed, rows.speed, rtol=1e-12)
+        np.testing.assert_allclose(events.torque, rows.torque, rtol=1e-12, atol=1e-15)
