@@ -14,7 +14,7 @@ import numpy as np
 from propid.errors import UserError
 from propid.flightlog import other_vehicle_files, read_flightlog, read_vehicle, vehicle_path_for, write_vehicle
 from propid.gap.log_order import canonical_order
-from propid.gap.scoring import REPLICATION_FOLDS
+from propid.gap.scoring import BLOCK_FOLD_RULES, BLOCK_FOLDS, REPLICATION_FOLDS
 from propid.gap.significance import REPLICATION_STATISTICS
 from propid.outputs import check_directory, check_not_inputs, check_writable, write_text
 
@@ -72,6 +72,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "mod 5, the default) or 'excitation' (a 1 s block holding more than a fold's share of the "
                              "effect's regressor energy is split over the folds; evaluated, not the default: "
                              "docs/gap.md, SITL accuracy 'Folds balanced by excitation')")
+    parser.add_argument("--block-folds", choices=BLOCK_FOLD_RULES, default=BLOCK_FOLDS,
+                        help="the cross-validation folds with one or two logs: 'phases' (1 s blocks numbered within "
+                             "each log from its own start, index mod 5, in five partitions whose grids are offset by "
+                             "0.2 s, the held-out sums averaged over them: neither the logs' order nor a log's first "
+                             "row decides the folds) or 'first-row' (one partition, the blocks numbered across the "
+                             f"logs in canonical order); default {BLOCK_FOLDS!r} (docs/gap.md 'Scoring')")
     parser.add_argument("--gyro-bias", choices=("off", "attitude"), default="off",
                         help="the gyro's constant bias before the measured torque's gyroscopic term w x (J w): "
                              "'off' (the default: the gyro as logged) or 'attitude' (measured against the logged "
@@ -187,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
     options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
                                repeats=args.repeats, lag_evidence=args.lag_evidence,
                                ground_effect_height=args.ground_effect_height, replication=args.replication,
-                               replication_folds=args.replication_folds, gyro_bias=args.gyro_bias, lag_nuisance=args.lag_nuisance)
+                               replication_folds=args.replication_folds, block_folds=args.block_folds, gyro_bias=args.gyro_bias, lag_nuisance=args.lag_nuisance)
     logs, left_out = without_unflown_logs(logs, vehicle, options)
     for entry in left_out:
         print(f"propid gap: left out {entry['why']}", file=sys.stderr)

@@ -117,7 +117,8 @@ def delay_designs(flights: list[Flight], positions: np.ndarray, signs: np.ndarra
 
 def search(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, progress=None,
            nuisance: list[dict] | None = None, evidence: bool = True,
-           nuisance_at: Callable[[float], list[dict]] | None = None) -> dict:
+           nuisance_at: Callable[[float], list[dict]] | None = None,
+           block_folds: str = scoring.BLOCK_FOLDS) -> dict:
     """The lag (all-data fit) and, with `evidence`, its held-out evidence on whitened rows
     (whitened_evidence, `whitened`); `explained_fraction` / `ci` are the raw rows' own
     cross-validation (kept for reference). `nuisance_at`: delay_designs."""
@@ -125,7 +126,7 @@ def search(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, prog
     designs = delay_designs(flights, positions, signs, grid, nuisance, nuisance_at)
     grs = []
     for d in designs:
-        gr = scoring.grams(d)
+        gr = scoring.grams(d, block_folds=block_folds)
         grs.append(gr)
         if progress:
             progress()
@@ -178,14 +179,15 @@ def search(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, prog
     if evidence:
         theta = scoring.solve(grs[best], cols, all_blocks)
         residual = {a: designs[best].y[a] - designs[best].x[a] @ theta for a in designs[best].axes}
-        out["whitened"] = whitened_evidence(flights, designs, grid, residual)
+        out["whitened"] = whitened_evidence(flights, designs, grid, residual, block_folds)
     return out
 
 
 EVIDENCE_LEVEL = 0.025  # one-sided: the level of the raw rule's two-sided 95 % interval above 0
 
 
-def whitened_evidence(flights: list[Flight], designs: list[Design], grid: np.ndarray, residual: dict) -> dict:
+def whitened_evidence(flights: list[Flight], designs: list[Design], grid: np.ndarray, residual: dict,
+                      block_folds: str = scoring.BLOCK_FOLDS) -> dict:
     """The lag's held-out evidence on whitened rows (generalised least squares, whitening.py),
     as the effects are scored: every lag's design whitened by the same filter per flight and
     axis, from the spectrum of the residual at the all-data best lag (the model with the lag
@@ -198,34 +200,37 @@ def whitened_evidence(flights: list[Flight], designs: list[Design], grid: np.nda
     zero = int(np.argmin(np.abs(grid)))
     filters = whitening.whitening_filters(designs[zero], residual, rates, bands)
     wd = [whitening.apply_filters(d, filters, rates) for d in designs]
-    grs = [scoring.grams(d) for d in wd]
+    grs = [scoring.grams(d, block_folds=block_folds) for d in wd]
     cols = list(range(len(wd[0].names)))
     all_blocks = np.arange(grs[zero].s.shape[0])
     weight = scoring.axis_weights(wd[zero], cols)
     for gr in grs:
         gr.weight = weight
-    held_zero = np.zeros_like(grs[zero].s)
-    held_best = np.zeros_like(grs[zero].s)
-    cross = np.zeros_like(grs[zero].s)
+    # per partition of the folds (scoring.fold_partitions), the test on their mean
+    shape = grs[zero].partitions.shape[:1] + grs[zero].s.shape
+    held_zero, held_best, cross = np.zeros(shape), np.zeros(shape), np.zeros(shape)
     fold_delay = {}
     block = wd[zero].block
     n_blocks = all_blocks.shape[0]
-    for test, train in scoring.folds(grs[zero]):
-        sse = [float((scoring.block_sse(gr, cols, scoring.solve(gr, cols, train), train) * weight).sum())
-               for gr in grs]
-        k = int(np.argmin(sse))
-        fold_delay[int(grs[zero].fold[test[0]])] = float(grid[k])
-        th0 = scoring.solve(grs[zero], cols, train)
-        th1 = scoring.solve(grs[k], cols, train)
-        held_zero[test] = scoring.block_sse(grs[zero], cols, th0, test)
-        held_best[test] = scoring.block_sse(grs[k], cols, th1, test)
-        rows = np.isin(block, test)
-        for ai, a in enumerate(wd[zero].axes):
-            r0 = wd[zero].y[a][rows] - wd[zero].x[a][rows] @ th0
-            r1 = wd[k].y[a][rows] - wd[k].x[a][rows] @ th1
-            cross[:, ai] += np.bincount(block[rows], weights=r1 * (r0 - r1), minlength=n_blocks)
+    for r in range(shape[0]):
+        for test, train in scoring.folds(grs[zero], r):
+            sse = [float((scoring.block_sse(gr, cols, scoring.solve(gr, cols, train), train) * weight).sum())
+                   for gr in grs]
+            k = int(np.argmin(sse))
+            if r == 0:  # reported: the first partition's folds
+                fold_delay[int(grs[zero].fold[test[0]])] = float(grid[k])
+            th0 = scoring.solve(grs[zero], cols, train)
+            th1 = scoring.solve(grs[k], cols, train)
+            held_zero[r, test] = scoring.block_sse(grs[zero], cols, th0, test)
+            held_best[r, test] = scoring.block_sse(grs[k], cols, th1, test)
+            rows = np.isin(block, test)
+            for ai, a in enumerate(wd[zero].axes):
+                r0 = wd[zero].y[a][rows] - wd[zero].x[a][rows] @ th0
+                r1 = wd[k].y[a][rows] - wd[k].x[a][rows] @ th1
+                cross[r, :, ai] += np.bincount(block[rows], weights=r1 * (r0 - r1), minlength=n_blocks)
     axes = [0, 1, 2]
-    weights = significance.block_weights(held_best, grs[zero].count, wd[zero].fold_group)
+    groups = grs[zero].groups if grs[zero].groups is not None else [wd[zero].fold_group] * shape[0]
+    weights = np.stack([significance.block_weights(h, grs[zero].count, g) for h, g in zip(held_best, groups)])
     test = significance.paired_test(held_zero, held_best, axes, cross, weights)
     if len(fold_delay) < 2:
         test = {**test, "ci": [float("nan"), float("nan")], "p_value": 1.0}

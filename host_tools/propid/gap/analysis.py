@@ -52,6 +52,11 @@ class Options:
     # "excitation" (a 1 s block with more than a fold's share of the effect's regressor energy split
     # over the folds; evaluated, not the default: docs/gap.md, SITL accuracy "Folds balanced by excitation")
     replication_folds: str = "time"
+    # the block folds with one or two logs (scoring.fold_partitions): "first-row" (one partition
+    # numbered across the logs in canonical order, the default) or "phases" (1 s groups numbered within
+    # each log from its own start, five partitions with grids offset by 0.2 s, held-out sums averaged;
+    # an option, evaluated: docs/gap.md, Scoring "Folds")
+    block_folds: str = scoring.BLOCK_FOLDS
     # the gyro's constant bias before the measured torque: "off" (the default) or "attitude" (measured
     # against the logged attitude; evaluated, not the default: docs/gap.md "Data preparation")
     gyro_bias: str = "off"
@@ -208,7 +213,8 @@ def _nuisance_at(flights: list[Flight], ctx: Context, candidates: list[str], mod
 
 
 def per_log_alignment(flights: list[Flight], held: list[Flight], vehicle: Vehicle, candidates: list[str],
-                      evidence: bool = False, lag_nuisance: str = "logged") -> list[dict]:
+                      evidence: bool = False, lag_nuisance: str = "logged",
+                      block_folds: str = scoring.BLOCK_FOLDS) -> list[dict]:
     """Each log's own rotor-stream lag (the same search as the pooled one, on that log
     alone): the lag belongs to a log's telemetry schedule, not to the vehicle. A held-out
     log's lag is measured on its own stream, as the filter's per-log delay rule does; the
@@ -219,7 +225,8 @@ def per_log_alignment(flights: list[Flight], held: list[Flight], vehicle: Vehicl
         ctx = make_context([f], vehicle, np.ones(vehicle.rotor_count), np.ones(vehicle.rotor_count))
         one = alignment.search([f], vehicle.positions, vehicle.yaw_signs,
                                nuisance=[_alignment_nuisance(f, ctx, candidates)], evidence=evidence,
-                               nuisance_at=_nuisance_at([f], ctx, candidates, lag_nuisance))
+                               nuisance_at=_nuisance_at([f], ctx, candidates, lag_nuisance),
+                               block_folds=block_folds)
         out.append({"delay_s": float(one["delay_s"]), **({"whitened": one["whitened"]} if evidence else {})})
     return out
 
@@ -255,7 +262,7 @@ def _physical(design, theta_scaled, effect_id, ctx):
 
 
 def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], options: Options) -> dict:
-    # one order whatever the command line's: folds, bootstraps and sums follow the list (log_order.py)
+    # one order whatever the command line's: bootstraps and sums follow the list (log_order.py)
     logs, holdout = canonical_order(logs), canonical_order(holdout)
     unit_inertia = vehicle.inertia is None
     original_vehicle = vehicle
@@ -288,7 +295,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     whitened = options.lag_evidence == "whitened"
     align = alignment.search(flights, vehicle.positions, vehicle.yaw_signs, progress=lambda: progress(0), nuisance=nuisance,
                              evidence=whitened,
-                             nuisance_at=_nuisance_at(flights, ctx_align, candidates, options.lag_nuisance))
+                             nuisance_at=_nuisance_at(flights, ctx_align, candidates, options.lag_nuisance),
+                             block_folds=options.block_folds)
     progress(20)
     # the alignment is always applied (stream misalignment is part of the base fit); it is
     # reported as esc_delay when it is significant and longer than the log's sample period
@@ -307,7 +315,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         # a lag belongs to a log: each log's own lag on its own whitened rows (per_log_lag_decision),
         # not one pooled lag tested on whole held-out logs
         decision = per_log_lag_decision(per_log_alignment(flights, held_flights, vehicle, candidates, evidence=True,
-                                                          lag_nuisance=options.lag_nuisance),
+                                                          lag_nuisance=options.lag_nuisance,
+                                                          block_folds=options.block_folds),
                                         names, len(flights), sample_period)
         delays, shown, delay_significant = decision["delays"], decision["shown"], decision["significant"]
         evidence = decision["evidence"]
@@ -315,7 +324,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         align["per_log_evidence"] = decision["per_log"]
     elif delay and len(names) > 1:
         delays = [e["delay_s"] for e in per_log_alignment(flights, held_flights, vehicle, candidates,
-                                                          lag_nuisance=options.lag_nuisance)]
+                                                          lag_nuisance=options.lag_nuisance,
+                                                          block_folds=options.block_folds)]
         align["per_log_delay_s"] = dict(zip(names, delays))
     work = [shifted_flight(f, d) for f, d in zip(flights, delays)]
     work_held = [shifted_flight(f, d) for f, d in zip(held_flights, delays[len(flights):])]
@@ -334,7 +344,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     km0 = np.full(count, 1.0)
     ctx0 = make_context(work, vehicle, kf0, km0)
     base_design = build_design(work, ctx0, [], vehicle.mass, with_thrust)
-    gr0 = scoring.grams(base_design)
+    gr0 = scoring.grams(base_design, block_folds=options.block_folds)
     base_cols = base_design.groups["base"]
     gr0.weight = scoring.axis_weights(base_design, base_cols)
     theta = scoring.solve(gr0, base_cols, np.arange(base_design.n_blocks)) / base_design.scale[base_cols]
@@ -348,7 +358,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     # nuisance columns some candidates are tested on top of (selection.score); not candidates
     nuisances = [RESIDUAL_LAG] if any(CONDITIONED_ON.get(e) == RESIDUAL_LAG.id for e in candidates) else []
     design = build_design(work, ctx, effects + nuisances, vehicle.mass, with_thrust)
-    gr = scoring.grams(design)
+    gr = scoring.grams(design, block_folds=options.block_folds)
     gr.weight = gr0.weight
     # effects are scored on the whitened rows (generalised least squares, whitening.py)
     # the noise spectrum comes from the residual of the full model (base + every candidate), so
@@ -358,7 +368,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     full_residual = scoring.residuals(design, all_cols, scoring.solve(gr, all_cols, np.arange(design.n_blocks)))
     design_w, _ = whitening.whiten(design, full_residual, [f.rate_hz for f in work],
                                    [(f.band.highpass_hz, f.band.lowpass_hz) for f in work])
-    gr_w = scoring.grams(design_w)
+    gr_w = scoring.grams(design_w, block_folds=options.block_folds)
     gr_w.weight = scoring.axis_weights(design_w, base_cols)
     progress(10)
     sel = selection.forward_select(design_w, gr_w, candidates, base_cols, progress=lambda n: progress(n),
@@ -423,7 +433,9 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         "inputs": {"logs": [str(l.path) for l in logs], "holdout": [str(l.path) for l in holdout],
                    "log_order": "canonical, whatever the command line's: sorted by a digest of each log's content "
                                 "(gap/log_order.py); with 3 or more logs each log is a cross-validation fold of "
-                                "its own (leave one log out), else the blocks in this order form 5 folds",
+                                "its own (leave one log out), else the 1 s blocks form 5 folds (inputs.block_folds: "
+                                "'first-row' numbers them across the logs in this order, 'phases' within each log)",
+                   "block_folds": options.block_folds,
                    "vehicle": str(vehicle.path) if vehicle.path else vehicle.name, "columns_present": present,
                    "band_hz": [options.band.highpass_hz, options.band.lowpass_hz],
                    "highpass_rule": None if band_rule is None else

@@ -4,8 +4,13 @@ blocks.
 Rules (docs/gap.md, "Scoring"):
 - folds: with 3 or more flights, one flight each (leave one flight out: no partition of the
   flights into groups, so neither the order of the logs nor a grouping decides which flights are
-  held out together); otherwise the fold blocks (Design.fold_group, 1 s on the whitened rows),
-  block index mod 5 (blocks numbered in the canonical log order of log_order.py);
+  held out together); otherwise (block_folds "first-row", the default) the fold blocks
+  (Design.fold_group, 1 s on the whitened rows), block index mod 5, numbered across the flights in
+  the canonical log order of log_order.py, so the logs' order and each log's first row pick which
+  blocks are held out together; block_folds "phases" (an option, evaluated: docs/gap.md) numbers 1 s
+  groups of the test blocks within each flight from its own first modelled row, index mod 5, in
+  FOLD_PHASES partitions whose grids are offset by 1/FOLD_PHASES s, each log's first second whole,
+  every held-out sum the mean over the partitions (repeated cross-fitting);
 - each axis is weighted by 1/sigma_a^2, sigma_a the base model's residual RMS on it
   (so torque [N m] and thrust [N] rows count alike);
 - an effect's explained fraction = mean over its axes of 1 - SSE_with / SSE_without,
@@ -36,14 +41,22 @@ few small solves, whatever the log length.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from propid.gap.design import Design
+from propid.gap.whitening import SCORE_BLOCK_S
 
 MIN_SCALE_EFFECT_SIZE = 0.03  # effects seen as a torque-vs-accelerometer scale (zero-g offset ~2 % of g)
 FOLDS = 5  # block folds with one or two flights (three or more: one fold per flight)
+# the block folds with one or two flights: "first-row" (one partition numbered across the logs in
+# canonical order, the default) or "phases" (FOLD_PHASES partitions, 1 s groups numbered within each
+# log from its own start, grids offset by 1/FOLD_PHASES s, held-out sums averaged; an option,
+# evaluated: docs/gap.md, Scoring "Folds")
+BLOCK_FOLD_RULES = ("phases", "first-row")
+BLOCK_FOLDS = "first-row"
+FOLD_PHASES = 5
 BOOTSTRAP = 300
 BOOTSTRAP_CI = 4000  # resamples for the held-out intervals (their tails are read at 0.05 / candidates)
 RIDGE = 1e-9
@@ -58,10 +71,19 @@ class Grams:
     m: np.ndarray  # (B, A) sum of the response
     count: np.ndarray  # (B,) rows per block
     weight: np.ndarray  # (A,)
-    fold: np.ndarray  # (B,)
+    fold: np.ndarray  # (B,) the first partition's folds
+    partitions: np.ndarray | None = None  # (R, B) folds of each partition (held-out sums: mean over R)
+    groups: np.ndarray | None = None  # (R, B) the 1 s group of each block per partition (block weights)
+
+    cache: dict = field(init=False, repr=False, compare=False)  # held-out SSE stacks by model
+
+    def __post_init__(self):
+        if self.partitions is None:
+            self.partitions = self.fold[None, :]
+        self.cache = {}
 
 
-def grams(design: Design, weight: np.ndarray | None = None) -> Grams:
+def grams(design: Design, weight: np.ndarray | None = None, block_folds: str = BLOCK_FOLDS) -> Grams:
     axes = design.axes
     nb = design.n_blocks
     p = len(design.names)
@@ -84,12 +106,57 @@ def grams(design: Design, weight: np.ndarray | None = None) -> Grams:
             h[b, k] = xb.T @ y[lo:hi]
             s[b, k] = y[lo:hi] @ y[lo:hi]
             m[b, k] = y[lo:hi].sum()
+    w = np.ones(len(axes)) if weight is None else weight
+    partitions, groups = fold_partitions(design, block_folds)
+    return Grams(axes, g, h, s, m, count, w, partitions[0], partitions, groups)
+
+
+def fold_partitions(design: Design, block_folds: str = BLOCK_FOLDS) -> tuple[np.ndarray, np.ndarray | None]:
+    """(R, B) fold of every block in each of R partitions, and (R, B) the 1 s group each block
+    belongs to in it (the block weights' groups; None where blocks are not pieces of groups).
+    Three or more flights: one partition, a fold per flight. One or two flights: with "first-row"
+    one partition, the fold groups (Design.fold_group) numbered across the flights, index mod
+    FOLDS; with "phases" FOLD_PHASES partitions, partition m grouping the blocks by
+    floor(t / SCORE_BLOCK_S + m / FOLD_PHASES), t the block's mean time from its flight's first
+    modelled row, numbered within each flight (so the flights' order does not matter), a first
+    group shorter than SCORE_BLOCK_S joined to the next (each log's first second held out whole in
+    every partition, as with one grid), fold = group mod FOLDS (a log trimmed by d s gives, past its
+    first 2 s, the partitions of phases shifted by d: within 1 / (2 FOLD_PHASES) s of the same set).
+    Designs without fold groups (raw rows: prep's 2 s blocks) get one partition, each flight's
+    blocks numbered from its own start."""
+    if block_folds not in BLOCK_FOLD_RULES:
+        raise ValueError(f"unknown block-fold rule {block_folds!r}")
+    nb = design.n_blocks
     flights = design.block_flight
     n_flights = int(flights.max()) + 1 if flights.size else 1
     group = np.arange(nb) if design.fold_group is None else design.fold_group
-    fold = flights.copy() if n_flights >= 3 else group % FOLDS
-    w = np.ones(len(axes)) if weight is None else weight
-    return Grams(axes, g, h, s, m, count, w, fold)
+    if n_flights >= 3:
+        return flights.copy()[None, :], None if design.fold_group is None else group[None, :]
+    if block_folds == "first-row":
+        return (group % FOLDS)[None, :], None if design.fold_group is None else group[None, :]
+    if design.fold_group is None or design.time is None or design.block.size == 0:
+        # one partition: each flight's blocks numbered from its own first block
+        within = np.zeros(nb, dtype=int)
+        for f in np.unique(flights):
+            members = np.flatnonzero(flights == f)
+            within[members] = np.arange(members.size)
+        return (within % FOLDS)[None, :], None
+    rows = np.bincount(design.block, minlength=nb).astype(float)
+    centre = np.bincount(design.block, weights=design.time, minlength=nb) / np.maximum(rows, 1.0)
+    row_flight = design.flight
+    start = np.array([design.time[row_flight == f].min() if np.any(row_flight == f) else 0.0
+                      for f in range(n_flights)])
+    rel = (centre - start[flights]) / SCORE_BLOCK_S
+    partitions = np.empty((FOLD_PHASES, nb), dtype=int)
+    groups = np.empty((FOLD_PHASES, nb), dtype=int)
+    for m in range(FOLD_PHASES):
+        local = np.floor(rel + m / FOLD_PHASES + 1e-9).astype(int)
+        # a first group shorter than 1 s joins the next: each log's first second is held out whole in
+        # every partition (a start transient's misfit is not confirmed by the rest of that transient)
+        local = np.maximum(local, 1) if m else local
+        partitions[m] = local % FOLDS
+        groups[m] = local * n_flights + flights  # unique per flight
+    return partitions, groups
 
 
 # the held-out replication's folds: "time" (the 1 s blocks, index mod FOLDS: the default) or
@@ -141,15 +208,23 @@ def excitation_folds(gr: Grams, current: list[int], effect_cols: list[int], grou
     return fold
 
 
+def _axis_weighted(gr: Grams) -> tuple[np.ndarray, np.ndarray]:
+    """(B, P, P) and (B, P): each block's normal matrix and right-hand side summed over the axes
+    with the axis weights (cached per weight: every fit of every fold and partition reads them)."""
+    key = ("axis_weighted", gr.weight.tobytes())
+    if key not in gr.cache:
+        gr.cache[key] = (np.einsum("a,bapq->bpq", gr.weight, gr.g), np.einsum("a,bap->bp", gr.weight, gr.h))
+    return gr.cache[key]
+
+
 def solve(gr: Grams, cols: list[int], blocks: np.ndarray) -> np.ndarray:
     """Weighted LS coefficients (scaled columns) on the given blocks."""
-    idx = np.ix_(cols, cols)
-    a = np.einsum("a,bapq->pq", gr.weight, gr.g[blocks][:, :, cols][:, :, :, cols]) if len(blocks) else None
-    if a is None:
+    if not len(blocks):
         return np.zeros(len(cols))
-    rhs = np.einsum("a,bap->p", gr.weight, gr.h[blocks][:, :, cols])
+    g_w, h_w = _axis_weighted(gr)
+    a = g_w[blocks].sum(axis=0)[np.ix_(cols, cols)]
+    rhs = h_w[blocks].sum(axis=0)[cols]
     ridge = RIDGE * max(np.trace(a) / max(len(cols), 1), 1e-300)
-    del idx
     return np.linalg.solve(a + ridge * np.eye(len(cols)), rhs)
 
 
@@ -160,39 +235,58 @@ def block_sse(gr: Grams, cols: list[int], theta: np.ndarray, blocks: np.ndarray)
     return gr.s[blocks] - 2.0 * h @ theta + np.einsum("bapq,p,q->ba", g, theta, theta)
 
 
-def folds(gr: Grams):
-    """(test, train) block indices per cross-validation fold (a single fold trains on itself)."""
+def folds(gr: Grams, partition: int = 0):
+    """(test, train) block indices per cross-validation fold of one partition (a single fold
+    trains on itself)."""
     all_blocks = np.arange(gr.s.shape[0])
-    for k in np.unique(gr.fold):
-        test = all_blocks[gr.fold == k]
-        train = all_blocks[gr.fold != k]
+    fold = gr.partitions[partition]
+    for k in np.unique(fold):
+        test = all_blocks[fold == k]
+        train = all_blocks[fold != k]
         yield test, (test if train.size == 0 else train)
 
 
+def cv_sse_stack(gr: Grams, cols: list[int]) -> np.ndarray:
+    """(R, B, A) held-out SSE per partition: each block predicted by the fit on the other folds."""
+    key = (tuple(cols), gr.weight.tobytes())
+    if key in gr.cache:
+        return gr.cache[key]
+    out = np.zeros((gr.partitions.shape[0],) + gr.s.shape)
+    for r in range(gr.partitions.shape[0]):
+        for test, train in folds(gr, r):
+            theta = solve(gr, cols, train)
+            out[r, test] = block_sse(gr, cols, theta, test)
+    out.flags.writeable = False  # cached: shared by every caller of this model
+    gr.cache[key] = out
+    return out
+
+
 def cv_sse(gr: Grams, cols: list[int]) -> np.ndarray:
-    """(B, A) held-out SSE: each block predicted by the fit on the other folds."""
-    out = np.zeros_like(gr.s)
-    for test, train in folds(gr):
-        theta = solve(gr, cols, train)
-        out[test] = block_sse(gr, cols, theta, test)
+    """(B, A) held-out SSE, the mean over the partitions (one partition: the plain CV)."""
+    return cv_sse_stack(gr, cols).mean(axis=0)
+
+
+def cv_cross_stack(gr: Grams, without: list[int], with_: list[int]) -> np.ndarray:
+    """(R, B, A) held-out sum over each block's rows of r_with * (r_without - r_with) per
+    partition: the with-model's held-out residual times what adding the columns changed in the
+    prediction (each block predicted by the fits on the other folds). `without` must be a prefix
+    of `with_`. The noise part of the held-out improvement is twice this (significance.py)."""
+    out = np.zeros((gr.partitions.shape[0],) + gr.s.shape)
+    for r in range(gr.partitions.shape[0]):
+        for test, train in folds(gr, r):
+            t1 = solve(gr, with_, train)
+            t0 = np.zeros_like(t1)
+            t0[:len(without)] = solve(gr, without, train)
+            d = t1 - t0
+            g = gr.g[test][:, :, with_][:, :, :, with_]
+            h = gr.h[test][:, :, with_]
+            out[r, test] = h @ d - np.einsum("bapq,p,q->ba", g, t1, d)
     return out
 
 
 def cv_cross(gr: Grams, without: list[int], with_: list[int]) -> np.ndarray:
-    """(B, A) held-out sum over each block's rows of r_with * (r_without - r_with): the
-    with-model's held-out residual times what adding the columns changed in the prediction
-    (each block predicted by the fits on the other folds). `without` must be a prefix of
-    `with_`. The noise part of the held-out improvement is twice this (significance.py)."""
-    out = np.zeros_like(gr.s)
-    for test, train in folds(gr):
-        t1 = solve(gr, with_, train)
-        t0 = np.zeros_like(t1)
-        t0[:len(without)] = solve(gr, without, train)
-        d = t1 - t0
-        g = gr.g[test][:, :, with_][:, :, :, with_]
-        h = gr.h[test][:, :, with_]
-        out[test] = h @ d - np.einsum("bapq,p,q->ba", g, t1, d)
-    return out
+    """(B, A) cv_cross_stack's mean over the partitions."""
+    return cv_cross_stack(gr, without, with_).mean(axis=0)
 
 
 def _fractions(without: np.ndarray, with_: np.ndarray) -> np.ndarray:
@@ -276,16 +370,19 @@ def coefficients_with_se(gr: Grams, cols: list[int]) -> tuple[np.ndarray, np.nda
 
 
 def cv_residuals(design: Design, gr: Grams, cols: list[int]) -> dict:
-    """Held-out residual series per axis: each row predicted by its fold's fit."""
+    """Held-out residual series per axis: each row predicted by its fold's fit (several
+    partitions: the mean of its held-out predictions)."""
     all_blocks = np.arange(gr.s.shape[0])
-    fold_of_row = gr.fold[design.block]
     out = {a: np.zeros_like(design.y[a]) for a in design.axes}
-    for k in np.unique(gr.fold):
-        train = all_blocks[gr.fold != k]
-        theta = solve(gr, cols, train if train.size else all_blocks)
-        rows = fold_of_row == k
-        for a in design.axes:
-            out[a][rows] = design.y[a][rows] - design.x[a][rows][:, cols] @ theta
+    count = gr.partitions.shape[0]
+    for fold in gr.partitions:
+        fold_of_row = fold[design.block]
+        for k in np.unique(fold):
+            train = all_blocks[fold != k]
+            theta = solve(gr, cols, train if train.size else all_blocks)
+            rows = fold_of_row == k
+            for a in design.axes:
+                out[a][rows] += (design.y[a][rows] - design.x[a][rows][:, cols] @ theta) / count
     return out
 
 

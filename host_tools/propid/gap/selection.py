@@ -76,17 +76,21 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
 
     block_folds = int(design.block_flight.max()) + 1 < 3 if design.block_flight.size else True
 
-    def evidence(given, held_given, held_with):
+    def evidence(given):
         rep = gr
         if folds == "excitation" and block_folds:
             # the replication's folds balanced by the effect's excitation (scoring.excitation_folds)
             fold = scoring.excitation_folds(gr, given, own, design.fold_group)
             if not np.array_equal(fold, gr.fold):
-                rep = dataclasses.replace(gr, fold=fold)
-                held_given, held_with = scoring.cv_sse(rep, given), scoring.cv_sse(rep, given + own)
-        weights = significance.block_weights(held_with, gr.count, design.fold_group)
-        test = significance.paired_test(held_given, held_with, idx, scoring.cv_cross(rep, given, given + own), weights,
-                                        replication)
+                rep = dataclasses.replace(gr, fold=fold, partitions=fold[None, :],
+                                          groups=None if design.fold_group is None else design.fold_group[None, :])
+        # per partition of the folds (scoring.fold_partitions): held-out sums and block weights,
+        # the test on their mean over the partitions (significance.paired_test)
+        held_given, held_with = scoring.cv_sse_stack(rep, given), scoring.cv_sse_stack(rep, given + own)
+        groups = rep.groups if rep.groups is not None else [None] * held_with.shape[0]
+        weights = np.stack([significance.block_weights(h, gr.count, g) for h, g in zip(held_with, groups)])
+        test = significance.paired_test(held_given, held_with, idx, scoring.cv_cross_stack(rep, given, given + own),
+                                        weights, replication)
         # one parameter that physics keeps >= 0: the physical-sign rule already makes the
         # alternative one-sided, so the test is too (docs/gap.md, Scoring)
         lm = significance.effect_test(gr, given, own, nonnegative=nonnegative)
@@ -94,7 +98,7 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
                                    (bounds or {}).get(effect_id), se=lm.get("se"))
         return test, lm, physical_sign(gr, given, own, nonnegative), (reason, edge)
 
-    test, lm, physical, (reason, edge) = evidence(current, held_current, held)
+    test, lm, physical, (reason, edge) = evidence(current)
     # an effect whose signature a shared nuisance also makes (CONDITIONED_ON: rotor_inertia and a
     # residual rotor-stream lag) must hold both alone and on top of the nuisance: the larger
     # p-values, both signs, both ranges (either fit may stand in for the other's error)
@@ -102,7 +106,7 @@ def score(design: Design, gr: scoring.Grams, current: list[int], effect_id: str,
     conditioned = None
     if nuisance in design.groups and not set(design.groups[nuisance]) & set(current):
         given = current + design.groups[nuisance]
-        c_test, c_lm, c_physical, (c_reason, c_edge) = evidence(given, scoring.cv_sse(gr, given), scoring.cv_sse(gr, given + own))
+        c_test, c_lm, c_physical, (c_reason, c_edge) = evidence(given)
         conditioned = {"on": nuisance, "p_value": c_lm["p_value"], "held_out_p_value": c_test["p_value"],
                        "explained_fraction": c_test["value"], "physical_sign": c_physical}
         if c_test["p_value"] > test["p_value"]:

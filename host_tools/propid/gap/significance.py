@@ -243,21 +243,32 @@ def paired_test(sse_without: np.ndarray, sse_with: np.ndarray, axis_idx: list[in
     explained fraction), `p_value` (the test's one-sided p), `weighted_value` (the tested
     statistic: the weighted fraction, or with statistic "prediction" the weighted fraction along
     the prediction) and `ci` its two-sided 95 % interval (_interval: the decision's own statistic,
-    so ci[0] > 0 exactly when p < 0.025). Blocks in time order."""
+    so ci[0] > 0 exactly when p < 0.025). Blocks in time order. Arrays (B, A), or (R, B, A) for R
+    partitions of the folds: the sums are then the means over the partitions."""
     if statistic not in REPLICATION_STATISTICS:
         raise ValueError(f"unknown replication statistic {statistic!r}")
-    n = sse_without.shape[0]
+    # (R, B, A) arrays: R partitions of the folds (repeated cross-fitting, scoring.fold_partitions);
+    # the tested sums are the means over the partitions of each block's (weighted) held-out sums:
+    # every block is held out once in each partition, so the mean is itself a held-out statistic,
+    # tested once (no combination of R p-values), its noise variance Newey-West on the same means
+    if sse_without.ndim == 2:
+        sse_without, sse_with = sse_without[None], sse_with[None]
+        cross = None if cross is None else cross[None]
+        weights = None if weights is None else weights[None]
+    n = sse_without.shape[1]
+    plain_without, plain_with = sse_without.mean(axis=0), sse_with.mean(axis=0)
+    plain_cross = None if cross is None else cross.mean(axis=0)
     if n < 3:
-        value = float(block_contributions(sse_without, sse_with, axis_idx).sum())
+        value = float(block_contributions(plain_without, plain_with, axis_idx).sum())
         return {"value": value, "weighted_value": value, "ci": [float("-inf"), float("inf")], "p_value": 1.0,
                 "blocks": n, "bandwidth": 0.0}
-    plain = _improvement_p(sse_without, sse_with, axis_idx, cross)
+    plain = _improvement_p(plain_without, plain_with, axis_idx, plain_cross)
     test = plain
     if weights is None and statistic != "improvement":
-        test = _improvement_p(sse_without, sse_with, axis_idx, cross, statistic)
+        test = _improvement_p(plain_without, plain_with, axis_idx, plain_cross, statistic)
     if weights is not None:
-        test = _improvement_p(sse_without * weights, sse_with * weights, axis_idx,
-                              None if cross is None else cross * weights, statistic)
+        test = _improvement_p((sse_without * weights).mean(axis=0), (sse_with * weights).mean(axis=0), axis_idx,
+                              None if cross is None else (cross * weights).mean(axis=0), statistic)
     return {"value": plain["value"], "weighted_value": test["stat"], "ci": _interval(test),
             "p_value": float(test["p"]), "blocks": n, "bandwidth": plain["bandwidth"]}
 
