@@ -87,6 +87,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "aero_damping): 'logged' (built once from the logged rotor stream, the default) or "
                              "'shifted' (built at each candidate lag from the stream shifted by it; evaluated, not "
                              "the default: docs/gap.md 'Stream alignment')")
+    parser.add_argument("--explainable", action="store_true",
+                        help="also measure how much of the held-out residual any linear filter of the logged "
+                             "non-gyro signals predicts, and the gyro-noise floor (OUT.json `explainable`; a "
+                             "diagnostic, off by default: on effect-free SITL flights it reads the sensor chain's "
+                             "residual, not 0: docs/gap.md 'How far')")
     parser.add_argument("--no-progress", "--quiet", dest="quiet", action="store_true",
                         help="no progress bar (--quiet: the older spelling)")
 
@@ -193,7 +198,8 @@ def run(args: argparse.Namespace) -> int:
     options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
                                repeats=args.repeats, lag_evidence=args.lag_evidence,
                                ground_effect_height=args.ground_effect_height, replication=args.replication,
-                               replication_folds=args.replication_folds, block_folds=args.block_folds, gyro_bias=args.gyro_bias, lag_nuisance=args.lag_nuisance)
+                               replication_folds=args.replication_folds, block_folds=args.block_folds, gyro_bias=args.gyro_bias, lag_nuisance=args.lag_nuisance,
+                               explainable=args.explainable)
     logs, left_out = without_unflown_logs(logs, vehicle, options)
     for entry in left_out:
         print(f"propid gap: left out {entry['why']}", file=sys.stderr)

@@ -10,7 +10,7 @@ import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
-from propid.gap import alignment, basefit, coherence, scoring, selection, shrink, significance, where, whitening
+from propid.gap import alignment, basefit, coherence, explainable, scoring, selection, shrink, significance, where, whitening
 from propid.gap.vehicle_out import corrected_vehicle
 from propid.gap.design import base_columns, build_design, responses
 from propid.gap.effects import (ALL_IDS, CONDITIONED_ON, EFFECTS, ESC_DELAY, MIN_REPORTED_LAG_S, RESIDUAL_LAG,
@@ -64,6 +64,9 @@ class Options:
     # (built once from the logged rotor stream, the default) or "shifted" (built at each candidate lag from
     # the stream shifted by it; evaluated, not the default: docs/gap.md "Stream alignment")
     lag_nuisance: str = "logged"
+    # the held-out residual's predictable share from the logged signals and the gyro-noise floor
+    # (explainable.py; a diagnostic, off by default: docs/gap.md "How far")
+    explainable: bool = False
 
 
 HIGHPASS_CANDIDATES_HZ = (0.2, 0.5, 1.0, 2.0, 5.0)
@@ -547,10 +550,27 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
         library = scoring.residuals(hd, all_cols, scoring.solve(gr_hd, all_cols, np.arange(hd.n_blocks)))
         result["shrink"] = shrink.shrink_table(hd, before, after, inertia, vehicle.mass, library)
         result["shrink_on"] = "hold-out logs"
+        if options.explainable:  # how much of that residual any linear model of the logged signals predicts
+            bound = explainable.heldout_bound(work, scoring.residuals(design, base_cols, theta_base), work_held,
+                                              before)
+            noise = explainable.gyro_noise_floor(work_held, inertia, before)
     else:
         # full_residual: base + every testable candidate, in-sample on these rows (the floor)
         result["shrink"] = shrink.shrink_table(design, base_res, final_res, inertia, vehicle.mass, full_residual)
         result["shrink_on"] = "cross-validation held-out blocks" if len(flights) < 3 else "cross-validation held-out flights"
+        if options.explainable:
+            all_blocks = np.arange(design.n_blocks)
+
+            def base_residual_without(k):
+                train = all_blocks[gr.fold != k]
+                theta = scoring.solve(gr, base_cols, train if train.size else all_blocks)
+                return scoring.residuals(design, base_cols, theta)
+
+            bound = explainable.out_of_fold(work, sorted(np.unique(gr.fold).tolist()), gr.fold[design.block],
+                                            base_residual_without)
+            noise = explainable.gyro_noise_floor(work, inertia, base_res)
+    if options.explainable:
+        result["explainable"] = explainable.summary(bound, noise, result["shrink"])
     # what bounds the shrink: the torque no linear model of the logged input channels predicts
     result["shrink_bound"] = coherence.shrink_bound(work_held or work, result["shrink"])
     corrected, carried = corrected_vehicle(original_vehicle, entries)

@@ -87,6 +87,7 @@ class Flight:
     blocks: list[tuple[int, int]] = field(default_factory=list)  # [start, stop) inside segments
     quat: np.ndarray | None = None  # (n,4) attitude w, x, y, z (body -> world): ground_effect at each hub
     gyro_bias: dict = field(default_factory=dict)  # the constant gyro bias removed (gyro_bias.py), or why not
+    logged_quat: np.ndarray | None = None  # (n,4) the logged attitude whatever the options: the explainable bound's channels
 
     @property
     def rows(self) -> int:
@@ -302,6 +303,8 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
     # the attitude, kept only for ground_effect at each hub's height (--ground-effect-height hub)
     quat = log.quat if attitude else None
     quat = _interp_missing(quat) if quat is not None and np.isfinite(quat).all(axis=1).any() else None
+    logged_quat = log.quat if log.quat is not None and np.isfinite(log.quat).all(axis=1).any() else None
+    logged_quat = _interp_missing(logged_quat) if logged_quat is not None else None
     cmd = log.group(tuple(f"cmd_{i + 1}" for i in range(log.rotor_count)))
     cmd = _interp_missing(cmd) if cmd is not None and np.isfinite(cmd).mean() > 0.5 else None
     vbat = log.extra.get("vbat")
@@ -311,7 +314,8 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
         gyro=gyro, rate_dot=rate_dot, speed=speeds, speed_dot=speed_dot, torque=torque,
         specific_force_z=None if acc is None else acc[:, 2], acc=acc, body_velocity=vel, height=height,
         cmd=cmd, vbat=vbat, segs=segs, band=band.for_rate(rate), repaired_rotor_samples=repaired,
-        held_rotor_fraction=held_fraction, quat=quat, gyro_bias=bias)
+        held_rotor_fraction=held_fraction, quat=quat, gyro_bias=bias,
+        logged_quat=logged_quat)
     in_segments = np.concatenate([np.arange(a, b) for a, b in segs])
     flight.repeated_rows = {"gyro": repeated_row_stats(gyro_copy, in_segments),
                             "rotor": repeated_row_stats(rotor_copy, in_segments), "treated_as": repeats}

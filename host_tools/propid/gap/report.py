@@ -157,6 +157,25 @@ def _table(head: list[str], rows: list[list]) -> str:
     return "\n".join(out)
 
 
+def _explainable_section(result: dict) -> str:
+    """How much of the held-out residual is predictable at all (gap/explainable.py)."""
+    ex = result.get("explainable")
+    if not ex:
+        return ""
+    if not ex.get("computed"):
+        return f"<h3>Predictable at all</h3><p>not computed: {html.escape(str(ex.get('why')))}</p>"
+    from propid.gap.explainable import report_line
+    lines = [report_line(a, v, result["shrink"].get(a, {}).get("reduction")) for a, v in ex.items()
+             if a in ("roll", "pitch", "yaw")]
+    rows = [[a, v["explainable_fraction"], v["explainable_rms_shrink"], v["inputs_fraction"], v["motion_fraction"],
+             v.get("gyro_noise_power_share"), v.get("named_effects_share")]
+            for a, v in ex.items() if a in ("roll", "pitch", "yaw")]
+    return ("<h3>Predictable at all</h3><p>" + html.escape(ex["how"]) + "</p><ul>"
+            + "".join(f"<li>{html.escape(t)}</li>" for t in lines) + "</ul>"
+            + _table(["axis", "explainable (power)", "as RMS shrink", "inputs only", "motion (attitude, all taps)",
+                      "gyro noise share", "named effects' share"], rows))
+
+
 def write_report(result: dict, directory: str | Path) -> Path:
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
@@ -253,6 +272,7 @@ def write_report(result: dict, directory: str | Path) -> Path:
                           v["pred_0.1s_before"], v["pred_0.1s_after"],
                           v["pred_0.5s_before"], v["pred_0.5s_after"]] for a, v in result["shrink"].items()]))
     parts.append("<img src='shrink.png'>")
+    parts.append(_explainable_section(result))
     if result.get("filter") and "error" in result["filter"]:
         parts.append(f"<h3>Firmware filter (replay)</h3><p>not run: {html.escape(str(result['filter']['error']))}</p>")
     elif result.get("filter"):
