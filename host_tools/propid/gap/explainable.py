@@ -31,6 +31,7 @@ import numpy as np
 
 from propid.gap.design import segment_rows
 from propid.gap.prep import Flight
+from propid.realdata_checks import bandpass
 
 TAPS_S = (-0.04, -0.02, -0.01, 0.0, 0.01, 0.02, 0.04)
 RIDGE = 1e-6
@@ -93,7 +94,7 @@ def _lagged(x: np.ndarray, segs: list[tuple[int, int]], lag: int) -> np.ndarray:
     return out
 
 
-def channel_matrix(flights: list[Flight], groups: list[str]) -> tuple[dict[str, np.ndarray], list[int]]:
+def channel_matrix(flights: list[Flight], groups: list[str]) -> dict[str, np.ndarray]:
     """Per channel set, the lagged, band-passed channel columns stacked over the flights' segment rows
     (the design's row order). `groups`: the groups every flight has (common to all)."""
     sets = {s: [] for s in SETS}
@@ -115,7 +116,7 @@ def channel_matrix(flights: list[Flight], groups: list[str]) -> tuple[dict[str, 
                         per[s].append(col)
         for s in SETS:
             sets[s].append(np.column_stack(per[s]) if per[s] else np.zeros((rows.size, 0)))
-    return {s: np.concatenate(v) for s, v in sets.items()}, []
+    return {s: np.concatenate(v) for s, v in sets.items()}
 
 
 def common_groups(flights: list[Flight]) -> list[str]:
@@ -136,9 +137,8 @@ def _fit(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return coef / scale
 
 
-def _band_power(f_rate: float, r: np.ndarray, flights_rows: list[tuple[Flight, np.ndarray, slice]],
-                lo: float, hi: float) -> float:
-    from propid.realdata_checks import bandpass
+def _band_power(r: np.ndarray, flights_rows: list[tuple[Flight, np.ndarray, slice]], lo: float, hi: float) -> float:
+    """Power of r (rows of the flights' segments) band-passed to lo-hi per segment."""
     total = 0.0
     for f, rows, where in flights_rows:
         full = np.zeros(len(f.t))
@@ -175,8 +175,8 @@ def out_of_fold(flights: list[Flight], test_folds: list[int], fold_of_row: np.nd
     groups = common_groups(flights)
     if not groups:
         return {"computed": False, "why": "no non-gyro channel common to the logs"}
-    x_all, _ = channel_matrix(flights, groups)
-    alone_x = {g: channel_matrix(flights, [g])[0]["inputs"] for g in groups if g != "attitude_rate"} if per_group else {}
+    x_all = channel_matrix(flights, groups)
+    alone_x = {g: channel_matrix(flights, [g])["inputs"] for g in groups if g != "attitude_rate"} if per_group else {}
     test_rows = np.isin(fold_of_row, test_folds)
     axes = None
     res = {}
@@ -200,7 +200,6 @@ def out_of_fold(flights: list[Flight], test_folds: list[int], fold_of_row: np.nd
     row_map = _row_map(flights)
     out = {"computed": True, "groups": groups, "taps_s": list(TAPS_S),
            "columns": {s: int(x_all[s].shape[1]) for s in SETS},
-           "rows_fit": int((~test_rows).sum()) if len(test_folds) == 1 else int(test_rows.sum()),
            "rows_scored": int(test_rows.sum())}
     for axis in axes or []:
         r = np.where(test_rows, res[axis], 0.0)
@@ -209,8 +208,8 @@ def out_of_fold(flights: list[Flight], test_folds: list[int], fold_of_row: np.nd
             p = np.where(test_rows, pred[(axis, "explainable")], 0.0)
             bands, total = {}, 0.0
             for lo, hi in BANDS:
-                before = _band_power(0, r, row_map, lo, hi)
-                after = _band_power(0, r - p, row_map, lo, hi)
+                before = _band_power(r, row_map, lo, hi)
+                after = _band_power(r - p, row_map, lo, hi)
                 if before > 0:
                     bands[f"{lo:g}-{hi:g} Hz"] = {"residual_power_share": before, "explained_power": 1 - after / before}
                     total += before
