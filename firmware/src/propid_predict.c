@@ -19,6 +19,7 @@
 
 #include "propid_internal.h"
 #include "propid_quad_predict.h"
+#include "propid_quad_model.h"
 
 /* The fast quad build (no general path, straight-line kernels inlined): its
  * step's prediction runs both kernels in one frame (propid_predict_step); the
@@ -53,6 +54,18 @@ PROPID_UNROLL(3)
         }
     }
     return status;
+}
+
+/* The quad model stage's end: the predicted rates' bound test, which is their
+ * finiteness test too (predict_stage_quad). */
+static inline __attribute__((always_inline)) propid_status_t
+quad_stage_bound(float *restrict rate_next, float rate_limit, float check)
+{
+    if (!(fabsf(rate_next[0]) <= rate_limit) || !(fabsf(rate_next[1]) <= rate_limit) ||
+        !(fabsf(rate_next[2]) + 0.0f * check <= rate_limit)) {
+        return bound_rates(rate_next, rate_limit, check);
+    }
+    return PROPID_OK;
 }
 
 /* propid_predict_stage for the quad layout (propid_internal.h): the same values
@@ -156,11 +169,7 @@ PROPID_UNROLL(3)
      * 0 * sum: exactly zero when finite, NaN otherwise. */
     const float check = state[PROPID_QUAD_FIRST_BIAS] + state[PROPID_QUAD_FIRST_BIAS + 1u] +
                         state[PROPID_QUAD_FIRST_BIAS + 2u];
-    if (!(fabsf(rate_next[0]) <= rate_limit) || !(fabsf(rate_next[1]) <= rate_limit) ||
-        !(fabsf(rate_next[2]) + 0.0f * check <= rate_limit)) {
-        return bound_rates(rate_next, rate_limit, check);
-    }
-    return PROPID_OK;
+    return quad_stage_bound(rate_next, rate_limit, check);
 }
 
 #if PROPID_GENERAL_VEHICLES
@@ -855,7 +864,15 @@ __attribute__((noinline)) propid_status_t propid_predict_step(propid_filter_t *f
      * step is accepted, as propid_check_next_row does it. */
     const int row_bad = quad_row_bad(core->cov, core->check_row);
 #endif
-#if PROPID_FAST_QUAD_PREDICT
+#if PROPID_ARM_MODEL_STAGE
+    /* The model stage in generated assembly (propid_quad_model.h): the same
+     * operations as predict_stage_quad, its entries left in the registers the
+     * kernel reads. */
+    float check;
+    propid_quad_model_stage_arm(filter, propid_drag_basis(&filter->derived, &filter->config).vector, dt,
+                                rate_jacobian_dt, rate_next, &check);
+    const propid_status_t staged = quad_stage_bound(rate_next, propid_rate_limit(filter), check);
+#elif PROPID_FAST_QUAD_PREDICT
     const propid_reflection_t basis = propid_drag_basis(&filter->derived, &filter->config);
     propid_thrust_basis_t thrust;
     propid_thrust_basis_init(&thrust, &filter->derived, &filter->config);

@@ -165,3 +165,142 @@ def _offsets(tree):
     elif tree[0] in ("mul", "add", "fma"):
         for arg in tree[1:]:
             yield from _offsets(arg)
+
+
+# The model stage in assembly (PROPID_ARM_MODEL_STAGE, firmware/codegen/quad_model_arm.py):
+# regenerated identically, and its graph GCC's contraction of predict_stage_quad.
+MODEL_GENERATOR = REPO / "firmware" / "codegen" / "quad_model_arm.py"
+MODEL_GENERATED = REPO / "firmware" / "src" / "propid_quad_model.h"
+
+
+def test_quad_model_stage_is_current(tmp_path):
+    result = subprocess.run([sys.executable, str(MODEL_GENERATOR), "--check"], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    out = tmp_path / "propid_quad_model.h"
+    assert subprocess.run([sys.executable, str(MODEL_GENERATOR), "--out", str(out)]).returncode == 0
+    assert out.read_bytes() == MODEL_GENERATED.read_bytes()
+    edited = tmp_path / "edited.h"
+    edited.write_text(MODEL_GENERATED.read_text().replace("vfms.f32", "vfma.f32", 1))
+    result = subprocess.run([sys.executable, str(MODEL_GENERATOR), "--check", "--out", str(edited)],
+                            capture_output=True, text=True)
+    assert result.returncode == 1 and "not current" in result.stderr
+
+
+def gcc_contracted_model_stage(tmp_path):
+    """predict_stage_quad's outputs in propid_predict_step (the quad build with the
+    assembly prediction kernel but the C model stage, the target flags) as GCC's
+    trees after its contraction pass: the 18 Jacobian entries (the kernel's
+    register variables g<a>_<p>), the three predicted rates (the bound test's
+    first three ABS_EXPRs) and the biases' sum (check_N). Leaves: ('filter',
+    byte offset), ('drag', byte offset), ('const', value), ('dt',)."""
+    subprocess.run([ARM_GCC, *TARGET_FLAGS[:-1], "-DPROPID_NO_ARM_MODEL_STAGE", "-I",
+                    str(REPO / "firmware" / "include"), "-I", str(REPO / "firmware" / "src"), "-c",
+                    str(REPO / "firmware" / "src" / "propid_predict.c"), "-o", str(tmp_path / "p.o"),
+                    "-fdump-tree-widening_mul"], cwd=tmp_path, check=True)
+    dump = next(tmp_path.glob("*.widening_mul")).read_text()
+    body = dump[dump.index("propid_status_t propid_predict_step"):]
+    body = body[:body.index("\n}\n")]
+    definitions, outputs, rates = {}, {}, []
+    for line in body.splitlines():
+        line = line.strip()
+        match = re.match(r"(\S+) = MEM\[\(const float \*\)filter_\d+\(D\) \+ (\d+)B\];", line)
+        if match:
+            definitions[match.group(1)] = ("filter", int(match.group(2)))
+            continue
+        match = re.match(r"(\S+) = MEM\[\(const float \*\)(_\d+)(?: \+ (\d+)B)?\];", line)
+        if match:
+            definitions[match.group(1)] = ("drag", int(match.group(3) or 0))
+            continue
+        match = re.match(r"(\S+) = \.FMA \((\S+), (\S+), (\S+)\);", line)
+        if match:
+            definitions[match.group(1)] = ("fma", *match.group(2, 3, 4))
+            continue
+        match = re.match(r"(\S+) = -(\S+);", line)
+        if match:
+            definitions[match.group(1)] = ("neg", match.group(2))
+            continue
+        match = re.match(r"(\S+) = (\S+) ([*+-]) (\S+);", line)
+        if match:
+            definitions[match.group(1)] = ({"*": "mul", "+": "add", "-": "sub"}[match.group(3)],
+                                           match.group(2), match.group(4))
+            continue
+        match = re.match(r"(g[0-2]_[0-5]) = (\S+);", line)
+        if match:
+            outputs[match.group(1)] = match.group(2)
+            continue
+        match = re.match(r"\S+ = ABS_EXPR <(\S+)>;", line)
+        if match and len(rates) < 3:
+            rates.append(match.group(1))
+    check = next(name for name in definitions if name.startswith("check_"))
+
+    def tree(name):
+        if re.fullmatch(r"-?\d+\.\d+e[+-]\d+|-?\d+\.\d+", name):
+            return ("const", float(name))
+        if re.fullmatch(r"dt_\d+\(D\)", name):
+            return ("dt",)
+        definition = definitions[name]
+        if definition[0] in ("filter", "drag"):
+            return definition
+        if definition[0] == "fma":
+            x, y, z = definition[1:]
+            for negated, other in ((x, y), (y, x)):
+                if definitions.get(negated, ("",))[0] == "neg":
+                    return ("fms", tree(definitions[negated][1]), tree(other), tree(z))
+            return ("fma", tree(x), tree(y), tree(z))
+        return (definition[0],) + tuple(tree(arg) for arg in definition[1:])
+
+    names = [outputs[f"g{a}_{p}"] for a in range(3) for p in range(6)] + rates + [check]
+    return [tree(name) for name in names]
+
+
+@pytest.mark.skipif(ARM_GCC is None, reason="arm-none-eabi-gcc not installed")
+def test_assembly_model_stage_fuses_as_gcc_does(tmp_path):
+    sys.path.insert(0, str(MODEL_GENERATOR.parent))
+    try:
+        import quad_model_arm
+    finally:
+        sys.path.pop(0)
+    _graph, g, _predictor, rate_next, check = quad_model_arm.build()
+    mine = [node for row in g for node in row] + rate_next + [check]
+    theirs = gcc_contracted_model_stage(tmp_path)
+    # The torque rows (float index 0 of the generator's filter locations) are the
+    # first of the filter's fields the stage reads: GCC's lowest offset.
+    torque = min(offset for tree in theirs for offset in _filter_offsets(tree))
+
+    def ours(node):
+        if node.kind == "K":
+            return ("const", node.key)
+        if node.kind == "dt":
+            return ("dt",)
+        if node.is_leaf():
+            base, index = quad_model_arm.location(node)
+            return (base, (torque if base == "filter" else 0) + 4 * index)
+        return (node.kind,) + tuple(ours(arg) for arg in node.args)
+
+    def same(gcc, own):
+        if gcc[0] == "const" and own[0] == "const":
+            return abs(gcc[1] - own[1]) <= 1e-7 * abs(own[1])
+        if gcc[0] != own[0] or len(gcc) != len(own):
+            return False
+        if gcc[0] in ("dt", "filter", "drag"):
+            return gcc == own
+        if gcc[0] in ("fma", "fms") and not same(gcc[3], own[3]):
+            return False
+        if gcc[0] == "sub":
+            return same(gcc[1], own[1]) and same(gcc[2], own[2])
+        # (the product's and the sum's operands commute)
+        return (same(gcc[1], own[1]) and same(gcc[2], own[2])) or (same(gcc[1], own[2]) and same(gcc[2], own[1]))
+
+    assert len(theirs) == len(mine) == 22
+    labels = [f"g{a}_{p}" for a in range(3) for p in range(6)] + ["rate_next[0]", "rate_next[1]",
+                                                                    "rate_next[2]", "check"]
+    for label, gcc, node in zip(labels, theirs, mine):
+        assert same(gcc, ours(node)), f"{label} is not GCC's contraction of predict_stage_quad"
+
+
+def _filter_offsets(tree):
+    if tree[0] == "filter":
+        yield tree[1]
+    elif tree[0] in ("mul", "add", "sub", "fma", "fms"):
+        for arg in tree[1:]:
+            yield from _filter_offsets(arg)
