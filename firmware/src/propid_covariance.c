@@ -210,6 +210,40 @@ uint32_t propid_clamp_coefficients(propid_filter_t *filter)
      * branch, so the values and the bases stay in registers (14 instructions less). */
     if (!PROPID_GENERAL_VEHICLES || rotor_count == 4u) {
         /* The quad: straight-line tests of the 8 coefficients' bit patterns. */
+#if PROPID_ARM_BLOCK_MOVES && !PROPID_GENERAL_VEHICLES
+        /* On the Cortex-M4 the 8 coefficient states (adjacent) and the thrust
+         * basis's 7 entries (adjacent) arrive by two VLDMs (GCC made a load of
+         * each); the arithmetic below is the same C. */
+        _Static_assert(PROPID_QUAD_FIRST_DRAG == PROPID_QUAD_FIRST_THRUST + 4u, "the coefficients are adjacent");
+        register float y0 __asm__("s0");
+        register float y1 __asm__("s1");
+        register float y2 __asm__("s2");
+        register float y3 __asm__("s3");
+        register float z0 __asm__("s4");
+        register float z1 __asm__("s5");
+        register float z2 __asm__("s6");
+        register float z3 __asm__("s7");
+        register float w00 __asm__("s8");
+        register float w01 __asm__("s9");
+        register float w02 __asm__("s10");
+        register float w03 __asm__("s11");
+        register float w10 __asm__("s12");
+        register float w11 __asm__("s13");
+        register float w12 __asm__("s14");
+        __asm__("vldmia %[coefficients], {s0-s7}\n\tvldmia %[thrust], {s8-s14}"
+                : "=t"(y0), "=t"(y1), "=t"(y2), "=t"(y3), "=t"(z0), "=t"(z1), "=t"(z2), "=t"(z3), "=t"(w00),
+                  "=t"(w01), "=t"(w02), "=t"(w03), "=t"(w10), "=t"(w11), "=t"(w12)
+                : [coefficients] "r"(&core->state[PROPID_QUAD_FIRST_THRUST]),
+                  [thrust] "r"(filter->derived.thrust_basis),
+                  "m"(*(const float (*)[8])&core->state[PROPID_QUAD_FIRST_THRUST]),
+                  "m"(*(const float (*)[2 * PROPID_MAX_ROTORS - 1])filter->derived.thrust_basis));
+        const float z[4] = {z0, z1, z2, z3};
+        const float y[4] = {y0, y1, y2, y3};
+        const float w1[3] = {w10, w11, w12};
+        const float v0[4] = {w00, w01, w02, w03};
+        const float *v = basis.vector;
+        const float along = basis.scale * (z[0] * v[0] + z[1] * v[1] + z[2] * v[2] + z[3] * v[3]);
+#else
         const float *z = &core->state[PROPID_QUAD_FIRST_DRAG];
         const float *v = basis.vector;
         const float along = basis.scale * (z[0] * v[0] + z[1] * v[1] + z[2] * v[2] + z[3] * v[3]);
@@ -218,13 +252,16 @@ uint32_t propid_clamp_coefficients(propid_filter_t *filter)
         propid_thrust_basis_init(&thrust, &filter->derived, config);
         const float *y = &core->state[PROPID_QUAD_FIRST_THRUST];
         const float *w1 = thrust.vector[1]; /* elements 1..3 */
+#endif
         const float along1 = y[1] * w1[0] + y[2] * w1[1] + y[3] * w1[2];
         kf_rel[0] = y[0];
 PROPID_UNROLL(3)
         for (uint8_t i = 1; i < 4u; ++i) {
             kf_rel[i] = y[i] - along1 * w1[i - 1u];
         }
+#if !(PROPID_ARM_BLOCK_MOVES && !PROPID_GENERAL_VEHICLES)
         const float *v0 = thrust.vector[0];
+#endif
         const float along0 = kf_rel[0] * v0[0] + kf_rel[1] * v0[1] + kf_rel[2] * v0[2] + kf_rel[3] * v0[3];
         uint32_t inside = 0u; /* (counted: a carry added per test, propid_count_inside) */
 PROPID_UNROLL(4)
