@@ -212,8 +212,9 @@ uint32_t propid_clamp_coefficients(propid_filter_t *filter)
         /* The quad: straight-line tests of the 8 coefficients' bit patterns. */
 #if PROPID_ARM_BLOCK_MOVES && !PROPID_GENERAL_VEHICLES
         /* On the Cortex-M4 the 8 coefficient states (adjacent) and the thrust
-         * basis's 7 entries (adjacent) arrive by two VLDMs (GCC made a load of
-         * each); the arithmetic below is the same C. */
+         * basis's 7 entries (adjacent) arrive by two VLDMs, the drag basis by a
+         * third once the thrust basis is no longer needed (GCC made a load of
+         * each); the same C arithmetic as below, the kf's tested first. */
         _Static_assert(PROPID_QUAD_FIRST_DRAG == PROPID_QUAD_FIRST_THRUST + 4u, "the coefficients are adjacent");
         register float y0 __asm__("s0");
         register float y1 __asm__("s1");
@@ -237,12 +238,38 @@ uint32_t propid_clamp_coefficients(propid_filter_t *filter)
                   [thrust] "r"(filter->derived.thrust_basis),
                   "m"(*(const float (*)[8])&core->state[PROPID_QUAD_FIRST_THRUST]),
                   "m"(*(const float (*)[2 * PROPID_MAX_ROTORS - 1])filter->derived.thrust_basis));
-        const float z[4] = {z0, z1, z2, z3};
         const float y[4] = {y0, y1, y2, y3};
         const float w1[3] = {w10, w11, w12};
-        const float v0[4] = {w00, w01, w02, w03};
-        const float *v = basis.vector;
+        const float w0[4] = {w00, w01, w02, w03};
+        const float along1 = y[1] * w1[0] + y[2] * w1[1] + y[3] * w1[2];
+        kf_rel[0] = y[0];
+PROPID_UNROLL(3)
+        for (uint8_t i = 1; i < 4u; ++i) {
+            kf_rel[i] = y[i] - along1 * w1[i - 1u];
+        }
+        const float along0 = kf_rel[0] * w0[0] + kf_rel[1] * w0[1] + kf_rel[2] * w0[2] + kf_rel[3] * w0[3];
+        uint32_t inside = 0u; /* (counted: a carry added per test, propid_count_inside) */
+PROPID_UNROLL(4)
+        for (uint8_t i = 0; i < 4u; ++i) {
+            kf_rel[i] -= along0 * w0[i];
+            inside = propid_count_inside(inside, propid_float_bits(kf_rel[i]), min_bits, range_bits);
+        }
+        /* (after the kf tests, whose count it reads: the thrust basis's registers are free) */
+        register float v0 __asm__("s8");
+        register float v1 __asm__("s9");
+        register float v2 __asm__("s10");
+        register float v3 __asm__("s11");
+        __asm__("vldmia %[drag], {s8-s11}"
+                : "=t"(v0), "=t"(v1), "=t"(v2), "=t"(v3)
+                : [drag] "r"(basis.vector), "r"(inside), "m"(*(const float (*)[4])basis.vector));
+        const float z[4] = {z0, z1, z2, z3};
+        const float v[4] = {v0, v1, v2, v3};
         const float along = basis.scale * (z[0] * v[0] + z[1] * v[1] + z[2] * v[2] + z[3] * v[3]);
+PROPID_UNROLL(4)
+        for (uint8_t i = 0; i < 4u; ++i) {
+            km_rel[i] = z[i] - along * v[i];
+            inside = propid_count_inside(inside, propid_float_bits(km_rel[i]), min_bits, range_bits);
+        }
 #else
         const float *z = &core->state[PROPID_QUAD_FIRST_DRAG];
         const float *v = basis.vector;
@@ -252,16 +279,13 @@ uint32_t propid_clamp_coefficients(propid_filter_t *filter)
         propid_thrust_basis_init(&thrust, &filter->derived, config);
         const float *y = &core->state[PROPID_QUAD_FIRST_THRUST];
         const float *w1 = thrust.vector[1]; /* elements 1..3 */
-#endif
         const float along1 = y[1] * w1[0] + y[2] * w1[1] + y[3] * w1[2];
         kf_rel[0] = y[0];
 PROPID_UNROLL(3)
         for (uint8_t i = 1; i < 4u; ++i) {
             kf_rel[i] = y[i] - along1 * w1[i - 1u];
         }
-#if !(PROPID_ARM_BLOCK_MOVES && !PROPID_GENERAL_VEHICLES)
         const float *v0 = thrust.vector[0];
-#endif
         const float along0 = kf_rel[0] * v0[0] + kf_rel[1] * v0[1] + kf_rel[2] * v0[2] + kf_rel[3] * v0[3];
         uint32_t inside = 0u; /* (counted: a carry added per test, propid_count_inside) */
 PROPID_UNROLL(4)
@@ -271,6 +295,7 @@ PROPID_UNROLL(4)
             inside = propid_count_inside(inside, propid_float_bits(kf_rel[i]), min_bits, range_bits);
             inside = propid_count_inside(inside, propid_float_bits(km_rel[i]), min_bits, range_bits);
         }
+#endif
         outside = inside != 8u;
     }
 #if PROPID_GENERAL_VEHICLES
