@@ -27,16 +27,18 @@ static inline __attribute__((always_inline)) void
 propid_quad_model_stage_arm(const propid_filter_t *filter, const float *drag_basis, float dt,
                             float jacobian_dt[3][PROPID_JAC_ROW], float rate_next[3], float *check)
 {
-    _Static_assert(offsetof(propid_filter_t, derived.quad_gyro) - offsetof(propid_filter_t, derived.jac_torque) == 4u * 12u,
+#define TORQUE offsetof(propid_filter_t, derived.jac_torque)
+    _Static_assert(offsetof(propid_filter_t, derived.quad_gyro) - TORQUE == 4u * 12u,
                    "derived.quad_gyro: the offsets below");
-    _Static_assert(offsetof(propid_filter_t, derived.thrust_basis) - offsetof(propid_filter_t, derived.jac_torque) == 4u * 15u,
+    _Static_assert(offsetof(propid_filter_t, derived.thrust_basis) - TORQUE == 4u * 15u,
                    "derived.thrust_basis: the offsets below");
-    _Static_assert(offsetof(propid_filter_t, core.state) - offsetof(propid_filter_t, derived.jac_torque) == 4u * 51u,
+    _Static_assert(offsetof(propid_filter_t, core.state) - TORQUE == 4u * 51u,
                    "core.state: the offsets below");
-    _Static_assert(offsetof(propid_filter_t, core.rotor_speed_sq) - offsetof(propid_filter_t, derived.jac_torque) == 4u * 170u,
+    _Static_assert(offsetof(propid_filter_t, core.rotor_speed_sq) - TORQUE == 4u * 170u,
                    "core.rotor_speed_sq: the offsets below");
-    _Static_assert(offsetof(propid_filter_t, core.input_speed_sq) - offsetof(propid_filter_t, derived.jac_torque) == 4u * 174u,
+    _Static_assert(offsetof(propid_filter_t, core.input_speed_sq) - TORQUE == 4u * 174u,
                    "core.input_speed_sq: the offsets below");
+#undef TORQUE
     register float g0_0 __asm__("s14");
     register float g0_1 __asm__("s15");
     register float g0_2 __asm__("s16");
@@ -59,7 +61,8 @@ propid_quad_model_stage_arm(const propid_filter_t *filter, const float *drag_bas
     register float rate1 __asm__("s13");
     register float rate2 __asm__("s11");
     register float bias_sum __asm__("s10");
-    const float *filter_at = (const float *)(const void *)((const char *)filter + offsetof(propid_filter_t, core.rotor_speed_sq));
+    const float *filter_at = (const float *)(const void *)((const char *)filter +
+                                                   offsetof(propid_filter_t, core.rotor_speed_sq));
     const float *drag_at = drag_basis;
     __asm__(
         "vmov s13, %[dt]\n\t"
@@ -237,8 +240,9 @@ propid_quad_model_stage_arm(const propid_filter_t *filter, const float *drag_bas
           "=&t"(rate0), "=&t"(rate1), "=&t"(rate2), "=&t"(bias_sum),
           [filter] "+&r"(filter_at), [drag] "+&r"(drag_at)
         : [dt] "r"(propid_float_bits(dt)), [zero] "r"(0u), [two_thirds] "r"(propid_float_bits(2.0f / 3.0f))
-        : "s0", "s1", "s2", "s3", "s4", "s5", "s6", "s7", "s8", "s9", "memory"); /* (it reads the filter and the basis: GCC's operand limit leaves no room
-                                    for them as memory operands) */
+        /* (it reads the filter and the basis: GCC's limit of 30 operands leaves
+         * no room for them as memory operands) */
+        : "s0", "s1", "s2", "s3", "s4", "s5", "s6", "s7", "s8", "s9", "memory");
     jacobian_dt[0][0] = g0_0;
     jacobian_dt[0][1] = g0_1;
     jacobian_dt[0][2] = g0_2;
