@@ -48,10 +48,18 @@ def _f32(value: float) -> float:
 
 
 class ReferenceFilter:
-    """Mirror of propid_filter_t and the propid_* functions, in float64."""
+    """Mirror of propid_filter_t and the propid_* functions, in float64.
 
-    def __init__(self, config: FilterConfig):
+    loadings=False is an experiment, not the C algorithm: the float32 covariance-health
+    loadings are left out (the prediction's loading of every variance, the rates' included,
+    and the update loading; docs/math.md §2; the rate variance keeps its ceiling), so the
+    filter is the plain EKF of the same model, which float64 can carry (docs/reliability.md, "The
+    loading's cost, measured in float64")."""
+
+    def __init__(self, config: FilterConfig, loadings: bool = True):
         self.config = config
+        self.var_loading = VAR_LOADING if loadings else 0.0
+        self.update_loading = UPDATE_LOADING if loadings else 0.0
         self.rotor_count = n_rot = config.rotor_count
         self.first_drag = 3 + n_rot
         self.first_bias = 3 + 2 * n_rot
@@ -617,7 +625,7 @@ class ReferenceFilter:
             # drag coefficients every second prediction (C: even check rows), on the rest every one;
             # the rates' of their rounding scale (above).
             diag = np.diag_indices(n)
-            loading = np.full(n, VAR_LOADING)
+            loading = np.full(n, self.var_loading)
             if self.check_row % 2 != 0:
                 loading[self.first_drag:self.first_bias] = 0.0
             scaled = self.cov[diag].copy()
@@ -771,7 +779,7 @@ class ReferenceFilter:
             cov_h = self.cov[:, axis] + self.cov[:, bias]
             innovation_var = max(cov_h[axis] + cov_h[bias] + self.gyro_var, self.gyro_var)
         # Update loading (C: PROPID_UPDATE_LOADING): R_eff = 64 eps P_hh when larger.
-        loaded_noise = UPDATE_LOADING * (innovation_var - self.gyro_var)
+        loaded_noise = self.update_loading * (innovation_var - self.gyro_var)
         if loaded_noise > self.gyro_var:
             innovation_var += loaded_noise - self.gyro_var
         innovation = gyro - self.state[axis] - self.state[bias]
@@ -858,7 +866,7 @@ class ReferenceFilter:
             cov_h = self.cov @ h
             innovation_var = float(h @ cov_h) + self.accel_var
         innovation_var = max(innovation_var, self.accel_var)
-        loaded_noise = UPDATE_LOADING * (innovation_var - self.accel_var)  # C: propid_scalar_update
+        loaded_noise = self.update_loading * (innovation_var - self.accel_var)  # C: propid_scalar_update
         if loaded_noise > self.accel_var:
             innovation_var += loaded_noise - self.accel_var
         self.accel_innovation = innovation
@@ -875,7 +883,7 @@ class ReferenceFilter:
             self._reset_state(b)
             cov_h = self.cov @ h
             innovation_var = max(float(h @ cov_h) + self.accel_var, self.accel_var)
-            loaded_noise = UPDATE_LOADING * (innovation_var - self.accel_var)
+            loaded_noise = self.update_loading * (innovation_var - self.accel_var)
             if loaded_noise > self.accel_var:
                 innovation_var += loaded_noise - self.accel_var
             innovation = 0.0
