@@ -15,7 +15,11 @@
  * f_z = r sum_i (kf_nominal_i / m) u_i g_i + b_z, H = [r (kf_nominal_i / m) u_i at
  * g_i, sum_i (kf_nominal_i / m) u_i g_i at r, 1 at b_z]. Fused against the
  * current state with the latest rotor speeds (the coefficients and the bias are
- * random walks: no prediction to the sample's time is needed). */
+ * random walks: no prediction to the sample's time is needed). With
+ * config.accel_error_std > 0 the row's slow model error e is a state of its own
+ * (a first-order Gauss-Markov process, docs/math.md §9): f_z = ... + b_z + e + v,
+ * one more entry 1 at e; it decays with the gyro step's prediction (at the gyro's
+ * rate, far faster than its correlation time). */
 #include <math.h>
 #include <stddef.h>
 
@@ -137,6 +141,14 @@ propid_status_t propid_fuse_accel(propid_filter_t *filter, uint64_t time_us, con
     }
     row.index[rotor_count] = bias;
     row.value[rotor_count] = 1.0f;
+    const uint8_t model_error = derived->accel_error; /* PROPID_NO_STATE: off */
+    float offset = core->state[bias];
+    if (model_error != PROPID_NO_STATE) {
+        row.index[row.count] = model_error;
+        row.value[row.count] = 1.0f;
+        row.count++;
+        offset += core->state[model_error];
+    }
     if (scale != PROPID_NO_STATE) {
         row.index[row.count] = scale;
         row.value[row.count] = thrust_states;
@@ -144,7 +156,7 @@ propid_status_t propid_fuse_accel(propid_filter_t *filter, uint64_t time_us, con
     }
     const float thrust = inverse_scale * thrust_states; /* collective thrust over mass */
     const float measured = specific_force[2];
-    float innovation = measured - thrust - core->state[bias];
+    float innovation = measured - thrust - offset;
     if (!isfinite(innovation)) {
         return reject(filter, PROPID_ERR_NUMERIC);
     }
@@ -170,6 +182,10 @@ propid_status_t propid_fuse_accel(propid_filter_t *filter, uint64_t time_us, con
          * what the gyro taught them. */
         core->state[bias] = measured - thrust;
         propid_cov_reset_state(derived, core, bias);
+        if (model_error != PROPID_NO_STATE) { /* the bias takes the whole offset */
+            core->state[model_error] = 0.0f;
+            propid_cov_reset_state(derived, core, model_error);
+        }
         innovation = 0.0f;
         (void)propid_scalar_update(filter, &row, innovation, derived->accel_var, 0.0f, &test_ratio);
         filter->counters.accel_reanchored++;

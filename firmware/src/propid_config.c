@@ -57,6 +57,8 @@ void propid_config_default(propid_config_t *config)
     config->accel_bias_std0 = 0.5f;
     config->accel_bias_walk = 1.0e-3f;
     config->accel_range = 160.0f;
+    config->accel_error_std = 0.0f; /* off: the row's error taken as white */
+    config->accel_error_time = 0.0f;
     config->torque_scale = 0u;
     config->torque_scale_std0 = 0.5f;
     config->torque_scale_walk = 0.0f;
@@ -645,6 +647,14 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             PROPID_BAD("accel_range");
         }
     }
+    if (!isfinite(config->accel_error_std) || config->accel_error_std < 0.0f || config->accel_error_std > 1.0e3f ||
+        (config->accel_error_std > 0.0f && !(config->mass > 0.0f))) {
+        PROPID_BAD("accel_error_std"); /* the row's error needs the row */
+    }
+    if (config->accel_error_std > 0.0f &&
+        (!positive_finite(config->accel_error_time) || config->accel_error_time > 1.0e6f)) {
+        PROPID_BAD("accel_error_time");
+    }
     if (config->torque_scale > 1u || (config->torque_scale && !(config->mass > 0.0f))) {
         PROPID_BAD("torque_scale"); /* only the accelerometer makes it observable */
     }
@@ -658,6 +668,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
 #else
     if (config->torque_scale != 0u) {
         PROPID_BAD("torque_scale"); /* only the accelerometer makes it observable */
+    }
+    if (config->accel_error_std != 0.0f) {
+        PROPID_BAD("accel_error_std"); /* compiled out with the accelerometer */
     }
 #endif
     if (!propid_delay_config_ok(config)) {
@@ -743,10 +756,18 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         out.layout.disturbance = next;
         next = (uint8_t)(next + PROPID_DISTURBANCE_STATES);
     }
+#if PROPID_WITH_ACCEL
+    out.accel_error = PROPID_NO_STATE;
+#endif
     if (PROPID_WITH_ACCEL && config->mass > 0.0f) {
         out.layout.accel_bias = next;
         next = (uint8_t)(next + PROPID_ACCEL_BIAS_STATES);
 #if PROPID_WITH_ACCEL
+        if (config->accel_error_std > 0.0f) { /* right after the bias (propid_setup.c checks it) */
+            out.accel_error = next;
+            out.accel_error_rate = 1.0f / config->accel_error_time;
+            next = (uint8_t)(next + PROPID_ACCEL_ERROR_STATES);
+        }
         out.accel_var = config->accel_noise_std * config->accel_noise_std;
         for (uint8_t i = 0; i < rotor_count; ++i) {
             out.thrust_per_mass[i] = config->rotor[i].thrust_coeff_nominal / config->mass;
@@ -756,6 +777,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     if (PROPID_WITH_ACCEL && config->torque_scale) {
         out.layout.torque_scale = next;
         next = (uint8_t)(next + PROPID_TORQUE_SCALE_STATES);
+    }
+    if (next > PROPID_MAX_STATES) {
+        PROPID_BAD("accel_error_std"); /* the one block PROPID_MAX_STATES does not count (propid_config.h) */
     }
     out.state_count = next;
 #if PROPID_WITH_ROTOR_INERTIA
@@ -915,6 +939,16 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             psd = config->accel_bias_walk * config->accel_bias_walk;
             floor_var = 1.0e-12f;
             ceiling = config->accel_range * config->accel_range;
+#if PROPID_WITH_ACCEL
+        } else if (k == out.accel_error) {
+            /* First-order Gauss-Markov: stationary variance sigma^2 held by a walk of
+             * 2 sigma^2 / tau against the decay exp(-dt / tau) (propid_predict.c). */
+            kind = PROPID_KIND_ACCEL_ERROR;
+            prior = config->accel_error_std * config->accel_error_std;
+            psd = 2.0f * prior * out.accel_error_rate;
+            floor_var = 1.0e-12f;
+            ceiling = 100.0f * prior;
+#endif
         } else if (PROPID_WITH_ACCEL && k == out.layout.torque_scale) {
             kind = PROPID_KIND_TORQUE_SCALE;
             prior = config->torque_scale_std0 * config->torque_scale_std0;
@@ -940,6 +974,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
          * below the variance ceiling: larger is not a model but a repair on
          * every sample. */
         const float max_gap_s = (float)config->max_gyro_gap_us * 1.0e-6f;
+#if PROPID_WITH_ACCEL
+        if (k == out.accel_error && max_gap_s > config->accel_error_time) {
+            PROPID_BAD("accel_error_time"); /* shorter than a gyro gap: not a process the step can follow */
+        }
+#endif
         if (psd * max_gap_s > ceiling) {
             PROPID_BAD(k < PROPID_RATE_STATES ? "rate_process_noise"
                                               : (k < first_drag ? "thrust_coeff_rel_walk"
@@ -976,6 +1015,9 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
                        : k < first_bias ? "drag_coeff_rel_std0"
                        : k < first_bias + PROPID_BIAS_STATES ? "gyro_bias_std0"
                        : k == out.layout.accel_bias ? "accel_bias_std0"
+#if PROPID_WITH_ACCEL
+                       : k == out.accel_error ? "accel_error_std"
+#endif
                        : k == out.layout.torque_scale ? "torque_scale_std0" : "disturbance_std0");
         }
         /* (A kind's values do not depend on k: the last write is the first's.) */

@@ -532,9 +532,9 @@ PROPID_RARE void propid_cov_reset_rotor(const propid_derived_t *derived, const p
 
 /* One scalar measurement y = H x + v with a sparse H (propid_scalar_update.c):
  * H has `count` non-zero entries, value[k] in column index[k]. The longest row
- * is the accelerometer's (every thrust coefficient, the torque scale and its
- * bias), else the gyro's two (a rate and its bias). */
-#define PROPID_SPARSE_MAX (PROPID_WITH_ACCEL ? PROPID_MAX_ROTORS + 2u : 2u)
+ * is the accelerometer's (every thrust coefficient, the torque scale, its bias
+ * and its model error), else the gyro's two (a rate and its bias). */
+#define PROPID_SPARSE_MAX (PROPID_WITH_ACCEL ? PROPID_MAX_ROTORS + 3u : 2u)
 typedef struct {
     uint8_t count;
     uint8_t index[PROPID_SPARSE_MAX];
@@ -765,6 +765,7 @@ static inline __attribute__((always_inline)) uint32_t propid_float_bits(float va
 #define PROPID_KIND_DISTURBANCE 4u
 #define PROPID_KIND_ACCEL_BIAS (4u + PROPID_WITH_DISTURBANCE)
 #define PROPID_KIND_TORQUE_SCALE (5u + PROPID_WITH_DISTURBANCE)
+#define PROPID_KIND_ACCEL_ERROR (6u + PROPID_WITH_DISTURBANCE)
 
 #if !PROPID_GENERAL_VEHICLES
 /* The fixed quad layout's rate, thrust, drag and bias blocks (propid_covariance.c):

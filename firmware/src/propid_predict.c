@@ -692,6 +692,30 @@ static __attribute__((noinline)) void add_input_noise(const propid_derived_t *de
 #endif
 
 #if PROPID_WITH_ACCEL
+/* The accelerometer row's model error, a first-order Gauss-Markov state (docs/math.md
+ * §9, "The row's model error"): e' = a e with a = exp(-dt / tau), so its row and
+ * column of P scale by a and its variance by a^2 before the prediction adds its
+ * process noise 2 sigma^2 / tau dt (propid_config.c; the rate rows then see the
+ * decayed column, as F P F^T with a on e's diagonal). N + 6 + blocks multiplies. */
+static __attribute__((noinline)) void decay_accel_error(const propid_derived_t *derived, propid_core_t *core,
+                                                       float dt, uint8_t n)
+{
+    const uint8_t e = derived->accel_error;
+    if (e >= n) { /* never (the caller tests PROPID_NO_STATE); bounds the index */
+        return;
+    }
+    const float a = expf(-dt * derived->accel_error_rate);
+    core->state[e] *= a;
+    for (uint8_t j = 0; j < e; ++j) {
+        core->cov[propid_cov_index(j, e)] *= a;
+    }
+    float *row_e = propid_cov_row(core->cov, e);
+    row_e[e] *= a * a;
+    for (uint8_t j = (uint8_t)(e + 1u); j < n; ++j) {
+        row_e[j] *= a;
+    }
+}
+
 /* A walking thrust-torque scale (docs/math.md §9): ds = w_s moves g_i = s kf_i by
  * kf_i ds and r = 1/s by -r^2 ds, so Q dt = q^2 dt v v^T with v = kf_i = r g_i at
  * each g_i and -r^2 at r, at the current state (the walk keeps kf where it is). The
@@ -735,6 +759,11 @@ __attribute__((noinline)) void propid_predict_covariance(const propid_derived_t 
     const float drag_factor = drag_loading_factor(core);
 #if PROPID_GENERAL_VEHICLES
     if (!derived->quad_layout) {
+#if PROPID_WITH_ACCEL
+        if (derived->accel_error != PROPID_NO_STATE) { /* (no such state in the quad layout) */
+            decay_accel_error(derived, core, dt, derived->state_count);
+        }
+#endif
         predict_covariance_any(derived, core->cov, dt, jacobian_dt, derived->state_count, drag_factor);
 #if PROPID_WITH_ACCEL
         add_scale_walk(derived, core, dt); /* (the quad layout has no scale state) */

@@ -67,6 +67,14 @@ static int setup_structure_ok(const propid_setup_t *setup)
         !optional_block_fits(layout->torque_scale, PROPID_TORQUE_SCALE_STATES, derived->state_count)) {
         return 0;
     }
+#if PROPID_WITH_ACCEL
+    /* The row's model error sits right after the bias, or is off. */
+    if (derived->accel_error != PROPID_NO_STATE &&
+        (layout->accel_bias == PROPID_NO_STATE || derived->accel_error != layout->accel_bias + 1u ||
+         derived->accel_error >= derived->state_count)) {
+        return 0;
+    }
+#endif
 #if PROPID_GENERAL_VEHICLES
     for (uint8_t a = 0; a < 3u; ++a) {
         if (derived->jac_count[a] > PROPID_MAX_STATES - 3u || derived->jac_rate_count[a] > derived->jac_count[a]) {

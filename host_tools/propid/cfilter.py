@@ -168,6 +168,11 @@ _OPTIONAL_FIELDS = [
     ("motor_command_memory", ctypes.c_float),
     ("motor_command_min_f", ctypes.c_float),
 ]
+# After aero_damping[3] (propid_config_t's last fields).
+_LAST_FIELDS = [
+    ("accel_error_std", ctypes.c_float),
+    ("accel_error_time", ctypes.c_float),
+]
 _INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int32)
 
 
@@ -178,7 +183,7 @@ def _config_struct(max_rotors: int) -> type:
         ("rotor", RotorConfigStruct * max_rotors),
         ("inertia", (ctypes.c_float * 3) * 3),
     ] + _TUNING_FIELDS + [("rotor_inertia", ctypes.c_float * max_rotors)] + _OPTIONAL_FIELDS
-        + [("aero_damping", ctypes.c_float * 3)]})
+        + [("aero_damping", ctypes.c_float * 3)] + _LAST_FIELDS})
 
 
 def _estimate_struct(max_rotors: int) -> type:
@@ -303,6 +308,9 @@ DEFAULT_TUNING: dict[str, float | int] = {
     "motor_command_lag": 0.03,
     "motor_command_memory": 10.0,
     "motor_command_min_f": 0.0,
+    # The accelerometer row's slow model error as a Gauss-Markov state (docs/math.md §9): std, time; 0: off.
+    "accel_error_std": 0.0,
+    "accel_error_time": 0.0,
     # The input error's correlation time per rotor from how long its value has stood
     # (docs/math.md §14; needs rotor_speed_noise > 0, the configured time its ceiling).
     "rotor_speed_noise_hold": 0,
@@ -371,6 +379,8 @@ class FilterConfig:
     motor_command_lag: float = DEFAULT_TUNING["motor_command_lag"]
     motor_command_memory: float = DEFAULT_TUNING["motor_command_memory"]
     motor_command_min_f: float = DEFAULT_TUNING["motor_command_min_f"]
+    accel_error_std: float = DEFAULT_TUNING["accel_error_std"]
+    accel_error_time: float = DEFAULT_TUNING["accel_error_time"]
     rotor_speed_noise_hold: int = DEFAULT_TUNING["rotor_speed_noise_hold"]
     rotor_speed_noise_split: int = DEFAULT_TUNING["rotor_speed_noise_split"]
     # Known aerodynamic rate damping [N m s/rad] per body axis (body torque -d_a omega_a, docs/math.md §17);
@@ -447,7 +457,7 @@ class FilterConfig:
         for a in range(3):
             for b in range(3):
                 s.inertia[a][b] = float(self.inertia[a][b])
-        for name, ctype in _TUNING_FIELDS + _OPTIONAL_FIELDS:
+        for name, ctype in _TUNING_FIELDS + _OPTIONAL_FIELDS + _LAST_FIELDS:
             value = getattr(self, name)
             setattr(s, name, int(value) if ctype in _INTEGER_TYPES else float(value))
         if self.rotor_inertia is not None:
@@ -644,7 +654,7 @@ def c_default_tuning(path: Optional[os.PathLike] = None) -> dict:
     lib = load_library(path)
     s = lib.propid_structs[0]()
     lib.propid_config_default(ctypes.byref(s))
-    return {name: getattr(s, name) for name, _ in _TUNING_FIELDS + _OPTIONAL_FIELDS}
+    return {name: getattr(s, name) for name, _ in _TUNING_FIELDS + _OPTIONAL_FIELDS + _LAST_FIELDS}
 
 
 # ---------------------------------------------------------------------------

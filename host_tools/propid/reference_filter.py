@@ -95,6 +95,9 @@ class ReferenceFilter:
             "disturbance_std0", "disturbance_walk", "disturbance_bandwidth", "mass", "accel_noise_std",
             "accel_bias_std0", "accel_bias_walk", "accel_range", "torque_scale_std0", "torque_scale_walk")}
         self.c = c
+        if float(getattr(config, "accel_error_std", 0.0)) > 0.0:
+            # The accelerometer row's model-error state (C: propid_predict.c) is not mirrored here.
+            raise ValueError("reference filter: accel_error_std > 0 is not modelled")
         self.gate_max_consecutive = int(config.gate_max_consecutive)
         # A gyro axis repeating its reading bit for bit this many samples is not fused (0: off).
         self.gyro_stuck_samples = int(getattr(config, "gyro_stuck_samples", 0))

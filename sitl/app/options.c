@@ -65,6 +65,8 @@ void sitl_options_default(sitl_options_t *o)
     o->prior_rate_std = -1.0;
     o->prior_accel_bias_std = -1.0;
     o->filter_accel_noise = -1.0;
+    o->filter_accel_error_std = 0.0;
+    o->filter_accel_error_time = 0.0;
     o->filter_rate_noise = -1.0;
     o->filter_coeff_walk = -1.0;
     o->filter_bias_walk = -1.0;
@@ -357,6 +359,12 @@ static const opt_t options[] = {
            "filter accelerometer z noise std per sample (accel_noise_std;\n"
            "with --filter-accel; default: library), e.g. the IMU datasheet's\n"
            "noise density x sqrt(sample rate)"),
+    NUMBER(NULL, "filter-accel-error-std", filter_accel_error_std, 1e-6, 100.0, "M_S2",
+           "the accelerometer row's slow model error as a Gauss-Markov state\n"
+           "of this std (accel_error_std; with --filter-accel and\n"
+           "--filter-accel-error-time; default: off, docs/math.md §9)"),
+    NUMBER(NULL, "filter-accel-error-time", filter_accel_error_time, 1e-3, 1e6, "S",
+           "its correlation time (accel_error_time)"),
     NUMBER(NULL, "filter-rate-noise", filter_rate_noise, 0.0, 1e4, "X",
            "filter rate_process_noise [rad/s^2/sqrt(Hz)] (default: library)"),
     NUMBER(NULL, "filter-coeff-walk", filter_coeff_walk, 0.0, 10.0, "X",
@@ -720,6 +728,15 @@ int sitl_options_parse(sitl_options_t *o, int argc, char **argv)
     if (o->filter_accel_noise > 0.0 && !o->filter_accel) {
         /* Without the aiding no accelerometer sample is fused: the noise would go unused. */
         fprintf(stderr, "propid_sitl: --filter-accel-noise needs --filter-accel\n");
+        return SITL_EXIT_USAGE;
+    }
+    if ((o->filter_accel_error_std > 0.0) != (o->filter_accel_error_time > 0.0)) {
+        fprintf(stderr, "propid_sitl: --filter-accel-error-std and --filter-accel-error-time go together\n");
+        return SITL_EXIT_USAGE;
+    }
+    if (o->filter_accel_error_std > 0.0 && !o->filter_accel) {
+        /* The row's model error is a term of the accelerometer's row. */
+        fprintf(stderr, "propid_sitl: --filter-accel-error-std needs --filter-accel\n");
         return SITL_EXIT_USAGE;
     }
     return 0;

@@ -95,6 +95,8 @@ typedef struct {
     double prior_rate_std;              /* rate_std0 [rad/s] */
     double prior_accel_bias_std;        /* accel_bias_std0 [m/s^2], with filter_accel */
     double filter_accel_noise;          /* accel_noise_std [m/s^2 per sample], with filter_accel */
+    double filter_accel_error_std;      /* accel_error_std [m/s^2] (0: off), with filter_accel */
+    double filter_accel_error_time;     /* accel_error_time [s], with filter_accel_error_std */
     /* Filter tuning overrides (< 0 = propid_config_default). */
     double filter_rate_noise;           /* rate_process_noise [rad/s^2/sqrt(Hz)] */
     double filter_coeff_walk;           /* thrust_ and drag_coeff_rel_walk [1/sqrt(s)] */

@@ -189,6 +189,10 @@ propid_status_t sitl_setup_filter_config(const sitl_options_t *opts, const sitl_
     if (opts->filter_accel_noise > 0.0) {
         c->accel_noise_std = (float)opts->filter_accel_noise;
     }
+    if (opts->filter_accel_error_std > 0.0) {
+        c->accel_error_std = (float)opts->filter_accel_error_std;
+        c->accel_error_time = (float)opts->filter_accel_error_time;
+    }
     c->torque_scale = opts->filter_torque_scale ? 1u : 0u; /* without the accelerometer: a config error */
     if (opts->filter_rotor_inertia) {
         for (int i = 0; i < v->rotor_count; i++) {

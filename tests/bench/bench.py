@@ -89,6 +89,8 @@ OPTION_FLAGS = (
     ("delay_4ms", "-DCOUNT_STEP_DELAY_US=4000"),
     ("input_noise", "-DCOUNT_STEP_INPUT_NOISE=2.0f"),
     ("input_compensation", "-DCOUNT_STEP_INPUT_NOISE=2.0f -DCOUNT_STEP_INPUT_COMPENSATION"),
+    ("accel", "-DCOUNT_STEP_ACCEL"),
+    ("accel_error", "-DCOUNT_STEP_ACCEL -DCOUNT_STEP_ACCEL_ERROR"),
 )
 
 

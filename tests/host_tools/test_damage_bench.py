@@ -546,6 +546,36 @@ def test_sitl_sets_the_accelerometer_noise(tmp_path, sitl_binary):
     assert proc.returncode == 2 and "--filter-accel-noise needs --filter-accel" in proc.stderr
 
 
+def test_sitl_sets_the_accelerometer_row_error(tmp_path, sitl_binary):
+    """--filter-accel-error-std / --filter-accel-error-time reach the filter's model-error state of
+    the accelerometer row (docs/math.md §9): with the datasheet's noise on a Lissajous flight the z
+    bias claims a wider std with the state (the bias and the row's slow error are told apart only
+    through time) and its estimate moves; every sample is still fused. The two options go together
+    and need --filter-accel (usage errors otherwise)."""
+    import json
+    import subprocess
+
+    summary = tmp_path / "s.json"
+    base = [str(sitl_binary), "--vehicle", "crazyflie-x", "--trajectory", "lissajous", "--seed", "5",
+            "--duration", "6", "--filter-rate-noise", "0.2", "--summary-json", str(summary), "--quiet"]
+    accel = ["--filter-accel", "--prior-accel-bias-std", "0.196133", "--filter-accel-noise", "0.054269"]
+    runs = []
+    for extra in ([], ["--filter-accel-error-std", "0.1", "--filter-accel-error-time", "10"]):
+        proc = subprocess.run(base + accel + extra, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        runs.append(json.loads(summary.read_text())["accel"])
+    assert runs[0]["accepted"] == runs[1]["accepted"] == 6000
+    assert runs[1]["gated"] == 0 and runs[1]["reanchored"] == 0
+    assert runs[1]["est_bias_std_z"] > 1.1 * runs[0]["est_bias_std_z"]
+    assert runs[1]["est_bias_z"] != runs[0]["est_bias_z"]
+    for extra, message in ((["--filter-accel-error-std", "0.1"], "go together"),
+                           (["--filter-accel-error-time", "10"], "go together"),
+                           (["--filter-accel-error-std", "0.1", "--filter-accel-error-time", "10"],
+                            "--filter-accel-error-std needs --filter-accel")):
+        proc = subprocess.run(base + extra, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 2 and message in proc.stderr, proc.stderr
+
+
 def test_sitl_oracle_told_late(tmp_path, sitl_binary):
     """--oracle-damage-delay S: the Oracle's allocation keeps the healthy coefficients for S after the
     loss and takes the damaged truth then. Its commands match an Oracle never told up to the damage

@@ -220,6 +220,17 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
     config.input_error_compensation = 1u;
 #endif
 #endif
+#ifdef COUNT_STEP_ACCEL
+    /* -DCOUNT_STEP_ACCEL: the accelerometer's z bias state on (a 30 g vehicle; the counted
+     * flight pushes no accelerometer sample: the gyro step with one more state). */
+    config.mass = 0.03f;
+#ifdef COUNT_STEP_ACCEL_ERROR
+    /* and -DCOUNT_STEP_ACCEL_ERROR: the accelerometer row's model-error state, whose
+     * Gauss-Markov decay every gyro step's prediction applies (docs/math.md §9). */
+    config.accel_error_std = 0.03f;
+    config.accel_error_time = 10.0f;
+#endif
+#endif
 #ifdef COUNT_STEP_DELAY_US
     /* -DCOUNT_STEP_DELAY_US=D: the telemetry delay D held by the filter; each counted
      * step is then the rotor push and the gyro push together (a held sample is fused

@@ -216,6 +216,12 @@ typedef struct {
                                          body torque -aero_damping[a] omega_a (docs/math.md §17; the
                                          vehicle file's key of that name). 0: not modelled. Full build
                                          only (the quad build refuses a nonzero value) */
+    float accel_error_std;            /* > 0 (needs mass > 0): the accelerometer row's slow model error
+                                         (vertical forces the row leaves out, the rotor speeds' decode
+                                         error) as one more state, a first-order Gauss-Markov process of
+                                         this stationary std [m/s^2] beside the z bias (docs/math.md §9,
+                                         "The row's model error"). 0: off (the row's error is white) */
+    float accel_error_time;           /* its correlation time [s] (> 0 with accel_error_std > 0) */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -426,6 +432,9 @@ typedef struct {
 #if PROPID_WITH_ACCEL
     float thrust_per_mass[PROPID_MAX_ROTORS];       /* kf_nominal_i / mass (accelerometer row) */
     float accel_var;                                /* accel_noise_std^2 */
+    float accel_error_rate;                         /* 1 / accel_error_time (its decay per second) */
+    uint8_t accel_error;                            /* the row's model-error state: accel_bias + 1, or
+                                                       PROPID_NO_STATE (config.accel_error_std 0) */
 #endif
 #if PROPID_WITH_INPUT_NOISE
     float input_noise_var;                          /* 4 rotor_speed_noise^2: Var(u_i) per unit u_i */
@@ -738,6 +747,16 @@ static inline uint8_t propid_index_disturbance(const propid_filter_t *filter, ui
 static inline uint8_t propid_index_accel_bias(const propid_filter_t *filter)
 {
     return filter->derived.layout.accel_bias;
+}
+/* The accelerometer row's model error (config.accel_error_std > 0), in m/s^2. */
+static inline uint8_t propid_index_accel_error(const propid_filter_t *filter)
+{
+#if PROPID_WITH_ACCEL
+    return filter->derived.accel_error;
+#else
+    (void)filter;
+    return (uint8_t)PROPID_NO_STATE;
+#endif
 }
 
 #ifdef __cplusplus

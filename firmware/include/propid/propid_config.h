@@ -88,14 +88,19 @@
 #define PROPID_RATE_STATES 3
 #define PROPID_BIAS_STATES 3
 /* Optional blocks the configuration may enable after them: disturbance torque (3),
- * accelerometer z bias (1), thrust-torque scale (1, with the accelerometer);
- * 0 when compiled out. */
+ * accelerometer z bias (1), the accelerometer row's model error (1, right after the
+ * bias), thrust-torque scale (1, with the accelerometer); 0 when compiled out. The
+ * row's model error takes no room of its own in PROPID_MAX_STATES: every other block
+ * fits beside it but for PROPID_MAX_ROTORS rotors with all three others on (then the
+ * configuration is refused, naming accel_error_std). */
 #define PROPID_DISTURBANCE_STATES (3 * PROPID_WITH_DISTURBANCE)
 #define PROPID_ACCEL_BIAS_STATES (1 * PROPID_WITH_ACCEL)
+#define PROPID_ACCEL_ERROR_STATES (1 * PROPID_WITH_ACCEL)
 #define PROPID_TORQUE_SCALE_STATES (1 * PROPID_WITH_ACCEL)
 /* Kinds of state (each shares its noise, prior and bounds): rate, thrust, drag,
- * gyro bias, then the optional disturbance, accelerometer bias, torque scale. */
-#define PROPID_STATE_KINDS (4 + PROPID_WITH_DISTURBANCE + 2 * PROPID_WITH_ACCEL)
+ * gyro bias, then the optional disturbance, accelerometer bias, torque scale,
+ * accelerometer model error. */
+#define PROPID_STATE_KINDS (4 + PROPID_WITH_DISTURBANCE + 3 * PROPID_WITH_ACCEL)
 #define PROPID_MAX_STATES (PROPID_RATE_STATES + 2 * PROPID_MAX_ROTORS + PROPID_BIAS_STATES + \
                            PROPID_DISTURBANCE_STATES + PROPID_ACCEL_BIAS_STATES + PROPID_TORQUE_SCALE_STATES)
 
