@@ -432,9 +432,6 @@ typedef struct {
 #if PROPID_WITH_ACCEL
     float thrust_per_mass[PROPID_MAX_ROTORS];       /* kf_nominal_i / mass (accelerometer row) */
     float accel_var;                                /* accel_noise_std^2 */
-    float accel_error_rate;                         /* 1 / accel_error_time (its decay per second) */
-    uint8_t accel_error;                            /* the row's model-error state: accel_bias + 1, or
-                                                       PROPID_NO_STATE (config.accel_error_std 0) */
 #endif
 #if PROPID_WITH_INPUT_NOISE
     float input_noise_var;                          /* 4 rotor_speed_noise^2: Var(u_i) per unit u_i */
@@ -461,6 +458,11 @@ typedef struct {
      * the reflection H = I - drag_basis_scale v v^T with v = drag_basis. */
     float drag_basis[PROPID_MAX_ROTORS];
     float drag_basis_scale;
+#endif
+#if PROPID_WITH_ACCEL /* (last: the step's offsets before it unchanged) */
+    float accel_error_rate;                         /* 1 / accel_error_time (its decay per second) */
+    uint8_t accel_error;                            /* the row's model-error state: accel_bias + 1, or
+                                                       PROPID_NO_STATE (config.accel_error_std 0) */
 #endif
 } propid_derived_t;
 
