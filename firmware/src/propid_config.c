@@ -1010,15 +1010,17 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
             }
         }
         if (!positive_finite(prior) || prior < floor_var) {
+            const char *optional_name = k == out.layout.torque_scale ? "torque_scale_std0" : "disturbance_std0";
+#if PROPID_WITH_ACCEL
+            if (k == out.accel_error) {
+                optional_name = "accel_error_std";
+            }
+#endif
             PROPID_BAD(k < PROPID_RATE_STATES ? "rate_std0"
                        : k < first_drag ? "thrust_coeff_rel_std0"
                        : k < first_bias ? "drag_coeff_rel_std0"
                        : k < first_bias + PROPID_BIAS_STATES ? "gyro_bias_std0"
-                       : k == out.layout.accel_bias ? "accel_bias_std0"
-#if PROPID_WITH_ACCEL
-                       : k == out.accel_error ? "accel_error_std"
-#endif
-                       : k == out.layout.torque_scale ? "torque_scale_std0" : "disturbance_std0");
+                       : k == out.layout.accel_bias ? "accel_bias_std0" : optional_name);
         }
         /* (A kind's values do not depend on k: the last write is the first's.) */
 #if PROPID_GENERAL_VEHICLES
