@@ -84,16 +84,18 @@ def _hold_missing(t: np.ndarray, values: np.ndarray) -> np.ndarray:
     return values[logged][np.maximum(index, 0)]
 
 
-def _hold_rotor_rows(speeds: np.ndarray) -> np.ndarray:
+def _hold_rotor_rows(speeds: np.ndarray, values: np.ndarray | None = None, before=np.nan) -> np.ndarray:
     """Rows without any rotor speed (gyro rows of an event-style log) take the latest
-    rotor row before them, as the filter does."""
+    rotor row before them, as the filter does: its speeds, or `values` (a per-row quantity
+    of the rotor stream), `before` the first rotor row."""
+    values = speeds if values is None else values
     empty = ~np.any(np.isfinite(speeds), axis=1)
     if not empty.any() or empty.all():
-        return speeds
+        return values
     index = np.where(~empty, np.arange(len(speeds)), 0)
     np.maximum.accumulate(index, out=index)
-    held = speeds[index]
-    held[empty & (np.cumsum(~empty) == 0)] = np.nan  # nothing to hold before the first rotor row
+    held = values[index]
+    held[empty & (np.cumsum(~empty) == 0)] = before  # nothing to hold before the first rotor row
     return held
 
 

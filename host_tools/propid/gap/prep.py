@@ -182,19 +182,6 @@ def repeated_rows(values: np.ndarray) -> np.ndarray:
     return repeats_previous_row(values) & np.any(values != 0.0, axis=1)
 
 
-def _hold_rotor_flags(flags: np.ndarray, speeds: np.ndarray) -> np.ndarray:
-    """A per-row flag of the rotor stream carried to the rows without rotor speeds, from the latest rotor
-    row before them (as _hold_rotor_rows carries the speeds); False before the first rotor row."""
-    empty = ~np.any(np.isfinite(speeds), axis=1)
-    if not empty.any() or empty.all():
-        return flags
-    index = np.where(~empty, np.arange(len(speeds)), 0)
-    np.maximum.accumulate(index, out=index)
-    held = flags[index]
-    held[empty & (np.cumsum(~empty) == 0)] = False
-    return held
-
-
 def repeated_row_stats(copy: np.ndarray, rows: np.ndarray) -> dict:
     """Share and count of copies among `rows` (indices), and the longest run of consecutive copies."""
     inside = copy[rows]
@@ -226,7 +213,7 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
     if not has_gyro.all():
         # an events log: a gyro row's rotor speeds are the latest rotor row's (the hold above), and so is
         # whether they are a copy (the rows copy of the same samples flags that row)
-        rotor_copy = _hold_rotor_flags(rotor_copy, log.rotor_speed)
+        rotor_copy = _hold_rotor_rows(log.rotor_speed, rotor_copy, before=False)  # the flag of the row in force
         log = log.select(has_gyro)
         speeds = speeds[has_gyro]
         gyro_copy, rotor_copy = gyro_copy[has_gyro], rotor_copy[has_gyro]
