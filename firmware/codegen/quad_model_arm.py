@@ -36,10 +36,11 @@ and without the assembly to the bit.
 
 from __future__ import annotations
 
-import argparse
 import pathlib
 import re
 import sys
+
+from generated_file import generator_main
 
 OUT = pathlib.Path(__file__).resolve().parents[2] / "firmware" / "src" / "propid_quad_model.h"
 
@@ -664,23 +665,7 @@ def generate() -> str:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=pathlib.Path, default=OUT, help=f"output file (default {OUT})")
-    parser.add_argument("--check", action="store_true",
-                        help="exit 1 when the output file is not what this script generates")
-    args = parser.parse_args()
-    text = generate()
-    if args.check:
-        current = args.out.read_text() if args.out.exists() else ""
-        if current != text:
-            print(f"quad_model_arm: {args.out} is not current: run firmware/codegen/quad_model_arm.py",
-                  file=sys.stderr)
-            return 1
-        print(f"quad_model_arm: {args.out} is current")
-        return 0
-    args.out.write_text(text)
-    print(f"quad_model_arm: wrote {args.out}")
-    return 0
+    return generator_main("quad_model_arm", __doc__.splitlines()[0], OUT, generate)
 
 
 if __name__ == "__main__":

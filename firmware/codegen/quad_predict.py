@@ -47,13 +47,13 @@ test suite runs it: tests/host_tools/test_codegen.py).
 
 from __future__ import annotations
 
-import argparse
 import pathlib
 import sys
 
 import sympy
 
 import quad_predict_arm
+from generated_file import generator_main
 
 N_RATE, N_ROTOR, N_BIAS = 3, 4, 3
 N = N_RATE + 2 * N_ROTOR + N_BIAS          # 14 states
@@ -470,23 +470,7 @@ propid_quad_predict_covariance(float *restrict cov, const float jacobian_dt[3][P
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=pathlib.Path, default=OUT, help=f"output file (default {OUT})")
-    parser.add_argument("--check", action="store_true",
-                        help="exit 1 when the output file is not what this script generates")
-    args = parser.parse_args()
-    text = generate()
-    if args.check:
-        current = args.out.read_text() if args.out.exists() else ""
-        if current != text:
-            print(f"quad_predict: {args.out} is not current: run firmware/codegen/quad_predict.py",
-                  file=sys.stderr)
-            return 1
-        print(f"quad_predict: {args.out} is current")
-        return 0
-    args.out.write_text(text)
-    print(f"quad_predict: wrote {args.out}")
-    return 0
+    return generator_main("quad_predict", __doc__.splitlines()[0], OUT, generate)
 
 
 if __name__ == "__main__":
