@@ -13,9 +13,8 @@ the biases' sum of the stage's finiteness test. Compiled with -ffp-contract=fast
 (the target build's flag) GCC fuses some of its products into additions and
 subtractions (`vfma`, `vfms`) and leaves others alone: that choice decides the
 bits. This module builds predict_stage_quad's statements three-address in the
-C's order and applies GCC's rule for contracting them (its widening-multiply
-pass): a product all of whose uses are additions, or subtractions of it, is
-fused into each of them, the products taken in the order they are written.
+C's order and applies GCC's rule for contracting them (expression_graph.py,
+shared with the prediction kernel's generator).
 
 The fused graph is then scheduled (any order of the same operations gives the
 same bits) and its registers allocated here: the 18 entries end in s14-s31,
@@ -40,6 +39,7 @@ import pathlib
 import re
 import sys
 
+from expression_graph import Graph
 from generated_file import generator_main
 
 OUT = pathlib.Path(__file__).resolve().parents[2] / "firmware" / "src" / "propid_quad_model.h"
@@ -53,83 +53,11 @@ def g_register(a: int, p: int) -> int:
     return G_BASE + ENTRIES * a + p
 
 
-class Node:
-    __slots__ = ("kind", "args", "key", "uses", "name")
-
-    def __init__(self, kind, args=(), key=None):
-        self.kind = kind          # leaves: 'S' state, 'V' latest speed, 'U' input speed, 'J' torque,
-        #                           'Q' gyroscopic, 'W' thrust basis, 'D' drag basis, 'K' constant, 'dt';
-        #                           operations: 'mul', 'add', 'sub', 'fma' (x y + z), 'fms' (z - x y)
-        self.args = list(args)
-        self.key = key
-        self.uses = []
-        self.name = None
-
-    def is_leaf(self):
-        return self.kind not in ("mul", "add", "sub", "fma", "fms", "dead")
-
-
-class Graph:
-    """predict_stage_quad's statements in the C's order, then GCC's contraction."""
-
-    def __init__(self):
-        self.nodes: list[Node] = []
-        self.leaves: dict = {}
-
-    def leaf(self, kind, key=None, tag=0):
-        """A leaf: one node per memory location or constant and `tag` (a value
-        loaded or set again where it is used later, which keeps its register
-        free meanwhile: the same value, as nothing is stored in between)."""
-        if (kind, key, tag) not in self.leaves:
-            node = Node(kind, (), key)
-            self.nodes.append(node)
-            self.leaves[(kind, key, tag)] = node
-        return self.leaves[(kind, key, tag)]
-
-    def op(self, kind, *args):
-        node = Node(kind, args)
-        self.nodes.append(node)
-        return node
-
-    def mul(self, x, y):
-        return self.op("mul", x, y)
-
-    def add(self, x, y):
-        return self.op("add", x, y)
-
-    def sub(self, x, y):
-        return self.op("sub", x, y)
-
-    def contract(self, roots):
-        for node in self.nodes:
-            node.uses = []
-        for node in self.nodes:
-            for arg in node.args:
-                arg.uses.append(node)
-        for root in roots:
-            root.uses.append(None)            # an output: a use that is no addition
-        for node in self.nodes:
-            if node.kind != "mul" or not node.uses:
-                continue
-            if not all(use is not None and (use.kind == "add" or (use.kind == "sub" and use.args[1] is node))
-                       for use in node.uses):
-                continue
-            for use in node.uses:
-                if use.kind == "add":
-                    other = use.args[1] if use.args[0] is node else use.args[0]
-                    use.kind = "fma"
-                else:
-                    other = use.args[0]
-                    use.kind = "fms"
-                use.args = [node.args[0], node.args[1], other]
-            node.kind = "dead"
-
-
 def build():
     """predict_stage_quad (propid_predict.c) for the quad layout, mirrored.
     Returns the graph, its outputs g[a][p], the predictors, its outputs
     rate_next[a] and check."""
-    graph = Graph()
+    graph = Graph(shared_leaves=True)
     dt = graph.leaf("dt")
     half = graph.leaf("K", 0.5)
     rate = [graph.leaf("S", a) for a in range(3)]

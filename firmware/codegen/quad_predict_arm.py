@@ -6,9 +6,8 @@ on a Cortex-M4). The C kernel there, compiled with -ffp-contract=fast (the
 target build's flag), is GCC's arithmetic: which product GCC fuses into an
 addition (a `vfma`) and which it leaves alone (a `vmul`) decides the bits. This
 module builds the same statements as the C, three-address, in the C's order,
-and applies GCC's rule for contracting them (its widening-multiply pass): a
-product all of whose uses are additions is fused into each of them, the
-products taken in the order they are written.
+and applies GCC's rule for contracting them (expression_graph.py, shared with
+the model stage's generator).
 
 The fused graph is then scheduled (any order of the same operations gives the
 same bits): column by column, the bias columns side by side so that each row's
@@ -32,6 +31,8 @@ builds with and without the assembly to the bit.
 
 from __future__ import annotations
 
+from expression_graph import Graph
+
 N_RATE, N_ROTOR, N_BIAS = 3, 4, 3
 N = N_RATE + 2 * N_ROTOR + N_BIAS
 FIRST_THRUST, FIRST_DRAG, FIRST_BIAS = 3, 7, 11
@@ -50,60 +51,6 @@ JOINT = (FIRST_BIAS, FIRST_BIAS + 1, FIRST_BIAS + 2)     # columns scheduled sid
 def cov_index(i: int, j: int) -> int:
     i, j = min(i, j), max(i, j)
     return i * N - i * (i - 1) // 2 + (j - i)
-
-
-class Node:
-    __slots__ = ("kind", "args", "key", "uses", "order")
-
-    def __init__(self, kind, args=(), key=None):
-        self.kind = kind          # 'P', 'G', 'T' (table), 'mul', 'add', 'fma'
-        self.args = list(args)
-        self.key = key
-        self.uses = []
-        self.order = 0
-
-
-class Graph:
-    """Three-address statements in the C's order, then GCC's contraction."""
-
-    def __init__(self):
-        self.nodes: list[Node] = []
-
-    def leaf(self, kind, key):
-        node = Node(kind, (), key)
-        self.nodes.append(node)
-        return node
-
-    def op(self, kind, *args):
-        node = Node(kind, args)
-        self.nodes.append(node)
-        return node
-
-    def mul(self, x, y):
-        return self.op("mul", x, y)
-
-    def add(self, x, y):
-        return self.op("add", x, y)
-
-    def contract(self, roots):
-        for index, node in enumerate(self.nodes):
-            node.order = index
-            node.uses = []
-        for node in self.nodes:
-            for arg in node.args:
-                arg.uses.append(node)
-        for root in roots:
-            root.uses.append(None)            # a stored value: a use that is no addition
-        for node in self.nodes:
-            if node.kind != "mul" or not node.uses:
-                continue
-            if not all(use is not None and use.kind == "add" for use in node.uses):
-                continue
-            for use in node.uses:
-                other = use.args[1] if use.args[0] is node else use.args[0]
-                use.kind = "fma"
-                use.args = [node.args[0], node.args[1], other]
-            node.kind = "dead"
 
 
 def build(structure):
