@@ -171,6 +171,7 @@ class RealDataConfig:
     out_dir: Path
     reference_kf: float
     modes: tuple[str, ...] = tuple(mode[0] for mode in MODES)
+    mean_window: str = "from-crossing"  # every replay's kf_mean window (replay/averaging.py)
 
 
 def _cv(values: list[float]) -> float:
@@ -326,7 +327,8 @@ def run_real_data(config: RealDataConfig, progress: bool = True) -> dict:
     for (name, _, fields), path in iterator:
         if path not in loaded:
             loaded[path] = read_flightlog(path, vehicle)
-        options = ReplayOptions(segment="flying", esc_delay="default", progress=False, **fields)
+        options = ReplayOptions(segment="flying", esc_delay="default", progress=False,
+                                mean_window=config.mean_window, **fields)
         use = vehicle
         if name in AERO_FITTED:
             if (name, path) not in corrected:
@@ -349,6 +351,7 @@ def run_real_data(config: RealDataConfig, progress: bool = True) -> dict:
     result = {
         "rules": __doc__.strip(),
         "data_dir": str(config.data_dir), "vehicle": str(config.vehicle), "reference_kf": config.reference_kf,
+        "mean_window": config.mean_window,
         "modes": [{"name": name, "what": what, "options": fields, "summary": mode_summary(per_mode[name]),
                    "runs": per_mode[name]} for name, what, fields in modes + calibrated],
         "calibrations": calibrations,

@@ -68,6 +68,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--streams", choices=["auto", "rows", "events"], default="auto",
                         help="rows: every row is one gyro and one rotor sample; events: a row carries whichever "
                              "stream is non-empty (ULog/tlog conversions); auto (default) decides from the log")
+    parser.add_argument("--mean-window", choices=("from-crossing", "at-least-half"), default="from-crossing",
+                        help="the window kf_mean/km_mean average over: from the first sample whose std is under the "
+                             "convergence bar (default), or from it or the replay's midpoint, whichever is earlier "
+                             "(every mean over at least half of the samples; evaluated, docs/real-data.md)")
     parser.add_argument("--skip-repeats", action="store_true",
                         help="treat a row whose gyro (or rotor speeds) exactly repeat the previous row as no new "
                              "sample (logs resampled by sample-and-hold)")
@@ -336,6 +340,7 @@ def run(args: argparse.Namespace) -> int:
         max_rotor_speed=args.max_rotor_speed,
         overrides=overrides,
         skip_repeats=args.skip_repeats,
+        mean_window=args.mean_window,
         esc_delay=None if args.rotor_delay is not None else args.esc_delay,
         rotor_delay_s=args.rotor_delay if args.rotor_delay is not None else 0.0,
         prefilter_hz=args.prefilter,

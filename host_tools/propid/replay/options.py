@@ -64,6 +64,8 @@ class ReplayOptions:
     # The first stage's weak-instrument guard: least F statistic of a rotor's fit (0: none).
     command_min_f: float = 0.0
     record_every: int = 1  # keep every k-th estimate for the time series
+    # The window kf_mean/km_mean average over (replay/averaging.py): "from-crossing" or "at-least-half".
+    mean_window: str = "from-crossing"
     progress: bool = True
 
 

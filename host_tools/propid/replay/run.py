@@ -12,6 +12,7 @@ from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.km_evidence import combination_std
 from propid.replay.alignment import detect_streams, estimate_esc_delay, filter_input_rule, gyro_rows_with_mask
+from propid.replay.averaging import MEAN_WINDOWS, window_means, window_start
 from propid.replay.config import build_config
 from propid.replay.instrument import resolve_instrument
 from propid.replay.noise import nis_mean, replay_nis
@@ -53,6 +54,8 @@ def input_pushes(rows: np.ndarray, streams: str, logged_streams: str, has_rotor:
 def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = None) -> ReplayResult:
     """Run the log through the C filter; return the summary (JSON-ready) and time series."""
     options = options or ReplayOptions()
+    if options.mean_window not in MEAN_WINDOWS:
+        raise UserError(f"mean window {options.mean_window!r}: one of {', '.join(MEAN_WINDOWS)}")
     if log.rotor_count != vehicle.rotor_count:
         raise UserError(f"the log has {log.rotor_count} rotors, the vehicle file {vehicle.rotor_count}")
     log, gyro_scale_note = undo_gyro_scale(log, vehicle, options)  # the boundary: true rates from here on
@@ -223,23 +226,12 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         status_counts = {name: int(count) for name, count in counters["rejected"].items()}
         gyro_accepted = int(counters["gyro_accepted"])
 
-    def converged_mean(values: np.ndarray, flags: np.ndarray) -> tuple[list[float], list[float]]:
-        means, starts = [], []
-        half = values.shape[0] // 2
-        for k in range(values.shape[1]):
-            on = np.flatnonzero(flags[:, k])
-            start = int(on[0]) if on.size else half
-            means.append(float(np.mean(values[start:, k])))
-            starts.append(float(series["t"][start]) if on.size else float("nan"))
-        return means, starts
-
-    kf_mean, kf_start = converged_mean(series["kf"], series["kf_converged"])
-    # The torque scale over the window every rotor's kf_mean covers: from the last rotor's
-    # convergence (the second half when one never converges).
-    firsts = [np.flatnonzero(series["kf_converged"][:, k]) for k in range(n)]
-    scale_from = max((int(f[0]) if f.size else series["t"].size // 2) for f in firsts)
+    window = options.mean_window
+    kf_mean, kf_mean_from, kf_start = window_means(series["kf"], series["kf_converged"], series["t"], window)
+    # The torque scale over the window every rotor's kf_mean covers: from the latest window start.
+    scale_from = max(window_start(series["kf_converged"][:, k], window) for k in range(n))
     torque_scale_mean = float(np.mean(series["torque_scale"][scale_from:]))
-    km_mean, km_start = converged_mean(series["km"], series["km_converged"])
+    km_mean, km_mean_from, km_start = window_means(series["km"], series["km_converged"], series["t"], window)
     # The filter's own claim at the end (withdrawn while MODEL_MISMATCH is up).
     kf_conv = [bool((final["thrust_coeff_converged"] >> k) & 1) for k in range(n)]
     km_conv = [bool((final["drag_coeff_converged"] >> k) & 1) for k in range(n)]
@@ -278,6 +270,9 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "km_combination_std": combination_std(filt.drag_coeff_rel_covariance(), filt.vehicle),
         "kf_converged_from_s": kf_start,
         "km_converged_from_s": km_start,
+        "kf_mean_from_s": kf_mean_from,
+        "km_mean_from_s": km_mean_from,
+        "mean_window": window,
         "converged": {"kf": kf_conv, "km": km_conv},
         "model_mismatch": bool(int(final["health"]) & cfilter.HEALTH["MODEL_MISMATCH"]),
         "model_mismatch_windows": int(counters.get("model_mismatch", 0)),
@@ -309,15 +304,18 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
                                     None if options.skip_repeats else repeated_gyro_share(log, rows)),
         "definitions": {
             "kf_mean": "mean of the estimate from the first sample with rel std < converged_rel_std to the end; "
-                       "second half of the replay if never below",
+                       "second half of the replay if never below; mean_window at-least-half: from the midpoint "
+                       "when that is earlier (replay/averaging.py)",
+            "kf_mean_from_s": "log time the kf_mean window starts (km_mean_from_s: km_mean's)",
+            "kf_converged_from_s": "log time kf's rel std first fell below converged_rel_std (null if never)",
             "kf_rotor_spread_bound": "each rotor's std of kf_i / mean(kf) - 1 from the final covariance, and the "
                                      "probability that every rotor is within the tolerance of the run mean if the "
                                      "rotors were equal (replay/rotor_spread.py)",
             "km_combination_std": "relative std of the km combination each input channel (yaw, collective, roll, "
                                   "pitch) measures, from the final covariance: yaw -> the mean km (km_evidence.py)",
             "finite": "every recorded kf, km, their stds, gyro bias and body rate is finite",
-            "torque_scale_mean": "mean of the thrust-torque scale from the last rotor's kf convergence (the second "
-                                 "half if one never converges) to the end; 1 without the scale state",
+            "torque_scale_mean": "mean of the thrust-torque scale from the latest rotor's kf_mean window start to "
+                                 "the end; 1 without the scale state",
             "converged": "the filter's converged flag at the end of the replay (none while model_mismatch)",
             "model_mismatch": "MODEL_MISMATCH health flag at the end: the innovations or the coefficients' drift "
                               "were inconsistent with the filter's covariance (docs/reliability.md)",
