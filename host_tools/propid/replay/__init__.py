@@ -25,6 +25,8 @@ Definitions used in the output (docs/real-data.md):
   "converged" flag asks 3 std below it and the consistency monitor's vouching);
   kf_mean/km_mean average the estimate over it. A coefficient that never converges is
   averaged over the second half of the replayed samples and flagged converged = false.
+  With mean_window "at-least-half" the window starts at the midpoint when that is earlier
+  (replay/averaging.py); kf_mean_from_s/km_mean_from_s say where each window starts.
 - unit-inertia mode (vehicle without inertia, e.g. the Betaflight file): the filter
   runs with J = identity [kg m^2], so its "kf" is kf/J (roll/pitch; one J for both)
   and its "km" is km/Jzz, in the vehicle file's (possibly assumed) geometry. Ratios
