@@ -193,9 +193,13 @@ SOAK_SEED ?= 1
 SOAK_NEES_TUNING ?= matched
 SOAK_INERTIA_STD ?=
 SOAK_GYRO_STUCK ?= 0
+SOAK_NEES_RATE_RULE ?= none
+SOAK_NEES_DEFAULT_RATE_NOISE ?=
 soak: setup host
 	@cd $(REPO) && nice -n 10 $(VENV_PYTHON) tests/soak/soak.py --sitl $(BUILD_HOST)/sitl/propid_sitl \
 	    --steps $(SOAK_STEPS) --seed $(SOAK_SEED) --jobs $(JOBS) --nees-tuning $(SOAK_NEES_TUNING) \
+	    --nees-rate-rule $(SOAK_NEES_RATE_RULE) \
+	    $(if $(SOAK_NEES_DEFAULT_RATE_NOISE),--nees-default-rate-noise $(SOAK_NEES_DEFAULT_RATE_NOISE)) \
 	    $(if $(SOAK_INERTIA_STD),--inertia-std $(SOAK_INERTIA_STD)) --gyro-stuck $(SOAK_GYRO_STUCK) \
 	    --out $(BUILD)/results/soak.json
 

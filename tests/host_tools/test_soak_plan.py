@@ -57,7 +57,8 @@ def test_nees_shares_below_and_above_the_band_per_group_and_flight(soak_script):
     counts = {default[0]["case"]: (90, 10, 0), default[1]["case"]: (50, 0, 50), paper[0]["case"]: (20, 80, 0)}
     results = {(c, "filter"): clean_flight_summary(*n) for c, n in counts.items()}
     args = type("Args", (), {"jobs": 1, "seed": 1, "inertia_std": None, "steps": 1e7, "nees_tuning": "matched",
-                             "gyro_stuck": 0})()
+                             "gyro_stuck": 0, "nees_rate_rule": "none",
+                             "nees_default_rate_noise": None})()
     out = soak.summarise(default + paper, results, 1.0, args)
     assert out["nees_samples"] == 300
     assert (out["nees_in_bounds_pct"], out["nees_below_bounds_pct"], out["nees_above_bounds_pct"]) == \

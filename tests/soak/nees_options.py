@@ -45,13 +45,21 @@ def clean_cases(seed: int, steps: float) -> list[dict]:
 
 
 def fly_case(job: tuple) -> dict:
-    sitl, case, extra = job
+    sitl, case, extra, rule, window_s = job
     soak = rate_noise_rule.load_soak()
+    calibration = None
+    if rate_noise_rule.rule_applies(rule, case):
+        calibration = rate_noise_rule.calibrate(
+            case, lambda flight, summary: soak.command(sitl, flight, "filter", summary) + extra, window_s)
+        if "error" in calibration:
+            return {"case": case, "extra": extra, "calibration": calibration, "result": calibration}
+        case = {**case, "rate_noise": calibration["q_rate"]}
     with tempfile.TemporaryDirectory(prefix="nees-options-") as work:
         summary = os.path.join(work, "flight.json")
         command = soak.command(sitl, case, "filter", summary) + extra
         proc = subprocess.run(command, capture_output=True, text=True)
-        return {"case": case, "extra": extra, "result": rate_noise_rule.nees_figures(summary, proc)}
+        return {"case": case, "extra": extra, "calibration": calibration,
+                "result": rate_noise_rule.nees_figures(summary, proc)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -64,12 +72,18 @@ def main(argv: list[str] | None = None) -> int:
                         help="extra propid_sitl options for the default-sensor flights, one string "
                              "(e.g. \"--esc-decode middle\")")
     parser.add_argument("--paper-args", default="", help="extra propid_sitl options for the paper-sensor flights")
+    parser.add_argument("--rate-rule", choices=rate_noise_rule.RATE_RULES, default="none",
+                        help="rate process noise rule of the flights: none (the soak's matched tuning, default) or "
+                             "previous-flight (exact-speed flights take the q_rate derived from a previous flight "
+                             "of the same vehicle and mission: the case with another seed)")
+    parser.add_argument("--rate-rule-window", type=float, default=rate_noise_rule.WINDOW_S,
+                        help="with --rate-rule previous-flight: the derivation's window [s] (default 1)")
     parser.add_argument("--limit", type=int, default=0, help="fly only the first N selected flights (0: all)")
     parser.add_argument("--out", help="write the figures and the per-flight results here (JSON)")
     args = parser.parse_args(argv)
     rate_noise_rule.check_sitl_and_out(parser, args)
-    if args.jobs < 1 or args.steps <= 0 or args.limit < 0:
-        parser.error("--jobs must be >= 1, --steps > 0 and --limit >= 0")
+    if args.jobs < 1 or args.steps <= 0 or args.limit < 0 or not args.rate_rule_window > 0:
+        parser.error("--jobs must be >= 1, --steps > 0, --limit >= 0 and --rate-rule-window > 0")
     extra = {"default": shlex.split(args.default_args), "paper": shlex.split(args.paper_args)}
     cases = [case for case in clean_cases(args.seed, args.steps)
              if args.sensors in ("all", case["sensors"])]
@@ -79,17 +93,19 @@ def main(argv: list[str] | None = None) -> int:
         from tqdm import tqdm
     except ImportError:  # the bar is a convenience
         tqdm = None
-    jobs = [(args.sitl, case, extra[case["sensors"]]) for case in cases]
+    jobs = [(args.sitl, case, extra[case["sensors"]], args.rate_rule, args.rate_rule_window) for case in cases]
     with ProcessPoolExecutor(args.jobs) as pool:
         iterator = pool.map(fly_case, jobs)
         if tqdm:
             iterator = tqdm(iterator, total=len(jobs), unit="flight", desc=f"plan {args.seed}", file=sys.stderr)
         results = list(iterator)
     out = {"plan_seed": args.seed, "default_args": args.default_args, "paper_args": args.paper_args,
+           "rate_rule": args.rate_rule, "rate_rule_window_s": args.rate_rule_window,
            "figures": rate_noise_rule.pooled(results, "result"), "flights": results}
     if args.out:
         write_text(args.out, json.dumps(out, indent=1) + "\n")
-    print(json.dumps({key: out[key] for key in ("plan_seed", "default_args", "paper_args", "figures")}, indent=1))
+    print(json.dumps({key: out[key] for key in ("plan_seed", "default_args", "paper_args", "rate_rule", "figures")},
+                     indent=1))
     return 0
 
 

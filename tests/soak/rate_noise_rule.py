@@ -88,21 +88,22 @@ def torque_per_u(arm: np.ndarray, yaw: np.ndarray, inertia_inv: np.ndarray, kf: 
     return np.einsum("ab,kbi->kai", inertia_inv, torque)
 
 
-def white_equivalent(t: np.ndarray, increments: np.ndarray) -> np.ndarray:
-    """Per axis sqrt(sum over 1 s windows of (sum of increments)^2 / time)."""
+def white_equivalent(t: np.ndarray, increments: np.ndarray, window_s: float = WINDOW_S) -> np.ndarray:
+    """Per axis sqrt(sum over windows of window_s (sum of increments)^2 / time)."""
     keep = t >= SKIP_S
     t, increments = t[keep], increments[keep]
     if len(t) < 2:
         return np.zeros(3)
-    window = np.floor((t - SKIP_S) / WINDOW_S).astype(int)
+    window = np.floor((t - SKIP_S) / window_s).astype(int)
     sums = np.zeros((window.max() + 1, 3))
     np.add.at(sums, window, increments)
     return np.sqrt((sums ** 2).sum(axis=0) / (t[-1] - SKIP_S))
 
 
-def derive(log: str, vehicle_file: str, vehicle: str, sensors: str, truth: bool = False) -> dict:
+def derive(log: str, vehicle_file: str, vehicle: str, sensors: str, truth: bool = False,
+           window_s: float = WINDOW_S) -> dict:
     """q_rate of one propid_sitl log (500 Hz rows); with truth (exact speeds only) also the
-    truth residual's."""
+    truth residual's. window_s: the white equivalent's window (default 1 s)."""
     spec = json.loads(Path(vehicle_file).read_text())
     tau_m, speed_max = MOTORS[vehicle.split("-")[0]]
     t_gyro, lag = SENSORS[sensors]
@@ -149,7 +150,7 @@ def derive(log: str, vehicle_file: str, vehicle: str, sensors: str, truth: bool 
     curvature[~np.isfinite(curvature)] = 0.0
     increments -= sub * t_gyro ** 3 / 12.0 * curvature
     increments[~valid] = 0.0
-    q = white_equivalent(t[:-1], increments)
+    q = white_equivalent(t[:-1], increments, window_s)
     out = {"q_axes": q.tolist(), "q_rate": float(q.max())}
     if truth:
         rates = x[:, [col[f"true_w{a}"] for a in "xyz"]]
@@ -160,7 +161,7 @@ def derive(log: str, vehicle_file: str, vehicle: str, sensors: str, truth: bool 
         stepped = rates[:-1] + period * rotor + 0.5 * period * (g_start + gyroscopic(predictor, inertia, inertia_inv))
         residual = rates[1:] - stepped
         residual[~valid] = 0.0
-        q_truth = white_equivalent(t[:-1], residual)
+        q_truth = white_equivalent(t[:-1], residual, window_s)
         out["truth_q_axes"] = q_truth.tolist()
         out["truth_q_rate"] = float(q_truth.max())
     return out
@@ -199,6 +200,35 @@ def fly_case(job: tuple) -> dict:
         proc = subprocess.run(soak.command(sitl, case, "filter", summary) + extra
                               + ["--filter-rate-noise", f"{derived['q_rate']:.6g}"], capture_output=True, text=True)
         return {"case": case, "matched": matched, "derived_q": derived, "derived": nees_figures(summary, proc)}
+
+
+# The previous-flight rule: a NEES flight with exact rotor speeds (the paper sensors: no
+# input error, so the rate process noise covers only the prediction's discretisation
+# miss) takes the q_rate derived from a previous flight of the same vehicle flying the
+# same mission: the case with another seed (another draw of the coefficients, biases
+# and noise), flown as the soak flies it, with a log. Flights with input errors keep the
+# matched tuning's rate noise, which also covers the held input error the derivation
+# leaves out.
+RATE_RULES = ("none", "previous-flight")
+CALIBRATION_SEED_OFFSET = 500000
+
+
+def rule_applies(rule: str, case: dict) -> bool:
+    return rule == "previous-flight" and case["clean"] and case["sensors"] == "paper"
+
+
+def calibrate(case: dict, command_of, window_s: float = WINDOW_S) -> dict:
+    """Fly the case's calibration flight (command_of(case, summary) -> propid_sitl command,
+    mode filter) with a log and derive its q_rate; {"error": ...} if it did not fly."""
+    previous = {**case, "seed": case["seed"] + CALIBRATION_SEED_OFFSET}
+    previous.pop("rate_noise", None)
+    with tempfile.TemporaryDirectory(prefix="rate-rule-") as work:
+        log, summary = os.path.join(work, "previous.csv"), os.path.join(work, "previous.json")
+        proc = subprocess.run(command_of(previous, summary) + ["--log", log], capture_output=True, text=True)
+        if proc.returncode != 0 or not os.path.exists(log):
+            return {"error": f"calibration flight exit {proc.returncode}: {proc.stderr.strip()[-200:]}"}
+        derived = derive(log, log[:-4] + ".vehicle.json", case["vehicle"], case["sensors"], window_s=window_s)
+        return {"q_rate": derived["q_rate"], "seed": previous["seed"]}
 
 
 # A flight counts as outside the band when fewer of its NEES samples than this lie in it

@@ -34,7 +34,10 @@ Figures:
   above it (overconfident): nees_below_bounds_pct / nees_above_bounds_pct. These flights use
   the "matched" tuning (--nees-tuning): the filter's priors and random walks
   are the distribution the simulator draws the truth from, without which a
-  NEES is not chi-square distributed;
+  NEES is not chi-square distributed; --nees-rate-rule previous-flight gives
+  the exact-speed NEES flights the rate process noise derived from a previous
+  flight of the same vehicle and mission (tests/soak/rate_noise_rule.py) and
+  --nees-default-rate-noise Q the default-sensor ones Q (both off by default);
 - false_converged: coefficient "converged" claims (per coefficient and control
   step) while more than 5 % off, over all mode-filter flights; with the claims.
   No test on gyro and rotor speeds sees a scale error of the inertia J (the
@@ -179,6 +182,8 @@ def command(sitl: str, case: dict, mode: str, summary: str, detect_damage: bool 
         cmd += matched_filter(case["sensors"])
     elif case["tuning"] == "matched-exact-inputs":
         cmd += matched_filter(case["sensors"], sensor_errors=False)
+    if case.get("rate_noise") is not None:  # a rate-noise rule's value (--nees-rate-rule)
+        cmd += ["--filter-rate-noise", f"{case['rate_noise']:.6g}"]
     for effect in case["effects"]:
         cmd += ["--effect", effect]
     declared = plan_inertia_rel_rms() if inertia_std is None else inertia_std
@@ -308,6 +313,7 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
                 out["nees_flights"].append({
                     "case": case["case"], "vehicle": case["vehicle"], "trajectory": case["trajectory"],
                     "duration_s": case["duration_s"], "sensors": case["sensors"], "tuning": case["tuning"],
+                    "rate_noise": case.get("rate_noise"),
                     "dof": int(honesty.get("nees_dof", 0)), "nees_mean": honesty.get("nees_mean"),
                     "in_bounds_pct": percent(inside, samples), "below_bounds_pct": percent(below, samples),
                     "above_bounds_pct": percent(above, samples),
@@ -366,10 +372,42 @@ def summarise(cases: list[dict], results: dict, elapsed_s: float, args) -> dict:
                                             else args.inertia_std, 6)
     out["command"] = (f"make soak SOAK_STEPS={args.steps:g} SOAK_SEED={args.seed} JOBS={args.jobs}"
                       + (f" SOAK_NEES_TUNING={args.nees_tuning}" if args.nees_tuning != "matched" else "")
+                      + (f" SOAK_NEES_RATE_RULE={args.nees_rate_rule}" if args.nees_rate_rule != "none" else "")
+                      + (f" SOAK_NEES_DEFAULT_RATE_NOISE={args.nees_default_rate_noise:g}"
+                         if args.nees_default_rate_noise is not None else "")
                       + (f" SOAK_INERTIA_STD={args.inertia_std:g}" if args.inertia_std is not None else "")
                       + f" SOAK_GYRO_STUCK={args.gyro_stuck}")
     out["gyro_stuck_samples"] = args.gyro_stuck
+    out["nees_rate_rule"] = args.nees_rate_rule
+    out["nees_default_rate_noise"] = args.nees_default_rate_noise
     return out
+
+
+def set_default_sensor_rate_noise(cases: list[dict], rate_noise: float) -> None:
+    """--nees-default-rate-noise: the NEES cases with the default sensors fly this rate noise."""
+    for case in cases:
+        if case["clean"] and case["sensors"] == "default":
+            case["rate_noise"] = rate_noise
+
+
+def calibrate_cases(cases: list[dict], args) -> None:
+    """--nees-rate-rule: each NEES case the rule applies to gets its rate noise from its
+    calibration flight (tests/soak/rate_noise_rule.py, calibrate; not counted in any figure).
+    A calibration flight that fails leaves the case at the matched tuning, and says so."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import rate_noise_rule
+
+    def command_of(flight: dict, summary: str) -> list[str]:
+        return command(args.sitl, flight, "filter", summary, not args.no_detect_damage, args.inertia_std,
+                       args.gyro_stuck)
+
+    chosen = [case for case in cases if rate_noise_rule.rule_applies(args.nees_rate_rule, case)]
+    with ThreadPoolExecutor(max_workers=args.jobs) as pool:
+        for case, found in zip(chosen, pool.map(lambda c: rate_noise_rule.calibrate(c, command_of), chosen)):
+            if "error" in found:
+                print(f"soak: case {case['case']}: {found['error']}; matched tuning kept", file=sys.stderr)
+            else:
+                case["rate_noise"] = found["q_rate"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -388,6 +426,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--inertia-std", type=float, default=None,
                         help="inertia_rel_std declared by every flight (default: the RMS inertia scale error "
                              f"over the plan's flights, {plan_inertia_rel_rms():.4f})")
+    parser.add_argument("--nees-rate-rule", choices=("none", "previous-flight"), default="none",
+                        help="rate process noise of the NEES flights with exact rotor speeds (paper sensors): "
+                             "none (the matched tuning's, default) or previous-flight (the q_rate derived from a "
+                             "previous flight of the same vehicle and mission, tests/soak/rate_noise_rule.py)")
+    parser.add_argument("--nees-default-rate-noise", type=float, default=None, metavar="Q",
+                        help="rate process noise of the NEES flights with the default sensors (DShot telemetry) "
+                             "[rad/s^2/sqrt(Hz)] (default: the matched tuning's, the library's 0.2)")
     parser.add_argument("--gyro-stuck", type=int, default=0, metavar="N",
                         help="the filter's gyro_stuck_samples on every flight: a gyro axis repeating its "
                              "reading bit for bit N times in a row is not fused (0: off, default; >= 2 on; "
@@ -397,9 +442,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"soak: {args.sitl}: not an executable (run make host)", file=sys.stderr)
         return 2
     if args.steps <= 0 or args.jobs < 1 or (args.inertia_std is not None and not 0.0 <= args.inertia_std <= 1.0) \
-            or args.gyro_stuck == 1 or not 0 <= args.gyro_stuck <= 65535:
-        print("soak: --steps must be > 0, --jobs >= 1, --inertia-std in [0, 1] and --gyro-stuck 0 or 2..65535",
-              file=sys.stderr)
+            or args.gyro_stuck == 1 or not 0 <= args.gyro_stuck <= 65535 \
+            or (args.nees_default_rate_noise is not None and not 0.0 <= args.nees_default_rate_noise <= 1e4):
+        print("soak: --steps must be > 0, --jobs >= 1, --inertia-std in [0, 1], --gyro-stuck 0 or 2..65535 and "
+              "--nees-default-rate-noise in [0, 1e4]", file=sys.stderr)
         return 2
 
     rng = random.Random(args.seed)
@@ -410,6 +456,11 @@ def main(argv: list[str] | None = None) -> int:
         case = plan_case(rng, len(cases), args.nees_tuning)
         cases.append(case)
         planned += 2.0 * expected_steps(case)
+
+    if args.nees_rate_rule != "none":
+        calibrate_cases(cases, args)
+    if args.nees_default_rate_noise is not None:
+        set_default_sensor_rate_noise(cases, args.nees_default_rate_noise)
 
     try:
         from tqdm import tqdm
