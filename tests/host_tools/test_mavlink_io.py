@@ -108,6 +108,19 @@ def test_health_flags_mirror_the_c_header():
     assert xml_flags == c_flags
 
 
+def test_model_terms_mirror_the_c_header():
+    # Every optional term the filter can report in propid_estimate_t.model_terms has its
+    # name in the dialect, so `propid listen` and a ground station can show it.
+    header = (REPO / "firmware" / "include" / "propid" / "propid.h").read_text()
+    c_terms = {name: 1 << int(bit) for name, bit in
+               re.findall(r"#define PROPID_TERM_(\w+)\s+\(1u << (\d+)\)", header)}
+    assert len(c_terms) >= 6
+    enum = mavlink_io.dialect().enums["PROPID_MODEL_TERMS"]
+    xml_terms = {e.name.replace("PROPID_MODEL_TERMS_", ""): v for v, e in enum.items()
+                 if not e.name.endswith("ENUM_END")}
+    assert xml_terms == c_terms
+
+
 def test_reject_reasons_mirror_the_c_status_codes():
     header = (REPO / "firmware" / "include" / "propid" / "propid.h").read_text()
     c_codes = {name: -int(value) for name, value in
