@@ -249,12 +249,29 @@ static uint64_t time_usec(double time_s)
     return (time_s > 0.0) ? (uint64_t)llround(time_s * 1e6) : 0u;
 }
 
-static void send_heartbeat(sitl_mavlink_t *link)
+/* The airframe a ground station draws (its icon, its motor test page): by rotor count. */
+static uint8_t vehicle_type(int rotor_count)
+{
+    switch (rotor_count) {
+    case 3:
+        return MAV_TYPE_TRICOPTER;
+    case 4:
+        return MAV_TYPE_QUADROTOR;
+    case 6:
+        return MAV_TYPE_HEXAROTOR;
+    case 8:
+        return MAV_TYPE_OCTOROTOR;
+    default:
+        return MAV_TYPE_GENERIC_MULTIROTOR;
+    }
+}
+
+static void send_heartbeat(sitl_mavlink_t *link, int rotor_count)
 {
     mavlink_status_t status = tx_status(link);
     mavlink_message_t msg;
     mavlink_msg_heartbeat_pack_status(link->sender.system_id, link->sender.component_id, &status,
-                                      &msg, MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_GENERIC,
+                                      &msg, vehicle_type(rotor_count), MAV_AUTOPILOT_GENERIC,
                                       MAV_MODE_FLAG_SAFETY_ARMED | MAV_MODE_FLAG_AUTO_ENABLED |
                                           MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                                       0u, MAV_STATE_ACTIVE);
@@ -432,7 +449,7 @@ void sitl_mavlink_update(sitl_mavlink_t *link, const sitl_mavlink_snapshot_t *sn
     }
     const double t = snapshot->time_s;
     if (schedule_due(&link->heartbeat, t)) {
-        send_heartbeat(link);
+        send_heartbeat(link, snapshot->rotor_count);
     }
     if (schedule_due(&link->attitude, t)) {
         send_attitude_and_position(link, snapshot);

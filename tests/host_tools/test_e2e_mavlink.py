@@ -272,13 +272,17 @@ def test_octocopter_estimates_cross_the_link(tmp_path, sitl_binary, free_udp_por
     """Eight rotors: every rotor's kf/km and std arrive, equal to the filter's (float32); with
     optional terms configured (disturbance states, the rotor samples held 1 ms: a gyro lagging)
     PROPID_MODEL arrives too and `propid log` writes its columns."""
-    est_csv, sitl_csv = tmp_path / "estimates.csv", tmp_path / "sitl.csv"
+    est_csv, sitl_csv, tlog = tmp_path / "estimates.csv", tmp_path / "sitl.csv", tmp_path / "octo.tlog"
     _fly_while_logging(
         sitl_binary, free_udp_port(),
         ["--vehicle", "octo-x", "--trajectory", "lissajous", "--mode", "filter", "--paper",
          "--duration", "3", "--seed", "2", "--filter-disturbance", "--filter-esc-delay", "-0.001",
          "--log", str(sitl_csv)],
-        est_csv)
+        est_csv, tlog=tlog)
+    # The HEARTBEAT names the airframe a ground station draws: an octocopter, not a quad.
+    heartbeats = list(mavlink_io.read_tlog(tlog, types={"HEARTBEAT"}))
+    assert heartbeats
+    assert {m.type for m in heartbeats} == {mavlink_io.dialect().MAV_TYPE_OCTOROTOR}
     rec = plotting.read_csv_columns(est_csv)
     sim = plotting.read_csv_columns(sitl_csv)
     assert "est_kf_8" in rec and "est_kf_9" not in rec
