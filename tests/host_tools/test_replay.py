@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -137,6 +138,24 @@ def test_time_gap_is_bridged_with_resync(cfilter_available):
     keep = (log.t < 2.0) | (log.t > 3.0)  # a 1 s hole: longer than max_gyro_gap_us
     s = replay(log.select(keep), parse_vehicle(VEHICLE), ReplayOptions(progress=False)).summary
     assert s["resyncs_by_replay"] == 1 and s["counters"]["resyncs"] == 1 and s["finite"]
+
+
+def test_repeated_time_stamps_are_replayed(cfilter_available):
+    """Flight-log v1 lets t repeat ("t never decreases"): a 1 kHz log stamped to 3 ms has three
+    rows with one t. The noise rule's central differences skip the zero spans (they divided by
+    zero and the replay stopped on 'bad gyro_noise_density'); the filter refuses each repeated
+    gyro stamp (TIME_BACKWARDS) and runs on the others."""
+    full = synthetic_log(duration=6.0, rate=1000.0)
+    coarse = FlightLog(t=np.floor(full.t / 0.003 + 1e-6) * 0.003, gyro=full.gyro,
+                       rotor_speed=full.rotor_speed, extra={})
+    repeats = int(np.sum(np.diff(coarse.t) == 0))
+    assert repeats > len(coarse) // 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        s = replay(coarse, parse_vehicle(VEHICLE), ReplayOptions(progress=False)).summary
+    assert s["finite"]
+    assert s["counters"]["gyro_accepted"] == len(coarse) - repeats
+    assert s["rejected"].get("PROPID_ERR_TIME_BACKWARDS", 0) >= repeats
 
 
 def test_events_log_pushes_each_stream_at_its_own_time(cfilter_available):

@@ -30,13 +30,15 @@ def estimate_noise(log: FlightLog, vehicle_inertia: np.ndarray, positions, signs
     ok = mask.copy()
     ok &= np.all(np.isfinite(gyro), axis=1) & np.all(np.isfinite(speeds), axis=1)
     ok &= np.all(np.nan_to_num(speeds, nan=0.0) <= absurd_speed_limit(speeds), axis=1)
-    inner = ok.copy()  # central differences need both neighbours
-    inner[1:-1] &= ok[:-2] & ok[2:]
+    inner = ok.copy()  # central differences need both neighbours, apart in time (the
+    inner[1:-1] &= ok[:-2] & ok[2:]  # format lets t repeat: "t never decreases")
+    span = log.t[2:] - log.t[:-2]
+    inner[1:-1] &= span > 0
     inner[[0, -1]] = False
     if inner.sum() < 100:
         return {}
     rate_dot = np.zeros_like(gyro)
-    rate_dot[1:-1] = (gyro[2:] - gyro[:-2]) / (log.t[2:] - log.t[:-2])[:, None]
+    rate_dot[1:-1] = (gyro[2:] - gyro[:-2]) / np.where(span > 0, span, 1.0)[:, None]
     torque = measured_torque(gyro, rate_dot, vehicle_inertia)
     u = np.where(np.isfinite(speeds), speeds, 0.0) ** 2
     n = u.shape[1]
