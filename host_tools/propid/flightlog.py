@@ -392,6 +392,9 @@ def _parse_table(text: str, where: str) -> tuple[list[str], np.ndarray]:
         raise UserError(f"{where}: a Betaflight blackbox log, not a flight-log CSV: convert it first with "
                         "`propid convert`")
     header = [h.strip() for h in lines[0].strip().lstrip("\ufeff").split(",")]
+    if header[0].startswith("#"):
+        raise UserError(f"{where} line 1 starts with '#': flight-log v1 has no comment lines "
+                        "(the first line names the columns)")
     if not header or header == [""]:
         raise UserError(f"{where} line 1: empty header (the first line must name the columns)")
     seen = set()

@@ -124,6 +124,8 @@ def test_empty_fields_anywhere_are_missing_values(tmp_path, newline):
         (GOOD_CSV.replace("801,811", "-801,811"), r"line 3, column omega_1: negative rotor speed"),
         (GOOD_CSV.replace(",9.8,1\n0.002", ",9.8,1,7\n0.002"), r"line 2: 11 fields but the header names 10"),
         (GOOD_CSV.replace(",omega_4,", ",omega_4,omega_4,"), r"column omega_4 appears twice"),
+        # a comment line, which the format does not have, named as such (not taken for the header)
+        ("# flight 3, by hand\n" + GOOD_CSV, r"line 1 starts with '#': flight-log v1 has no comment lines"),
     ],
 )
 def test_bad_csv_errors_name_line_and_column(tmp_path, text, expected):
