@@ -138,3 +138,16 @@ def test_every_make_verb_of_make_help_is_in_the_readme_and_build_md():
     for doc in ("README.md", "docs/build.md"):
         text = (REPO / doc).read_text()
         assert not [v for v in verbs if f"`make {v}`" not in text], doc
+
+
+@pytest.mark.parametrize("verb", ["listen", "table1", "campaign", "gap-bench", "replay"])
+def test_an_unknown_option_is_named_by_its_verb(verb, capsys):
+    """`propid VERB --bogus` ends with VERB's usage and "propid VERB: error" (it said "propid: error",
+    with the top level's usage, for the verbs whose parser takes no required argument)."""
+    from propid.cli import main
+    with pytest.raises(SystemExit) as exc:
+        main([verb, "--log", "x.csv", "--bogus"] if verb == "replay" else [verb, "--bogus"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"usage: propid {verb}" in err
+    assert err.strip().splitlines()[-1] == f"propid {verb}: error: unrecognized arguments: --bogus"
