@@ -231,6 +231,50 @@ static void test_esc_stamp_far_ahead_does_not_freeze_input(void)
                           propid_push_rotor_speeds(&filter, now_us - 1000u, speeds, ROTORS));
 }
 
+/* An ESC outage (docs/integration.md rule 3): gyro samples are ROTOR_STALE once the
+ * latest rotor speeds are older than rotor_stale_us; rejected samples do not move the
+ * filter's time, so max_gyro_gap_us after the last accepted one they are TIME_JUMP, and
+ * stay so when the telemetry is back, until propid_resync. */
+static void test_esc_outage_turns_stale_into_time_jump(void)
+{
+    init_filter();
+    const float gyro[3] = {0.01f, -0.02f, 0.03f};
+    for (uint32_t k = 0; k < 20u; ++k) {
+        now_us += GYRO_PERIOD_US;
+        TEST_ASSERT_EQUAL_INT(PROPID_OK, push(now_us, HOVER_SPEED, gyro));
+    }
+    const uint64_t last_rotor_us = now_us;
+    uint64_t last_accepted_us = now_us;
+    uint32_t stale = 0u;
+    uint32_t jumps = 0u;
+    for (uint32_t k = 0; k < 100u; ++k) {
+        now_us += GYRO_PERIOD_US;
+        const propid_status_t status = propid_push_gyro(&filter, now_us, gyro);
+        if (now_us - last_accepted_us > config.max_gyro_gap_us) {
+            TEST_ASSERT_EQUAL_INT(PROPID_ERR_TIME_JUMP, status);
+            ++jumps;
+        } else if (now_us - last_rotor_us > config.rotor_stale_us) {
+            TEST_ASSERT_EQUAL_INT(PROPID_ERR_ROTOR_STALE, status);
+            ++stale;
+        } else {
+            TEST_ASSERT_TRUE_MESSAGE(status >= 0, propid_status_name(status));
+            last_accepted_us = now_us;
+        }
+    }
+    TEST_ASSERT_TRUE(stale > 0u && jumps > 0u);
+    /* The telemetry is back: the gyro is still a time jump away from the filter. */
+    const float speeds[ROTORS] = {HOVER_SPEED, HOVER_SPEED, HOVER_SPEED, HOVER_SPEED};
+    now_us += GYRO_PERIOD_US;
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_push_rotor_speeds(&filter, now_us, speeds, ROTORS));
+    TEST_ASSERT_EQUAL_INT(PROPID_ERR_TIME_JUMP, propid_push_gyro(&filter, now_us, gyro));
+    /* Rule 4: resync, push the sample again; the next ones are fused. */
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_resync(&filter, now_us));
+    TEST_ASSERT_TRUE(propid_push_gyro(&filter, now_us, gyro) >= 0);
+    now_us += GYRO_PERIOD_US;
+    TEST_ASSERT_TRUE(push(now_us, HOVER_SPEED, gyro) >= 0);
+    assert_sane();
+}
+
 /* A corrupted ESC frame decoded as a speed within range (soak: a 0.7 % rate of
  * such spikes on a Crazyflie circle threw every kf ~90 % off within 0.5 s, no
  * innovation gated, and crashed the vehicle with the damage detector on): a
@@ -770,6 +814,7 @@ int main(void)
     RUN_TEST(test_gate_off_never_writes_non_finite);
     RUN_TEST(test_esc_stamp_far_ahead_does_not_freeze_input);
     RUN_TEST(test_esc_stamp_far_ahead_before_anchor);
+    RUN_TEST(test_esc_outage_turns_stale_into_time_jump);
     RUN_TEST(test_esc_spike_within_range_refused);
     RUN_TEST(test_first_sample_fused_at_high_rate);
     RUN_TEST(test_config_bounds_noise_fields);
