@@ -390,18 +390,24 @@ static int setup(flight_t *f, const sitl_options_t *o, sitl_result_t *r)
         }
         f->log_open = 1;
         char vpath[SITL_PATH_MAX + 32];
-        char notes[1024], fx[256], vseed[48] = "";
+        char notes[1024], fx[256], vseed[48] = "", assumed[128] = "";
         sitl_flight_log_vehicle_path(o->log_path, vpath, sizeof(vpath));
         sitl_effects_describe(&o->effects, fx, (int)sizeof(fx));
         if (o->vehicle_seed_set) {
             snprintf(vseed, sizeof(vseed), ", vehicle seed %llu",
                      (unsigned long long)o->vehicle_seed);
         }
+        if (f->vehicle.rotor_inertia_assumed) {
+            snprintf(assumed, sizeof(assumed),
+                     "; rotor inertia not in the vehicle file (null), %.3g kg m^2 assumed from "
+                     "the rotor radius for the effects",
+                     f->vehicle.rotor_inertia);
+        }
         snprintf(notes, sizeof(notes),
                  "written by propid_sitl: vehicle '%s', geometry and inertia as simulated "
                  "(before effects), nominal catalogue coefficients (the truth is in the CSV "
-                 "true_kf_i/true_km_i columns); seed %llu%s, coeff spread %g, effects %s",
-                 f->vehicle.name, (unsigned long long)o->seed, vseed, o->coeff_spread, fx);
+                 "true_kf_i/true_km_i columns); seed %llu%s, coeff spread %g, effects %s%s",
+                 f->vehicle.name, (unsigned long long)o->seed, vseed, o->coeff_spread, fx, assumed);
         if (sitl_vehicle_write_json(vpath, &f->vehicle, notes) != 0) {
             snprintf(err, sizeof(err), "cannot write '%.200s'", vpath);
             return fail(r, SITL_EXIT_ERROR, err);

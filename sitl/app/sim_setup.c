@@ -51,6 +51,7 @@ int sitl_setup_vehicle(const sitl_options_t *opts, sitl_vehicle_t *v, char *err,
             v->flapping_coeff = 0.5 * v->rotor_radius * v->rotor_drag_coeff;
             v->rotor_inertia = file_rotor_inertia > 0.0 ? file_rotor_inertia
                                                         : 1.5e-5 * s * s * s * s * s;
+            v->rotor_inertia_assumed = file_rotor_inertia > 0.0 ? 0 : 1;
         }
     }
     if (opts->motor_time_constant > 0.0) {

@@ -305,7 +305,9 @@ int sitl_vehicle_write_json(const char *path, const sitl_vehicle_t *v, const cha
     cJSON_AddItemToObject(root, "kf_nominal", per_rotor(v, 0));
     cJSON_AddItemToObject(root, "km_nominal", per_rotor(v, 1));
     cJSON_AddItemToObject(root, "rotor_radius", positive_or_null(v->rotor_radius));
-    cJSON_AddItemToObject(root, "rotor_inertia", positive_or_null(v->rotor_inertia));
+    /* as described: an inertia the simulator assumed for its effects is not the vehicle's */
+    cJSON_AddItemToObject(root, "rotor_inertia",
+                          positive_or_null(v->rotor_inertia_assumed ? 0.0 : v->rotor_inertia));
     cJSON_AddItemToObject(root, "notes", cJSON_CreateString(notes != NULL ? notes : ""));
     return sitl_write_json_file(path, root);
 }

@@ -38,6 +38,8 @@ typedef struct {
     /* Rotor properties used only by the switchable effects (docs/sitl.md). */
     double rotor_radius;         /* [m] */
     double rotor_inertia;        /* spinning parts of one rotor about its axis [kg m^2] */
+    int rotor_inertia_assumed;   /* 1: rotor_inertia is the radius-scaled assumption for the effects,
+                                    not the vehicle file's: the log's vehicle file leaves it null */
     double rotor_drag_coeff;     /* in-plane H-force k_d [N/(rad/s * m/s)] */
     double inflow_coeff;         /* axial inflow k_z [N/(rad/s * m/s)] */
     double translational_lift_coeff; /* k_h [N/(m/s)^2] */

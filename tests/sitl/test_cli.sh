@@ -140,6 +140,32 @@ fi
 # The written vehicle file flies.
 expect_rc 0 "vehicle from file" "$SITL" --vehicle "$WORK/a.vehicle.json" --trajectory hover \
     --mode oracle --duration 2 --quiet
+# The log's vehicle file says what the input said: a rotor inertia the simulator assumed from
+# the radius for its effects (the input has none) is written null, named in the notes; the
+# input's own value is kept (propid replay models a written value by default).
+if command -v python3 >/dev/null; then
+    python3 - "$WORK" <<'PY' || fail "radius-only vehicle file"
+import json, sys
+w = sys.argv[1]
+v = json.load(open(w + "/a.vehicle.json"))
+v.pop("notes")
+for name, inertia in (("r_null", None), ("r_given", 6e-6)):
+    json.dump(dict(v, name=name, rotor_radius=0.0635, rotor_inertia=inertia), open(f"{w}/{name}.json", "w"))
+PY
+    for name in r_null r_given; do
+        expect_rc 0 "vehicle file $name" "$SITL" --vehicle "$WORK/$name.json" --trajectory hover \
+            --mode oracle --duration 0.2 --quiet --log "$WORK/$name.csv"
+    done
+    python3 - "$WORK" <<'PY' || fail "the log's vehicle file keeps the input's rotor inertia"
+import json, sys
+w = sys.argv[1]
+v = json.load(open(w + "/r_null.vehicle.json"))
+assert v["rotor_radius"] == 0.0635 and v["rotor_inertia"] is None, v
+assert "rotor inertia not in the vehicle file (null)" in v["notes"], v["notes"]
+v = json.load(open(w + "/r_given.vehicle.json"))
+assert v["rotor_inertia"] == 6e-6 and "assumed" not in v["notes"], v
+PY
+fi
 # A short flight flies the start of the same 10 s trajectory (the period is not
 # the duration): a 2 s Lissajous used to be 5x faster and diverged at 0.4 s.
 expect_rc 0 "short lissajous" "$SITL" --trajectory lissajous --mode filter --duration 2 --quiet
