@@ -225,6 +225,7 @@ class FlightMaker:
                     "detectability": measured["index"], "clipped": clipped,
                     "below_limit": measured["index"] < DETECTION_LIMIT,
                     "axes": measured["axes"],
+                    "free_flight_share": measured["free_flight_share"],
                 })
             first.update(vehicle=vehicle, twin=twin, noisy_twin=noisy_twin)
         flight_args = noisy + _effect_args(strengths)
