@@ -256,3 +256,38 @@ def test_the_lag_rule_starts_at_the_first_logged_command():
     np.testing.assert_allclose(out[:3], [[0.4, 0.6]] * 3)  # held at the first command until it changes
     decay = np.exp(-0.01 / 0.03)
     np.testing.assert_allclose(out[3], [0.5 + (0.4 - 0.5) * decay, 0.6])
+
+
+def test_skipping_repeats_skips_the_accelerometers_copies_and_keeps_its_fresh_samples(original):
+    # A logger that samples separately streamed blocks by sample-and-hold copies each lost packet: on some
+    # rows both the gyro and the accelerometer repeat the row before, on others only the gyro does and the
+    # accelerometer's sample is new. --skip-repeats drops every stream's copies and nothing else.
+    log, _ = original
+    rng = np.random.default_rng(13)
+    flying = np.flatnonzero(log.t >= GROUND_S + 0.1)
+    rows = np.sort(rng.choice(flying[1:], 2 * (len(flying) // 10), replace=False))
+    both, gyro_only = rows[0::2], rows[1::2]
+    gyro = log.gyro.copy()
+    extra = {k: v.copy() for k, v in log.extra.items()}
+    for k in rows:  # in time order: a copy of a copy stays a copy
+        gyro[k] = gyro[k - 1]
+        if k in set(both.tolist()):
+            for axis in ("acc_x", "acc_y", "acc_z"):
+                extra[axis][k] = extra[axis][k - 1]
+    lossy = FlightLog(t=log.t, gyro=gyro, rotor_speed=log.rotor_speed, extra=extra)
+    vehicle = parse_vehicle(VEHICLE)
+
+    def summary(skip):
+        options = ReplayOptions(segment="flying", noise="auto", progress=False, skip_repeats=skip)
+        return replay(lossy, vehicle, options).summary
+
+    fused, skipped = summary(False), summary(True)
+    assert skipped["repeated_rows_skipped"]["gyro"] == rows.size
+    assert skipped["repeated_rows_skipped"]["accel"] == both.size
+
+    def accel_pushes(s):
+        counters = s["counters"]
+        return counters["accel_accepted"] + sum(n for name, n in counters["rejected"].items() if "ACCEL" in name)
+
+    assert accel_pushes(fused) > 0
+    assert accel_pushes(skipped) == accel_pushes(fused) - both.size

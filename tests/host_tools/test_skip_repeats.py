@@ -40,14 +40,14 @@ def test_duplicated_rows_bias_kf_low_and_skipping_them_removes_the_bias(cfilter_
     # a log without repeats replays the same with the option on (nothing to skip)
     _, clean_skipped = kf_over_truth(clean, True)
     assert clean_skipped["kf_mean"] == reference_summary["kf_mean"]
-    assert clean_skipped["repeated_rows_skipped"] == {"gyro": 0, "rotor": 0}
+    assert clean_skipped["repeated_rows_skipped"] == {"gyro": 0, "rotor": 0, "accel": 0}
     fused, fused_summary = kf_over_truth(duplicated, False)
     skipped, skipped_summary = kf_over_truth(duplicated, True)
     assert abs(reference - 1.0) < 0.02
     # measured: 0.947 fused, 1.015 skipped (the clean log 0.992)
     assert fused < reference - 0.03
     assert abs(skipped - 1.0) < 0.025
-    assert fused_summary["repeated_rows_skipped"] == {"gyro": 0, "rotor": 0}
+    assert fused_summary["repeated_rows_skipped"] == {"gyro": 0, "rotor": 0, "accel": 0}
     # the replay says so when it fuses the copies, and not when it skips them or there are none
     assert any("30 % of the rows repeat the previous gyro sample" in w for w in fused_summary["warnings"])
     assert not any("repeat the previous gyro" in w for w in skipped_summary["warnings"] + reference_summary["warnings"])

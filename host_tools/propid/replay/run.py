@@ -117,12 +117,18 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     gyro = np.ascontiguousarray(log.gyro, dtype=np.float32)
     has_gyro = np.any(np.isfinite(log.gyro), axis=1)
     has_rotor = np.any(np.isfinite(log.rotor_speed), axis=1)
-    repeats = {"gyro": 0, "rotor": 0}
+    repeats = {"gyro": 0, "rotor": 0, "accel": 0}
     if options.skip_repeats:
         same_gyro, same_rotor = repeats_previous_row(log.gyro), repeats_previous_row(log.rotor_speed)
-        repeats = {"gyro": int(np.sum(same_gyro[mask])), "rotor": int(np.sum(same_rotor[mask]))}
+        repeats = {"gyro": int(np.sum(same_gyro[mask])), "rotor": int(np.sum(same_rotor[mask])), "accel": 0}
         has_gyro &= ~same_gyro
         has_rotor &= ~same_rotor
+        if has_acc is not None:
+            # the accelerometer is a stream of its own: its copy is no sample either (its fresh sample on a
+            # row whose gyro repeats is one, pushed at its own time below)
+            same_acc = repeats_previous_row(log.acc)
+            repeats["accel"] = int(np.sum(same_acc[mask]))
+            has_acc &= ~same_acc
         if streams == "rows":
             streams = "events"  # rows now carry one stream or the other
     status_counts: dict[str, int] = {}
