@@ -154,6 +154,16 @@ int sitl_vehicle_check(const sitl_vehicle_t *v, char *err, int err_size)
         if (why == NULL && sitl_mat3_inverse(v->inertia, inv) != 0) {
             why = "inertia is singular";
         }
+        /* Positive definite (leading minors positive), as the filter's configuration
+         * check wants it: a bad vehicle file is a usage error, named here. */
+        const double (*j)[3] = v->inertia;
+        const double minor2 = j[0][0] * j[1][1] - j[0][1] * j[1][0];
+        const double det = j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1]) -
+                           j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0]) +
+                           j[0][2] * (j[1][0] * j[2][1] - j[1][1] * j[2][0]);
+        if (why == NULL && !(minor2 > 0.0 && det > 0.0)) {
+            why = "inertia must be positive definite";
+        }
         for (int i = 0; i < v->rotor_count && why == NULL; i++) {
             const sitl_rotor_t *r = &v->rotor[i];
             if (!positive_finite(r->thrust_coeff) || !positive_finite(r->drag_coeff)) {

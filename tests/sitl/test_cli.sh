@@ -102,6 +102,17 @@ cat >"$WORK/nomass.vehicle.json" <<'JSON'
 JSON
 expect_rc 2 "vehicle file without mass" "$SITL" --vehicle "$WORK/nomass.vehicle.json" --quiet
 grep -q "'mass' is missing or null" "$WORK/err.txt" || fail "missing-mass message: $(cat "$WORK/err.txt")"
+# An inertia that is symmetric but not positive definite is a bad vehicle file (exit 2),
+# named before the flight (it was the filter's set-up failing, exit 1, in every mode).
+cat >"$WORK/notspd.vehicle.json" <<'JSON'
+{"name": "x", "mass": 0.5, "inertia": [[1e-3, 5e-3, 0], [5e-3, 1e-3, 0], [0, 0, 2e-3]],
+ "rotors": [{"position": [0.1, 0, 0], "yaw_sign": 1}, {"position": [0, 0.1, 0], "yaw_sign": -1},
+            {"position": [-0.1, 0, 0], "yaw_sign": 1}, {"position": [0, -0.1, 0], "yaw_sign": -1}],
+ "kf_nominal": 1e-6, "km_nominal": 1e-8}
+JSON
+expect_rc 2 "vehicle file with an inertia not positive definite" "$SITL" \
+    --vehicle "$WORK/notspd.vehicle.json" --mode oracle --quiet
+grep -q "inertia must be positive definite" "$WORK/err.txt" || fail "inertia message: $(cat "$WORK/err.txt")"
 
 # A logged flight, twice with the same seed, once with another.
 expect_rc 0 "logged flight" "$SITL" --trajectory circle --seed 7 --duration 10 --quiet \
