@@ -262,15 +262,38 @@ def test_library_floor_bounds_the_shrink_and_does_not_invent_room_on_an_effect_f
 
 
 # ------------------------------------------------------------------ CLI: vehicle-out, report, errors
-def test_cli_writes_json_report_and_a_corrected_vehicle_that_replays(flights, tmp_path):
+class RecordingBar:
+    """Stands in for tqdm: keeps the bar's count and total as the tool leaves them."""
+    closed: list = []
+
+    def __init__(self, total=None, **_):
+        self.total, self.n = total, 0
+
+    def update(self, n=1):
+        self.n += n
+
+    def refresh(self):
+        pass
+
+    def close(self):
+        RecordingBar.closed.append((self.n, self.total))
+
+
+def test_cli_writes_json_report_and_a_corrected_vehicle_that_replays(flights, tmp_path, monkeypatch):
+    import tqdm
+
     from propid.cli import main
     from propid.replay import ReplayOptions, replay
 
     log_path, _, _ = flights("inertia_error", "0.1")
     out, corrected = tmp_path / "out.json", tmp_path / "corrected.json"
+    monkeypatch.setattr(tqdm, "tqdm", RecordingBar)
+    RecordingBar.closed.clear()
     code = main(["gap", "--log", str(log_path), "--json", str(out), "--report", str(tmp_path / "rep"),
-                 "--vehicle-out", str(corrected), "--no-filter", "--quiet"])
+                 "--vehicle-out", str(corrected), "--no-filter"])
     assert code == 0
+    # the progress bar ends full: the selection stops early and the calibration adds its replays
+    assert RecordingBar.closed and all(n == total and total > 60 for n, total in RecordingBar.closed)
     result = json.loads(out.read_text())
     assert result["verdict"] == "inertia_error"
     assert (tmp_path / "rep" / "index.html").is_file() and (tmp_path / "rep" / "effects.png").is_file()

@@ -215,9 +215,7 @@ def run(args: argparse.Namespace) -> int:
     if args.vehicle_out:
         from propid.gap.calibration import calibrate_or_fall_back
 
-        if progress.bar is not None:  # the calibration's replays, one step per fit log
-            progress.bar.total += len(logs)
-            progress.bar.refresh()
+        progress.grow(len(logs))  # the calibration's replays, one step per fit log
         corrected, result["calibration"] = calibrate_or_fall_back(args.calibration, logs, vehicle, corrected,
                                                                   progress=lambda: progress(1))
         if result["calibration"]["calibrated"] and result.get("base_fit_after"):
@@ -244,6 +242,7 @@ def run(args: argparse.Namespace) -> int:
                                          "units (`propid replay --unit-inertia` replays such logs for kf/J; "
                                          "--no-filter skips this check)"}
         else:
+            progress.grow(len(holdout or logs))  # one step per replayed log (before and after)
             try:
                 result["filter"] = filter_before_after(holdout or logs, vehicle, corrected,
                                                        progress=lambda: progress(1), walk=walk)

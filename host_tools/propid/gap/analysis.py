@@ -151,6 +151,11 @@ def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band,
 
 
 class Progress:
+    """The analysis' progress bar. Stages whose length is known only later (the effect
+    selection stops when nothing more is significant; the replays depend on the options)
+    reserve their most steps with `grow` and, when done early, jump to the stage's end with
+    `fill_to`, so the bar ends at its total instead of stopping part-way."""
+
     def __init__(self, enabled: bool, total: int):
         self.bar = None
         if enabled:
@@ -162,8 +167,23 @@ class Progress:
         if self.bar is not None:
             self.bar.update(n)
 
+    def grow(self, n: int):
+        """Reserve n more steps (a stage whose length is now known)."""
+        if self.bar is not None and n > 0:
+            self.bar.total += n
+            self.bar.refresh()
+
+    def position(self) -> int:
+        return int(self.bar.n) if self.bar is not None else 0
+
+    def fill_to(self, mark: int):
+        """Advance to `mark` (a stage that ended before its most steps)."""
+        if self.bar is not None and mark > self.bar.n:
+            self.bar.update(mark - self.bar.n)
+
     def close(self):
         if self.bar is not None:
+            self.fill_to(int(self.bar.total))
             self.bar.close()
 
 
@@ -272,7 +292,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     if unit_inertia:  # torque coefficients become kf/J-like ratios in the file's geometry
         vehicle = copy.deepcopy(vehicle)
         vehicle.inertia = np.eye(3)
-    progress = Progress(options.progress, total=60 + 12 * 6)
+    progress = Progress(options.progress, total=60)  # + the selection's steps, reserved below
     hub = options.ground_effect_height == "hub"
     flights = [prepare_flight(log, vehicle, options.band, repeats=options.repeats, attitude=hub,
                               gyro_bias=options.gyro_bias) for log in logs]
@@ -374,9 +394,14 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     gr_w = scoring.grams(design_w, block_folds=options.block_folds)
     gr_w.weight = scoring.axis_weights(design_w, base_cols)
     progress(10)
+    # the selection scores every remaining candidate per round, at most MAX_EFFECTS rounds
+    selection_steps = sum(max(len(candidates) - r, 0) for r in range(selection.MAX_EFFECTS))
+    progress.grow(selection_steps)
+    selection_end = progress.position() + selection_steps
     sel = selection.forward_select(design_w, gr_w, candidates, base_cols, progress=lambda n: progress(n),
                                    size_gr=gr, bounds={e.id: e.bounds(ctx) for e in effects if e.bounds},
                                    replication=options.replication, folds=options.replication_folds)
+    progress.fill_to(selection_end)
 
     # final model on all training data
     final_cols = sel["columns"]
