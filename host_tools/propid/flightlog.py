@@ -33,6 +33,9 @@ POS_COLUMNS = ("px", "py", "pz")
 GYRO_DEG_S_SUSPECT = 40.0  # rad/s, 99th percentile of |gyro|
 ROTOR_RPM_SUSPECT = 8000.0  # rad/s, median of spinning rotor speeds
 TIME_US_SUSPECT = 1.0e5  # s: a log longer than ~28 h is more likely in us or ms
+# s: a median sample step this long (under 4 Hz) is more likely t in milliseconds (a 500 Hz
+# log in ms steps by 2); no flight log this filter can use is sampled this slowly
+SAMPLE_STEP_MS_SUSPECT = 0.25
 
 _OMEGA_RE = re.compile(r"^omega_(\d+)$")
 _CMD_RE = re.compile(r"^cmd_(\d+)$")
@@ -449,6 +452,12 @@ def validate_columns(
         raise UserError(
             f"{where}, column t: the log spans {t[-1] - t[0]:.3g} 's': t looks like milli- or microseconds, "
             "flight-log v1 wants seconds"
+        )
+    steps = dt[dt > 0]
+    if steps.size and float(np.median(steps)) > SAMPLE_STEP_MS_SUSPECT:
+        raise UserError(
+            f"{where}, column t: samples are {float(np.median(steps)):.3g} 's' apart (median): t looks like "
+            "milliseconds, flight-log v1 wants seconds"
         )
     for i, name in enumerate(GYRO_COLUMNS):
         bad = np.isinf(gyro[:, i])

@@ -164,6 +164,13 @@ def test_units_sanity_acc_in_g_and_time_in_us(tmp_path):
         read_flightlog(_with_columns(tmp_path, t_scale=1e6))
 
 
+def test_time_in_ms_of_a_short_log_is_named(tmp_path):
+    """A 1 s log at 500 Hz written in ms spans 998 'seconds', under the microsecond check's
+    span: its 2 'second' sample step names it."""
+    with pytest.raises(UserError, match="milliseconds"):
+        read_flightlog(_with_columns(tmp_path, t_scale=1e3))
+
+
 def test_rad_s_log_passes_units_checks(tmp_path):
     log = read_flightlog(_with_columns(tmp_path))
     assert log.rotor_speed.max() < 2000.1
