@@ -448,6 +448,32 @@ def test_listen_shows_estimates(capsys):
     assert "health 0x44  GATED ALL_CONVERGED" in view
 
 
+def test_listen_says_when_the_stream_goes_quiet(capsys):
+    """After the sender stops, the screen says its figures are the last received, and a pipe
+    gets that screen once, not the same screen every refresh."""
+    port = free_udp_port()
+    stop = threading.Event()
+    sender = threading.Thread(target=_send_frames, args=(port, telemetry_frames(5), 3, stop, 0.002))
+    timer = threading.Timer(0.3, sender.start)
+    timer.start()
+    try:
+        code = cli.main(["listen", "--connect", f"udp:127.0.0.1:{port}", "--timeout", "10",
+                         "--duration", "3.5"])
+    finally:
+        stop.set()
+        timer.join()
+        if sender.is_alive():
+            sender.join()
+    out = capsys.readouterr().out
+    assert code == 0
+    screens = out.strip().split("propid listen")[1:]
+    assert "2.3000e-08" in screens[-1]          # the last estimates are still shown
+    assert "no propid message for" in screens[-1] and "last received" in screens[-1]
+    assert not any("no propid message" in v for v in screens[:1])
+    # quiet for ~2.5 s at a 0.5 s refresh: one quiet screen printed, then the final one
+    assert sum("no propid message" in v for v in screens) == 2
+
+
 def test_listen_plot_without_a_display_is_a_clear_error(monkeypatch, capsys):
     monkeypatch.setenv("MPLBACKEND", "Agg")
     import matplotlib

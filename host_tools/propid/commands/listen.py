@@ -14,6 +14,7 @@ NAME = "listen"
 HELP = "live view of kf/km (+-1 sigma) per rotor, gyro bias and health from MAVLink telemetry"
 
 REFRESH_S = 0.5
+SILENT_S = 1.0  # no propid message for this long: the screen says its figures are the last received
 PLOT_HISTORY_S = 120.0
 
 
@@ -94,10 +95,13 @@ def format_model(model) -> list[str]:
 
 
 def format_view(coeffs, gyro, status, frames: int, source: str, model=None,
-                damage: list[str] | None = None) -> str:
+                damage: list[str] | None = None, silent_s: float | None = None) -> str:
     """The text screen for the latest messages (any of them may be None); damage: the
-    damage detections and CRITICAL texts received so far (latest last)."""
+    damage detections and CRITICAL texts received so far (latest last); silent_s: seconds
+    since the last propid message when the stream has gone quiet (None while it flows)."""
     lines = [f"propid listen  {source}  frames {frames}"]
+    if silent_s is not None:
+        lines.append(f"no propid message for {silent_s:.1f} s: the figures below are the last received")
     if coeffs is None:
         lines.append("waiting for PROPID_COEFFICIENTS ...")
         return "\n".join(lines + (damage or [])[-4:])
@@ -198,6 +202,11 @@ def run(args: argparse.Namespace) -> int:
     reset_pending = args.reset is not None
     reset_result = None
     interrupted = False
+    last_propid = start
+    printed = None  # (frames, silent) of the last screen printed to a pipe or file
+
+    def silence(at: float) -> float | None:
+        return at - last_propid if got_propid and at - last_propid >= SILENT_S else None
     try:
         while True:
             now = time.monotonic()
@@ -210,6 +219,8 @@ def run(args: argparse.Namespace) -> int:
             if msg is not None and msg.get_type() != "BAD_DATA":
                 frames += 1
                 kind = msg.get_type()
+                if kind.startswith("PROPID_"):
+                    last_propid = now
                 if kind == mavlink_io.MSG_COEFFICIENTS:
                     coeffs, got_propid = msg, True
                     if live_plot is not None:
@@ -239,10 +250,14 @@ def run(args: argparse.Namespace) -> int:
                     print(f"MAV_CMD_PROPID_RESET {reset_label(args.reset)}: {reset_result}", flush=True)
             if now - last_draw >= REFRESH_S:
                 last_draw = now
-                view = format_view(coeffs, gyro, status, frames, args.connect, model, damage)
+                silent = silence(now)
+                view = format_view(coeffs, gyro, status, frames, args.connect, model, damage, silent)
                 if interactive:
                     print("\033[H\033[J" + view, flush=True)
-                else:
+                elif printed != (frames, silent is not None):
+                    # a pipe or file gets a screen when something arrived, and once when the
+                    # stream goes quiet, not the same screen every refresh
+                    printed = (frames, silent is not None)
                     print(view + "\n", flush=True)
                 if live_plot is not None:
                     live_plot.draw()
@@ -250,7 +265,7 @@ def run(args: argparse.Namespace) -> int:
         interrupted = True
     finally:
         conn.close()
-    print(format_view(coeffs, gyro, status, frames, args.connect, model))
+    print(format_view(coeffs, gyro, status, frames, args.connect, model, silent_s=silence(time.monotonic())))
     if not got_propid and not interrupted:
         what = "MAVLink data" if frames == 0 else "propid messages (other MAVLink did arrive)"
         raise UserError(f"no {what} on {args.connect} within --duration {args.duration:g} s")
