@@ -69,6 +69,7 @@ void propid_config_default(propid_config_t *config)
     config->input_error_compensation = 0u;
     config->rotor_speed_noise_hold = 0u;
     config->rotor_speed_noise_split = 0u;
+    config->rotor_timing_error = 0.0f;
     config->motor_command_instrument = 0u;
     config->motor_command_lag = 0.03f;
     config->motor_command_memory = 10.0f;
@@ -687,6 +688,11 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
         config->rotor_speed_noise_time > PROPID_ROTOR_SPEED_NOISE_TIME_MAX) {
         PROPID_BAD("rotor_speed_noise_time");
     }
+    if (!isfinite(config->rotor_timing_error) || config->rotor_timing_error < 0.0f ||
+        config->rotor_timing_error > PROPID_ROTOR_TIMING_ERROR_MAX ||
+        (!PROPID_WITH_INPUT_NOISE && config->rotor_timing_error != 0.0f)) {
+        PROPID_BAD("rotor_timing_error"); /* compiled out with the input error: only 0 */
+    }
     /* The compensation removes the part of the update an error of the configured
      * size explains: without a size there is nothing to remove. */
     if (config->input_error_compensation > 1u ||
@@ -738,6 +744,7 @@ propid_status_t propid_config_derive(const propid_config_t *config, propid_deriv
     out.input_noise_time = config->rotor_speed_noise_time;
     out.input_compensation = config->input_error_compensation;
     out.input_noise_hold = config->rotor_speed_noise_hold;
+    out.input_timing_error = config->rotor_timing_error;
 #endif
 #if PROPID_WITH_INPUT_NOISE || PROPID_WITH_GYRO_STUCK_CHECK
     out.rare_gyro_update = (uint8_t)((PROPID_WITH_INPUT_NOISE && config->input_error_compensation) ||

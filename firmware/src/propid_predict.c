@@ -534,7 +534,7 @@ static void add_common_block(float *cov, const float along[3])
 static __attribute__((noinline)) void add_input_noise_quad(const propid_derived_t *derived,
                                                            propid_core_t *core, const float *kf_rel,
                                                            const float *km_rel, const float *weight,
-                                                           const float *common)
+                                                           const float *common, const float *timing)
 {
     float input_var[4];
     float gain[3][4];
@@ -564,13 +564,21 @@ PROPID_UNROLL(3)
         }
         add_common_block(cov, along);
     }
+    if (timing != NULL) {
+        float along[3];
+        for (uint8_t a = 0; a < 3u; ++a) {
+            along[a] = gain[a][0] * timing[0] + gain[a][1] * timing[1] + gain[a][2] * timing[2] +
+                       gain[a][3] * timing[3];
+        }
+        add_common_block(cov, along);
+    }
 }
 
 /* Any vehicle, over the sparsity lists. */
 static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t *derived,
                                                           propid_core_t *core, const float *kf_rel,
                                                           const float *km_rel, const float *weight,
-                                                          const float *common)
+                                                          const float *common, const float *timing)
 {
     const uint8_t rotor_count = (uint8_t)(derived->layout.drag - derived->layout.thrust);
     float input_var[PROPID_MAX_ROTORS];
@@ -596,6 +604,15 @@ static __attribute__((noinline)) void add_input_noise_any(const propid_derived_t
         for (uint8_t a = 0; a < 3u; ++a) {
             for (uint8_t i = 0; i < rotor_count; ++i) {
                 along[a] += gain[a][i] * common[i];
+            }
+        }
+        add_common_block(core->cov, along);
+    }
+    if (timing != NULL) {
+        float along[3] = {0.0f, 0.0f, 0.0f};
+        for (uint8_t a = 0; a < 3u; ++a) {
+            for (uint8_t i = 0; i < rotor_count; ++i) {
+                along[a] += gain[a][i] * timing[i];
             }
         }
         add_common_block(core->cov, along);
@@ -670,6 +687,17 @@ static __attribute__((noinline)) void add_input_noise(const propid_derived_t *de
         }
     }
     const float *common_or_null = with_common ? common : NULL;
+    /* The report's timing (docs/math.md §14, "The report's timing"): a report tau older
+     * or newer than assumed puts tau du_i/dt into every rotor's input at once (one age
+     * per report), du_i/dt over the step from its two ends: rank one, along = B t with
+     * t_i = tau (u_end,i - u_start,i) / dt, the rate increment's error over the step. */
+    float timing[PROPID_MAX_ROTORS];
+    const int with_timing = derived->input_timing_error > 0.0f;
+    const float timing_per_dt = derived->input_timing_error / dt;
+    for (uint8_t i = 0; i < rotor_count; ++i) {
+        timing[i] = timing_per_dt * (core->rotor_speed_sq[i] - core->input_speed_sq[i]);
+    }
+    const float *timing_or_null = with_timing ? timing : NULL;
     /* B at the drag coefficients per rotor (kept in their yaw basis; this term is
      * in the general build only, whose derived data holds the basis). */
     const propid_reflection_t basis = {derived->drag_basis, derived->drag_basis_scale,
@@ -684,9 +712,9 @@ static __attribute__((noinline)) void add_input_noise(const propid_derived_t *de
     float kf_rel[PROPID_MAX_ROTORS];
     propid_thrust_per_rotor(&thrust_basis, core, kf_rel, NULL);
     if (derived->quad_layout) {
-        add_input_noise_quad(derived, core, kf_rel, km_rel, weight, common_or_null);
+        add_input_noise_quad(derived, core, kf_rel, km_rel, weight, common_or_null, timing_or_null);
     } else {
-        add_input_noise_any(derived, core, kf_rel, km_rel, weight, common_or_null);
+        add_input_noise_any(derived, core, kf_rel, km_rel, weight, common_or_null, timing_or_null);
     }
 }
 #endif
@@ -774,7 +802,8 @@ __attribute__((noinline)) void propid_predict_covariance(const propid_derived_t 
         predict_covariance_quad_layout(derived, core->cov, dt, jacobian_dt, drag_factor);
     }
 #if PROPID_WITH_INPUT_NOISE
-    if (derived->input_noise_var > 0.0f) {
+    /* Both are >= 0 (propid_config.c): one compare for either term. */
+    if (derived->input_noise_var + derived->input_timing_error > 0.0f) {
         add_input_noise(derived, core, dt);
     }
 #endif

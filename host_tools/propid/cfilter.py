@@ -172,6 +172,7 @@ _OPTIONAL_FIELDS = [
 _LAST_FIELDS = [
     ("accel_error_std", ctypes.c_float),
     ("accel_error_time", ctypes.c_float),
+    ("rotor_timing_error", ctypes.c_float),
 ]
 _INTEGER_TYPES = (ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32, ctypes.c_int32)
 
@@ -317,6 +318,9 @@ DEFAULT_TUNING: dict[str, float | int] = {
     # 1: the input error is a truncation's, rotor_speed_noise its RMS q / sqrt(3): mean q / 2
     # common to every rotor, spread q / sqrt(12) per rotor (docs/math.md §14). 0: independent.
     "rotor_speed_noise_split": 0,
+    # Std of a rotor report's age error [s], common to the rotors of a report: the step's input is off by
+    # that time x du/dt while the speeds change (docs/math.md §14, "The report's timing"). 0: off.
+    "rotor_timing_error": 0.0,
 }
 
 
@@ -383,6 +387,7 @@ class FilterConfig:
     accel_error_time: float = DEFAULT_TUNING["accel_error_time"]
     rotor_speed_noise_hold: int = DEFAULT_TUNING["rotor_speed_noise_hold"]
     rotor_speed_noise_split: int = DEFAULT_TUNING["rotor_speed_noise_split"]
+    rotor_timing_error: float = DEFAULT_TUNING["rotor_timing_error"]
     # Known aerodynamic rate damping [N m s/rad] per body axis (body torque -d_a omega_a, docs/math.md §17);
     # None or zeros: not modelled.
     aero_damping: Optional[list] = None

@@ -152,6 +152,8 @@ class ReferenceFilter:
         self.input_noise_split = bool(getattr(config, "rotor_speed_noise_split", 0))
         if self.input_noise_split:
             self.input_noise_var *= 0.25
+        # The report's timing error [s], one per report (C: add_input_noise's timing block, docs/math.md §14)
+        self.input_timing_error = _f32(getattr(config, "rotor_timing_error", 0.0))
         self.converged_var = c["converged_rel_std"] ** 2
         # C (propid_config.c): a claim counts the configured inertia's scale error too, which
         # the data cannot see (for kf not when the torque-scale state takes it).
@@ -643,7 +645,7 @@ class ReferenceFilter:
                 v[r] = -self.state[r] ** 2
                 self.cov += self.process_psd[r] * dt * np.outer(v, v)
                 self.cov[r, r] -= self.process_psd[r] * dt
-            if self.input_noise_var > 0.0:
+            if self.input_noise_var > 0.0 or self.input_timing_error > 0.0:
                 # Rotor-speed input error (C: add_input_noise, docs/math.md §14): B Sigma_u B^T
                 # dt max(dt, time), B = d(omega_dot)/d(Omega^2) at the current coefficients.
                 n_rot = self.rotor_count
@@ -659,6 +661,13 @@ class ReferenceFilter:
                 if self.input_noise_split:
                     # C: add_common_block, an error common to every rotor over each rotor's span
                     along = gain @ np.sqrt(3.0 * self.input_noise_var * speed_sq * dt * span)
+                    self.cov[:3, :3] += np.outer(along, along)
+                if self.input_timing_error > 0.0:
+                    # C: the report's timing, rank one: B tau (u_end - u_start) / dt, the speeds' squares as
+                    # C rounds them (float32): the difference of two close squares keeps their rounding
+                    change = (np.asarray(self.rotor_speed_sq, dtype=np.float32).astype(float)
+                              - np.asarray(self.input_speed_sq, dtype=np.float32).astype(float))
+                    along = gain @ (self.input_timing_error * change / dt)
                     self.cov[:3, :3] += np.outer(along, along)
             self.state[:3] = rate_next
         else:

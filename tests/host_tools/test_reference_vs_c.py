@@ -231,6 +231,34 @@ def test_c_agrees_with_reference_with_input_noise(flight, options):
     assert cov_off > 10.0 * COV_TOL_REL
 
 
+@pytest.mark.parametrize("options", ["plain", "all"])
+@pytest.mark.parametrize("speed_noise", [0.0, 20.0])
+def test_c_agrees_with_reference_with_the_report_timing(flight, options, speed_noise):
+    """The rotor report's timing error (rotor_timing_error, docs/math.md §14 "The report's timing"): a rank-one
+    rate block from the speeds' change over the step, alone and beside the speed error; same bounds, and the term
+    changes the run (the comparison would see it missing on one side)."""
+    without = make_config(options).with_overrides(rotor_speed_noise=speed_noise,
+                                                  rotor_speed_noise_time=0.01 if speed_noise else 0.0)
+    config = without.with_overrides(rotor_timing_error=0.001)
+    trace_ref = replay(ReferenceFilter(config), flight)
+    trace_c = replay(CFilter(config), flight)
+    state_err, cov_err = disagreement(trace_c, trace_ref)
+    print(f"C vs reference, report timing ({options}, speed noise {speed_noise}): max |dx|/std = {state_err:.3g}, "
+          f"max |dP_ii|/P_ii = {cov_err:.3g}")
+    assert state_err < STATE_TOL_SIGMA
+    assert cov_err < COV_TOL_REL
+    _, cov_off = disagreement(replay(CFilter(without), flight), trace_ref)
+    assert cov_off > 10.0 * COV_TOL_REL
+
+
+def test_quad_build_refuses_the_report_timing():
+    """The quad build compiles no input error: a nonzero timing error is a configuration error naming it."""
+    _, path = quad_library()
+    with pytest.raises(UserError, match="bad rotor_timing_error"):
+        CFilter(make_config().with_overrides(rotor_timing_error=0.002), library=path)
+    CFilter(make_config().with_overrides(rotor_timing_error=0.0), library=path)
+
+
 def check_quantised_against_reference(flight, config, without, label):
     """On the flight's speeds quantised to a 25 rad/s grid (values stand for several samples):
     C and the reference filter within the bounds with `config`, and C without the term under test

@@ -220,6 +220,11 @@ static int fly(uint32_t variant, const char *label, uint8_t rotors, float first_
     config.input_error_compensation = 1u;
 #endif
 #endif
+#ifdef COUNT_STEP_REPORT_TIMING
+    /* -DCOUNT_STEP_REPORT_TIMING=T: the rotor report's timing error of std T [s] in the rate
+     * process noise (docs/math.md §14, "The report's timing"). */
+    config.rotor_timing_error = COUNT_STEP_REPORT_TIMING;
+#endif
 #ifdef COUNT_STEP_ACCEL
     /* -DCOUNT_STEP_ACCEL: the accelerometer's z bias state on (a 30 g vehicle; the counted
      * flight pushes no accelerometer sample: the gyro step with one more state). */

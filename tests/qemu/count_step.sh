@@ -16,7 +16,7 @@
 # median/min/max instructions per step and the mean per function (self); --json
 # writes the same. Optional terms: -DCOUNT_STEP_DISTURBANCE, -DCOUNT_STEP_ROTOR_INERTIA=J,
 # -DCOUNT_STEP_AERO_DAMPING=D,
-# -DCOUNT_STEP_DELAY_US=D, -DCOUNT_STEP_INPUT_NOISE=S (+ -DCOUNT_STEP_INPUT_COMPENSATION), -DCOUNT_STEP_ACCEL (+ -DCOUNT_STEP_ACCEL_ERROR) in COUNT_STEP_CFLAGS; -DCOUNT_STEP_GET_ESTIMATE counts propid_get_estimate() after each step instead. QEMU does not model cycles: these are
+# -DCOUNT_STEP_DELAY_US=D, -DCOUNT_STEP_INPUT_NOISE=S (+ -DCOUNT_STEP_INPUT_COMPENSATION), -DCOUNT_STEP_REPORT_TIMING=T, -DCOUNT_STEP_ACCEL (+ -DCOUNT_STEP_ACCEL_ERROR) in COUNT_STEP_CFLAGS; -DCOUNT_STEP_GET_ESTIMATE counts propid_get_estimate() after each step instead. QEMU does not model cycles: these are
 # instruction counts.
 set -euo pipefail
 

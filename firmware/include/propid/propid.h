@@ -67,6 +67,9 @@ typedef enum {
  * telemetry code for a whole flight (docs/math.md §14, "Hold time from the telemetry"). */
 #define PROPID_ROTOR_SPEED_NOISE_TIME_MAX 600.0f
 
+/* Largest rotor_timing_error [s]: a report older than a second is no rotor speed. */
+#define PROPID_ROTOR_TIMING_ERROR_MAX 1.0f
+
 /* ------------------------------------------------------------------------ */
 /* Health flags (propid_estimate_t.health)                                  */
 /* ------------------------------------------------------------------------ */
@@ -222,6 +225,13 @@ typedef struct {
                                          this stationary std [m/s^2] beside the z bias (docs/math.md §9,
                                          "The row's model error"). 0: off (the row's error is white) */
     float accel_error_time;           /* its correlation time [s] (> 0 with accel_error_std > 0) */
+    float rotor_timing_error;         /* std of a rotor-speed report's age error [s], one error common
+                                         to the rotors of a report (latency, hold): while the speeds
+                                         change, the report stands for the speed of another instant,
+                                         and the step's input is off by that time x du/dt
+                                         (docs/math.md §14, "The report's timing"). At most
+                                         PROPID_ROTOR_TIMING_ERROR_MAX. Full build only (the quad
+                                         build refuses a nonzero value). 0: off */
 } propid_config_t;
 
 /* Fill every noise, prior and guard field with documented defaults (docs/design.md)
@@ -436,6 +446,7 @@ typedef struct {
 #if PROPID_WITH_INPUT_NOISE
     float input_noise_var;                          /* 4 rotor_speed_noise^2: Var(u_i) per unit u_i */
     float input_noise_time;                         /* rotor_speed_noise_time */
+    float input_timing_error;                       /* config.rotor_timing_error */
     uint8_t input_compensation;                     /* config.input_error_compensation */
     uint8_t input_noise_hold;                       /* config.rotor_speed_noise_hold */
     uint8_t input_noise_split;                      /* config.rotor_speed_noise_split (input_noise_var is
