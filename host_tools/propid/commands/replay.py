@@ -21,6 +21,11 @@ def _noise_std(text: str):
                            "a std in rad/s or 'auto'", f"{text}: the std [rad/s] must be between 0 and 10000")
 
 
+def _timing_error(text: str):
+    return _word_or_number(text, ("auto", "off"), float, lambda v: 0.0 <= v <= 1.0,
+                           "a time in s, 'auto' or 'off'", f"{text}: the time [s] must be between 0 and 1")
+
+
 def _walk(text: str):
     return _word_or_number(text, ("auto",), float, lambda v: 0.0 <= v <= 10.0,
                            "a walk in 1/sqrt(s) or 'auto'", f"{text}: the walk must be between 0 and 10 [1/sqrt(s)]")
@@ -144,6 +149,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rotor-speed-noise-time", metavar="S", type=float,
                         help="correlation time of that error [s] (default: auto's median sample interval, "
                              "or one step with a given SIGMA)")
+    parser.add_argument("--rotor-timing-error", metavar="auto|off|S", type=_timing_error, default="off",
+                        help="std of a rotor-speed report's age error [s], one error common to the rotors of a "
+                             "report: while the speeds change fast (a rotor driven to 0 and back, a take-off) the "
+                             "step's input is off by that time x du/dt and the filter carries it in the rate "
+                             "process noise (docs/math.md §14), or auto: the median interval between new "
+                             "rotor-speed samples. Default off (exact timing; docs/sitl.md 'Log' for when it helps)")
     parser.add_argument("--input-error-compensation", choices=["on", "off"], default="off",
                         help="with --rotor-speed-noise: remove from each coefficient update the average part "
                              "that rotor-speed error explains (errors-in-variables bias; docs/math.md §14). "
@@ -361,6 +372,7 @@ def run(args: argparse.Namespace) -> int:
         thrust_coeff_walk=thrust_coeff_walk,
         rotor_speed_noise=args.rotor_speed_noise,
         rotor_speed_noise_time=args.rotor_speed_noise_time,
+        rotor_timing_error=args.rotor_timing_error,
         input_error_compensation=args.input_error_compensation == "on",
         progress=not args.no_progress and len(log_paths) == 1,
     )

@@ -53,6 +53,10 @@ class ReplayOptions:
     # its correlation time [s] (None: the rule's with auto, one step with a given std).
     rotor_speed_noise: float | str | None = None
     rotor_speed_noise_time: float | None = None
+    # The rotor report's timing error (docs/math.md §14, "The report's timing"): None/"off", seconds, or "auto"
+    # (replay/report_timing.py: the median interval between new rotor-speed samples). Off by default (the CLI's
+    # too: it failed its default rule, docs/sitl.md "Log").
+    rotor_timing_error: float | str | None = None
     # The errors-in-variables compensation of the coefficient update with that error (needs rotor_speed_noise).
     input_error_compensation: bool = False
     # The motor commands as the rotor input's instrument (docs/math.md §16): "off" or "commands" (the log's

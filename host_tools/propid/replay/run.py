@@ -18,6 +18,7 @@ from propid.replay.instrument import resolve_instrument
 from propid.replay.noise import nis_mean, replay_nis
 from propid.replay.options import US, ReplayOptions, ReplayResult
 from propid.replay.prefilter import highpass_emulation_log, prefilter_log
+from propid.replay.report_timing import resolve_rotor_timing_error
 from propid.replay.rotor_spread import spread_bound
 from propid.replay.session import FilterSession, segment_mask
 from propid.replay.thrust_aero import carry_thrust_aero
@@ -100,6 +101,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     resolve_scale_walk(log, vehicle, mask, options, config_fields, notes, esc_delay_s)
     resolve_thrust_coeff_walk(log, vehicle, mask, options, config_fields, notes, esc_delay_s)
     resolve_rotor_speed_noise(log, mask, options, config_fields, notes)
+    resolve_rotor_timing_error(log, mask, options.rotor_timing_error, config_fields, notes)
     if prefilter_info is not None:
         notes["prefilter"] = prefilter_info
     if highpass_info is not None:
