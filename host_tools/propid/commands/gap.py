@@ -87,6 +87,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "aero_damping): 'logged' (built once from the logged rotor stream, the default) or "
                              "'shifted' (built at each candidate lag from the stream shifted by it; evaluated, not "
                              "the default: docs/gap.md 'Stream alignment')")
+    parser.add_argument("--thrust-offset", choices=("segment", "none"), default="none",
+                        help="the thrust axis's constant (the accelerometer's zero-g offset times the mass): "
+                             "'segment' (a free constant per flying segment: only the collective thrust's "
+                             "variations set kf_thrust; the fitted offset per log in OUT.json "
+                             "base_fit_details.thrust_offset) or 'none' (through the origin: kf_thrust carries "
+                             "the offset as 1 + b_z/g); docs/gap.md 'Base model'")
     parser.add_argument("--explainable", action="store_true",
                         help="also measure how much of the held-out residual any linear filter of the logged "
                              "non-gyro signals predicts, and the gyro-noise floor (OUT.json `explainable`; a "
@@ -195,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
     # the calibration and the filter check below take the logs in the analysis's canonical order too
     logs = canonical_order([read_flightlog(p, vehicle) for p in args.log])
     holdout = canonical_order([read_flightlog(p, vehicle) for p in args.holdout])
-    options = analysis.Options(Band(highpass, args.lowpass), progress=not args.quiet, auto_highpass=auto,
+    options = analysis.Options(Band(highpass, args.lowpass, thrust_offset=args.thrust_offset == "segment"), progress=not args.quiet, auto_highpass=auto,
                                repeats=args.repeats, lag_evidence=args.lag_evidence,
                                ground_effect_height=args.ground_effect_height, replication=args.replication,
                                replication_folds=args.replication_folds, block_folds=args.block_folds, gyro_bias=args.gyro_bias, lag_nuisance=args.lag_nuisance,

@@ -100,7 +100,7 @@ def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band,
     candidates = highpass_candidates(flights, band, candidates)
     values, boots = {}, {}
     for hp in candidates:
-        trial = [replace(f, band=Band(hp, band.lowpass_hz).for_rate(f.rate_hz)) for f in flights]
+        trial = [replace(f, band=replace(band, highpass_hz=hp).for_rate(f.rate_hz)) for f in flights]
         kf, boot = [], []
         for axis in ("roll", "pitch"):
             fit = basefit.fleet_fit(trial, axis, vehicle.positions, vehicle.yaw_signs, vehicle.mass,
@@ -136,7 +136,7 @@ def choose_highpass(flights: list[Flight], vehicle: Vehicle, band: Band,
         if not any(differs(hp, h) for h in candidates[k + 1:]):
             chosen = hp
             break
-    return Band(chosen, band.lowpass_hz), {
+    return replace(band, highpass_hz=chosen), {
         "candidates_hz": list(candidates),
         "roll_pitch_kf": [values[h] for h in candidates],
         "roll_pitch_kf_ci": [kf_ci[h] for h in candidates],
@@ -539,7 +539,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                                   **({"torque_scale_instrument": instrument_scales} if instrument_scales else {}),
                                   "agreement_before": _agreement(base_shape),
                                   "agreement_after": _agreement(after_shape),
-                                  "torque_gain_per_band": gain_per_band}
+                                  "torque_gain_per_band": gain_per_band,
+                                  "thrust_offset": _thrust_offset_summary(options.band, base_details, after_details)}
     progress(10)
 
     # where (base model, held-out residual)
@@ -622,6 +623,18 @@ def stream_quality(flights: list[Flight], held: list[Flight], repeats: str) -> d
                 "packet, not a sample (all-zero rotor rows excepted); treated_as: how the fits took them "
                 "('samples' as measurements, the default; 'missing': torque and Omega^2 interpolated across the "
                 "rows they leave unmeasured); the firmware-filter check skips them (--skip-repeats) either way"}}
+
+
+def _thrust_offset_summary(band: Band, before: dict, after: dict) -> dict:
+    """OUT.json base_fit_details.thrust_offset: the thrust axis's constant per log (basefit.thrust_offsets)."""
+    if not band.thrust_offset:
+        return {"mode": "none", "note": "the thrust axis is fitted through the origin: an accelerometer z offset "
+                                        "b_z scales kf_thrust by 1 + b_z/g"}
+    fit_before, fit_after = before.get("kf_thrust") or {}, after.get("kf_thrust") or {}
+    if "thrust_offset" not in fit_before:
+        return {"mode": "segment", "note": "no thrust axis (accelerometer or mass missing)"}
+    return {"mode": "segment", "units": "m/s^2 (the accelerometer's z offset)",
+            "before": fit_before["thrust_offset"], "after": fit_after.get("thrust_offset")}
 
 
 def closed_loop_entry(flights: list[Flight], band_rule: dict | None, requested: Band, vehicle: Vehicle,

@@ -1,7 +1,8 @@
 """Base fit: the fleet thrust coefficient from the accelerometer and the fleet torque
 coefficients from the gyro, each with a block-bootstrap 95 % interval.
 
-    kf_thrust: m acc_z = kf sum_i Omega_i^2            (low-passed only, through the origin)
+    kf_thrust: m acc_z = kf sum_i Omega_i^2 [+ c_s]    (low-passed only; c_s a constant per flying
+                                                        segment when the band fits the thrust offset)
     kf_roll:   tau_x   = kf sum_i y_i Omega_i^2        (band-passed)
     kf_pitch:  tau_y   = kf sum_i -x_i Omega_i^2       (band-passed)
     km_yaw:    tau_z   = km sum_i s_i Omega_i^2        (band-passed)
@@ -19,9 +20,20 @@ INSTRUMENT_LAGS samples; lags of 2 or more keep the controller's reaction to the
 current gyro noise out). Command noise is independent of telemetry noise, so the
 attenuation goes; the band-pass keeps the slow disturbance out as for least squares.
 Without commands: least squares (an attenuated lower bound), said in `method`.
+
+Thrust offset (`Band.thrust_offset`, docs/gap.md "Base model"): the accelerometer's zero-g offset
+b_z adds m b_z to m acc_z. Through the origin, kf_thrust then reads kf (1 + b_z / g) in hover. With
+a constant per segment (each segment's mean removed from both sides, prep.Flight.filtered) only
+the collective thrust's variations set kf_thrust, and the fitted offset is reported per log
+(`thrust_offset`): b_z = mean(acc_z - kf sum_i Omega_i^2 / m) over the segment, its interval from
+the same bootstrap resamples as kf's. A hover or a level circle hardly varies its collective
+thrust: kf_thrust's interval then widens, and `determined` says whether it lies within
+OFFSET_DETERMINED_REL of the value.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -32,6 +44,7 @@ from propid.gap.prep import Flight
 INSTRUMENT_LAGS = (2, 3, 5, 8, 13)
 QUANTITIES = {"kf_thrust": "thrust", "kf_roll": "roll", "kf_pitch": "pitch", "km_yaw": "yaw"}
 QUANTITY_OF = {axis: key for key, axis in QUANTITIES.items()}
+OFFSET_DETERMINED_REL = 0.10  # kf_thrust's 95 % interval within +-10 %: the torque-vs-thrust agreement target
 
 
 def main_regressor(axis: str, u: np.ndarray, positions: np.ndarray, signs: np.ndarray,
@@ -128,15 +141,17 @@ def fleet_fit(flights: list[Flight], axis: str, positions: np.ndarray, signs: np
         xx[b] = x[lo:hi].T @ x[lo:hi]
         xy[b] = x[lo:hi].T @ y[lo:hi]
 
-    def solve(rows, a, rhs):
+    def solve_all(rows, a, rhs):  # every coefficient, physical units
         m = a[rows].sum(axis=0)
-        return np.linalg.lstsq(m, rhs[rows].sum(axis=0), rcond=None)[0][0] / scale[0]
+        return np.linalg.lstsq(m, rhs[rows].sum(axis=0), rcond=None)[0] / scale
 
     all_rows = np.arange(nb)
-    value = solve(all_rows, zx, zy)
-    ls_value = solve(all_rows, xx, xy)
+    coef = solve_all(all_rows, zx, zy)
+    value = coef[0]
+    ls_value = solve_all(all_rows, xx, xy)[0]
     rng = np.random.default_rng(rng_seed)
-    boot = [solve(rng.integers(0, nb, nb), zx, zy) for _ in range(scoring.BOOTSTRAP)]
+    boot_all = np.array([solve_all(rng.integers(0, nb, nb), zx, zy) for _ in range(scoring.BOOTSTRAP)])
+    boot = boot_all[:, 0]
     resid = y - x @ np.linalg.lstsq(x, y, rcond=None)[0]
     r2 = 1.0 - float(resid @ resid) / float(y @ y) if y @ y > 0 else float("nan")
     out = {"value": float(value), "ci": [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))],
@@ -144,7 +159,46 @@ def fleet_fit(flights: list[Flight], axis: str, positions: np.ndarray, signs: np
            "least_squares_value": float(ls_value), "r2": r2, "rows": int(y.size)}
     if keep_bootstrap:  # the resamples depend only on rng_seed and the block count: paired across calls
         out["bootstrap"] = np.asarray(boot)
+    if lowpass_only and mass and any(f.band.thrust_offset for f in flights):
+        out["thrust_offset"] = thrust_offsets(flights, positions, signs, mass, extra, shape, coef, boot_all)
     return out
+
+
+def thrust_offsets(flights: list[Flight], positions: np.ndarray, signs: np.ndarray, mass: float,
+                   extra: list[np.ndarray] | None, shape: dict | None, coef: np.ndarray,
+                   boot_coef: np.ndarray) -> dict:
+    """The thrust axis's fitted constant per log as the accelerometer's z offset [m/s^2]: each
+    segment's mean of acc_z - (kf sum_i Omega_i^2 + extra columns) / m, low-passed as the fit and
+    with its mean kept (module text); the interval from the bootstrap's coefficients."""
+    per_log, variation = {}, []
+    for fi, f in enumerate(flights):
+        raw = replace(f, band=replace(f.band, thrust_offset=False))
+        main = main_regressor("thrust", f.speed**2, positions, signs, shape)
+        cols = [main[:, None]] + ([extra[fi]] if extra is not None and extra[fi] is not None else [])
+        x = raw.filtered(np.column_stack(cols), True)
+        y = raw.filtered(responses(f, mass)["thrust"], True)
+        seg_values, seg_boot, weights = [], [], []
+        for a, b in f.segs:
+            mx, my = x[a:b].mean(axis=0), float(y[a:b].mean())
+            seg_values.append((my - float(mx @ coef)) / mass)
+            seg_boot.append((my - boot_coef @ mx) / mass)
+            weights.append(b - a)
+            total = x[a:b, 0]
+            if total.mean() > 0:
+                variation.append((float(np.std(total) / total.mean()), b - a))
+        w = np.asarray(weights, dtype=float) / sum(weights)
+        boot = np.asarray(seg_boot).T @ w
+        per_log[f.name] = {"m_s2": float(np.dot(w, seg_values)), "ci": [float(np.percentile(boot, 2.5)),
+                                                                         float(np.percentile(boot, 97.5))],
+                           "per_segment_m_s2": [float(v) for v in seg_values]}
+    value = float(coef[0])
+    lo, hi = float(np.percentile(boot_coef[:, 0], 2.5)), float(np.percentile(boot_coef[:, 0], 97.5))
+    half = max(value - lo, hi - value) / abs(value) if value else float("inf")
+    rows = sum(n for _, n in variation)
+    return {"per_log": per_log,
+            "collective_variation": float(sum(v * n for v, n in variation) / rows) if rows else None,
+            "kf_thrust_ci_relative_halfwidth": float(half),
+            "determined": bool(value > 0 and half <= OFFSET_DETERMINED_REL)}
 
 
 def instrument_scales(scales: dict, after_details: dict) -> dict:

@@ -25,12 +25,14 @@ Rules (docs/gap.md, "Data preparation"):
 - each segment is band-passed (zero phase) per `band`: torque axes high-passed at
   `highpass_hz` (the slow disturbance torque the controller cancels is a nuisance:
   removing it keeps the closed loop from dragging coefficients to 0) and low-passed
-  at `lowpass_hz`; the thrust axis is only low-passed (no constant may absorb gravity).
+  at `lowpass_hz`; the thrust axis is only low-passed, and with `band.thrust_offset` each
+  segment's mean is then removed from it (a constant per segment: the accelerometer's zero-g
+  offset times the mass, so that only the collective thrust's variations set kf).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -56,10 +58,14 @@ GROUND_CONTACT_M = 0.03  # cross-validation / bootstrap block length
 class Band:
     highpass_hz: float = 1.0
     lowpass_hz: float = 25.0
+    # the thrust axis's constant (docs/gap.md "Base model"): False, through the origin (its mean is
+    # kept: kf carries the accelerometer's zero-g offset as 1 + b/g); True, each segment's mean removed
+    # from the low-passed thrust axis, which fits a free constant per segment on both sides
+    thrust_offset: bool = False
 
     def for_rate(self, rate_hz: float) -> "Band":
         """The low-pass never above a quarter of the sample rate."""
-        return Band(self.highpass_hz, min(self.lowpass_hz, 0.25 * rate_hz))
+        return replace(self, lowpass_hz=min(self.lowpass_hz, 0.25 * rate_hz))
 
 
 @dataclass
@@ -96,13 +102,16 @@ class Flight:
     def filtered(self, x: np.ndarray, lowpass_only: bool = False, response: bool = False) -> np.ndarray:
         """Band-pass columns of x per segment; rows outside segments are 0. `response`: also
         give x the central difference's response (difference_response), as the measured
-        torque has it: for a regressor compared with J dw/dt."""
+        torque has it: for a regressor compared with J dw/dt. `lowpass_only` (the thrust axis):
+        low-passed, and each segment's mean removed when the band fits the thrust offset."""
         two_d = x.ndim == 2
         xx = x if two_d else x[:, None]
         out = np.zeros_like(xx, dtype=float)
         lo = None if lowpass_only else self.band.highpass_hz
         for a, b in self.segs:
             y = bandpass(np.nan_to_num(xx[a:b]), self.rate_hz, lo, self.band.lowpass_hz)
+            if lowpass_only and self.band.thrust_offset:
+                y = y - y.mean(axis=0)  # the segment's constant (Frisch-Waugh: fitted on both sides)
             out[a:b] = difference_response(y, self.rate_hz) if response else y
         return out if two_d else out[:, 0]
 
