@@ -91,8 +91,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the thrust axis's constant (the accelerometer's zero-g offset times the mass): "
                              "'segment' (a free constant per flying segment: only the collective thrust's "
                              "variations set kf_thrust; the fitted offset per log in OUT.json "
-                             "base_fit_details.thrust_offset) or 'none' (through the origin: kf_thrust carries "
-                             "the offset as 1 + b_z/g); docs/gap.md 'Base model'")
+                             "base_fit_details.thrust_offset; evaluated, not the default) or 'none' (the default: "
+                             "through the origin, kf_thrust carries the offset as 1 + b_z/g); docs/gap.md "
+                             "'Base model'")
     parser.add_argument("--explainable", action="store_true",
                         help="also measure how much of the held-out residual any linear filter of the logged "
                              "non-gyro signals predicts, and the gyro-noise floor (OUT.json `explainable`; a "

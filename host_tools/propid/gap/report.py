@@ -218,6 +218,16 @@ def write_report(result: dict, directory: str | Path) -> Path:
     parts.append(f"<p>Agreement with the thrust kf: before {_fmt(result['base_fit_details']['agreement_before'])}; "
                  f"after {_fmt(result['base_fit_details']['agreement_after'])}.</p>")
     parts.append(f"<p>{html.escape(result['base_fit_method'])}.</p>")
+    offset = result["base_fit_details"].get("thrust_offset") or {}
+    if offset.get("before"):  # --thrust-offset segment: the accelerometer's z offset per log
+        before = offset["before"]
+        parts.append("<p>Thrust axis with a constant per segment (the accelerometer's zero-g offset): collective "
+                     f"thrust variation {_fmt(before['collective_variation'])}, kf_thrust interval half-width "
+                     f"{_fmt(before['kf_thrust_ci_relative_halfwidth'])} of its value "
+                     f"({'determined' if before['determined'] else 'not determined: the offset and kf are not told apart'}"
+                     ").</p>")
+        parts.append(_table(["log", "offset [m/s^2]", "95 % CI"],
+                            [[name, v["m_s2"], v["ci"]] for name, v in before["per_log"].items()]))
     loop = next((e for e in result["effects"] if e["id"] == "closed_loop_cancellation" and e["significant"]), None)
     if loop is not None:
         p = loop["params"]
