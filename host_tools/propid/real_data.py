@@ -172,6 +172,7 @@ class RealDataConfig:
     reference_kf: float
     modes: tuple[str, ...] = tuple(mode[0] for mode in MODES)
     mean_window: str = "from-crossing"  # every replay's kf_mean window (replay/averaging.py)
+    mean_estimator: str = "window"  # what every replay's kf_mean reports (replay/averaging.py)
 
 
 def _cv(values: list[float]) -> float:
@@ -328,7 +329,7 @@ def run_real_data(config: RealDataConfig, progress: bool = True) -> dict:
         if path not in loaded:
             loaded[path] = read_flightlog(path, vehicle)
         options = ReplayOptions(segment="flying", esc_delay="default", progress=False,
-                                mean_window=config.mean_window, **fields)
+                                mean_window=config.mean_window, mean_estimator=config.mean_estimator, **fields)
         use = vehicle
         if name in AERO_FITTED:
             if (name, path) not in corrected:
@@ -352,6 +353,7 @@ def run_real_data(config: RealDataConfig, progress: bool = True) -> dict:
         "rules": __doc__.strip(),
         "data_dir": str(config.data_dir), "vehicle": str(config.vehicle), "reference_kf": config.reference_kf,
         "mean_window": config.mean_window,
+        "mean_estimator": config.mean_estimator,
         "modes": [{"name": name, "what": what, "options": fields, "summary": mode_summary(per_mode[name]),
                    "runs": per_mode[name]} for name, what, fields in modes + calibrated],
         "calibrations": calibrations,

@@ -26,6 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mean-window", choices=("from-crossing", "at-least-half"), default="from-crossing",
                         help="the window of every replay's kf_mean/km_mean (propid replay --mean-window; default "
                              "from-crossing)")
+    parser.add_argument("--mean-estimator", choices=("window", "inverse-variance"), default="window",
+                        help="what every replay's kf_mean/km_mean reports (propid replay --mean-estimator; default "
+                             "window)")
     parser.add_argument("--skip-missing", action="store_true",
                         help="exit 0 with a note when DIR does not exist (for make real-data without ../shared)")
     parser.add_argument("--thrust-evidence", action="store_true",
@@ -73,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.reference_kf > 0:
         raise UserError("--reference-kf must be positive")
     config = real_data.RealDataConfig(data_dir=data, vehicle=vehicle, out_dir=Path(args.out),
-                                      reference_kf=args.reference_kf, modes=modes, mean_window=args.mean_window)
+                                      reference_kf=args.reference_kf, modes=modes, mean_window=args.mean_window,
+                                      mean_estimator=args.mean_estimator)
     result = real_data.run_real_data(config, progress=not args.no_progress)
     print(real_data.render(result), end="")
     print(f"wrote {config.out_dir / 'real_data.json'}")

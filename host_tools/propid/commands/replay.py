@@ -77,6 +77,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the window kf_mean/km_mean average over: from the first sample whose std is under the "
                              "convergence bar (default), or from it or the replay's midpoint, whichever is earlier "
                              "(every mean over at least half of the samples; evaluated, docs/real-data.md)")
+    parser.add_argument("--mean-estimator", choices=("window", "inverse-variance"), default="window",
+                        help="what kf_mean/km_mean report: the window's plain mean (default), or every recorded "
+                             "estimate weighted by 1/std^2 (no threshold); both are always in the JSON as "
+                             "kf_mean_window and kf_mean_inverse_variance (docs/real-data.md)")
     parser.add_argument("--skip-repeats", action="store_true",
                         help="treat a row whose gyro (or rotor speeds) exactly repeat the previous row as no new "
                              "sample (logs resampled by sample-and-hold)")
@@ -352,6 +356,7 @@ def run(args: argparse.Namespace) -> int:
         overrides=overrides,
         skip_repeats=args.skip_repeats,
         mean_window=args.mean_window,
+        mean_estimator=args.mean_estimator,
         esc_delay=None if args.rotor_delay is not None else args.esc_delay,
         rotor_delay_s=args.rotor_delay if args.rotor_delay is not None else 0.0,
         prefilter_hz=args.prefilter,

@@ -27,6 +27,8 @@ Definitions used in the output (docs/real-data.md):
   averaged over the second half of the replayed samples and flagged converged = false.
   With mean_window "at-least-half" the window starts at the midpoint when that is earlier
   (replay/averaging.py); kf_mean_from_s/km_mean_from_s say where each window starts.
+  That window's mean is kf_mean_window (km_mean_window); kf_mean_inverse_variance is every
+  recorded estimate weighted by 1/std^2; mean_estimator says which of the two kf_mean is.
 - unit-inertia mode (vehicle without inertia, e.g. the Betaflight file): the filter
   runs with J = identity [kg m^2], so its "kf" is kf/J (roll/pitch; one J for both)
   and its "km" is km/Jzz, in the vehicle file's (possibly assumed) geometry. Ratios

@@ -70,6 +70,9 @@ class ReplayOptions:
     record_every: int = 1  # keep every k-th estimate for the time series
     # The window kf_mean/km_mean average over (replay/averaging.py): "from-crossing" or "at-least-half".
     mean_window: str = "from-crossing"
+    # What kf_mean/km_mean report (replay/averaging.py): "window" (the window's plain mean) or
+    # "inverse-variance" (the whole series weighted by 1/std^2); both are always in the summary.
+    mean_estimator: str = "window"
     progress: bool = True
 
 

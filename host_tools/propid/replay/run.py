@@ -12,7 +12,7 @@ from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.km_evidence import combination_std
 from propid.replay.alignment import detect_streams, estimate_esc_delay, filter_input_rule, gyro_rows_with_mask
-from propid.replay.averaging import MEAN_WINDOWS, window_means, window_start
+from propid.replay.averaging import MEAN_ESTIMATORS, MEAN_WINDOWS, coefficient_means, window_start
 from propid.replay.config import build_config
 from propid.replay.instrument import resolve_instrument
 from propid.replay.noise import nis_mean, replay_nis
@@ -57,6 +57,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     options = options or ReplayOptions()
     if options.mean_window not in MEAN_WINDOWS:
         raise UserError(f"mean window {options.mean_window!r}: one of {', '.join(MEAN_WINDOWS)}")
+    if options.mean_estimator not in MEAN_ESTIMATORS:
+        raise UserError(f"mean estimator {options.mean_estimator!r}: one of {', '.join(MEAN_ESTIMATORS)}")
     if log.rotor_count != vehicle.rotor_count:
         raise UserError(f"the log has {log.rotor_count} rotors, the vehicle file {vehicle.rotor_count}")
     log, gyro_scale_note = undo_gyro_scale(log, vehicle, options)  # the boundary: true rates from here on
@@ -234,12 +236,12 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         status_counts = {name: int(count) for name, count in counters["rejected"].items()}
         gyro_accepted = int(counters["gyro_accepted"])
 
-    window = options.mean_window
-    kf_mean, kf_mean_from, kf_start = window_means(series["kf"], series["kf_converged"], series["t"], window)
-    # The torque scale over the window every rotor's kf_mean covers: from the latest window start.
+    window, estimator = options.mean_window, options.mean_estimator
+    kf_means = coefficient_means(series["kf"], series["kf_std"], series["kf_converged"], series["t"], estimator, window)
+    km_means = coefficient_means(series["km"], series["km_std"], series["km_converged"], series["t"], estimator, window)
+    # The torque scale over the window every rotor's window mean covers: from the latest window start.
     scale_from = max(window_start(series["kf_converged"][:, k], window) for k in range(n))
     torque_scale_mean = float(np.mean(series["torque_scale"][scale_from:]))
-    km_mean, km_mean_from, km_start = window_means(series["km"], series["km_converged"], series["t"], window)
     # The filter's own claim at the end (withdrawn while MODEL_MISMATCH is up).
     kf_conv = [bool((final["thrust_coeff_converged"] >> k) & 1) for k in range(n)]
     km_conv = [bool((final["drag_coeff_converged"] >> k) & 1) for k in range(n)]
@@ -271,15 +273,20 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "kf_std": [float(v) for v in final["thrust_coeff_std"][:n]],
         "km": [float(v) for v in final["drag_coeff"][:n]],
         "km_std": [float(v) for v in final["drag_coeff_std"][:n]],
-        "kf_mean": kf_mean,
-        "km_mean": km_mean,
-        "kf_rotor_spread_bound": spread_bound(np.asarray(kf_mean), filt.thrust_coeff_covariance()),
+        "kf_mean": kf_means["mean"],
+        "km_mean": km_means["mean"],
+        "mean_estimator": estimator,
+        "kf_mean_window": kf_means["window"],
+        "km_mean_window": km_means["window"],
+        "kf_mean_inverse_variance": kf_means["inverse_variance"],
+        "km_mean_inverse_variance": km_means["inverse_variance"],
+        "kf_rotor_spread_bound": spread_bound(np.asarray(kf_means["mean"]), filt.thrust_coeff_covariance()),
         # Relative std of the km combination each input channel measures (km_evidence.py): yaw -> the mean km.
         "km_combination_std": combination_std(filt.drag_coeff_rel_covariance(), filt.vehicle),
-        "kf_converged_from_s": kf_start,
-        "km_converged_from_s": km_start,
-        "kf_mean_from_s": kf_mean_from,
-        "km_mean_from_s": km_mean_from,
+        "kf_converged_from_s": kf_means["crossing"],
+        "km_converged_from_s": km_means["crossing"],
+        "kf_mean_from_s": kf_means["from"],
+        "km_mean_from_s": km_means["from"],
         "mean_window": window,
         "converged": {"kf": kf_conv, "km": km_conv},
         "model_mismatch": bool(int(final["health"]) & cfilter.HEALTH["MODEL_MISMATCH"]),
@@ -311,10 +318,13 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "warnings": replay_warnings(rates, gyro_accepted, gyro_pushes,
                                     None if options.skip_repeats else repeated_gyro_share(log, rows)),
         "definitions": {
-            "kf_mean": "mean of the estimate from the first sample with rel std < converged_rel_std to the end; "
-                       "second half of the replay if never below; mean_window at-least-half: from the midpoint "
-                       "when that is earlier (replay/averaging.py)",
-            "kf_mean_from_s": "log time the kf_mean window starts (km_mean_from_s: km_mean's)",
+            "kf_mean": "kf_mean_window or kf_mean_inverse_variance, as mean_estimator says (km_mean the same)",
+            "kf_mean_window": "mean of the estimate from the first sample with rel std < converged_rel_std to the "
+                              "end; second half of the replay if never below; mean_window at-least-half: from the "
+                              "midpoint when that is earlier (replay/averaging.py)",
+            "kf_mean_inverse_variance": "mean of every recorded estimate of the replay weighted by 1/std^2 "
+                                        "(replay/averaging.py)",
+            "kf_mean_from_s": "log time the kf_mean_window window starts (km_mean_from_s: km_mean_window's)",
             "kf_converged_from_s": "log time kf's rel std first fell below converged_rel_std (null if never)",
             "kf_rotor_spread_bound": "each rotor's std of kf_i / mean(kf) - 1 from the final covariance, and the "
                                      "probability that every rotor is within the tolerance of the run mean if the "
@@ -322,7 +332,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
             "km_combination_std": "relative std of the km combination each input channel (yaw, collective, roll, "
                                   "pitch) measures, from the final covariance: yaw -> the mean km (km_evidence.py)",
             "finite": "every recorded kf, km, their stds, gyro bias and body rate is finite",
-            "torque_scale_mean": "mean of the thrust-torque scale from the latest rotor's kf_mean window start to "
+            "torque_scale_mean": "mean of the thrust-torque scale from the latest rotor's kf_mean_window start to "
                                  "the end; 1 without the scale state",
             "converged": "the filter's converged flag at the end of the replay (none while model_mismatch)",
             "model_mismatch": "MODEL_MISMATCH health flag at the end: the innovations or the coefficients' drift "
