@@ -166,3 +166,33 @@ def test_run_names_drop_any_date_token_not_one_date():
     assert run_name("flight_20240101.csv") == "flight"
     assert run_name("run_12345678_a.csv") == "run_12345678_a"  # not a date
     assert run_name("flight.csv") == "flight"
+
+
+def test_the_window_mean_figures_beside_the_chosen_estimator():
+    """Each run keeps its replay's window mean (kf_mean_window) beside kf_mean: the mode summary carries the
+    fleet kf, CV, worst rotor and runs within 5 % of both, and render prints the window's when kf_mean is not it."""
+    base = dict(km=1e-10, km_converged=False, accel_bias=None, finite=True, p_every_rotor_within_5pct=0.9,
+                km_worst_rotor_rel_std=0.2, km_mean_rel_std=0.1, esc_delay_s=0.0, km_converged_rotors=0, rotor_count=4)
+    runs = {"square_a": dict(base, kf_over_reference=1.0, rotor_spread=0.02, kf_window_over_reference=1.1,
+                             rotor_spread_window=0.08),
+            "random_b": dict(base, kf_over_reference=0.9, rotor_spread=0.03, kf_window_over_reference=0.9,
+                             rotor_spread_window=0.04)}
+    s = real_data.mode_summary(runs)
+    assert s["kf_fleet_over_reference"] == pytest.approx(0.95) and s["runs_every_rotor_within_5pct"] == 2
+    w = s["window_mean"]
+    assert w["kf_fleet_over_reference"] == pytest.approx(1.0) and w["worst_rotor_spread"] == 0.08
+    assert w["runs_every_rotor_within_5pct"] == 1 and w["kf_run_cv"] == pytest.approx(0.2 / 2 ** 0.5 / 1.0)
+    result = {"reference_kf": 3.72e-8, "mean_estimator": "inverse-variance",
+              "modes": [{"name": "gyro", "what": "gyro only", "runs": runs, "summary": s}]}
+    assert "window mean (kf_mean_window) instead" in real_data.render(result)
+    assert "gyro 1.000, 14%, 8%, 1/2" in real_data.render(result)
+    assert "kf_mean_window" not in real_data.render(dict(result, mean_estimator="window"))
+    # a run summarised from a replay: both estimators' figures
+    replayed = {"kf_mean": [1.0, 1.0, 1.0, 1.0], "kf_mean_window": [1.2, 1.0, 1.0, 0.8], "km_mean": [1.0] * 4,
+                "km_std": [0.1] * 4, "converged": {"kf": [True] * 4, "km": [False] * 4},
+                "config": {"drag_coeff_nominal": [1.0] * 4}, "km_combination_std": {"yaw": 0.1},
+                "model_mismatch": False, "accel_bias": None, "torque_scale": 1.0, "esc_delay_s": 0.0, "finite": True,
+                "kf_rotor_spread_bound": {"p_every_rotor_within": 0.5, "chi_squared": 1.0}}
+    r = real_data.run_summary(replayed, 2.0)
+    assert r["kf_over_reference"] == 0.5 and r["rotor_spread"] == 0.0
+    assert r["kf_window_over_reference"] == pytest.approx(0.5) and r["rotor_spread_window"] == pytest.approx(0.2)

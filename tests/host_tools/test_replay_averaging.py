@@ -1,4 +1,4 @@
-"""The window kf_mean/km_mean average over (replay/averaging.py): by default from the first sample whose std
+"""The window kf_mean_window/km_mean_window average over (replay/averaging.py): by default from the first sample whose std
 is under the convergence bar; with --mean-window at-least-half never later than the replay's midpoint, so a
 bar crossed just before the log's end does not leave the mean of its last few samples. The replay reports
 where each window starts (kf_mean_from_s, km_mean_from_s) beside the crossing (kf_converged_from_s)."""
@@ -72,10 +72,10 @@ def test_replay_reports_the_window_when_a_rotor_crosses_the_bar_near_the_end(cfi
     assert h["kf_converged_from_s"] == s["kf_converged_from_s"]
     # default: from the crossing (the last ~10 % of the samples), and it says so
     start = int(np.searchsorted(t, crossing))
-    assert s["kf_mean"][0] == pytest.approx(float(np.mean(kf[start:, 0])), rel=1e-12)
+    assert s["kf_mean_window"][0] == pytest.approx(float(np.mean(kf[start:, 0])), rel=1e-12)
     assert s["kf_mean_from_s"][0] == crossing and s["mean_window"] == "from-crossing"
     # at-least-half: the second half's mean
-    assert h["kf_mean"][0] == pytest.approx(float(np.mean(kf[n // 2:, 0])), rel=1e-12)
+    assert h["kf_mean_window"][0] == pytest.approx(float(np.mean(kf[n // 2:, 0])), rel=1e-12)
     assert h["kf_mean_from_s"][0] == pytest.approx(t[n // 2]) and h["mean_window"] == "at-least-half"
     for k in range(4):  # every window by the midpoint, at the crossing when that is earlier
         assert h["kf_mean_from_s"][k] <= t[n // 2] and h["km_mean_from_s"][k] <= t[n // 2]

@@ -56,8 +56,8 @@ def test_coefficient_means_reports_both_estimators_and_picks_one():
 def test_replay_reports_both_means_and_the_chosen_one(cfilter_available):
     log = synthetic_log(duration=6.0)
     vehicle = parse_vehicle(VEHICLE)
-    window = replay(log, vehicle, ReplayOptions(progress=False)).summary
-    result = replay(log, vehicle, ReplayOptions(progress=False, mean_estimator="inverse-variance"))
+    window = replay(log, vehicle, ReplayOptions(progress=False, mean_estimator="window")).summary
+    result = replay(log, vehicle, ReplayOptions(progress=False))  # the default: inverse-variance
     weighted, series = result.summary, result.series
     assert window["mean_estimator"] == "window" and weighted["mean_estimator"] == "inverse-variance"
     for name in ("kf", "km"):
@@ -83,9 +83,11 @@ def test_cli_mean_estimator_reaches_the_json(cfilter_available, tmp_path):
     write_flightlog(log_path, synthetic_log(duration=3.0))
     write_vehicle(tmp_path / "synthetic.vehicle.json", parse_vehicle(VEHICLE))
     out = tmp_path / "out.json"
-    assert _run_cli(["--log", str(log_path), "--json", str(out), "--no-progress", "--mean-estimator",
-                     "inverse-variance"]) == 0
+    assert _run_cli(["--log", str(log_path), "--json", str(out), "--no-progress"]) == 0
     summary = json.loads(out.read_text())
-    assert summary["mean_estimator"] == "inverse-variance"
+    assert summary["mean_estimator"] == "inverse-variance"  # the default
     assert summary["kf_mean"] == summary["kf_mean_inverse_variance"] != summary["kf_mean_window"]
     assert "1/std^2" in summary["definitions"]["kf_mean_inverse_variance"]
+    assert _run_cli(["--log", str(log_path), "--json", str(out), "--no-progress", "--mean-estimator", "window"]) == 0
+    summary = json.loads(out.read_text())
+    assert summary["mean_estimator"] == "window" and summary["kf_mean"] == summary["kf_mean_window"]

@@ -26,9 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mean-window", choices=("from-crossing", "at-least-half"), default="from-crossing",
                         help="the window of every replay's kf_mean/km_mean (propid replay --mean-window; default "
                              "from-crossing)")
-    parser.add_argument("--mean-estimator", choices=("window", "inverse-variance"), default="window",
+    parser.add_argument("--mean-estimator", choices=("window", "inverse-variance"), default="inverse-variance",
                         help="what every replay's kf_mean/km_mean reports (propid replay --mean-estimator; default "
-                             "window)")
+                             "inverse-variance); the window mean's figures are printed beside it")
     parser.add_argument("--skip-missing", action="store_true",
                         help="exit 0 with a note when DIR does not exist (for make real-data without ../shared)")
     parser.add_argument("--thrust-evidence", action="store_true",

@@ -74,13 +74,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="rows: every row is one gyro and one rotor sample; events: a row carries whichever "
                              "stream is non-empty (ULog/tlog conversions); auto (default) decides from the log")
     parser.add_argument("--mean-window", choices=("from-crossing", "at-least-half"), default="from-crossing",
-                        help="the window kf_mean/km_mean average over: from the first sample whose std is under the "
+                        help="the window kf_mean_window/km_mean_window average over: from the first sample whose std is under the "
                              "convergence bar (default), or from it or the replay's midpoint, whichever is earlier "
                              "(every mean over at least half of the samples; evaluated, docs/real-data.md)")
-    parser.add_argument("--mean-estimator", choices=("window", "inverse-variance"), default="window",
-                        help="what kf_mean/km_mean report: the window's plain mean (default), or every recorded "
-                             "estimate weighted by 1/std^2 (no threshold); both are always in the JSON as "
-                             "kf_mean_window and kf_mean_inverse_variance (docs/real-data.md)")
+    parser.add_argument("--mean-estimator", choices=("window", "inverse-variance"), default="inverse-variance",
+                        help="what kf_mean/km_mean report: every recorded estimate weighted by 1/std^2 (default; no "
+                             "threshold), or the plain mean over --mean-window's window; both are always in the JSON "
+                             "as kf_mean_inverse_variance and kf_mean_window (docs/real-data.md)")
     parser.add_argument("--skip-repeats", action="store_true",
                         help="treat a row whose gyro (or rotor speeds) exactly repeat the previous row as no new "
                              "sample (logs resampled by sample-and-hold)")
@@ -293,7 +293,7 @@ def check_arguments(args: argparse.Namespace, log_paths: list[Path]) -> None:
 
 
 def rotor_table(summary: dict) -> str:
-    """Per-rotor kf and km: mean over the converged part +- the final 1-sigma, and flags."""
+    """Per-rotor kf and km: kf_mean/km_mean +- the final 1-sigma, and flags."""
     unit_inertia = summary.get("mode") == "unit_inertia"
     kf_unit = "kf/J" if unit_inertia else "kf [N/(rad/s)^2]"
     km_unit = "km/Jzz" if unit_inertia else "km [N m/(rad/s)^2]"
@@ -313,7 +313,9 @@ def report(summary: dict, out) -> None:
     print(f"{name}: {summary['duration_s']:.1f} s, {summary['rows_replayed']} rows ({summary['segment']}), "
           f"gyro {summary['gyro_rate_hz']:.0f} Hz, rotor speeds {summary['rotor_rate_hz']:.0f} Hz, "
           f"ESC delay {round(1e3 * summary['esc_delay_s'])} ms", file=out)  # an int: never "-0 ms"
-    print("  kf, km: mean over the converged part +- final 1 sigma", file=out)
+    weighted = summary.get("mean_estimator") == "inverse-variance"
+    print("  kf, km: " + ("every estimate weighted by 1/std^2" if weighted else "mean over the converged part")
+          + " +- final 1 sigma", file=out)
     print(rotor_table(summary), file=out)
     combination = summary.get("km_combination_std")
     if combination:  # what the flight's yaw excitation determined (docs/real-data.md "km: what the information allows")

@@ -68,11 +68,11 @@ class ReplayOptions:
     # The first stage's weak-instrument guard: least F statistic of a rotor's fit (0: none).
     command_min_f: float = 0.0
     record_every: int = 1  # keep every k-th estimate for the time series
-    # The window kf_mean/km_mean average over (replay/averaging.py): "from-crossing" or "at-least-half".
+    # The window kf_mean_window/km_mean_window average over (replay/averaging.py): "from-crossing" or "at-least-half".
     mean_window: str = "from-crossing"
-    # What kf_mean/km_mean report (replay/averaging.py): "window" (the window's plain mean) or
-    # "inverse-variance" (the whole series weighted by 1/std^2); both are always in the summary.
-    mean_estimator: str = "window"
+    # What kf_mean/km_mean report (replay/averaging.py): "inverse-variance" (the whole series weighted by
+    # 1/std^2) or "window" (the window's plain mean); both are always in the summary.
+    mean_estimator: str = "inverse-variance"
     progress: bool = True
 
 
