@@ -38,36 +38,79 @@ void sitl_honesty_init(sitl_honesty_t *h, const propid_filter_t *filter, const d
     h->first_all_claimed_s = -1.0;
 }
 
-/* e^T P^-1 e by Cholesky (double); reads the lower triangle of P only;
- * returns -1 when P is not positive definite. The divisions by the diagonal
+/* e^T P^-1 e by Cholesky (double); P's lower triangle by columns,
+ * p_col[j][i] = P[i][j] for i >= j, zeros elsewhere (add_nees); returns -1 when
+ * P is not positive definite. The divisions by the diagonal
  * are multiplications by its reciprocals (rounding-level difference). Both
  * passes go column by column: every element takes the same operations in the
- * same order as row by row, but the elements of one column do not wait for
- * each other (independent chains instead of one through the whole row). */
+ * same order as row by row (its sum over k in k order), but the elements of one
+ * column do not wait for each other. The factor is kept transposed, lt[k][i] =
+ * L[i][k], and the factorisation takes a column's elements four at a time (GCC
+ * and Clang vector extensions): the lanes above the diagonal and beyond n hold
+ * values nothing reads (each lane its own chain). */
+#if defined(__GNUC__)
+typedef double honesty_v4d __attribute__((vector_size(32)));
+#define HONESTY_LANES 4
+_Static_assert(HONESTY_MAX_DOF % HONESTY_LANES == 0, "whole vectors per column");
+#endif
+
 static inline __attribute__((always_inline)) double
-nees_of_inline(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const double *e, int n)
+nees_of_inline(const double p_col[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const double *e, int n)
 {
-    double l[HONESTY_MAX_DOF][HONESTY_MAX_DOF];
     double inv_diag[HONESTY_MAX_DOF];
     double y[HONESTY_MAX_DOF];
+#if defined(__GNUC__)
+    honesty_v4d lt[HONESTY_MAX_DOF][HONESTY_MAX_DOF / HONESTY_LANES];
+    const int vectors = (n + HONESTY_LANES - 1) / HONESTY_LANES;
     for (int j = 0; j < n; j++) {
-        double d = p[j][j];
-        for (int k = 0; k < j; k++) {
-            d -= l[j][k] * l[j][k];
+        /* s[j]: the diagonal's sum, s[i > j]: the column's. */
+        const int first = j / HONESTY_LANES;
+        honesty_v4d s[HONESTY_MAX_DOF / HONESTY_LANES];
+        for (int v = first; v < vectors; v++) {
+            memcpy(&s[v], &p_col[j][HONESTY_LANES * v], sizeof(s[v]));
         }
+        for (int k = 0; k < j; k++) {
+            const double l_jk = lt[k][first][j % HONESTY_LANES];
+            for (int v = first; v < vectors; v++) {
+                s[v] -= lt[k][v] * l_jk;
+            }
+        }
+        const double d = s[first][j % HONESTY_LANES];
         if (!(d > 0.0)) {
             return -1.0;
         }
-        l[j][j] = sqrt(d);
-        inv_diag[j] = 1.0 / l[j][j];
-        for (int i = j + 1; i < n; i++) {
-            double s = p[i][j];
-            for (int k = 0; k < j; k++) {
-                s -= l[i][k] * l[j][k];
+        const double l_jj = sqrt(d);
+        inv_diag[j] = 1.0 / l_jj;
+        for (int v = first; v < vectors; v++) {
+            lt[j][v] = s[v] * inv_diag[j];
+        }
+        lt[j][first][j % HONESTY_LANES] = l_jj;
+    }
+#define HONESTY_LT(k, i) lt[k][(i) / HONESTY_LANES][(i) % HONESTY_LANES]
+#else
+    double lt[HONESTY_MAX_DOF][HONESTY_MAX_DOF];
+    for (int j = 0; j < n; j++) {
+        double s[HONESTY_MAX_DOF];
+        for (int i = j; i < n; i++) {
+            s[i] = p_col[j][i];
+        }
+        for (int k = 0; k < j; k++) {
+            const double l_jk = lt[k][j];
+            for (int i = j; i < n; i++) {
+                s[i] -= lt[k][i] * l_jk;
             }
-            l[i][j] = s * inv_diag[j];
+        }
+        if (!(s[j] > 0.0)) {
+            return -1.0;
+        }
+        lt[j][j] = sqrt(s[j]);
+        inv_diag[j] = 1.0 / lt[j][j];
+        for (int i = j + 1; i < n; i++) {
+            lt[j][i] = s[i] * inv_diag[j];
         }
     }
+#define HONESTY_LT(k, i) lt[k][i]
+#endif
     /* Forward substitution: y[i] = (e[i] - sum_k<i l[i][k] y[k]) / l[i][i], each
      * sum taken in k order as y[k] becomes known. */
     double rest[HONESTY_MAX_DOF];
@@ -79,23 +122,24 @@ nees_of_inline(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const double *e
         y[k] = rest[k] * inv_diag[k];
         nees += y[k] * y[k];
         for (int i = k + 1; i < n; i++) {
-            rest[i] -= l[i][k] * y[k];
+            rest[i] -= HONESTY_LT(k, i) * y[k];
         }
     }
+#undef HONESTY_LT
     return nees;
 }
 
 /* The quad's sizes (11 states, 12 with the torque scale) as constants, so the
  * loops above compile for them (the same operations in the same order). */
-static double nees_of(const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const double *e, int n)
+static double nees_of(const double p_col[HONESTY_MAX_DOF][HONESTY_MAX_DOF], const double *e, int n)
 {
     switch (n) {
     case 11:
-        return nees_of_inline(p, e, 11);
+        return nees_of_inline(p_col, e, 11);
     case 12:
-        return nees_of_inline(p, e, 12);
+        return nees_of_inline(p_col, e, 12);
     default:
-        return nees_of_inline(p, e, n);
+        return nees_of_inline(p_col, e, n);
     }
 }
 
@@ -280,7 +324,7 @@ int sitl_honesty_dump_close(sitl_honesty_t *h)
 }
 
 static void dump_sample(sitl_honesty_t *h, double nees, const double *e,
-                        const double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF], int n)
+                        const double p_col[HONESTY_MAX_DOF][HONESTY_MAX_DOF], int n)
 {
     int failed = fprintf(h->dump, "%.6f,%.9g", h->dump_time_s, nees) < 0;
     for (int i = 0; i < n; i++) {
@@ -288,7 +332,7 @@ static void dump_sample(sitl_honesty_t *h, double nees, const double *e,
     }
     for (int i = 0; i < n; i++) {
         for (int j = 0; j <= i; j++) {
-            failed |= fprintf(h->dump, ",%.9g", p[i][j]) < 0;
+            failed |= fprintf(h->dump, ",%.9g", p_col[j][i]) < 0;
         }
     }
     failed |= fputc('\n', h->dump) == EOF;
@@ -313,19 +357,19 @@ static void add_nees(sitl_honesty_t *h, const propid_filter_t *filter, const dou
         columns[a - n_rotor] = (uint8_t)index[a];
     }
     sitl_honesty_coeff_per_rotor(filter, columns, n - n_rotor, &core);
-    double p[HONESTY_MAX_DOF][HONESTY_MAX_DOF];
+    double p_col[HONESTY_MAX_DOF][HONESTY_MAX_DOF] = {{0.0}}; /* nees_of's layout */
     double e[HONESTY_MAX_DOF];
     for (int i = 0; i < n; i++) {
         e[i] = (double)core.state[index[i]] - truth[i];
-        for (int j = 0; j <= i; j++) { /* nees_of reads the lower triangle */
+        for (int j = 0; j <= i; j++) {
             const int a = index[i] < index[j] ? index[i] : index[j];
             const int b = index[i] < index[j] ? index[j] : index[i];
-            p[i][j] = (double)core.cov[propid_cov_index(a, b)]; /* the filter keeps the upper triangle */
+            p_col[j][i] = (double)core.cov[propid_cov_index(a, b)]; /* the filter keeps the upper triangle */
         }
     }
-    const double nees = nees_of(p, e, n);
+    const double nees = nees_of(p_col, e, n);
     if (h->dump != NULL) {
-        dump_sample(h, nees, e, p, n);
+        dump_sample(h, nees, e, p_col, n);
     }
     if (nees < 0.0 || !isfinite(nees)) {
         return;

@@ -31,12 +31,14 @@ void sitl_request_stop(void)
     stop_requested = 1;
 }
 
-/* A periodic event in integer nanoseconds: time_k = phase + k * period. */
+/* A periodic event in integer nanoseconds: time_k = phase + k * period; next_ns is
+ * instant k, after_ns instant k + 1 (the loop asks for it at every pass). */
 typedef struct {
     double phase_ns;
     double period_ns;
     uint64_t k;
     int64_t next_ns;
+    int64_t after_ns;
 } schedule_t;
 
 /* llround without the libm call (three per loop pass): for 0 <= x < 2^52 the
@@ -51,24 +53,26 @@ static int64_t round_ns(double x)
     return whole + (x - (double)whole >= 0.5);
 }
 
-static void schedule_init(schedule_t *s, double phase_s, double rate_hz)
-{
-    s->phase_ns = phase_s * 1e9;
-    s->period_ns = 1e9 / rate_hz;
-    s->k = 0;
-    s->next_ns = round_ns(s->phase_ns);
-}
-
 /* The schedule's k-th instant [ns]. */
 static int64_t schedule_instant(const schedule_t *s, uint64_t k)
 {
     return round_ns(s->phase_ns + (double)k * s->period_ns);
 }
 
+static void schedule_init(schedule_t *s, double phase_s, double rate_hz)
+{
+    s->phase_ns = phase_s * 1e9;
+    s->period_ns = 1e9 / rate_hz;
+    s->k = 0;
+    s->next_ns = round_ns(s->phase_ns);
+    s->after_ns = schedule_instant(s, 1);
+}
+
 static void schedule_advance(schedule_t *s)
 {
     s->k++;
-    s->next_ns = schedule_instant(s, s->k);
+    s->next_ns = s->after_ns;
+    s->after_ns = schedule_instant(s, s->k + 1);
 }
 
 static double wall_seconds(void)
@@ -756,7 +760,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
                 sitl_control_output_t cmd;
                 sitl_controller_update(&f->controller, &vs, &ref, &cmd);
                 sitl_allocation_result_t alloc;
-                if (sitl_allocation_solve(&f->allocation, cmd.thrust, cmd.moment, &alloc) == 0) {
+                if (sitl_allocation_solve_speeds(&f->allocation, cmd.thrust, cmd.moment, &alloc) == 0) {
                     (void)sitl_allocation_add_null_dither(&f->allocation, o->null_dither, t, &alloc);
                     memcpy(f->command, alloc.rotor_speed, (size_t)n * sizeof(double));
                 }
@@ -832,7 +836,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
          * cross (imu_instant_crossable). */
         int64_t next = physics.next_ns;
         if (imu.next_ns < next && (!imu_instant_crossable(f, o, imu.next_ns) ||
-                                   schedule_instant(&imu, imu.k + 1) < next)) {
+                                   imu.after_ns < next)) {
             next = imu.next_ns; /* or a second sample inside the step: split at the first */
         }
         if (control.next_ns < next) {
@@ -848,7 +852,7 @@ int sitl_run(const sitl_options_t *o, sitl_result_t *r, FILE *out)
         if (esc.next_ns < next &&
             (o->esc_split_steps ||
              (double)esc.next_ns * 1e-9 - esc_read_delay_s > (double)now_ns * 1e-9 ||
-             schedule_instant(&esc, esc.k + 1) < next)) {
+             esc.after_ns < next)) {
             next = esc.next_ns;
         }
         if (step_end_pending) {

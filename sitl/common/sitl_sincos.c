@@ -63,32 +63,47 @@ void sitl_sincos(double x, double *s, double *c)
 }
 
 /* Four angles at once (see sitl_sincos.h): each lane takes sitl_sincos's
- * operations in its order, so every value is the same bit for bit; the
- * reduction's remainder and both polynomials run as one 4-wide vector (GCC and
- * Clang vector extensions: AVX registers in the x86-64-v3 build, SSE2 pairs in
- * the portable one; with -ffp-contract=off no multiply-add is fused). */
+ * operations in its order, so every value is the same bit for bit; the range
+ * test, the reduction, both polynomials and the quadrant's swap and signs run as
+ * 4-wide vectors (GCC and Clang vector extensions: AVX registers in the
+ * x86-64-v3 build, SSE2 pairs in the portable one; with -ffp-contract=off no
+ * multiply-add is fused). The quadrant's integer fits 32 bits in the range
+ * (|k| < 2^20), so the truncation to it is the same as to 64 bits. */
 #if defined(__GNUC__)
 typedef double sitl_v4d __attribute__((vector_size(32)));
+typedef int64_t sitl_v4l __attribute__((vector_size(32)));
+typedef int32_t sitl_v4i __attribute__((vector_size(16)));
+
+/* The lanes of a (mask all ones) or of b (mask zero), bit for bit. */
+static inline sitl_v4d select_lanes(sitl_v4l mask, sitl_v4d a, sitl_v4d b)
+{
+    return (sitl_v4d)(((sitl_v4l)a & mask) | ((sitl_v4l)b & ~mask));
+}
 #endif
 
 void sitl_sincos4(const double x[4], double s[4], double c[4])
 {
-    for (int i = 0; i < 4; i++) {
-        if (!(fabs(x[i]) <= reduction_limit)) {
-            for (int j = 0; j < 4; j++) {
-                sitl_sincos(x[j], &s[j], &c[j]);
-            }
-            return;
-        }
-    }
 #if defined(__GNUC__)
-    int64_t k[4];
-    sitl_v4d kd, xv;
+    sitl_v4d xv;
     for (int i = 0; i < 4; i++) {
-        k[i] = (int64_t)(x[i] * two_over_pi + (x[i] >= 0.0 ? 0.5 : -0.5));
-        kd[i] = (double)k[i];
         xv[i] = x[i];
     }
+    const sitl_v4d limit = {reduction_limit, reduction_limit, reduction_limit, reduction_limit};
+    const sitl_v4l sign_bit = {INT64_MIN, INT64_MIN, INT64_MIN, INT64_MIN};
+    const sitl_v4d magnitude = (sitl_v4d)((sitl_v4l)xv & ~sign_bit); /* fabs */
+    const sitl_v4l in_range = magnitude <= limit; /* false for NaN */
+    if (!(in_range[0] & in_range[1] & in_range[2] & in_range[3])) {
+        for (int j = 0; j < 4; j++) {
+            sitl_sincos(x[j], &s[j], &c[j]);
+        }
+        return;
+    }
+    const sitl_v4d zero = {0.0, 0.0, 0.0, 0.0};
+    const sitl_v4d plus_half = {0.5, 0.5, 0.5, 0.5}, minus_half = {-0.5, -0.5, -0.5, -0.5};
+    const sitl_v4d half = select_lanes(xv >= zero, plus_half, minus_half);
+    const sitl_v4i k32 = __builtin_convertvector(xv * two_over_pi + half, sitl_v4i);
+    const sitl_v4d kd = __builtin_convertvector(k32, sitl_v4d);
+    const sitl_v4l k = __builtin_convertvector(k32, sitl_v4l);
     const sitl_v4d r = ((xv - kd * half_pi_1) - kd * half_pi_2) - kd * half_pi_3;
     const sitl_v4d r2 = r * r;
     const sitl_v4d r4 = r2 * r2, r8 = r4 * r4;
@@ -102,14 +117,19 @@ void sitl_sincos4(const double x[4], double s[4], double c[4])
                                     r4 * (1.0 / 20922789888000.0));
     const sitl_v4d sin_r = r + (r * r2) * sin_tail;
     const sitl_v4d cos_r = (1.0 - 0.5 * r2) + r4 * cos_tail;
+    /* The quadrant as in sitl_sincos: odd swaps sine and cosine; the sine is
+     * negated in quadrants 2 and 3, the cosine in 1 and 2 (negation is exact: the
+     * sign bit flipped). */
+    const sitl_v4l odd = (k & 1) != 0;
+    const sitl_v4l sin_negative = (k & 2) != 0;
+    const sitl_v4l cos_negative = ((k + 1) & 2) != 0;
+    const sitl_v4d sv = select_lanes(odd, cos_r, sin_r);
+    const sitl_v4d cv = select_lanes(odd, sin_r, cos_r);
+    const sitl_v4d so = (sitl_v4d)((sitl_v4l)sv ^ (sin_negative & sign_bit));
+    const sitl_v4d co = (sitl_v4d)((sitl_v4l)cv ^ (cos_negative & sign_bit));
     for (int i = 0; i < 4; i++) {
-        /* The quadrant as in sitl_sincos: odd swaps sine and cosine; the sine is
-         * negated in quadrants 2 and 3, the cosine in 1 and 2 (negation is exact). */
-        const int64_t q = k[i] & 3;
-        const double sv = (q & 1) ? cos_r[i] : sin_r[i];
-        const double cv = (q & 1) ? sin_r[i] : cos_r[i];
-        s[i] = (q & 2) ? -sv : sv;
-        c[i] = ((q + 1) & 2) ? -cv : cv;
+        s[i] = so[i];
+        c[i] = co[i];
     }
 #else
     for (int i = 0; i < 4; i++) {

@@ -192,8 +192,10 @@ static int inside(const double *u, int n, double lo, double hi)
     return 1;
 }
 
-int sitl_allocation_solve(const sitl_allocation_t *alloc, double thrust, const double moment[3],
-                          sitl_allocation_result_t *result)
+/* The body of both solves; with_achieved a constant where it is inlined. */
+static inline __attribute__((always_inline)) int
+solve(const sitl_allocation_t *alloc, double thrust, const double moment[3],
+      sitl_allocation_result_t *result, const int with_achieved)
 {
     if (alloc == NULL || moment == NULL || result == NULL || !alloc->ready || !isfinite(thrust) ||
         !isfinite(moment[0]) || !isfinite(moment[1]) || !isfinite(moment[2])) {
@@ -280,6 +282,9 @@ int sitl_allocation_solve(const sitl_allocation_t *alloc, double thrust, const d
         u[i] = c;
         result->rotor_speed[i] = sqrt(c);
     }
+    if (!with_achieved) {
+        return 0;
+    }
     for (int k = 0; k < 4; k++) {
         double s = 0.0;
         for (int i = 0; i < n; i++) {
@@ -288,6 +293,18 @@ int sitl_allocation_solve(const sitl_allocation_t *alloc, double thrust, const d
         result->achieved[k] = s;
     }
     return 0;
+}
+
+int sitl_allocation_solve(const sitl_allocation_t *alloc, double thrust, const double moment[3],
+                          sitl_allocation_result_t *result)
+{
+    return solve(alloc, thrust, moment, result, 1);
+}
+
+int sitl_allocation_solve_speeds(const sitl_allocation_t *alloc, double thrust,
+                                 const double moment[3], sitl_allocation_result_t *result)
+{
+    return solve(alloc, thrust, moment, result, 0);
 }
 
 int sitl_allocation_add_null_dither(const sitl_allocation_t *alloc, double fraction, double t,

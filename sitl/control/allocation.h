@@ -76,6 +76,11 @@ int sitl_allocation_set_coefficients(sitl_allocation_t *alloc, const double *thr
 int sitl_allocation_solve(const sitl_allocation_t *alloc, double thrust, const double moment[3],
                           sitl_allocation_result_t *result);
 
+/* sitl_allocation_solve without result->achieved (left 0): the flight loop reads the
+ * speeds only. Every other field the same bit for bit. */
+int sitl_allocation_solve_speeds(const sitl_allocation_t *alloc, double thrust,
+                                 const double moment[3], sitl_allocation_result_t *result);
+
 /* Null-space excitation for more than 4 rotors: adds to the commanded squared
  * speeds u the projection (I - A^+ A) d(t) of the dither
  *     d_i(t) = fraction * mean(u) * sin(2 pi (1.1 + 0.37 i) t + 1.3 i)   [Hz, rad]

@@ -200,7 +200,13 @@ void sitl_controller_update(const sitl_controller_t *ctl, const sitl_vehicle_sta
     /* Attitude errors. */
     mat3 rd_t_r, r_t_rd;
     sitl_mat3_transpose_mul(rd_t_r, rd, rot);
-    sitl_mat3_transpose_mul(r_t_rd, rot, rd);
+    /* R^T R_d = (R_d^T R)^T: each element the same products (a b = b a exactly) summed in
+     * the same order, so the transpose is that product bit for bit. */
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++) {
+            r_t_rd[i][j] = rd_t_r[j][i];
+        }
+    }
     mat3 skew;
     for (int i = 0; i < 3; i++) {
         for (int j = 0; j < 3; j++) {

@@ -57,6 +57,8 @@ void sitl_imu_init(sitl_imu_t *imu, const sitl_imu_params_t *params, uint64_t bi
     }
     sitl_rng_init(&imu->gyro_rng, noise_seed, SITL_RNG_GYRO);
     sitl_rng_init(&imu->accel_rng, noise_seed, SITL_RNG_ACCEL);
+    imu->gyro_draws_used = SITL_IMU_DRAWS_AHEAD;
+    imu->accel_draws_used = SITL_IMU_DRAWS_AHEAD;
     sitl_effects_gyro_matrix(effects, imu->gyro_matrix);
 }
 
@@ -71,6 +73,18 @@ static double finish(const sitl_inertial_params_t *p, double x)
     return x;
 }
 
+/* The stream's next six normals, refilling its buffer when spent. */
+static const double *next_six(sitl_rng_t *rng, double *draws, int *used)
+{
+    if (*used > SITL_IMU_DRAWS_AHEAD - 6) {
+        sitl_rng_normals(rng, draws, SITL_IMU_DRAWS_AHEAD);
+        *used = 0;
+    }
+    const double *six = draws + *used;
+    *used += 6;
+    return six;
+}
+
 void sitl_imu_sample(sitl_imu_t *imu, const double true_rate[3],
                      const double specific_force[3], double dt, double gyro_out[3],
                      double accel_out[3])
@@ -82,11 +96,12 @@ void sitl_imu_sample(sitl_imu_t *imu, const double true_rate[3],
     double scaled[3];
     sitl_mat3_mul_vec(scaled, imu->gyro_matrix, true_rate);
     /* Draw order is fixed (per axis: noise, then walk) so runs stay reproducible;
-     * the six draws of each stream at once are the same values in that order. */
-    double gyro_draws[6], accel_draws[6];
-    sitl_rng_normals(&imu->gyro_rng, gyro_draws, 6);
+     * the six draws of each stream come from its buffer, the same values in that order
+     * as drawn one sample at a time. */
+    const double *gyro_draws = next_six(&imu->gyro_rng, imu->gyro_draws, &imu->gyro_draws_used);
+    const double *accel_draws = NULL;
     if (accel_out != NULL) {
-        sitl_rng_normals(&imu->accel_rng, accel_draws, 6);
+        accel_draws = next_six(&imu->accel_rng, imu->accel_draws, &imu->accel_draws_used);
     }
     for (int i = 0; i < 3; i++) {
         const double ng = gyro_draws[2 * i], wg = gyro_draws[2 * i + 1];

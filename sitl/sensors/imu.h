@@ -28,6 +28,9 @@ typedef struct {
     sitl_inertial_params_t accel;   /* m/s^2 units */
 } sitl_imu_params_t;
 
+/* 4 samples' six normals: 12 Box-Muller pairs, three 4-wide sincos calls. */
+#define SITL_IMU_DRAWS_AHEAD 24
+
 typedef struct {
     sitl_imu_params_t params;
     double gyro_sigma, accel_sigma; /* white-noise std per sample: density x sqrt(rate) */
@@ -36,6 +39,11 @@ typedef struct {
     double gyro_matrix[3][3];
     sitl_rng_t gyro_rng;
     sitl_rng_t accel_rng;
+    /* Each stream's normals drawn ahead, SITL_IMU_DRAWS_AHEAD at a time (whole groups of
+     * four Box-Muller pairs: no sincos lane idle), taken in their order; *_used: how many
+     * of the buffer are spent. */
+    double gyro_draws[SITL_IMU_DRAWS_AHEAD], accel_draws[SITL_IMU_DRAWS_AHEAD];
+    int gyro_draws_used, accel_draws_used;
 } sitl_imu_t;
 
 void sitl_imu_default_params(sitl_imu_params_t *params);

@@ -270,6 +270,55 @@ static void test_null_dither_keeps_the_wrench(void)
     CHECK(sitl_allocation_add_null_dither(&alloc, NAN, 0.0, &r) == -1, "NaN fraction accepted");
 }
 
+/* sitl_allocation_solve_speeds (the flight loop's) gives sitl_allocation_solve's speeds,
+ * saturation and yaw fraction bit for bit, with achieved left 0, in every saturation
+ * branch: inside, yaw cut, thrust moved, roll/pitch cut, nothing fits. */
+static void test_solve_speeds_same_as_solve(void)
+{
+    const double hover = kf_nom * 1500.0 * 1500.0;
+    const double cases[][4] = {
+        {4.0 * hover, 2e-4, -1.5e-4, 3e-6},   /* inside */
+        {4.0 * hover, 1e-4, 0.0, 5e-3},       /* yaw cut */
+        {20.0 * hover, 3e-3, 0.0, 0.0},       /* thrust moved */
+        {4.0 * hover, 5e-2, -5e-2, 1e-3},     /* roll/pitch cut */
+        {-1.0, 0.0, 0.0, 0.0},                /* nothing fits */
+    };
+    for (int n = 4; n <= 8; n += 2) {
+        sitl_allocation_geometry_t g;
+        symmetric_geometry(&g, n, 0.3);
+        g.rotor_speed_min = 200.0;
+        sitl_allocation_t alloc;
+        sitl_allocation_init(&alloc, &g);
+        double kf[SITL_ALLOC_MAX_ROTORS], km[SITL_ALLOC_MAX_ROTORS];
+        spread(n, kf, km, n);
+        CHECK(sitl_allocation_set_coefficients(&alloc, kf, km) == 0, "coefficients n=%d", n);
+        unsigned saturations_seen = 0u;
+        for (size_t c = 0; c < sizeof(cases) / sizeof(cases[0]); c++) {
+            const double thrust = cases[c][0] * n / 4.0, moment[3] = {cases[c][1], cases[c][2], cases[c][3]};
+            sitl_allocation_result_t full, speeds;
+            memset(&speeds, 0xab, sizeof(speeds));
+            CHECK(sitl_allocation_solve(&alloc, thrust, moment, &full) == 0, "solve n=%d case %zu", n, c);
+            CHECK(sitl_allocation_solve_speeds(&alloc, thrust, moment, &speeds) == 0,
+                  "solve_speeds n=%d case %zu", n, c);
+            CHECK(memcmp(full.rotor_speed, speeds.rotor_speed, sizeof(full.rotor_speed)) == 0,
+                  "n=%d case %zu: speeds differ", n, c);
+            CHECK(full.saturation == speeds.saturation && full.yaw_fraction == speeds.yaw_fraction,
+                  "n=%d case %zu: saturation %u/%u, yaw fraction %g/%g", n, c, full.saturation,
+                  speeds.saturation, full.yaw_fraction, speeds.yaw_fraction);
+            for (int k = 0; k < 4; k++) {
+                CHECK(speeds.achieved[k] == 0.0, "n=%d case %zu: achieved %d not cleared", n, c, k);
+            }
+            saturations_seen |= 1u << (full.saturation & 7u);
+        }
+        CHECK(saturations_seen != 1u, "n=%d: no case saturated", n);
+    }
+    sitl_allocation_t not_ready;
+    memset(&not_ready, 0, sizeof(not_ready));
+    sitl_allocation_result_t r;
+    const double m[3] = {0.0, 0.0, 0.0};
+    CHECK(sitl_allocation_solve_speeds(&not_ready, 0.3, m, &r) == -1, "solve_speeds before coefficients");
+}
+
 int main(void)
 {
     test_round_trips();
@@ -277,6 +326,7 @@ int main(void)
     test_yaw_sacrificed_first();
     test_thrust_moved_before_roll_pitch();
     test_bad_input();
+    test_solve_speeds_same_as_solve();
     printf("test_allocation: %d failure(s)\n", failures);
     return failures == 0 ? 0 : 1;
 }

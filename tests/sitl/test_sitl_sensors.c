@@ -2,7 +2,8 @@
  * Sensor models: gyro noise level and bias draw, saturation and quantisation;
  * ESC telemetry latency, DShot quantisation bound, dropout rate;
  * reproducibility of every random stream from the seed; sitl_rng_normals
- * against sitl_rng_normal called as often (the IMU draws its normals so).
+ * against sitl_rng_normal called as often (the IMU draws its normals so), and the
+ * IMU's normals drawn ahead against the model drawing them one by one.
  */
 #include <math.h>
 #include <string.h>
@@ -193,6 +194,49 @@ static void test_normals_at_once_match_one_by_one(void)
     TEST_ASSERT_EQUAL_INT(0, mismatches);
 }
 
+/* The IMU takes its normals from per-stream buffers drawn ahead: its samples are those
+ * of the model with each normal drawn one by one at the sample (per axis: noise, then
+ * walk; the accelerometer's stream only when it is read), bit for bit, across refills. */
+static void test_imu_draws_ahead_match_one_by_one(void)
+{
+    sitl_imu_params_t p;
+    sitl_imu_default_params(&p);
+    p.gyro.range = p.gyro.resolution = 0.0;
+    p.accel.range = p.accel.resolution = 0.0;
+    sitl_effects_t fx;
+    sitl_effects_clear(&fx);
+    sitl_imu_t imu;
+    sitl_imu_init(&imu, &p, 3, 5, &fx);
+    double gyro_bias[3], accel_bias[3];
+    memcpy(gyro_bias, imu.gyro_bias, sizeof(gyro_bias));
+    memcpy(accel_bias, imu.accel_bias, sizeof(accel_bias));
+    sitl_rng_t gyro_rng, accel_rng;
+    sitl_rng_init(&gyro_rng, 5, SITL_RNG_GYRO);
+    sitl_rng_init(&accel_rng, 5, SITL_RNG_ACCEL);
+    const double dt = 1.0 / p.rate_hz, walk_g = p.gyro.bias_walk * sqrt(dt);
+    const double walk_a = p.accel.bias_walk * sqrt(dt);
+    int mismatches = 0;
+    for (int k = 0; k < 41; k++) {
+        const double w[3] = {0.1 * k, -0.2, 0.3}, f[3] = {0.5, -0.01 * k, 9.8};
+        const int with_accel = k % 3 != 1;
+        double g[3], a[3];
+        sitl_imu_sample(&imu, w, f, dt, g, with_accel ? a : NULL);
+        for (int i = 0; i < 3; i++) {
+            const double ng = sitl_rng_normal(&gyro_rng), wg = sitl_rng_normal(&gyro_rng);
+            gyro_bias[i] += walk_g * wg;
+            const double want = w[i] + gyro_bias[i] + imu.gyro_sigma * ng;
+            mismatches += memcmp(&want, &g[i], sizeof(want)) != 0;
+            if (with_accel) {
+                const double na = sitl_rng_normal(&accel_rng), wa = sitl_rng_normal(&accel_rng);
+                accel_bias[i] += walk_a * wa;
+                const double want_a = f[i] + accel_bias[i] + imu.accel_sigma * na;
+                mismatches += memcmp(&want_a, &a[i], sizeof(want_a)) != 0;
+            }
+        }
+    }
+    TEST_ASSERT_EQUAL_INT(0, mismatches);
+}
+
 int main(void)
 {
     UNITY_BEGIN();
@@ -203,5 +247,6 @@ int main(void)
     RUN_TEST(test_esc_dropout_rate);
     RUN_TEST(test_streams_are_reproducible_and_independent);
     RUN_TEST(test_normals_at_once_match_one_by_one);
+    RUN_TEST(test_imu_draws_ahead_match_one_by_one);
     return UNITY_END();
 }
