@@ -466,8 +466,11 @@ void sitl_honesty_add(sitl_honesty_t *h, double t, const propid_estimate_t *esti
     }
     /* NEES every HONESTY_NEES_EVERY control steps: a Cholesky per sample would
      * cost the simulator several per cent, and 50 Hz samples a 10 s flight
-     * 500 times. */
-    if (h->steps++ % HONESTY_NEES_EVERY == 0) {
+     * 500 times. A countdown, not steps % HONESTY_NEES_EVERY (the same steps:
+     * 0, 10, 20, ...): GCC had compiled that as a 64-bit division. */
+    h->steps++;
+    if (h->steps_to_nees-- == 0) {
+        h->steps_to_nees = HONESTY_NEES_EVERY - 1;
         h->dump_time_s = t;
         if (h->check_cov) {
             h->cov_checks++;

@@ -17,6 +17,7 @@
 
 typedef struct {
     long steps;                 /* control steps seen */
+    int steps_to_nees;          /* control steps before the next NEES sample */
     long nees_samples;          /* NEES samples (every 10th step) with a usable covariance block */
     long nees_in_bounds;        /* ... whose NEES lay in the 95 % chi-square interval */
     long nees_below_bounds;     /* ... below it (sigma too large: underconfident) */

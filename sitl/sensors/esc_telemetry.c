@@ -79,8 +79,12 @@ void sitl_esc_record(sitl_esc_telemetry_t *esc, double t, const double *speed)
 
 static const sitl_speed_sample_t *at(const sitl_esc_telemetry_t *esc, int age)
 {
-    /* age 0 = newest */
-    int idx = (esc->head - 1 - age + 2 * esc->capacity) % esc->capacity;
+    /* age 0 = newest; 0 <= age < size <= capacity, so one wrap at most (a compare,
+     * not an integer division: two or three per report). */
+    int idx = esc->head - 1 - age;
+    if (idx < 0) {
+        idx += esc->capacity;
+    }
     return &esc->history[idx];
 }
 
