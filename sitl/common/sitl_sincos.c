@@ -74,11 +74,11 @@ typedef double sitl_v4d __attribute__((vector_size(32)));
 typedef int64_t sitl_v4l __attribute__((vector_size(32)));
 typedef int32_t sitl_v4i __attribute__((vector_size(16)));
 
-/* The lanes of a (mask all ones) or of b (mask zero), bit for bit. */
-static inline sitl_v4d select_lanes(sitl_v4l mask, sitl_v4d a, sitl_v4d b)
-{
-    return (sitl_v4d)(((sitl_v4l)a & mask) | ((sitl_v4l)b & ~mask));
-}
+/* The lanes of a (mask all ones) or of b (mask zero), bit for bit. A macro: a
+ * function taking or returning a 32-byte vector changes the ABI without AVX
+ * (GCC's -Wpsabi, the portable and sanitizer builds). */
+#define SITL_SELECT_LANES(mask, a, b) \
+    ((sitl_v4d)(((sitl_v4l)(a) & (mask)) | ((sitl_v4l)(b) & ~(mask))))
 #endif
 
 void sitl_sincos4(const double x[4], double s[4], double c[4])
@@ -100,7 +100,7 @@ void sitl_sincos4(const double x[4], double s[4], double c[4])
     }
     const sitl_v4d zero = {0.0, 0.0, 0.0, 0.0};
     const sitl_v4d plus_half = {0.5, 0.5, 0.5, 0.5}, minus_half = {-0.5, -0.5, -0.5, -0.5};
-    const sitl_v4d half = select_lanes(xv >= zero, plus_half, minus_half);
+    const sitl_v4d half = SITL_SELECT_LANES(xv >= zero, plus_half, minus_half);
     const sitl_v4i k32 = __builtin_convertvector(xv * two_over_pi + half, sitl_v4i);
     const sitl_v4d kd = __builtin_convertvector(k32, sitl_v4d);
     const sitl_v4l k = __builtin_convertvector(k32, sitl_v4l);
@@ -123,8 +123,8 @@ void sitl_sincos4(const double x[4], double s[4], double c[4])
     const sitl_v4l odd = (k & 1) != 0;
     const sitl_v4l sin_negative = (k & 2) != 0;
     const sitl_v4l cos_negative = ((k + 1) & 2) != 0;
-    const sitl_v4d sv = select_lanes(odd, cos_r, sin_r);
-    const sitl_v4d cv = select_lanes(odd, sin_r, cos_r);
+    const sitl_v4d sv = SITL_SELECT_LANES(odd, cos_r, sin_r);
+    const sitl_v4d cv = SITL_SELECT_LANES(odd, sin_r, cos_r);
     const sitl_v4d so = (sitl_v4d)((sitl_v4l)sv ^ (sin_negative & sign_bit));
     const sitl_v4d co = (sitl_v4d)((sitl_v4l)cv ^ (cos_negative & sign_bit));
     for (int i = 0; i < 4; i++) {
