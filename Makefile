@@ -157,7 +157,7 @@ test: setup
 	stage cppcheck      $(MAKE) --no-print-directory cppcheck; \
 	echo; echo "=== make test: $$(( $$(date +%s) - start )) s"; \
 	if [ -n "$$failed" ]; then echo "=== FAILED:$$failed"; fi; \
-	$(PYTHON) $(REPO)/tests/count_results.py $$logs; \
+	$(PYTHON) $(REPO)/tests/count_results.py $$logs $$failed; \
 	if [ -n "$$failed" ]; then exit 1; fi
 
 # Benchmark, not a test (docs/performance.md). BENCH_SKIP=rotorpy,table1 leaves parts out.
