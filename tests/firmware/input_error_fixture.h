@@ -9,6 +9,8 @@
 #include "propid/propid.h"
 #include "unity.h"
 #include "../../firmware/src/propid_internal.h"
+#include "../../firmware/src/propid_model.h"
+#include "per_rotor_view.h"
 
 /* Symmetric vehicle of `rotors` rotors; `full_inertia` adds a product of
  * inertia so the general (non-diagonal) inverse is exercised. */
@@ -40,6 +42,41 @@ static inline void input_error_off_prior(propid_filter_t *filter, const propid_c
         const float end = 520.0f - 10.0f * (float)i;
         filter->core.input_speed_sq[i] = start * start;
         filter->core.rotor_speed_sq[i] = end * end;
+    }
+}
+
+
+/* One prediction step of dt of two filters with the same inputs: `plain`
+ * without the term under test, `with_term` with it. */
+static inline void input_error_predict_pair(propid_filter_t *plain, propid_filter_t *with_term, float dt)
+{
+    float rate_next[3];
+    float jac_dt[3][PROPID_JAC_ROW];
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(plain, dt, rate_next, jac_dt));
+    propid_predict_covariance(&plain->derived, &plain->core, dt, jac_dt);
+    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(with_term, dt, rate_next, jac_dt));
+    propid_predict_covariance(&with_term->derived, &with_term->core, dt, jac_dt);
+}
+
+/* B_ai = d(omega_dot_a)/d(u_i) densely: the model's coefficient columns at unit
+ * inputs times the per-rotor coefficients (the filter keeps the coefficient
+ * blocks in their bases, per_rotor_core maps them back). */
+static inline void input_error_dense_gain(const propid_filter_t *filter, float gain[3][PROPID_MAX_ROTORS])
+{
+    const uint8_t rotors = filter->config.rotor_count;
+    float rows[3][PROPID_MAX_STATES];
+    float unit_speed_sq[PROPID_MAX_ROTORS];
+    for (uint8_t i = 0; i < rotors; ++i) {
+        unit_speed_sq[i] = 1.0f;
+    }
+    const propid_core_t per_rotor = per_rotor_core(filter);
+    const float *x = per_rotor.state;
+    propid_model_rate_jacobian(&filter->config, &filter->derived, x, unit_speed_sq, rows);
+    for (uint8_t a = 0; a < 3u; ++a) {
+        for (uint8_t i = 0; i < rotors; ++i) {
+            gain[a][i] = rows[a][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
+                         rows[a][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
+        }
     }
 }
 

@@ -30,41 +30,6 @@ void tearDown(void) {}
 static propid_filter_t with_noise;
 static propid_filter_t without_noise;
 
-/* One prediction step of dt of both filters (the same inputs). */
-static void predict_both(float dt)
-{
-    float rate_next[3];
-    float jac_dt[3][PROPID_JAC_ROW];
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_noise, dt, rate_next, jac_dt));
-    propid_predict_covariance(&without_noise.derived, &without_noise.core, dt, jac_dt);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_noise, dt, rate_next, jac_dt));
-    propid_predict_covariance(&with_noise.derived, &with_noise.core, dt, jac_dt);
-}
-
-/* The block one prediction step added (`with` after the step minus `plain`, the
- * same filter stepped without the term) against B Sigma_u B^T dt span_i, B computed
- * densely from the model's Jacobian; everything outside the rate block bit for bit. */
-/* B_ai = d(omega_dot_a)/d(u_i) densely: the model's coefficient columns (per rotor:
- * the filter keeps the coefficient blocks in their bases) divided by u_i. */
-static void dense_input_gain(const propid_filter_t *filter, float gain[3][PROPID_MAX_ROTORS])
-{
-    const uint8_t rotors = filter->config.rotor_count;
-    float rows[3][PROPID_MAX_STATES];
-    float unit_speed_sq[PROPID_MAX_ROTORS];
-    for (uint8_t i = 0; i < rotors; ++i) {
-        unit_speed_sq[i] = 1.0f;
-    }
-    const propid_core_t per_rotor = per_rotor_core(filter);
-    const float *x = per_rotor.state;
-    propid_model_rate_jacobian(&filter->config, &filter->derived, x, unit_speed_sq, rows);
-    for (uint8_t a = 0; a < 3u; ++a) {
-        for (uint8_t i = 0; i < rotors; ++i) {
-            gain[a][i] = rows[a][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
-                         rows[a][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
-        }
-    }
-}
-
 /* The rate block's expected increment `expected[a][b]` against what `with` added over
  * `plain`; everything outside the rate block bit for bit. */
 static void check_rate_block_added(const propid_filter_t *with, const propid_filter_t *plain,
@@ -98,7 +63,7 @@ static void check_block(const propid_filter_t *with, const propid_filter_t *plai
                         float dt)
 {
     float gain[3][PROPID_MAX_ROTORS];
-    dense_input_gain(with, gain);
+    input_error_dense_gain(with, gain);
     float expected[3][3] = {{0.0f}};
     for (uint8_t a = 0; a < 3u; ++a) {
         for (uint8_t b = a; b < 3u; ++b) {
@@ -122,7 +87,7 @@ static void check_added_block(uint8_t rotors, int full_inertia, float time)
     config.rotor_speed_noise_time = time;
     input_error_off_prior(&with_noise, &config);
 
-    predict_both(dt);
+    input_error_predict_pair(&without_noise, &with_noise, dt);
     float span[PROPID_MAX_ROTORS];
     for (uint8_t i = 0; i < rotors; ++i) {
         span[i] = time > dt ? time : dt;
@@ -145,7 +110,7 @@ static void test_input_noise_off_is_the_plain_prediction(void)
     input_error_off_prior(&without_noise, &config);
     config.rotor_speed_noise_time = 0.05f; /* a time alone switches nothing on */
     input_error_off_prior(&with_noise, &config);
-    predict_both(0.002f);
+    input_error_predict_pair(&without_noise, &with_noise, 0.002f);
     TEST_ASSERT_EQUAL_MEMORY(without_noise.core.cov, with_noise.core.cov, sizeof(with_noise.core.cov));
 }
 
@@ -167,10 +132,10 @@ static void check_common_block(uint8_t rotors, int full_inertia, float time)
     config.rotor_speed_noise_split = 1u;
     input_error_off_prior(&with_noise, &config);
 
-    predict_both(dt);
+    input_error_predict_pair(&without_noise, &with_noise, dt);
     const float span = time > dt ? time : dt;
     float gain[3][PROPID_MAX_ROTORS];
-    dense_input_gain(&with_noise, gain);
+    input_error_dense_gain(&with_noise, gain);
     float along[3] = {0.0f, 0.0f, 0.0f};
     for (uint8_t a = 0; a < 3u; ++a) {
         for (uint8_t i = 0; i < rotors; ++i) {
@@ -213,7 +178,7 @@ static void check_held_spans(uint8_t rotors, float sigma, float dt, const float 
         }
         without_noise = with_noise;
         without_noise.derived.input_noise_var = 0.0f; /* the same step without the term */
-        predict_both(dt);
+        input_error_predict_pair(&without_noise, &with_noise, dt);
         float span[PROPID_MAX_ROTORS];
         for (uint8_t i = 0; i < rotors; ++i) {
             span[i] = dt * expected_span[step][i < 4u ? i : 1u];
@@ -300,7 +265,7 @@ static void test_held_input_error_within_one_step_is_the_plain_term(void)
     config.rotor_speed_noise_hold = 1u;
     input_error_off_prior(&with_noise, &config);
     for (uint8_t step = 0; step < 3u; ++step) {
-        predict_both(0.002f);
+        input_error_predict_pair(&without_noise, &with_noise, 0.002f);
         TEST_ASSERT_EQUAL_MEMORY(without_noise.core.cov, with_noise.core.cov, sizeof(with_noise.core.cov));
     }
 }

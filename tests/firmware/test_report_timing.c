@@ -26,45 +26,13 @@ void tearDown(void) {}
 static propid_filter_t with_timing;
 static propid_filter_t without_timing;
 
-/* One prediction step of dt of both filters (the same inputs). */
-static void predict_both(float dt)
-{
-    float rate_next[3];
-    float jac_dt[3][PROPID_JAC_ROW];
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&without_timing, dt, rate_next, jac_dt));
-    propid_predict_covariance(&without_timing.derived, &without_timing.core, dt, jac_dt);
-    TEST_ASSERT_EQUAL_INT(PROPID_OK, propid_predict_stage(&with_timing, dt, rate_next, jac_dt));
-    propid_predict_covariance(&with_timing.derived, &with_timing.core, dt, jac_dt);
-}
-
-/* B_ai = d(omega_dot_a)/d(u_i) densely: the model's coefficient columns at unit
- * inputs times the per-rotor coefficients. */
-static void dense_input_gain(const propid_filter_t *filter, float gain[3][PROPID_MAX_ROTORS])
-{
-    const uint8_t rotors = filter->config.rotor_count;
-    float rows[3][PROPID_MAX_STATES];
-    float unit_speed_sq[PROPID_MAX_ROTORS];
-    for (uint8_t i = 0; i < rotors; ++i) {
-        unit_speed_sq[i] = 1.0f;
-    }
-    const propid_core_t per_rotor = per_rotor_core(filter);
-    const float *x = per_rotor.state;
-    propid_model_rate_jacobian(&filter->config, &filter->derived, x, unit_speed_sq, rows);
-    for (uint8_t a = 0; a < 3u; ++a) {
-        for (uint8_t i = 0; i < rotors; ++i) {
-            gain[a][i] = rows[a][PROPID_RATE_STATES + i] * x[PROPID_RATE_STATES + i] +
-                         rows[a][PROPID_RATE_STATES + rotors + i] * x[PROPID_RATE_STATES + rotors + i];
-        }
-    }
-}
-
 /* What `with_timing` added over `without_timing` in the step: along along^T in the
  * rate block, everything else bit for bit. */
 static void check_timing_block(float tau, float dt)
 {
     const uint8_t rotors = with_timing.config.rotor_count;
     float gain[3][PROPID_MAX_ROTORS];
-    dense_input_gain(&with_timing, gain);
+    input_error_dense_gain(&with_timing, gain);
     float along[3] = {0.0f, 0.0f, 0.0f};
     for (uint8_t a = 0; a < 3u; ++a) {
         for (uint8_t i = 0; i < rotors; ++i) {
@@ -110,7 +78,7 @@ static void check_added_block(uint8_t rotors, int full_inertia, float speed_nois
     input_error_off_prior(&without_timing, &config);
     config.rotor_timing_error = tau;
     input_error_off_prior(&with_timing, &config);
-    predict_both(dt);
+    input_error_predict_pair(&without_timing, &with_timing, dt);
     check_timing_block(tau, dt);
 }
 
@@ -135,7 +103,7 @@ static void test_report_timing_without_a_speed_change_adds_nothing(void)
     config.rotor_timing_error = 0.01f;
     input_error_off_prior(&with_timing, &config);
     memcpy(with_timing.core.input_speed_sq, with_timing.core.rotor_speed_sq, sizeof(with_timing.core.input_speed_sq));
-    predict_both(0.002f);
+    input_error_predict_pair(&without_timing, &with_timing, 0.002f);
     TEST_ASSERT_EQUAL_MEMORY(without_timing.core.cov, with_timing.core.cov, sizeof(with_timing.core.cov));
 }
 
