@@ -424,21 +424,26 @@ def test_listen_times_out_with_a_clear_error(capsys):
     assert "no MAVLink data" in capsys.readouterr().err
 
 
-def test_listen_shows_estimates(capsys):
+def _listen_while_sending(repeat: int, duration: float) -> tuple[int, str]:
+    """`propid listen` for `duration` s while a sender starts 0.3 s in and sends the
+    telemetry frames `repeat` times; (exit code, what listen printed is read by the caller)."""
     port = free_udp_port()
     stop = threading.Event()
-    sender = threading.Thread(target=_send_frames,
-                              args=(port, telemetry_frames(5), 200, stop, 0.002))
+    sender = threading.Thread(target=_send_frames, args=(port, telemetry_frames(5), repeat, stop, 0.002))
     timer = threading.Timer(0.3, sender.start)
     timer.start()
     try:
-        code = cli.main(["listen", "--connect", f"udp:127.0.0.1:{port}", "--timeout", "10",
-                         "--duration", "1.5"])
+        return cli.main(["listen", "--connect", f"udp:127.0.0.1:{port}", "--timeout", "10",
+                         "--duration", f"{duration:g}"])
     finally:
         stop.set()
         timer.join()
         if sender.is_alive():
             sender.join()
+
+
+def test_listen_shows_estimates(capsys):
+    code = _listen_while_sending(200, 1.5)
     out = capsys.readouterr().out
     assert code == 0
     view = out.strip().split("propid listen")[-1]
@@ -451,19 +456,7 @@ def test_listen_shows_estimates(capsys):
 def test_listen_says_when_the_stream_goes_quiet(capsys):
     """After the sender stops, the screen says its figures are the last received, and a pipe
     gets that screen once, not the same screen every refresh."""
-    port = free_udp_port()
-    stop = threading.Event()
-    sender = threading.Thread(target=_send_frames, args=(port, telemetry_frames(5), 3, stop, 0.002))
-    timer = threading.Timer(0.3, sender.start)
-    timer.start()
-    try:
-        code = cli.main(["listen", "--connect", f"udp:127.0.0.1:{port}", "--timeout", "10",
-                         "--duration", "3.5"])
-    finally:
-        stop.set()
-        timer.join()
-        if sender.is_alive():
-            sender.join()
+    code = _listen_while_sending(3, 3.5)
     out = capsys.readouterr().out
     assert code == 0
     screens = out.strip().split("propid listen")[1:]
