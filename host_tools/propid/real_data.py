@@ -162,6 +162,8 @@ CALIBRATED = {"gyro_walk_calibrated": ("gyro_walk", "accel_scale_walk"),
               "gyro_walk_band_calibrated": ("gyro_walk_band", "accel_scale_walk"),
               "gyro_walk_skip_calibrated": ("gyro_walk_skip", "accel_scale_walk_skip")}
 ROTOR_WITHIN = 0.05
+# The replay's means kept beside kf_mean in each run's summary (kf_mean_<name>; replay/averaging.py)
+OTHER_MEANS = ("window", "inverse_variance", "smoothed")
 
 
 @dataclass
@@ -182,14 +184,17 @@ def _cv(values: list[float]) -> float:
 def run_summary(summary: dict, reference_kf: float) -> dict:
     kf = summary["kf_mean"]
     mean = statistics.fmean(kf)
-    # The other estimator's figures from the same replay (kf_mean_window: the window's plain mean), for comparison.
-    kf_window = summary["kf_mean_window"]
-    mean_window = statistics.fmean(kf_window)
+    # Every estimator's figures from the same replay (replay/averaging.py), kf_mean being one of them, for comparison.
+    others = {}
+    for estimator in OTHER_MEANS:
+        kf_other = summary[f"kf_mean_{estimator}"]
+        mean_other = statistics.fmean(kf_other)
+        others[f"kf_{estimator}_over_reference"] = mean_other / reference_kf
+        others[f"rotor_spread_{estimator}"] = max(abs(k / mean_other - 1.0) for k in kf_other)
     return {
         "kf_over_reference": mean / reference_kf,
         "rotor_spread": max(abs(k / mean - 1.0) for k in kf),
-        "kf_window_over_reference": mean_window / reference_kf,
-        "rotor_spread_window": max(abs(k / mean_window - 1.0) for k in kf_window),
+        **others,
         "km": statistics.fmean(summary["km_mean"]),
         "km_converged": all(summary["converged"]["km"]),
         "km_converged_rotors": sum(summary["converged"]["km"]),
@@ -238,7 +243,7 @@ def mode_summary(runs: dict[str, dict]) -> dict:
         "other_cv": _cv(other) if other else float("nan"),
         "worst_rotor_spread": max(runs[n]["rotor_spread"] for n in names),
         "runs_every_rotor_within_5pct": sum(runs[n]["rotor_spread"] <= ROTOR_WITHIN for n in names),
-        "window_mean": _window_figures([runs[n] for n in names]),
+        **{f"{estimator}_mean": _estimator_figures([runs[n] for n in names], estimator) for estimator in OTHER_MEANS},
         "runs_every_rotor_within_5pct_if_equal": sum(runs[n]["p_every_rotor_within_5pct"] for n in names),
         "km_fleet": statistics.fmean(km), "km_cv": _cv(km),
         "runs_km_converged": sum(runs[n]["km_converged"] for n in names),
@@ -252,15 +257,16 @@ def mode_summary(runs: dict[str, dict]) -> dict:
     }
 
 
-def _window_figures(runs: list[dict]) -> dict | None:
-    """The kf figures of the mode with every run's kf_mean_window in place of its kf_mean (None for runs
-    summarised before the window mean was kept beside it)."""
-    if not all("kf_window_over_reference" in r for r in runs):
+def _estimator_figures(runs: list[dict], estimator: str) -> dict | None:
+    """The kf figures of the mode with every run's kf_mean_window, kf_mean_inverse_variance or kf_mean_smoothed
+    (estimator: a key of OTHER_MEANS) in place of its kf_mean (None for runs summarised before that mean was kept
+    beside it)."""
+    if not all(f"kf_{estimator}_over_reference" in r for r in runs):
         return None
-    kf = [r["kf_window_over_reference"] for r in runs]
+    kf = [r[f"kf_{estimator}_over_reference"] for r in runs]
     return {"kf_fleet_over_reference": statistics.fmean(kf), "kf_run_cv": _cv(kf),
-            "worst_rotor_spread": max(r["rotor_spread_window"] for r in runs),
-            "runs_every_rotor_within_5pct": sum(r["rotor_spread_window"] <= ROTOR_WITHIN for r in runs)}
+            "worst_rotor_spread": max(r[f"rotor_spread_{estimator}"] for r in runs),
+            "runs_every_rotor_within_5pct": sum(r[f"rotor_spread_{estimator}"] <= ROTOR_WITHIN for r in runs)}
 
 
 def _median_or_none(values: list) -> float | None:
@@ -410,12 +416,14 @@ def render(result: dict) -> str:
             f"| {s['km_fleet']:.3g} ({_percent(s['km_cv'])}) | {s['runs_km_converged']}/{s['runs']} "
             f"| {_bias(s['accel_bias_median'])} |")
     estimator = result.get("mean_estimator", "window")
-    if estimator != "window" and all(m["summary"].get("window_mean") for m in result["modes"]):
-        lines += ["", f"kf_mean is the {estimator} mean; with each replay's window mean (kf_mean_window) instead: "
-                  "fleet kf / ref, run CV, worst rotor, runs with every rotor within 5 %: " + "; ".join(
-                      f"{m['name']} {w['kf_fleet_over_reference']:.3f}, {_percent(w['kf_run_cv'])}, "
-                      f"{100 * w['worst_rotor_spread']:.0f}%, {w['runs_every_rotor_within_5pct']}/{m['summary']['runs']}"
-                      for m in result["modes"] for w in [m["summary"]["window_mean"]])]
+    for other in OTHER_MEANS:
+        key = f"{other}_mean"
+        if estimator.replace("-", "_") != other and all(m["summary"].get(key) for m in result["modes"]):
+            lines += ["", f"kf_mean is the {estimator} mean; with each replay's {other} mean (kf_mean_{other}) "
+                      "instead: fleet kf / ref, run CV, worst rotor, runs with every rotor within 5 %: " + "; ".join(
+                          f"{m['name']} {w['kf_fleet_over_reference']:.3f}, {_percent(w['kf_run_cv'])}, "
+                          f"{100 * w['worst_rotor_spread']:.0f}%, {w['runs_every_rotor_within_5pct']}/"
+                          f"{m['summary']['runs']}" for m in result["modes"] for w in [m["summary"][key]])]
     lines += ["", "Runs with every rotor within 5 % expected if the rotors were equal, by the filter's own final "
               "covariance (replay/rotor_spread.py): " + "; ".join(
                   f"{m['name']} {m['summary']['runs_every_rotor_within_5pct_if_equal']:.1f}" for m in result["modes"])]

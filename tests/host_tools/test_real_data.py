@@ -168,15 +168,16 @@ def test_run_names_drop_any_date_token_not_one_date():
     assert run_name("flight.csv") == "flight"
 
 
-def test_the_window_mean_figures_beside_the_chosen_estimator():
-    """Each run keeps its replay's window mean (kf_mean_window) beside kf_mean: the mode summary carries the
-    fleet kf, CV, worst rotor and runs within 5 % of both, and render prints the window's when kf_mean is not it."""
+def test_the_window_and_smoothed_mean_figures_beside_the_chosen_estimator():
+    """Each run keeps its replay's window and smoothed means (kf_mean_window, kf_mean_smoothed) beside kf_mean: the
+    mode summary carries the fleet kf, CV, worst rotor and runs within 5 % of each, and render prints the others'
+    when kf_mean is not them."""
     base = dict(km=1e-10, km_converged=False, accel_bias=None, finite=True, p_every_rotor_within_5pct=0.9,
                 km_worst_rotor_rel_std=0.2, km_mean_rel_std=0.1, esc_delay_s=0.0, km_converged_rotors=0, rotor_count=4)
     runs = {"square_a": dict(base, kf_over_reference=1.0, rotor_spread=0.02, kf_window_over_reference=1.1,
-                             rotor_spread_window=0.08),
+                             rotor_spread_window=0.08, kf_smoothed_over_reference=0.8, rotor_spread_smoothed=0.01),
             "random_b": dict(base, kf_over_reference=0.9, rotor_spread=0.03, kf_window_over_reference=0.9,
-                             rotor_spread_window=0.04)}
+                             rotor_spread_window=0.04, kf_smoothed_over_reference=1.0, rotor_spread_smoothed=0.06)}
     s = real_data.mode_summary(runs)
     assert s["kf_fleet_over_reference"] == pytest.approx(0.95) and s["runs_every_rotor_within_5pct"] == 2
     w = s["window_mean"]
@@ -187,8 +188,15 @@ def test_the_window_mean_figures_beside_the_chosen_estimator():
     assert "window mean (kf_mean_window) instead" in real_data.render(result)
     assert "gyro 1.000, 14%, 8%, 1/2" in real_data.render(result)
     assert "kf_mean_window" not in real_data.render(dict(result, mean_estimator="window"))
+    # the smoothed mean's figures the same way (kf_mean_smoothed)
+    m = s["smoothed_mean"]
+    assert m["kf_fleet_over_reference"] == pytest.approx(0.9) and m["worst_rotor_spread"] == 0.06
+    assert m["runs_every_rotor_within_5pct"] == 1
+    assert "gyro 0.900, 16%, 6%, 1/2" in real_data.render(result)
+    assert "kf_mean_smoothed" not in real_data.render(dict(result, mean_estimator="smoothed"))
     # a run summarised from a replay: both estimators' figures
-    replayed = {"kf_mean": [1.0, 1.0, 1.0, 1.0], "kf_mean_window": [1.2, 1.0, 1.0, 0.8], "km_mean": [1.0] * 4,
+    replayed = {"kf_mean": [1.0, 1.0, 1.0, 1.0], "kf_mean_window": [1.2, 1.0, 1.0, 0.8],
+                "kf_mean_smoothed": [1.1, 1.1, 0.9, 0.9], "kf_mean_inverse_variance": [1.0] * 4, "km_mean": [1.0] * 4,
                 "km_std": [0.1] * 4, "converged": {"kf": [True] * 4, "km": [False] * 4},
                 "config": {"drag_coeff_nominal": [1.0] * 4}, "km_combination_std": {"yaw": 0.1},
                 "model_mismatch": False, "accel_bias": None, "torque_scale": 1.0, "esc_delay_s": 0.0, "finite": True,
@@ -196,3 +204,5 @@ def test_the_window_mean_figures_beside_the_chosen_estimator():
     r = real_data.run_summary(replayed, 2.0)
     assert r["kf_over_reference"] == 0.5 and r["rotor_spread"] == 0.0
     assert r["kf_window_over_reference"] == pytest.approx(0.5) and r["rotor_spread_window"] == pytest.approx(0.2)
+    assert r["kf_smoothed_over_reference"] == pytest.approx(0.5) and r["rotor_spread_smoothed"] == pytest.approx(0.1)
+    assert r["kf_inverse_variance_over_reference"] == 0.5 and r["rotor_spread_inverse_variance"] == 0.0

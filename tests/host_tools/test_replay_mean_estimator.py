@@ -1,6 +1,7 @@
-"""What kf_mean/km_mean report (replay/averaging.py): the window's plain mean or the inverse-variance
-(1/std^2) weighted mean of every recorded estimate. Both are always in the summary under their own keys
-(kf_mean_window, kf_mean_inverse_variance; km_ the same) and mean_estimator says which kf_mean is."""
+"""What kf_mean/km_mean report (replay/averaging.py): the window's plain mean, the inverse-variance
+(1/std^2) weighted mean of every recorded estimate or the time mean of the estimate smoothed backwards.
+All are always in the summary under their own keys (kf_mean_window, kf_mean_inverse_variance,
+kf_mean_smoothed; km_ the same) and mean_estimator says which kf_mean is."""
 
 from __future__ import annotations
 
@@ -9,10 +10,11 @@ import json
 import numpy as np
 import pytest
 
+from propid.cfilter import DEFAULT_TUNING
 from propid.errors import UserError
 from propid.flightlog import parse_vehicle, write_flightlog, write_vehicle
 from propid.replay import ReplayOptions, replay
-from propid.replay.averaging import coefficient_means, inverse_variance_means
+from propid.replay.averaging import coefficient_means, inverse_variance_means, smoothed_means, time_mean
 from test_replay import KF_TRUE, KM_TRUE, VEHICLE, _run_cli, synthetic_log
 
 
@@ -44,13 +46,61 @@ def test_coefficient_means_reports_both_estimators_and_picks_one():
     values = np.arange(1.0, n + 1.0)[:, None]
     stds = np.linspace(1.0, 0.1, n)[:, None]
     converged = (np.arange(n) >= 6)[:, None]
-    window = coefficient_means(values, stds, converged, t)
-    weighted = coefficient_means(values, stds, converged, t, "inverse-variance")
+    window = coefficient_means(values, stds, converged, t, [0.0])
+    weighted = coefficient_means(values, stds, converged, t, [0.0], "inverse-variance")
+    smoothed = coefficient_means(values, stds, converged, t, [0.0], "smoothed")
+    # without a walk every sample's smoothed estimate is the final one
+    assert smoothed["mean"] == smoothed["smoothed"] == window["smoothed"] == [pytest.approx(float(n))]
     w = 1.0 / stds[:, 0] ** 2
     assert window["window"] == weighted["window"] == [pytest.approx(np.mean(values[6:, 0]))]
     assert window["inverse_variance"] == weighted["inverse_variance"] == [pytest.approx(np.sum(w * values[:, 0]) / w.sum())]
     assert window["mean"] == window["window"] and weighted["mean"] == weighted["inverse_variance"]
     assert window["from"] == weighted["from"] == [pytest.approx(0.6)] and window["crossing"] == [pytest.approx(0.6)]
+
+
+def _scalar_walk_filter(truth: np.ndarray, dt: float, walk: float, noise_var: float) -> tuple[np.ndarray, np.ndarray]:
+    """A scalar Kalman filter of a coefficient modelled as a random walk (variance walk^2 per second) measured
+    directly with the given noise variance, started at 1 with std 0.3: its estimates and stds."""
+    x, p = 1.0, 0.09
+    xs, ps = np.empty_like(truth), np.empty_like(truth)
+    for i, z in enumerate(truth):
+        p += walk * walk * dt
+        gain = p / (p + noise_var)
+        x, p = x + gain * (z - x), p * (1.0 - gain)
+        xs[i], ps[i] = x, p
+    return xs, np.sqrt(ps)
+
+
+@pytest.mark.parametrize("shape", ["step", "ramp"])
+def test_smoothed_mean_recovers_the_flight_average_a_walking_filter_lags(shape):
+    # The coefficient changes during the flight (a 20 % step at mid-flight, or a steady 20 % decline) and
+    # the filter follows it with the walk's lag (memory about 2 s: std^2 / walk^2); noise-free measurements,
+    # so only the lag separates the estimates from the truth. The user's number is the flight's average.
+    dt, walk, noise_var = 0.01, 0.05, 1.0
+    t = np.arange(0.0, 10.0, dt)
+    truth = np.where(t < 5.0, 1.0, 0.8) if shape == "step" else 1.0 - 0.02 * t
+    values, stds = _scalar_walk_filter(truth, dt, walk, noise_var)
+    target = time_mean(truth, t)
+    smoothed = smoothed_means(values[:, None], stds[:, None], t, [walk * walk])[0]
+    weighted = inverse_variance_means(values[:, None], stds[:, None])[0]
+    # 1/std^2 weighs the settled, lagging estimates uniformly: biased towards the early coefficient
+    assert weighted / target - 1 > 0.02
+    # the backward pass gives each sample the later samples' information: the lag is gone
+    assert abs(smoothed / target - 1) < 0.002
+    # in the estimate's units (kf ~ 1e-8): the same answer
+    tiny = smoothed_means(values[:, None] * 1e-8, stds[:, None] * 1e-8, t, [(walk * 1e-8) ** 2])[0]
+    assert tiny == pytest.approx(smoothed * 1e-8, rel=1e-9)
+
+
+def test_smoothed_mean_of_a_constant_and_unusable_samples():
+    t = np.linspace(0.0, 2.0, 21)
+    values = np.full((21, 2), 3.0)
+    stds = np.column_stack([np.linspace(1.0, 0.1, 21), np.full(21, np.nan)])
+    assert smoothed_means(values, stds, t, [0.5, 0.5])[0] == pytest.approx(3.0)
+    assert np.isnan(smoothed_means(values, stds, t, [0.5, 0.5])[1])  # no usable sample
+    # uneven sampling: the mean is over time, not over samples
+    # spans 0.05, 5 and 4.95 s: (1 x 0.05 + 1 x 5 + 4 x 4.95) / 10, not the samples' plain mean 2
+    assert time_mean(np.array([1.0, 1.0, 4.0]), np.array([0.0, 0.1, 10.0])) == pytest.approx(2.485)
 
 
 def test_replay_reports_both_means_and_the_chosen_one(cfilter_available):
@@ -69,6 +119,16 @@ def test_replay_reports_both_means_and_the_chosen_one(cfilter_available):
         w = 1.0 / series[f"{name}_std"] ** 2
         np.testing.assert_allclose(weighted[f"{name}_mean"], np.sum(w * series[name], axis=0) / w.sum(axis=0),
                                    rtol=1e-12)
+    # the smoothed mean: the backward pass over the same series, with the walks the filter ran with
+    smoothed = replay(log, vehicle, ReplayOptions(progress=False, mean_estimator="smoothed")).summary
+    assert smoothed["mean_estimator"] == "smoothed"
+    for name, walk_key, nominal_key in (("kf", "thrust_coeff_rel_walk", "thrust_coeff_nominal"),
+                                        ("km", "drag_coeff_rel_walk", "drag_coeff_nominal")):
+        rates = [(smoothed["config"].get(walk_key, DEFAULT_TUNING[walk_key]) * v) ** 2 for v in smoothed["config"][nominal_key]]
+        expected = smoothed_means(series[name], series[f"{name}_std"], series["t"], rates)
+        np.testing.assert_allclose(smoothed[f"{name}_mean"], expected, rtol=1e-12)
+        assert smoothed[f"{name}_mean_smoothed"] == weighted[f"{name}_mean_smoothed"] == smoothed[f"{name}_mean"]
+    np.testing.assert_allclose(smoothed["kf_mean"], KF_TRUE, rtol=0.05)
     # the weighted mean lands on the synthetic truth as the window mean does
     np.testing.assert_allclose(weighted["kf_mean"], KF_TRUE, rtol=0.05)
     np.testing.assert_allclose(weighted["km_mean"], KM_TRUE, rtol=0.15)
@@ -91,3 +151,7 @@ def test_cli_mean_estimator_reaches_the_json(cfilter_available, tmp_path):
     assert _run_cli(["--log", str(log_path), "--json", str(out), "--no-progress", "--mean-estimator", "window"]) == 0
     summary = json.loads(out.read_text())
     assert summary["mean_estimator"] == "window" and summary["kf_mean"] == summary["kf_mean_window"]
+    assert _run_cli(["--log", str(log_path), "--json", str(out), "--no-progress", "--mean-estimator", "smoothed"]) == 0
+    summary = json.loads(out.read_text())
+    assert summary["mean_estimator"] == "smoothed" and summary["kf_mean"] == summary["kf_mean_smoothed"]
+    assert "smoothed" in summary["definitions"]["kf_mean_smoothed"]

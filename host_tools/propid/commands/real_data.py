@@ -8,6 +8,7 @@ from pathlib import Path
 from propid import real_data
 from propid.errors import UserError
 from propid.outputs import check_directory
+from propid.replay.averaging import MEAN_ESTIMATORS
 
 NAME = "real-data"
 HELP = ("replay every log of a real-data directory in each mode of the filter's optional terms; "
@@ -26,9 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mean-window", choices=("from-crossing", "at-least-half"), default="from-crossing",
                         help="the window of every replay's kf_mean/km_mean (propid replay --mean-window; default "
                              "from-crossing)")
-    parser.add_argument("--mean-estimator", choices=("window", "inverse-variance"), default="inverse-variance",
+    parser.add_argument("--mean-estimator", choices=MEAN_ESTIMATORS, default="inverse-variance",
                         help="what every replay's kf_mean/km_mean reports (propid replay --mean-estimator; default "
-                             "inverse-variance); the window mean's figures are printed beside it")
+                             "inverse-variance); the other means' figures are printed beside it")
     parser.add_argument("--skip-missing", action="store_true",
                         help="exit 0 with a note when DIR does not exist (for make real-data without ../shared)")
     parser.add_argument("--thrust-evidence", action="store_true",

@@ -11,6 +11,7 @@ from pathlib import Path
 from propid.errors import UserError
 from propid.flightlog import other_vehicle_files, read_flightlog, read_vehicle, vehicle_path_for
 from propid.outputs import check_not_inputs, check_writable, write_text
+from propid.replay.averaging import MEAN_ESTIMATORS
 
 NAME = "replay"
 HELP = "replay a flight-log v1 CSV through the firmware filter: per-rotor kf/km, gyro biases, JSON + plot"
@@ -77,10 +78,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the window kf_mean_window/km_mean_window average over: from the first sample whose std is under the "
                              "convergence bar (default), or from it or the replay's midpoint, whichever is earlier "
                              "(every mean over at least half of the samples; evaluated, docs/real-data.md)")
-    parser.add_argument("--mean-estimator", choices=("window", "inverse-variance"), default="inverse-variance",
+    parser.add_argument("--mean-estimator", choices=MEAN_ESTIMATORS, default="inverse-variance",
                         help="what kf_mean/km_mean report: every recorded estimate weighted by 1/std^2 (default; no "
-                             "threshold), or the plain mean over --mean-window's window; both are always in the JSON "
-                             "as kf_mean_inverse_variance and kf_mean_window (docs/real-data.md)")
+                             "threshold), the plain mean over --mean-window's window, or the time mean of the estimate "
+                             "smoothed backwards under the coefficient walk; all are always in the JSON as "
+                             "kf_mean_inverse_variance, kf_mean_window and kf_mean_smoothed (docs/real-data.md)")
     parser.add_argument("--skip-repeats", action="store_true",
                         help="treat a row whose gyro (or rotor speeds) exactly repeat the previous row as no new "
                              "sample (logs resampled by sample-and-hold)")
@@ -313,8 +315,9 @@ def report(summary: dict, out) -> None:
     print(f"{name}: {summary['duration_s']:.1f} s, {summary['rows_replayed']} rows ({summary['segment']}), "
           f"gyro {summary['gyro_rate_hz']:.0f} Hz, rotor speeds {summary['rotor_rate_hz']:.0f} Hz, "
           f"ESC delay {round(1e3 * summary['esc_delay_s'])} ms", file=out)  # an int: never "-0 ms"
-    weighted = summary.get("mean_estimator") == "inverse-variance"
-    print("  kf, km: " + ("every estimate weighted by 1/std^2" if weighted else "mean over the converged part")
+    what = {"inverse-variance": "every estimate weighted by 1/std^2",
+            "smoothed": "time mean of the estimate smoothed under the coefficient walk"}
+    print("  kf, km: " + what.get(summary.get("mean_estimator"), "mean over the converged part")
           + " +- final 1 sigma", file=out)
     print(rotor_table(summary), file=out)
     combination = summary.get("km_combination_std")

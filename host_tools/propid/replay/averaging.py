@@ -6,6 +6,12 @@ Two estimators, both always reported (docs/real-data.md "The mean of the estimat
   each estimate counts as much as the filter trusts it, so the prior-dominated start weighs little and
   the settled part most. Successive estimates are strongly correlated, so the weights are no likelihood
   and no std of the mean is claimed from them; it is a point estimate.
+- "smoothed": the time mean over the replay of the smoothed estimate, each sample's estimate given every
+  sample of the replay (a backward Rauch-Tung-Striebel pass on each coefficient alone, as the random walk
+  the filter models it with: the walk's variance rate from the configuration). The target is the flight's
+  average coefficient; under the walk that is the mean of the smoothed estimates. With the walk the filter's
+  estimate lags a change (and the young fit's attenuation) by about the walk's memory, std^2 / walk
+  variance rate; the backward pass takes the later samples' information back to the earlier ones.
 
 The window rules:
 
@@ -23,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 MEAN_WINDOWS = ("from-crossing", "at-least-half")
-MEAN_ESTIMATORS = ("window", "inverse-variance")
+MEAN_ESTIMATORS = ("window", "inverse-variance", "smoothed")
 
 
 def window_start(converged: np.ndarray, rule: str = "from-crossing") -> int:
@@ -65,12 +71,60 @@ def inverse_variance_means(values: np.ndarray, stds: np.ndarray) -> list[float]:
     return means
 
 
+def smoothed_series(value: np.ndarray, std: np.ndarray, t: np.ndarray, walk_var_rate: float) -> np.ndarray:
+    """One coefficient's estimate at each sample given every sample (the backward pass of a scalar
+    Rauch-Tung-Striebel smoother): the coefficient walks, its variance growing by walk_var_rate per second
+    between samples, and the filter's estimate and std stand for the forward pass. Going backwards,
+    smoothed_i = filtered_i + g (smoothed_(i+1) - filtered_i), g = std_i^2 / (std_i^2 + walk_var_rate dt):
+    g near 1 where the walk adds little to the estimate's own variance (a young, uncertain estimate takes
+    the later one), smaller where the estimate is settled and the walk lets the coefficient move. Without a
+    walk every sample takes the final estimate."""
+    variance = (std * std).tolist()  # Python floats: the loop runs once per sample
+    step_var = (walk_var_rate * np.diff(t)).tolist()
+    filtered = np.asarray(value, dtype=float).tolist()
+    smoothed = list(filtered)
+    for i in range(len(filtered) - 2, -1, -1):
+        total = variance[i] + step_var[i]
+        gain = variance[i] / total if total > 0 else 1.0
+        smoothed[i] = filtered[i] + gain * (smoothed[i + 1] - filtered[i])
+    return np.array(smoothed)
+
+
+def time_mean(series: np.ndarray, t: np.ndarray) -> float:
+    """Mean over time of samples at times t: each sample weighs half the span to its neighbours."""
+    if series.shape[0] < 2 or not t[-1] > t[0]:
+        return float(np.mean(series))
+    span = np.empty_like(t, dtype=float)
+    span[1:-1] = (t[2:] - t[:-2]) / 2
+    span[0], span[-1] = (t[1] - t[0]) / 2, (t[-1] - t[-2]) / 2
+    return float(np.sum(span * series) / np.sum(span))
+
+
+def smoothed_means(values: np.ndarray, stds: np.ndarray, t: np.ndarray, walk_var_rates: list[float]) -> list[float]:
+    """Per coefficient (column): the time mean of its smoothed series over the samples whose value is finite and
+    whose std is finite and positive (nan if none). walk_var_rates: each column's walk variance per second,
+    in the values' units squared ((relative walk x nominal)^2)."""
+    means = []
+    for k in range(values.shape[1]):
+        value, std = values[:, k], stds[:, k]
+        usable = np.isfinite(value) & np.isfinite(std) & (std > 0)
+        if not usable.any():
+            means.append(float("nan"))
+            continue
+        smoothed = smoothed_series(value[usable], std[usable], t[usable], float(walk_var_rates[k]))
+        means.append(time_mean(smoothed, t[usable]))
+    return means
+
+
 def coefficient_means(values: np.ndarray, stds: np.ndarray, converged: np.ndarray, t: np.ndarray,
-                      estimator: str = "window", window: str = "from-crossing") -> dict[str, list[float]]:
+                      walk_var_rates: list[float], estimator: str = "window",
+                      window: str = "from-crossing") -> dict[str, list[float]]:
     """Every summary of one coefficient family (kf or km), per rotor: "mean" (the chosen estimator's),
-    "window" and "inverse_variance" (both estimators), "from" (the window's start time) and "crossing"
-    (the time the std first fell under the bar, nan if never)."""
+    "window", "inverse_variance" and "smoothed" (every estimator), "from" (the window's start time) and
+    "crossing" (the time the std first fell under the bar, nan if never)."""
     window_mean, window_from, crossing = window_means(values, converged, t, window)
     weighted = inverse_variance_means(values, stds)
-    return {"mean": weighted if estimator == "inverse-variance" else window_mean, "window": window_mean,
-            "inverse_variance": weighted, "from": window_from, "crossing": crossing}
+    smoothed = smoothed_means(values, stds, t, walk_var_rates)
+    chosen = {"window": window_mean, "inverse-variance": weighted, "smoothed": smoothed}[estimator]
+    return {"mean": chosen, "window": window_mean, "inverse_variance": weighted, "smoothed": smoothed,
+            "from": window_from, "crossing": crossing}

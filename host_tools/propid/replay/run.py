@@ -237,8 +237,13 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         gyro_accepted = int(counters["gyro_accepted"])
 
     window, estimator = options.mean_window, options.mean_estimator
-    kf_means = coefficient_means(series["kf"], series["kf_std"], series["kf_converged"], series["t"], estimator, window)
-    km_means = coefficient_means(series["km"], series["km_std"], series["km_converged"], series["t"], estimator, window)
+    # The walks the filter ran with, in the estimates' units squared per second (the smoothed mean's model)
+    kf_walk = float(config_fields.get("thrust_coeff_rel_walk", DEFAULT_TUNING["thrust_coeff_rel_walk"]))
+    km_walk = float(config_fields.get("drag_coeff_rel_walk", DEFAULT_TUNING["drag_coeff_rel_walk"]))
+    kf_means = coefficient_means(series["kf"], series["kf_std"], series["kf_converged"], series["t"],
+                                 [(kf_walk * v) ** 2 for v in kf_nominal], estimator, window)
+    km_means = coefficient_means(series["km"], series["km_std"], series["km_converged"], series["t"],
+                                 [(km_walk * v) ** 2 for v in km_nominal], estimator, window)
     # The torque scale over the window every rotor's window mean covers: from the latest window start.
     scale_from = max(window_start(series["kf_converged"][:, k], window) for k in range(n))
     torque_scale_mean = float(np.mean(series["torque_scale"][scale_from:]))
@@ -280,6 +285,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "km_mean_window": km_means["window"],
         "kf_mean_inverse_variance": kf_means["inverse_variance"],
         "km_mean_inverse_variance": km_means["inverse_variance"],
+        "kf_mean_smoothed": kf_means["smoothed"],
+        "km_mean_smoothed": km_means["smoothed"],
         "kf_rotor_spread_bound": spread_bound(np.asarray(kf_means["mean"]), filt.thrust_coeff_covariance()),
         # Relative std of the km combination each input channel measures (km_evidence.py): yaw -> the mean km.
         "km_combination_std": combination_std(filt.drag_coeff_rel_covariance(), filt.vehicle),
@@ -318,12 +325,16 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "warnings": replay_warnings(rates, gyro_accepted, gyro_pushes,
                                     None if options.skip_repeats else repeated_gyro_share(log, rows)),
         "definitions": {
-            "kf_mean": "kf_mean_window or kf_mean_inverse_variance, as mean_estimator says (km_mean the same)",
+            "kf_mean": "kf_mean_window, kf_mean_inverse_variance or kf_mean_smoothed, as mean_estimator says "
+                       "(km_mean the same)",
             "kf_mean_window": "mean of the estimate from the first sample with rel std < converged_rel_std to the "
                               "end; second half of the replay if never below; mean_window at-least-half: from the "
                               "midpoint when that is earlier (replay/averaging.py)",
             "kf_mean_inverse_variance": "mean of every recorded estimate of the replay weighted by 1/std^2 "
                                         "(replay/averaging.py)",
+            "kf_mean_smoothed": "time mean over the replay of the estimate smoothed backwards (each sample's "
+                                "estimate given every sample, the coefficient a random walk with "
+                                "thrust_coeff_rel_walk; km: drag_coeff_rel_walk) (replay/averaging.py)",
             "kf_mean_from_s": "log time the kf_mean_window window starts (km_mean_from_s: km_mean_window's)",
             "kf_converged_from_s": "log time kf's rel std first fell below converged_rel_std (null if never)",
             "kf_rotor_spread_bound": "each rotor's std of kf_i / mean(kf) - 1 from the final covariance, and the "
