@@ -28,7 +28,8 @@ Definitions used in the output (docs/real-data.md):
   With mean_window "at-least-half" the window starts at the midpoint when that is earlier
   (replay/averaging.py); kf_mean_from_s/km_mean_from_s say where each window starts.
   That window's mean is kf_mean_window (km_mean_window); kf_mean_inverse_variance is every
-  recorded estimate weighted by 1/std^2; mean_estimator says which of the two kf_mean is.
+  recorded estimate weighted by 1/std^2; kf_mean_smoothed the time mean of the estimate
+  smoothed backwards under the coefficient walk; mean_estimator says which kf_mean is.
 - unit-inertia mode (vehicle without inertia, e.g. the Betaflight file): the filter
   runs with J = identity [kg m^2], so its "kf" is kf/J (roll/pitch; one J for both)
   and its "km" is km/Jzz, in the vehicle file's (possibly assumed) geometry. Ratios
