@@ -464,6 +464,7 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
                                 "its own (leave one log out), else the 1 s blocks form 5 folds (inputs.block_folds: "
                                 "'first-row' numbers them across the logs in this order, 'phases' within each log)",
                    "block_folds": options.block_folds,
+                   "landed_height_m": {f.name: f.landed_height for f in flights + held_flights},
                    "vehicle": str(vehicle.path) if vehicle.path else vehicle.name, "columns_present": present,
                    "band_hz": [options.band.highpass_hz, options.band.lowpass_hz],
                    "highpass_rule": None if band_rule is None else
@@ -561,7 +562,8 @@ def run(logs: list[FlightLog], vehicle: Vehicle, holdout: list[FlightLog], optio
     result["where"] = {"per_axis": per_axis, "per_regime": per_regime, "errors_in_variables": eiv,
                        "per_band": where.per_band(work, vehicle.positions, vehicle.yaw_signs, kf_rotor, km_rotor,
                                                   vehicle.mass),
-                       "per_rotor": where.per_rotor(kf_rotor, km_rotor)}
+                       "per_rotor": where.per_rotor(kf_rotor, km_rotor),
+                       "thrust_gain_per_band": where.thrust_gain_per_band(work, vehicle.mass) if with_thrust else None}
     progress(5)
 
     # how far

@@ -4,8 +4,9 @@ time blocks used for cross-validation.
 
 Rules (docs/gap.md, "Data preparation"):
 - rows: the flying rows of `realdata_checks.flying_mask` (is_flying column, else every
-  rotor spinning; off the ground when the height is logged), cut into segments of
-  uniform timing at least MIN_SEGMENT_S long;
+  rotor spinning), off the ground when the height is logged (more than GROUND_CONTACT_M
+  above the log's landed height, `landed_height`), cut into segments of uniform timing at
+  least MIN_SEGMENT_S long;
 - event-style logs (rotor rows and gyro rows apart): rotor speeds are held to the
   gyro rows, rows without a gyro sample are dropped;
 - missing or absurd rotor speeds (above 2x the 99.9th percentile) and isolated
@@ -40,18 +41,22 @@ import numpy as np
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
 from propid.gap.gyro_bias import MODES as GYRO_BIAS_MODES, gyro_bias_from_attitude
-from propid.realdata_checks import _hold_rotor_rows, absurd_speed_limit, bandpass, \
+from propid.realdata_checks import LANDED_HEIGHT_MAX_M, _hold_rotor_rows, absurd_speed_limit, bandpass, \
     clean_rotor_speeds, flying_mask
 from propid.signals import log_body_velocity, measured_torque, repeats_previous_row, segments
 
 MIN_SEGMENT_S = 2.0
+# a quarter of the hover thrust cannot hold the vehicle up: rows at the lowest height whose collective
+# sum Omega^2 is below this share of the flying rows' median rest on the ground (landed_height)
+LANDED_COLLECTIVE = 0.25
+LANDED_MIN_ROWS = 10
 
 
 class NoFlyingSegment(UserError):
     """A log without a flying segment of MIN_SEGMENT_S: nothing in it to fit (with several
     fitted logs, gap leaves such a log out and lists it; alone it is an error)."""
 BLOCK_S = 2.0
-GROUND_CONTACT_M = 0.03  # cross-validation / bootstrap block length
+GROUND_CONTACT_M = 0.03  # rows at most this far above the landed height are ground contact
 
 
 @dataclass
@@ -94,6 +99,7 @@ class Flight:
     quat: np.ndarray | None = None  # (n,4) attitude w, x, y, z (body -> world): ground_effect at each hub
     gyro_bias: dict = field(default_factory=dict)  # the constant gyro bias removed (gyro_bias.py), or why not
     logged_quat: np.ndarray | None = None  # (n,4) the logged attitude whatever the options: the explainable bound's channels
+    landed_height: float = 0.0  # the logged height on the ground (landed_height); contact up to GROUND_CONTACT_M above
 
     @property
     def rows(self) -> int:
@@ -202,6 +208,29 @@ def repeated_row_stats(copy: np.ndarray, rows: np.ndarray) -> dict:
             "longest_run": int(longest)}
 
 
+def landed_height(height: np.ndarray | None, speeds: np.ndarray, flying: np.ndarray) -> float:
+    """The logged height of the vehicle resting on the ground, which gap's ground-contact rule measures
+    heights from (docs/gap.md "Data preparation"). A log whose height's zero is not the floor (the
+    Crazyflie's estimate reads 0.045-0.05 m on the ground) and whose flag stays on while the rotors idle
+    there would otherwise count its resting rows as flight: the ground holds the weight while sum
+    Omega^2 is a tenth of the hover's. Resting rows: within GROUND_CONTACT_M of the lowest logged height
+    (at most LANDED_HEIGHT_MAX_M) with a collective sum Omega^2 below LANDED_COLLECTIVE x the median of
+    the flying rows'; their median height if there are LANDED_MIN_ROWS of them, else 0 (the height is
+    above the ground, as the SITL logs it; a flight that never rests on the ground)."""
+    if height is None or not np.isfinite(height).any():
+        return 0.0
+    lowest = float(np.nanmin(height))
+    collective = np.sum(np.nan_to_num(speeds) ** 2, axis=1)
+    spinning = flying & (collective > 0)
+    if lowest > LANDED_HEIGHT_MAX_M or not spinning.any():
+        return 0.0
+    low = np.nan_to_num(height, nan=np.inf) <= lowest + GROUND_CONTACT_M
+    resting = low & (collective < LANDED_COLLECTIVE * float(np.median(collective[spinning])))
+    if resting.sum() < LANDED_MIN_ROWS:
+        return 0.0
+    return float(np.median(height[resting]))
+
+
 def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | None = None,
                    repeats: str = "samples", attitude: bool = False, gyro_bias: str = "off") -> Flight:
     """Build a Flight from a validated log. Raises UserError if nothing usable. What the
@@ -263,11 +292,13 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
     if vehicle.gyro_scale is not None:
         gyro = gyro / np.asarray(vehicle.gyro_scale)[None, :]
     # flying: is_flying column, else every rotor spinning; off the ground where the height is
-    # logged (pz is height above flat ground: contact below GROUND_CONTACT_M)
+    # logged (contact up to GROUND_CONTACT_M above the landed height, landed_height)
     no_height = {k: v for k, v in log.extra.items() if k != "pz"}
     fly = flying_mask(FlightLog(t=log.t, gyro=gyro, rotor_speed=flying_speeds, extra=no_height, path=log.path))
+    ground = 0.0
     if "pz" in log.extra:
-        fly &= np.nan_to_num(log.extra["pz"], nan=np.inf) > GROUND_CONTACT_M
+        ground = landed_height(log.extra["pz"], flying_speeds, fly)
+        fly &= np.nan_to_num(log.extra["pz"], nan=np.inf) > ground + GROUND_CONTACT_M
     uniform = np.ones(len(log), dtype=bool)
     bad_dt = np.abs(dt - dt_med) > 0.5 * dt_med
     uniform[1:] &= ~bad_dt
@@ -311,7 +342,7 @@ def prepare_flight(log: FlightLog, vehicle: Vehicle, band: Band, name: str | Non
         specific_force_z=None if acc is None else acc[:, 2], acc=acc, body_velocity=vel, height=height,
         cmd=cmd, vbat=vbat, segs=segs, band=band.for_rate(rate), repaired_rotor_samples=repaired,
         held_rotor_fraction=held_fraction, quat=quat, gyro_bias=bias,
-        logged_quat=logged_quat)
+        logged_quat=logged_quat, landed_height=ground)
     in_segments = np.concatenate([np.arange(a, b) for a, b in segs])
     flight.repeated_rows = {"gyro": repeated_row_stats(gyro_copy, in_segments),
                             "rotor": repeated_row_stats(rotor_copy, in_segments), "treated_as": repeats}

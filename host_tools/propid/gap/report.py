@@ -258,6 +258,18 @@ def write_report(result: dict, directory: str | Path) -> Path:
     parts.append(_table(["regime", "share of rows"] + list(w["per_axis"]),
                         [[r, v["fraction_of_rows"]] + [v.get(a) for a in w["per_axis"]] for r, v in w["per_regime"].items()]))
     parts.append(_table(["band", "roll", "pitch", "yaw"], [[b, v["roll"], v["pitch"], v["yaw"]] for b, v in w["per_band"].items()]))
+    thrust = w.get("thrust_gain_per_band")
+    if thrust:
+        demeaned = thrust["segment_demeaned"]
+        parts.append(f"<p><b>Thrust gain per band</b> (m acc_z against sum Omega_i^2, each over the static kf "
+                     f"{_fmt(thrust['static_kf'])} through the origin): h1 least squares (low when the rotor speeds are "
+                     "noisy), h2 reverse regression (high when the accelerometer is), coherence = h1 / h2, instrument "
+                     "= the motor commands' prediction of the collective. One gain: h1 ~ h2 ~ instrument and coherence "
+                     f"near 1. Segment means removed (the slope --thrust-offset segment fits): h1 {_fmt(demeaned['h1'])}, "
+                     f"h2 {_fmt(demeaned['h2'])}, coherence {_fmt(demeaned['coherence'])}.</p>")
+        parts.append(_table(["band", "h1", "h2", "coherence", "instrument"],
+                            [[b, v["h1"], v["h2"], v["coherence"], v["instrument"]]
+                             for b, v in thrust["per_band"].items()]))
     parts.append(f"<p>Per rotor (relative to the fleet mean): kf {_fmt(w['per_rotor']['kf_relative'])}, "
                  f"km {_fmt(w['per_rotor']['km_relative'])}.</p><img src='where.png'>")
     parts.append("<h2>Which effects</h2><p>Held-out explained fraction of the current residual (unweighted: "

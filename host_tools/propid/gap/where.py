@@ -119,3 +119,94 @@ def errors_in_variables(gr, cols: list[int], theta: np.ndarray, axis_idx: list[i
     return {"flag": flag, "forward_gain": fwd, "reverse_gain": rev,
             "excitation_rms": [float(np.median(excitation[gi])) for gi in groups],
             "rule": f"forward gain of the most excited fifth > {EIV_RISE} x the least excited fifth's"}
+
+
+THRUST_BANDS = ((0.2, 0.5), (0.5, 2.0), (2.0, 5.0), (5.0, 10.0), (10.0, 20.0))
+THRUST_COHERENT = 0.7  # coherence above which H1 and H2 agree to within 30 %: one gain, not noise
+
+
+def _band_first_stage(f: Flight, u_band: np.ndarray, lo: float | None, hi: float | None) -> np.ndarray | None:
+    """The collective sum Omega_i^2 that the motor commands alone predict in a band (zeros outside the
+    segments), or None without commands: per rotor, least squares of the band-passed Omega_i^2 on the
+    band-passed cmd_i and cmd_i^2 delayed by the base fit's INSTRUMENT_LAGS."""
+    if f.cmd is None:
+        return None
+    from propid.gap.basefit import INSTRUMENT_LAGS, _delayed
+
+    rows = segment_rows(f)
+    out = np.zeros(len(f.t))
+    for i in range(f.speed.shape[1]):
+        feats = []
+        for lag in INSTRUMENT_LAGS:
+            c = _delayed(f.cmd[:, i], lag)
+            feats += [c, c * c]
+        feats = np.column_stack(feats)
+        z = np.zeros_like(feats)
+        for a, b in f.segs:
+            z[a:b] = bandpass(np.nan_to_num(feats[a:b]), f.rate_hz, lo, hi)
+        coef, *_ = np.linalg.lstsq(z[rows], u_band[rows, i], rcond=None)
+        out += z @ coef
+    return out
+
+
+def thrust_gain_per_band(flights: list[Flight], mass: float | None) -> dict | None:
+    """The thrust axis's dynamic gain against its static one (docs/gap.md "Thrust gain per band"):
+    m acc_z against the collective sum Omega_i^2, pooled over the flights' segments.
+    static: through the origin on the low-passed rows (the mean's gain, what the base fit's kf_thrust reads);
+    per band (both sides band-passed per segment), as ratios over static:
+    h1 = Sxy / Sxx (least squares: attenuated by noise on the rotor-speed side),
+    h2 = Syy / Sxy (the reverse regression: inflated by noise on the accelerometer side),
+    coherence = Sxy^2 / (Sxx Syy) = h1 / h2, and instrument = Szy / Szx with z the collective the motor
+    commands predict (their noise is not the telemetry's). Noise on the regressor: h1 low, h2 and the
+    instrument near 1, low coherence; a real gain: h1 ~ h2 ~ instrument, coherence near 1.
+    segment_demeaned: h1 of the low-passed rows with each segment's mean removed (the slope
+    `--thrust-offset segment` fits). None without accelerometer or mass."""
+    if not mass or any(f.specific_force_z is None for f in flights):
+        return None
+    sxx = sxy = 0.0
+    demeaned = np.zeros(3)
+    for f in flights:
+        rows = segment_rows(f)
+        x = f.filtered(np.sum(f.speed**2, axis=1), lowpass_only=True)
+        y = f.filtered(mass * f.specific_force_z, lowpass_only=True)
+        sxx += float(x[rows] @ x[rows])
+        sxy += float(x[rows] @ y[rows])
+        for a, b in f.segs:
+            xs, ys = x[a:b] - x[a:b].mean(), y[a:b] - y[a:b].mean()
+            demeaned += [xs @ xs, xs @ ys, ys @ ys]
+    if not sxx > 0:
+        return None
+    static = sxy / sxx
+    top = 0.4 * min(f.rate_hz for f in flights)
+    bands = {}
+    for lo, hi in THRUST_BANDS:
+        if hi > top:
+            continue
+        s = np.zeros(5)  # xx, xy, yy, zx, zy
+        instrumented = all(f.cmd is not None for f in flights)
+        for f in flights:
+            rows = segment_rows(f)
+            u = np.zeros_like(f.speed)
+            y = np.zeros(len(f.t))
+            for a, b in f.segs:
+                u[a:b] = bandpass(np.nan_to_num(f.speed[a:b] ** 2), f.rate_hz, lo, hi)
+                y[a:b] = bandpass(mass * np.nan_to_num(f.specific_force_z[a:b, None]), f.rate_hz, lo, hi)[:, 0]
+            x = u.sum(axis=1)
+            z = _band_first_stage(f, u, lo, hi) if instrumented else None
+            s[:3] += [x[rows] @ x[rows], x[rows] @ y[rows], y[rows] @ y[rows]]
+            if z is not None:
+                s[3:] += [z[rows] @ x[rows], z[rows] @ y[rows]]
+        xx, xy, yy, zx, zy = s
+        ok = xx > 0 and xy != 0 and yy > 0
+        bands[f"{lo:g}-{hi:g}Hz"] = {
+            "h1": float(xy / xx / static) if ok else None,
+            "h2": float(yy / xy / static) if ok else None,
+            "coherence": float(xy * xy / (xx * yy)) if ok else None,
+            "instrument": float(zy / zx / static) if instrumented and zx != 0 else None}
+    xx, xy, yy = demeaned
+    return {"static_kf": float(static),
+            "segment_demeaned": {"h1": float(xy / xx / static) if xx > 0 else None,
+                                 "h2": float(yy / xy / static) if xy != 0 else None,
+                                 "coherence": float(xy * xy / (xx * yy)) if xx > 0 and yy > 0 else None},
+            "per_band": bands,
+            "coherent_above": THRUST_COHERENT}
