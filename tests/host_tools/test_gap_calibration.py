@@ -200,6 +200,8 @@ def test_an_accelerometer_that_did_not_pin_kf_is_no_reference(sitl_binary, tmp_p
     same, info = calibrate_or_fall_back("auto", [read_flightlog(path, vehicle)], vehicle, vehicle)
     assert same is vehicle and not info["calibrated"]
     assert "did not pin" in info["why"] and info["reference_rel_std"] > 2 * REFERENCE_MAX_REL_STD
+    assert info["guard"] == "torque-gain" and info["per_log_gyro_only_rotor_mean_rel_std"][0] > REFERENCE_MAX_REL_STD
+    assert info["reference_rel_std_final_bound"] > 2 * REFERENCE_MAX_REL_STD  # the guard before refused it too
     assert info["torque_gain_not_applied"] > 1.2  # what it would have applied: far off
     with pytest.raises(UserError, match="did not pin"):
         calibrate_or_fall_back("on", [read_flightlog(path, vehicle)], vehicle, vehicle)

@@ -42,6 +42,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default): when the fit logs have accelerometer columns and the vehicle a mass and "
                              "inertia, else the file is gap's effects alone and OUT.json says why; on: an error "
                              "instead; off: never")
+    parser.add_argument("--calibration-guard", choices=("torque-gain", "rotor-mean", "final"), default="torque-gain",
+                        help="with --vehicle-out: when the calibration is measured well enough to apply (docs/gap.md, "
+                             "Corrected vehicle, 'Only a pinned reference'), at most 5 %%: torque-gain (default): the "
+                             "relative std of c from both replays' rotor mean kf (the filter's covariance, its median "
+                             "over each log's second half), and with 3 or more logs the references' spread; "
+                             "rotor-mean: the same without the gyro-only replays; final: the guard before, the "
+                             "accelerometer replays' final kf relative std, mean over rotors")
     parser.add_argument("--highpass", default="auto", metavar="HZ|auto",
                         help="torque axes: slow disturbance torques below this are a nuisance; auto (default): the "
                              "lowest of 0.2/0.5/1/2/5 Hz at which the roll/pitch kf no longer depends on the band")
@@ -224,7 +231,8 @@ def run(args: argparse.Namespace) -> int:
 
         progress.grow(len(logs))  # the calibration's replays, one step per fit log
         corrected, result["calibration"] = calibrate_or_fall_back(args.calibration, logs, vehicle, corrected,
-                                                                  progress=lambda: progress(1))
+                                                                  progress=lambda: progress(1),
+                                                                  guard=args.calibration_guard)
         if result["calibration"]["calibrated"] and result.get("base_fit_after"):
             from propid.gap.calibration import base_fit_with_calibrated_inertia
 

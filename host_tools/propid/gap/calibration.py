@@ -17,25 +17,34 @@ little"): the correction must be measured with the estimator that uses it. So, a
   gyro-only fleet kf, applied on top of gap's effects (Jxx, Jyy x c, kf_nominal's mean = the
   accelerometer fleet kf).
 
-The fit logs' own accelerometer kf is the reference; the hold-out logs are never used. It is a
-reference only where the accelerometer pinned it: at a nearly constant collective thrust (a hover,
-a level circle) the accelerometer cannot tell kf from its own bias, and the accelerometer-aided kf
-follows the gyro or wanders (SITL: 1.48x the truth on a step flight, docs/gap.md). The guard uses the
-filter's own claimed uncertainty: per log the mean over rotors of kf's final relative std (an upper
-bound on the rotor mean's, the rotors' errors being correlated along the weakly seen scale), over
-logs sqrt(sum of squares) / n; the calibration runs only if that is at most 5 %, so that the
-reference's 95 % interval lies inside the 10 % the file is meant to deliver. Without an
-accelerometer, a mass or an inertia, or with an unpinned reference, the file is gap's corrected
-file as before, and `calibration` says why.
+The fit logs' own accelerometer kf is the reference; the hold-out logs are never used. c is applied only
+where it is measured (the guard, docs/gap.md "Only a measured gain"): at a nearly constant collective
+thrust (a hover, a level circle) the accelerometer cannot tell kf from its own bias, and without torque
+excitation the gyro-only side is not known either. The guard (`guard="torque-gain"`, the default) reads
+the filter's own covariance on both replays of every log:
+- per replay the relative std of the ROTOR MEAN of kf (the fleet kf is a rotor mean; the accelerometer pins
+  the rotors' sum, and how they differ is seen by the gyro alone and does not enter c), its median over the
+  second half of the log's samples (not its last sample); per log sqrt(accelerometer^2 + gyro only^2);
+  over logs sqrt(sum of squares) / n;
+- with 3 or more logs also the logs' agreement: the std of their references / sqrt(n) / their mean, which
+  sees a set the filter is sure of but that disagrees (a payload, another vehicle);
+the larger must be at most 5 %, so that c's 95 % interval lies inside the 10 % the file is meant to
+deliver. `rotor-mean` is the same without the gyro-only side; `final` the guard before (per log the mean
+over rotors of kf's final relative std with the accelerometer, an upper bound on the rotor mean's that is
+loose by the inverse of the thrust-torque scale state; pooled the same way). Without an accelerometer, a
+mass or an inertia, or when the guard refuses, the file is gap's corrected file as before, and
+`calibration` says why.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
 from propid.errors import UserError
 from propid.flightlog import FlightLog, Vehicle
-from propid.gap.filtercheck import chain_options, replay_summary
+from propid.gap.filtercheck import chain_options
 from propid.replay.calibration import accelerometer_options, torque_gain_correction
 
 REFERENCE_MAX_REL_STD = 0.05  # the reference's 95 % interval (1.96 std) inside the 10 % target
@@ -49,14 +58,48 @@ class UnpinnedReference(UserError):
         self.details = details
 
 
+GUARDS = ("torque-gain", "rotor-mean", "final")
+DEFAULT_GUARD = "torque-gain"
+MIN_LOGS_FOR_SPREAD = 3  # the logs' spread as a std needs a few of them
+
+
 def reference_rel_std(accel_summaries: list[dict]) -> float:
-    """The accelerometer-aided fleet kf's relative std, from the filter's own final stds (module text)."""
+    """The guard before (`final`): per log the mean over rotors of kf's final relative std, pooled over logs as
+    sqrt(sum of squares) / n."""
     per_log = []
     for s in accel_summaries:
         std, mean = np.asarray(s["kf_std"], dtype=float), np.asarray(s["kf_mean"], dtype=float)
         per_log.append(float(np.mean(std / mean)) if np.all(mean > 0) else float("inf"))
     value = float(np.sqrt(np.sum(np.square(per_log))) / len(per_log))
     return value if np.isfinite(value) else float("inf")
+
+
+def claimed_rotor_mean_rel_std(series: np.ndarray) -> float:
+    """One log's claim: the median, over the second half of the recorded samples, of the rotor mean kf's relative
+    std (NaN where not recorded)."""
+    values = np.asarray(series, dtype=float)
+    later = values[values.size // 2:]
+    later = later[~np.isnan(later)]
+    if not later.size:
+        return float("inf")
+    value = float(np.median(later))
+    return value if np.isfinite(value) else float("inf")
+
+
+def reference_guard(per_log_claimed: list[float], per_log_reference: list[float]) -> dict:
+    """A guard's figures (module text) from per-log claimed relative stds and the logs' references: the claim
+    pooled over logs, the logs' spread (None with fewer than MIN_LOGS_FOR_SPREAD logs) and the larger of the two."""
+    claimed = np.asarray(per_log_claimed, dtype=float)
+    refs = np.asarray(per_log_reference, dtype=float)
+    pooled = float(np.sqrt(np.sum(np.square(claimed))) / claimed.size)
+    pooled = pooled if np.isfinite(pooled) else float("inf")
+    spread = None
+    if refs.size >= MIN_LOGS_FOR_SPREAD:
+        mean = float(np.mean(refs))
+        spread = float(np.std(refs, ddof=1) / np.sqrt(refs.size) / mean) if mean > 0 else float("inf")
+        spread = spread if np.isfinite(spread) else float("inf")
+    return {"claimed": pooled, "spread": spread, "reference_rel_std": max(pooled, spread or 0.0),
+            "per_log_claimed": [float(v) for v in claimed]}
 
 
 RULE = ("c = fleet kf with the accelerometer / fleet kf gyro only, both replays of the fit logs with gap's corrected "
@@ -91,44 +134,88 @@ def unavailable(vehicle: Vehicle, logs: list[FlightLog]) -> str | None:
     return None
 
 
-def calibrate(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progress=None) -> tuple[Vehicle, dict]:
+ROTOR_MEAN_STD_EVERY = 5  # the rotor mean's std on every 5th sample of the accelerometer replay
+
+
+def _claimed_replay(log: FlightLog, vehicle: Vehicle, options) -> tuple[dict, float]:
+    """A calibration replay's summary and the log's claimed rotor-mean std (filtercheck.replay_summary's
+    fallback to every row when no row is flying)."""
+    from propid.replay import replay
+
+    try:
+        result = replay(log, vehicle, options)
+    except UserError:
+        if options.segment != "flying":
+            raise
+        result = replay(log, vehicle, replace(options, segment="all"))
+    return result.summary, claimed_rotor_mean_rel_std(result.series["kf_rotor_mean_rel_std"])
+
+
+def calibrate(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progress=None,
+              guard: str = DEFAULT_GUARD) -> tuple[Vehicle, dict]:
     """gap's corrected file calibrated with the filter on the fit logs: (the file, what was done).
     Raises UserError when it cannot be done; the caller decides whether that falls back."""
+    if guard not in GUARDS:
+        raise UserError(f"gap calibration guard {guard!r}: one of {', '.join(GUARDS)}")
     why = unavailable(vehicle, logs)
     if why:
         raise UserError(f"gap calibration: {why}")
     gyro_options = chain_options(corrected, skip_repeats=True, walk=True)
-    accel_options = accelerometer_options(gyro_options)
-    used, skipped, gyro, accel = [], [], [], []
+    accel_options = replace(accelerometer_options(gyro_options), rotor_mean_std_every=ROTOR_MEAN_STD_EVERY)
+    gyro_options = replace(gyro_options, rotor_mean_std_every=ROTOR_MEAN_STD_EVERY)
+    used, skipped, gyro, accel, claimed, gyro_claimed = [], [], [], [], [], []
     for log in logs:
         name = log.path.name if log.path else "log"
         if not _has_accelerometer(log):
             skipped.append({"log": name, "why": "no accelerometer columns"})
         else:
             try:
-                g = replay_summary(log, corrected, gyro_options)
-                a = replay_summary(log, corrected, accel_options)
+                g, g_claimed = _claimed_replay(log, corrected, gyro_options)
+                a, a_claimed = _claimed_replay(log, corrected, accel_options)
             except UserError as exc:
                 skipped.append({"log": name, "why": str(exc)})
             else:
                 used.append(name)
                 gyro.append(g)
                 accel.append(a)
+                claimed.append(a_claimed)
+                gyro_claimed.append(g_claimed)
         if progress:
             progress()
     if not used:
         raise UserError("gap calibration: no fit log could be replayed with the accelerometer: "
                         + "; ".join(f"{s['log']}: {s['why']}" for s in skipped))
-    sigma = reference_rel_std(accel)
+    per_log_reference = [float(np.mean(s["kf_mean"])) for s in accel]
+    figures = reference_guard(claimed, per_log_reference)
+    per_log_gain = [float(np.hypot(a, g)) for a, g in zip(claimed, gyro_claimed)]
+    gain_figures = reference_guard(per_log_gain, per_log_reference)
+    final_bound = reference_rel_std(accel)
+    chosen = {"torque-gain": gain_figures, "rotor-mean": figures}.get(guard)
+    sigma = chosen["reference_rel_std"] if chosen else final_bound
+    guard_record = {"guard": guard, "reference_rel_std_final_bound": final_bound,
+                    "reference_rel_std_claimed": figures["claimed"], "reference_rel_std_spread": figures["spread"],
+                    "torque_gain_rel_std_claimed": gain_figures["claimed"],
+                    "per_log_rotor_mean_rel_std": figures["per_log_claimed"],
+                    "per_log_gyro_only_rotor_mean_rel_std": [float(v) for v in gyro_claimed]}
     if sigma > REFERENCE_MAX_REL_STD:
         kf_gyro = float(np.mean([np.mean(s["kf_mean"]) for s in gyro]))
-        kf_accel = float(np.mean([np.mean(s["kf_mean"]) for s in accel]))
+        kf_accel = float(np.mean(per_log_reference))
+        spread_decides = chosen is not None and (chosen["spread"] or 0.0) > chosen["claimed"]
+        gyro_decides = guard == "torque-gain" and figures["reference_rel_std"] <= REFERENCE_MAX_REL_STD
+        why = ("the fit logs' accelerometer references disagree (their fleet kf's relative std from their spread "
+               f"{100 * sigma:.1f} % > {100 * REFERENCE_MAX_REL_STD:.0f} %: a payload, another vehicle or unlike flights)"
+               if spread_decides else
+               f"the gyro-only replays did not pin kf on the fit logs (the torque gain c's relative std {100 * sigma:.1f} % "
+               f"> {100 * REFERENCE_MAX_REL_STD:.0f} %: too little torque excitation to measure what the file corrects)"
+               if gyro_decides else
+               f"the accelerometer did not pin kf on the fit logs (its fleet kf's relative std "
+               f"{100 * sigma:.1f} % > {100 * REFERENCE_MAX_REL_STD:.0f} %: too little change of the collective thrust "
+               f"to tell kf from the accelerometer bias)")
         raise UnpinnedReference(
-            f"gap calibration: the accelerometer did not pin kf on the fit logs (its fleet kf's relative std "
-            f"{100 * sigma:.1f} % > {100 * REFERENCE_MAX_REL_STD:.0f} %: too little change of the collective thrust "
-            f"to tell kf from the accelerometer bias)",
+            f"gap calibration: {why}",
             {"reference_rel_std": sigma, "reference_max_rel_std": REFERENCE_MAX_REL_STD, "logs": used,
-             "kf_gyro_only": kf_gyro, "kf_with_accelerometer": kf_accel, "torque_gain_not_applied": kf_accel / kf_gyro})
+             "kf_gyro_only": kf_gyro, "kf_with_accelerometer": kf_accel, "torque_gain_not_applied": kf_accel / kf_gyro,
+             "per_log_kf_with_accelerometer": per_log_reference, **guard_record})
     calibrated, found = torque_gain_correction(corrected, gyro, accel)
     calibrated.notes = ((corrected.notes or "") + f" Calibrated by propid gap with the filter on {len(used)} fit "
                         f"log(s): Jxx, Jyy x {found['torque_gain']:.4g} on top of the effects above, kf_nominal mean "
@@ -142,6 +229,7 @@ def calibrate(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progr
         "kf_with_accelerometer": found["kf_with_accelerometer"],
         "reference_rel_std": sigma,
         "reference_max_rel_std": REFERENCE_MAX_REL_STD,
+        **guard_record,
         "per_log_kf_gyro_only": [float(np.mean(s["kf_mean"])) for s in gyro],
         "per_log_kf_with_accelerometer": [float(np.mean(s["kf_mean"])) for s in accel],
         "inertia_before": [float(v) for v in np.diag(np.asarray(corrected.inertia, dtype=float))],
@@ -151,7 +239,7 @@ def calibrate(logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle, progr
                                "with_accelerometer": _options_record(accel_options)},
         "replay_options": dict(_options_record(gyro_options), command=chain_command(calibrated)),
         "rule": RULE + f"; only when the accelerometer-aided fleet kf's relative std is at most "
-                       f"{100 * REFERENCE_MAX_REL_STD:.0f} %",
+                       f"{100 * REFERENCE_MAX_REL_STD:.0f} % (guard {guard})",
     }
     return calibrated, info
 
@@ -167,12 +255,12 @@ def not_calibrated(why: str, vehicle: Vehicle | None = None) -> dict:
 
 
 def calibrate_or_fall_back(mode: str, logs: list[FlightLog], vehicle: Vehicle, corrected: Vehicle,
-                           progress=None) -> tuple[Vehicle, dict]:
+                           progress=None, guard: str = DEFAULT_GUARD) -> tuple[Vehicle, dict]:
     """mode: auto (calibrate when possible, else gap's file and why), on (must calibrate), off."""
     if mode == "off":
         return corrected, not_calibrated("--calibration off", corrected)
     try:
-        return calibrate(logs, vehicle, corrected, progress)
+        return calibrate(logs, vehicle, corrected, progress, guard)
     except UserError as exc:
         if mode == "on":
             raise

@@ -68,6 +68,10 @@ class ReplayOptions:
     # The first stage's weak-instrument guard: least F statistic of a rotor's fit (0: none).
     command_min_f: float = 0.0
     record_every: int = 1  # keep every k-th estimate for the time series
+    # Every k-th recorded estimate, also the rotor mean kf's relative std from the filter's covariance (series
+    # "kf_rotor_mean_rel_std", NaN between; gap's calibration guard reads it); 0: not recorded (it costs a copy
+    # of the covariance per value).
+    rotor_mean_std_every: int = 0
     # The window kf_mean_window/km_mean_window average over (replay/averaging.py): "from-crossing" or "at-least-half".
     mean_window: str = "from-crossing"
     # What kf_mean/km_mean report (replay/averaging.py): "inverse-variance" (the whole series weighted by

@@ -140,6 +140,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     rec_t, rec_kf, rec_kfs, rec_km, rec_kms, rec_bg, rec_bgs, rec_conv_kf, rec_conv_km, rec_nis, rec_rate = (
         [] for _ in range(11))
     rec_scale = []
+    rec_mean_std = []  # the rotor mean kf's relative std (options.rotor_mean_std_every), NaN between
     gate = float(config_fields.get("gate_sigma", DEFAULT_TUNING["gate_sigma"]))
     resyncs = 0
     gyro_pushes = 0
@@ -196,6 +197,10 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
                 rec_bgs.append(est["gyro_bias_std"])
                 rec_rate.append(est["body_rate"])
                 rec_scale.append(est["torque_scale"])
+                if options.rotor_mean_std_every > 0 and (len(rec_t) - 1) % options.rotor_mean_std_every == 0:
+                    rec_mean_std.append(rotor_mean_rel_std(filt.thrust_coeff_covariance(), est["thrust_coeff"][:n]))
+                else:
+                    rec_mean_std.append(np.nan)
                 # The averaging window starts where the relative std first falls below
                 # converged_rel_std (one std: the estimate has settled), whatever the
                 # filter's claim says (that asks 3 std and the consistency monitor's
@@ -224,6 +229,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "gyro_bias_std": np.array(rec_bgs, dtype=float),
         "body_rate": np.array(rec_rate, dtype=float),
         "torque_scale": np.array(rec_scale, dtype=float),
+        "kf_rotor_mean_rel_std": np.array(rec_mean_std, dtype=float),
         "kf_converged": np.array(rec_conv_kf, dtype=bool),
         "km_converged": np.array(rec_conv_km, dtype=bool),
         "nis": np.array(rec_nis, dtype=float) * (gate * gate if gate > 0 else np.nan),
@@ -388,6 +394,16 @@ def rotor_stream_is_slower(log: FlightLog, mask: np.ndarray) -> bool:
     logs_rotor = np.any(np.isfinite(log.rotor_speed[mask]), axis=1).sum()
     logs_gyro = np.any(np.isfinite(log.gyro[mask]), axis=1).sum()
     return bool(logs_rotor < 0.9 * logs_gyro)
+
+
+def rotor_mean_rel_std(covariance: np.ndarray, kf) -> float:
+    """The relative std of the rotors' mean kf, sqrt(1' C 1) / n / mean(kf), C the rotors' kf covariance: what the
+    accelerometer pins (their sum), whatever the gyro knows of how the rotors differ."""
+    kf = np.asarray(kf, dtype=float)
+    mean = float(np.mean(kf))
+    if not (mean > 0 and np.all(np.isfinite(covariance))):
+        return float("inf")
+    return float(np.sqrt(max(float(np.sum(covariance)), 0.0)) / kf.size / mean)
 
 
 def estimates_finite(series: dict) -> bool:
