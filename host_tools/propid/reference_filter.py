@@ -56,8 +56,14 @@ class ReferenceFilter:
     filter is the plain EKF of the same model, which float64 can carry (docs/reliability.md, "The
     loading's cost, measured in float64")."""
 
-    def __init__(self, config: FilterConfig, loadings: bool = True):
+    def __init__(self, config: FilterConfig, loadings: bool = True, rate_coordinate: str = "body"):
+        if rate_coordinate not in ("body", "gyro"):
+            raise ValueError(f"reference filter: rate_coordinate {rate_coordinate!r} (body or gyro)")
         self.config = config
+        # "gyro" is an experiment, not the C algorithm: the loadings the same filter takes with the
+        # rate kept in the gyro's coordinate s = omega + b (docs/math.md, "What it costs where the bias
+        # is not learnt"); exact arithmetic does the rest the same in either coordinate.
+        self.rate_coordinate = rate_coordinate
         self.var_loading = VAR_LOADING if loadings else 0.0
         self.update_loading = UPDATE_LOADING if loadings else 0.0
         self.rotor_count = n_rot = config.rotor_count
@@ -161,7 +167,7 @@ class ReferenceFilter:
         self.claim_var = (self.converged_var / 9.0 - (0.0 if self.torque_scale is not None else inertia_var),
                           self.converged_var / 9.0 - inertia_var)
 
-        self.rate_terms = self._rate_row_terms()
+        self.rate_terms, self.rate_entries = self._rate_row_terms()
 
         n = self.n
         self.prior_var = np.empty(n)
@@ -219,10 +225,12 @@ class ReferenceFilter:
                                          _f32(getattr(config, "motor_command_min_f", 0.0)))
         self._core_to_prior()
 
-    def _rate_row_terms(self) -> np.ndarray:
+    def _rate_row_terms(self) -> tuple[np.ndarray, np.ndarray]:
         """Terms of each rate row of F = I + G the C prediction lists (propid_config.c,
         derive_quad_layout / derive_sparsity): 1 for the rate itself + the row's Jacobian
-        entries; the count m of the rounding scale's Cauchy-Schwarz bound (docs/math.md §2)."""
+        entries; the count m of the rounding scale's Cauchy-Schwarz bound (docs/math.md §2).
+        And how many of those entries are rate columns (in the gyro's coordinate each is on
+        the bias of that axis too)."""
         n_rot = self.rotor_count
         # A_ab = sum_c coeff[a, b, c] omega_c: the gyroscopic Jacobian at each unit rate
         coeff = np.stack([-(self.inertia_inv @ (_skew(e) @ self.inertia - _skew(self.inertia @ e)))
@@ -234,17 +242,20 @@ class ReferenceFilter:
         if (n_rot == 4 and self.n == 3 + 2 * n_rot + 3 and not self.rotor_inertia_on and not self.aero_damping_on
                 and third_only
                 and not drag[:, :2].any() and not thrust[:, 2].any()):
-            return np.full(3, 1.0 + 6.0)  # the fixed quad layout: 2 rates + 4 coefficients a row
+            # the fixed quad layout: 2 rates + 4 coefficients a row
+            return np.full(3, 1.0 + 6.0), np.full(3, 2.0)
         terms = np.ones(3)
+        rate_entries = np.zeros(3)
         for a in range(3):
             for b in range(3):
                 rotor_term = self.rotor_inertia_on and b < 2 and self.inertia_inv[a, 1 - b] != 0.0
                 damping_term = self.aero_rate[a, b] != 0.0
-                terms[a] += bool(np.any(coeff[a, b] != 0.0) or rotor_term or damping_term)
+                rate_entries[a] += bool(np.any(coeff[a, b] != 0.0) or rotor_term or damping_term)
+            terms[a] += rate_entries[a]
             terms[a] += np.count_nonzero(thrust[:, a])
             terms[a] += n_rot if drag[:, a].any() else 0
             terms[a] += 1 if self.first_disturbance is not None else 0
-        return terms
+        return terms, rate_entries
 
     # ------------------------------------------------------------------ life cycle
     def _core_to_prior(self) -> None:
@@ -618,24 +629,7 @@ class ReferenceFilter:
 
         if not anchor:
             n = self.n
-            f = np.eye(n)
-            f[:3, :] += jac_dt
-            # the rates' loading eps l m (P_aa + sum_p G_ap^2 P_pp), m = 1 + the row's listed
-            # entries, l = max(8, m) (C: the prediction's rounding scale, docs/math.md §2)
-            terms = self.rate_terms
-            rate_scale = terms * np.maximum(terms, 8.0) * (np.diag(self.cov)[:3] + (jac_dt ** 2) @ np.diag(self.cov))
-            self.cov = f @ self.cov @ f.T
-            self.cov = 0.5 * (self.cov + self.cov.T)
-            # Q dt and the rounding loading (C: PROPID_VAR_LOADING, docs/math.md §2): on the
-            # drag coefficients every second prediction (C: even check rows), on the rest every one;
-            # the rates' of their rounding scale (above).
-            diag = np.diag_indices(n)
-            loading = np.full(n, self.var_loading)
-            if self.check_row % 2 != 0:
-                loading[self.first_drag:self.first_bias] = 0.0
-            scaled = self.cov[diag].copy()
-            scaled[:3] = rate_scale
-            self.cov[diag] += loading * scaled + self.process_psd * dt
+            self._propagate_covariance(jac_dt, dt)
             if self.torque_scale is not None and self.process_psd[self.torque_scale] > 0.0:
                 # C: add_scale_walk, Q dt = q^2 dt v v^T, v = r g at each g and -r^2 at r (q^2 dt
                 # on P_rr is in the per-state process noise already)
@@ -701,6 +695,52 @@ class ReferenceFilter:
         self.stale_mark = self.counters_data["rejected"][-STATUS["PROPID_ERR_ROTOR_STALE"]]
         self.counters_data["gyro_accepted"] += 1
         return STATUS["PROPID_OK_GATED"] if gated else STATUS["PROPID_OK"]
+
+    def _propagate_covariance(self, jac_dt: np.ndarray, dt: float) -> None:
+        """P := F P F^T + Q dt + the rounding loadings (C: propid_predict.c), F = I + jac_dt on the
+        rate rows. rate_coordinate="gyro": the loadings the same algorithm takes with the rate kept
+        as s = omega + b (below); F P F^T and Q dt are the same in either coordinate."""
+        n = self.n
+        f = np.eye(n)
+        f[:3, :] += jac_dt
+        diag = np.diag_indices(n)
+        bias = slice(self.first_bias, self.first_bias + 3)
+        variances = np.diag(self.cov)
+        if self.rate_coordinate == "gyro":
+            # Row a of F in (s, b): 1 on s_a, G_ac on s_c, -G_ac on b_c, G on the rest; its
+            # diagonal: var(s_c) on the rates, P_bb on the biases, P on the rest.
+            kept = variances.copy()
+            kept[:3] = variances[:3] + 2.0 * np.diag(self.cov[:3, bias]) + variances[bias]
+            squares = kept[:3] + (jac_dt ** 2) @ kept + (jac_dt[:, :3] ** 2) @ variances[bias]
+            terms = self.rate_terms + self.rate_entries
+        else:
+            squares = variances[:3] + (jac_dt ** 2) @ variances
+            terms = self.rate_terms
+        # the rates' loading eps l m (P_aa + sum_p G_ap^2 P_pp), m = 1 + the row's listed
+        # entries, l = max(8, m) (C: the prediction's rounding scale, docs/math.md §2)
+        rate_scale = terms * np.maximum(terms, 8.0) * squares
+        self.cov = f @ self.cov @ f.T
+        self.cov = 0.5 * (self.cov + self.cov.T)
+        # Q dt and the rounding loading (C: PROPID_VAR_LOADING, docs/math.md §2): on the
+        # drag coefficients every second prediction (C: even check rows), on the rest every one;
+        # the rates' of their rounding scale (above).
+        loading = np.full(n, self.var_loading)
+        if self.check_row % 2 != 0:
+            loading[self.first_drag:self.first_bias] = 0.0
+        scaled = self.cov[diag].copy()
+        scaled[:3] = rate_scale
+        if self.rate_coordinate == "gyro":
+            # A bias loaded with s = omega + b held: + d on var(b) and var(omega), - d on their
+            # covariance (var(omega + b) untouched).
+            along = loading[bias] * scaled[bias]
+            loading[bias] = 0.0
+            rates = np.arange(3)
+            biases = rates + self.first_bias
+            self.cov[rates, rates] += along
+            self.cov[biases, biases] += along
+            self.cov[rates, biases] -= along
+            self.cov[biases, rates] -= along
+        self.cov[diag] += loading * scaled + self.process_psd * dt
 
     def _input_compensation_prepare(self, dt: float) -> dict:
         """C: propid_input_compensation_prepare (docs/math.md §14): each axis' errors-in-variables

@@ -96,3 +96,10 @@ def test_cli_refuses_a_rate_noise_that_is_not_positive(sitl_binary):
                           capture_output=True, text=True)
     assert proc.returncode == 2
     assert "--rate-noise must be a positive number" in proc.stderr
+
+
+def test_cli_refuses_an_unknown_filter(sitl_binary):
+    proc = subprocess.run([sys.executable, str(TOOL), "--sitl", str(sitl_binary), "--filters", "float64,float32"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "--filters: float32 is not one of c, float64, float64_unloaded, float64_gyro" in proc.stderr

@@ -11,7 +11,10 @@ with that rate noise and the soak's other settings:
 - c: the C filter (propid.cfilter, float32 with its loadings);
 - float64: the float64 reference of the same algorithm, loadings included;
 - float64_unloaded: the same reference without the loadings (`ReferenceFilter(...,
-  loadings=False)`: the plain EKF of the same model, which float64 can carry).
+  loadings=False)`: the plain EKF of the same model, which float64 can carry);
+- float64_gyro: the reference with the loadings the same algorithm takes with the rate kept in the
+  gyro's coordinate s = omega + b (`ReferenceFilter(..., rate_coordinate="gyro")`; only with
+  --filters, docs/reliability.md, "The rate in the gyro's coordinate, measured in float64").
 
 The NEES of kf, km and the gyro biases against the log's truth every 10th row (the SITL's
 50 Hz), in its 95 % band as the SITL counts it (Wilson-Hilferty; a block that is not
@@ -44,7 +47,8 @@ from propid.flightlog import read_table, read_vehicle  # noqa: E402
 from propid.outputs import write_text  # noqa: E402
 from propid.reference_filter import ReferenceFilter  # noqa: E402
 
-FILTERS = ("c", "float64", "float64_unloaded")
+FILTERS = ("c", "float64", "float64_unloaded")  # the default set
+ALL_FILTERS = FILTERS + ("float64_gyro",)
 NEES_EVERY = 10  # rows between NEES samples (sitl/app/honesty.c: HONESTY_NEES_EVERY)
 PAPER_GYRO_RATE_HZ = 500.0  # sitl/sensors/imu.c, the paper's IMU
 GYRO_NOISE_DENSITY = 0.014 * math.pi / 180.0  # the simulated gyro's (BMI088 datasheet), rad/s/sqrt(Hz)
@@ -74,6 +78,8 @@ def replay_config(vehicle_file: str, preset: str, rate_noise: float) -> FilterCo
 def make_filter(name: str, config: FilterConfig):
     if name == "c":
         return CFilter(config)
+    if name == "float64_gyro":
+        return ReferenceFilter(config, rate_coordinate="gyro")
     return ReferenceFilter(config, loadings=(name == "float64"))
 
 
@@ -117,7 +123,7 @@ def replay_nees(log: str, config: FilterConfig, name: str) -> dict:
 
 
 def fly_case(job: tuple) -> dict:
-    sitl, case, rate_noise = job
+    sitl, case, rate_noise, filters = job
     soak = rate_noise_rule.load_soak()
     with tempfile.TemporaryDirectory(prefix="nees-float64-") as work:
         log, summary = os.path.join(work, "flight.csv"), os.path.join(work, "flight.json")
@@ -131,18 +137,18 @@ def fly_case(job: tuple) -> dict:
             log, vehicle_file, case["vehicle"], "paper")["q_rate"]
         config = replay_config(vehicle_file, case["vehicle"], q)
         return {"case": case, "rate_noise": q, "in_loop_soak_tuning": in_loop,
-                **{name: replay_nees(log, config, name) for name in FILTERS}}
+                **{name: replay_nees(log, config, name) for name in filters}}
 
 
 def share(part: int, whole: int) -> float | None:
     return round(100.0 * part / whole, 2) if whole else None
 
 
-def pooled(results: list[dict]) -> dict:
+def pooled(results: list[dict], filters: tuple = FILTERS) -> dict:
     """Per filter: the shares of all flights' NEES samples in band, below and above, and the
     flights under 90 % in band."""
     out = {}
-    for name in FILTERS:
+    for name in filters:
         flights = [r[name] for r in results if name in r]
         samples = sum(f["samples"] for f in flights)
         out[name] = {"in_band_pct": share(sum(f["in_band"] for f in flights), samples),
@@ -163,9 +169,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rate-noise", type=float,
                         help="replay at this rate process noise [rad/s^2/sqrt(Hz)] (default: each flight's "
                              "derived value, rate_noise_rule.derive)")
+    parser.add_argument("--filters", default=",".join(FILTERS),
+                        help=f"comma-separated, of {', '.join(ALL_FILTERS)} (default: {','.join(FILTERS)})")
     parser.add_argument("--jobs", type=int, default=2, help="flights in parallel (default 2)")
     parser.add_argument("--out", help="write the figures and the per-flight results here (JSON)")
     args = parser.parse_args(argv)
+    filters = tuple(name.strip() for name in args.filters.split(",") if name.strip())
+    unknown = [name for name in filters if name not in ALL_FILTERS]
+    if unknown or not filters:
+        parser.error(f"--filters: {unknown[0] if unknown else 'none given'} is not one of {', '.join(ALL_FILTERS)}")
     rate_noise_rule.check_sitl_and_out(parser, args)
     if args.jobs < 1 or args.steps <= 0:
         parser.error("--jobs must be >= 1 and --steps > 0")
@@ -184,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         from tqdm import tqdm
     except ImportError:  # the bar is a convenience
         tqdm = None
-    jobs = [(args.sitl, case, args.rate_noise) for case in cases]
+    jobs = [(args.sitl, case, args.rate_noise, filters) for case in cases]
     try:
         with ProcessPoolExecutor(args.jobs) as pool:
             iterator = pool.map(fly_case, jobs)
@@ -199,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"nees_float64: case {failed[0]['case']['case']}: {failed[0]['error']}", file=sys.stderr)
         return 1
     out = {"plan_seed": args.seed, "rate_noise": args.rate_noise if args.rate_noise is not None else "derived",
-           "pooled": pooled(results), "flights": results}
+           "pooled": pooled(results, filters), "flights": results}
     if args.out:
         write_text(args.out, json.dumps(out, indent=1) + "\n")
     print(json.dumps({key: out[key] for key in ("plan_seed", "rate_noise", "pooled")}, indent=1))
