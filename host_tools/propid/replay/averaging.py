@@ -61,16 +61,22 @@ def window_means(values: np.ndarray, converged: np.ndarray, t: np.ndarray,
 def inverse_variance_means(values: np.ndarray, stds: np.ndarray) -> list[float]:
     """Per coefficient (column): sum(value / std^2) / sum(1 / std^2) over the samples whose value is finite and
     whose std is finite and positive (nan if none)."""
+    def weighted(k: int, usable: np.ndarray) -> float:
+        value, std = values[usable, k], stds[usable, k]
+        # weights relative to the smallest std: the same ratios as 1/std^2, without overflow for tiny stds
+        weight = (np.min(std) / std) ** 2
+        return float(np.sum(weight * value) / np.sum(weight))
+    return _per_usable_column(values, stds, weighted)
+
+
+def _per_usable_column(values: np.ndarray, stds: np.ndarray, summary) -> list[float]:
+    """summary(k, usable) of each column k, usable the mask of its samples whose value is finite and whose std
+    is finite and positive; nan for a column without such a sample."""
     means = []
     for k in range(values.shape[1]):
         value, std = values[:, k], stds[:, k]
         usable = np.isfinite(value) & np.isfinite(std) & (std > 0)
-        if not usable.any():
-            means.append(float("nan"))
-            continue
-        # weights relative to the smallest std: the same ratios as 1/std^2, without overflow for tiny stds
-        weight = (np.min(std[usable]) / std[usable]) ** 2
-        means.append(float(np.sum(weight * value[usable]) / np.sum(weight)))
+        means.append(summary(k, usable) if usable.any() else float("nan"))
     return means
 
 
@@ -107,16 +113,10 @@ def smoothed_means(values: np.ndarray, stds: np.ndarray, t: np.ndarray, walk_var
     """Per coefficient (column): the time mean of its smoothed series over the samples whose value is finite and
     whose std is finite and positive (nan if none). walk_var_rates: each column's walk variance per second,
     in the values' units squared ((relative walk x nominal)^2)."""
-    means = []
-    for k in range(values.shape[1]):
-        value, std = values[:, k], stds[:, k]
-        usable = np.isfinite(value) & np.isfinite(std) & (std > 0)
-        if not usable.any():
-            means.append(float("nan"))
-            continue
-        smoothed = smoothed_series(value[usable], std[usable], t[usable], float(walk_var_rates[k]))
-        means.append(time_mean(smoothed, t[usable]))
-    return means
+    def smoothed_mean(k: int, usable: np.ndarray) -> float:
+        smoothed = smoothed_series(values[usable, k], stds[usable, k], t[usable], float(walk_var_rates[k]))
+        return time_mean(smoothed, t[usable])
+    return _per_usable_column(values, stds, smoothed_mean)
 
 
 def coefficient_means(values: np.ndarray, stds: np.ndarray, converged: np.ndarray, t: np.ndarray,
