@@ -12,6 +12,7 @@ from propid.errors import UserError
 from propid.flightlog import other_vehicle_files, read_flightlog, read_vehicle, vehicle_path_for
 from propid.outputs import check_not_inputs, check_writable, write_text
 from propid.replay.averaging import MEAN_ESTIMATORS
+from propid.replay.start import HOLD_S
 
 NAME = "replay"
 HELP = "replay a flight-log v1 CSV through the firmware filter: per-rotor kf/km, gyro biases, JSON + plot"
@@ -71,6 +72,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--segment", choices=["all", "flying"], default="all",
                         help="replay every row, or only flying rows (is_flying column, else every rotor above "
                              "1/3 of the median spinning speed); gaps are bridged with propid_resync (default all)")
+    parser.add_argument("--start", choices=["first", "flying"], default="first",
+                        help="where the filter starts: the segment's first row (default), or flying: the first row "
+                             f"from which the vehicle flies {HOLD_S:g} s without a break (a simulator's untrimmed start or "
+                             "a take-off left out; the noise and delay rules still measure on the whole segment)")
     parser.add_argument("--streams", choices=["auto", "rows", "events"], default="auto",
                         help="rows: every row is one gyro and one rotor sample; events: a row carries whichever "
                              "stream is non-empty (ULog/tlog conversions); auto (default) decides from the log")
@@ -352,6 +357,7 @@ def run(args: argparse.Namespace) -> int:
     thrust_coeff_walk = overrides.pop("thrust_coeff_rel_walk") if overrides.get("thrust_coeff_rel_walk") == "auto" else None
     options = ReplayOptions(
         segment=args.segment,
+        start=args.start,
         streams=args.streams,
         unit_inertia=args.unit_inertia,
         kf_nominal=args.kf_nominal,

@@ -10,6 +10,7 @@ US = 1_000_000  # microseconds per second: the C API takes time stamps in us
 @dataclass
 class ReplayOptions:
     segment: str = "all"  # "all" or "flying"
+    start: str = "first"  # where the filter starts: "first" (the segment's first row) or "flying" (replay/start.py)
     streams: str = "auto"  # "auto", "rows" or "events"
     unit_inertia: bool = False
     kf_nominal: float | None = None  # override (unit-inertia mode: kf/J)

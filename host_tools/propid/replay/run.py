@@ -21,6 +21,7 @@ from propid.replay.prefilter import highpass_emulation_log, prefilter_log
 from propid.replay.report_timing import resolve_rotor_timing_error
 from propid.replay.rotor_spread import spread_bound
 from propid.replay.session import FilterSession, segment_mask
+from propid.replay.start import STARTS, flying_start
 from propid.replay.thrust_aero import carry_thrust_aero
 from propid.replay.vehicle_terms import undo_gyro_scale
 from propid.signals import median_dt, repeats_previous_row
@@ -59,6 +60,8 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         raise UserError(f"mean window {options.mean_window!r}: one of {', '.join(MEAN_WINDOWS)}")
     if options.mean_estimator not in MEAN_ESTIMATORS:
         raise UserError(f"mean estimator {options.mean_estimator!r}: one of {', '.join(MEAN_ESTIMATORS)}")
+    if options.start not in STARTS:
+        raise UserError(f"--start {options.start!r}: choose {' or '.join(STARTS)}")
     if log.rotor_count != vehicle.rotor_count:
         raise UserError(f"the log has {log.rotor_count} rotors, the vehicle file {vehicle.rotor_count}")
     log, gyro_scale_note = undo_gyro_scale(log, vehicle, options)  # the boundary: true rates from here on
@@ -145,14 +148,20 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
     resyncs = 0
     gyro_pushes = 0
     gyro_accepted = 0
-    iterator = rows
+    # The filter's rows: the segment's, from the start the rule gives (the per-log rules above measured on
+    # the whole segment).
+    start_row = flying_start(log) if options.start == "flying" else 0
+    filter_rows = rows[rows >= start_row]
+    if filter_rows.size == 0:
+        filter_rows, start_row = rows, 0
+    iterator = filter_rows
     if options.progress:
         from tqdm import tqdm
 
-        iterator = tqdm(rows, desc="replay", unit="row", mininterval=0.5, leave=False)
+        iterator = tqdm(filter_rows, desc="replay", unit="row", mininterval=0.5, leave=False)
     # Every sample at its logged time, the streams interleaved in time order (commands, then rotor
     # speeds, then the gyro at equal stamps); the filter realigns them by its configured delay.
-    inputs = input_pushes(rows, streams, logged_streams, has_rotor, commands, t_us)
+    inputs = input_pushes(filter_rows, streams, logged_streams, has_rotor, commands, t_us)
     next_input = 0
     for i in iterator:
         while next_input < len(inputs) and t_us[inputs[next_input][1]] <= t_us[i]:
@@ -267,15 +276,17 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
             "gyro_bias": "rad/s",
         },
         "segment": options.segment,
+        "start": {"rule": options.start, "from_s": float(log.t[filter_rows[0]] - log.t[0]),
+                  "rows_left_out": int(rows.size - filter_rows.size)},
         "streams": streams,
-        "rows_replayed": int(rows.size),
+        "rows_replayed": int(filter_rows.size),
         "repeated_rows_skipped": repeats,
         "esc_delay_s": esc_delay_s,
         "esc_delay_rule": delay_rule,
         "rotor_delay_s": -esc_delay_s,  # the older convention: rotor speeds acting this much after their stamp
         "rotor_delay_rule": delay_rule,
         "filter_rotor_input": filter_input_rule(),
-        "duration_s": float(log.t[rows[-1]] - log.t[rows[0]]),
+        "duration_s": float(log.t[filter_rows[-1]] - log.t[filter_rows[0]]),
         "gyro_rate_hz": rates["gyro"],
         "rotor_rate_hz": rates["rotor"],
         "gyro_samples_accepted": gyro_accepted,
@@ -329,7 +340,7 @@ def replay(log: FlightLog, vehicle: Vehicle, options: ReplayOptions | None = Non
         "config": config_fields,
         "config_notes": notes,
         "warnings": replay_warnings(rates, gyro_accepted, gyro_pushes,
-                                    None if options.skip_repeats else repeated_gyro_share(log, rows)),
+                                    None if options.skip_repeats else repeated_gyro_share(log, filter_rows)),
         "definitions": {
             "kf_mean": "kf_mean_window, kf_mean_inverse_variance or kf_mean_smoothed, as mean_estimator says "
                        "(km_mean the same)",
