@@ -4,13 +4,9 @@ thrust-torque scale when the filter is given it."""
 
 from __future__ import annotations
 
-import json
-import subprocess
-
 import numpy as np
 import pytest
 
-from propid.cli import main as cli_main
 from propid.errors import UserError
 from propid.flightlog import FlightLog
 from propid.replay import ReplayOptions, replay
@@ -63,30 +59,18 @@ def test_start_setting_is_checked():
         replay(rotor_log(hover(1.0)), None, ReplayOptions(start="late", progress=False))  # type: ignore[arg-type]
 
 
-def replay_json(log_path, tmp_path, name, *options) -> dict:
-    out = tmp_path / f"{name}.json"
-    assert cli_main(["replay", "--log", str(log_path), "--json", str(out), "--no-progress", *options]) == 0
-    return json.loads(out.read_text())
-
-
-def test_flying_start_frees_the_scale_from_the_untrimmed_start(cfilter_available, sitl_binary, tmp_path):
-    """hummingbird-x, Lissajous, seed 3, 4 s, default sensors: the flight starts level in the air and its first
-    ~0.1 s drives rotors to 0 rad/s and back (docs/math.md §14, "The report's timing"). The default replay
-    (from the first row, the accelerometer and the thrust-torque scale on) ends with the scale far from 1
-    (measured 2.59, kf 0.40-0.47 x); with `--start flying` the filter starts at 0.096 s and every rotor's kf is
-    within 5 % of the truth and the scale within 5 % of 1 (measured 0.999-1.010 x, 0.991). The per-log rules
-    measure on the same rows either way (the same noise and delay)."""
-    log_path = tmp_path / "h4.csv"
-    subprocess.run([str(sitl_binary), "--vehicle", "hummingbird-x", "--duration", "4", "--seed", "3", "--log",
-                    str(log_path)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120, check=True)
-    with open(log_path) as handle:
-        header = handle.readline().strip().split(",")
-        last = handle.readlines()[-1].strip().split(",")
-    true_kf = np.array([float(last[header.index(f"true_kf_{i + 1}")]) for i in range(4)])
-    first = replay_json(log_path, tmp_path, "first")
+def test_flying_start_frees_the_scale_from_the_untrimmed_start(cfilter_available, untrimmed_start_flight,
+                                                               replay_cli_json, tmp_path):
+    """The untrimmed start's flight (conftest): the default replay (from the first row, the accelerometer and
+    the thrust-torque scale on) ends with the scale far from 1 (measured 2.59, kf 0.40-0.47 x); with
+    `--start flying` the filter starts at 0.096 s and every rotor's kf is within 5 % of the truth and the scale
+    within 5 % of 1 (measured 0.999-1.010 x, 0.991). The per-log rules measure on the same rows either way
+    (the same noise and delay)."""
+    log_path, true_kf = untrimmed_start_flight
+    first = replay_cli_json(log_path, tmp_path, "first")
     assert first["start"] == {"rule": "first", "from_s": 0.0, "rows_left_out": 0}
     assert first["aiding"] == "gyro+accel" and first["config_notes"]["torque_scale"] == "estimated"
-    flying = replay_json(log_path, tmp_path, "flying", "--start", "flying")
+    flying = replay_cli_json(log_path, tmp_path, "flying", "--start", "flying")
     assert flying["start"]["rule"] == "flying" and 0.05 < flying["start"]["from_s"] < 0.2
     assert flying["rows_replayed"] == first["rows_replayed"] - flying["start"]["rows_left_out"]
     for key in ("rate_process_noise", "gyro_noise_density", "rotor_delay_us"):

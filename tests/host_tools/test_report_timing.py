@@ -4,13 +4,9 @@ thrust-torque scale without it."""
 
 from __future__ import annotations
 
-import json
-import subprocess
-
 import numpy as np
 import pytest
 
-from propid.cli import main as cli_main
 from propid.errors import UserError
 from propid.flightlog import FlightLog
 from propid.replay.report_timing import report_interval, resolve_rotor_timing_error
@@ -51,30 +47,18 @@ def test_interval_needs_two_new_samples_and_settings_are_checked():
         resolve_rotor_timing_error(rotor_log(t, standing), np.ones(10, dtype=bool), 2.0, {}, {})
 
 
-def replay_json(log_path, tmp_path, name, *options) -> dict:
-    out = tmp_path / f"{name}.json"
-    assert cli_main(["replay", "--log", str(log_path), "--json", str(out), "--no-progress", *options]) == 0
-    return json.loads(out.read_text())
-
-
-def test_timing_error_frees_the_scale_from_the_untrimmed_start(cfilter_available, sitl_binary, tmp_path):
-    """hummingbird-x, Lissajous, seed 3, 4 s, default sensors: the flight starts level in the air and its
-    first ~0.1 s drives a rotor to 0 rad/s and back; the telemetry's age (1 ms latency, a 2 ms report hold)
-    is then an input error larger than the process noise. Replayed with the accelerometer and the thrust-torque
+def test_timing_error_frees_the_scale_from_the_untrimmed_start(cfilter_available, untrimmed_start_flight,
+                                                               replay_cli_json, tmp_path):
+    """The untrimmed start's flight (conftest): the telemetry's age (1 ms latency, a 2 ms report hold) is
+    then an input error larger than the process noise. Replayed with the accelerometer and the thrust-torque
     scale (the defaults) and exact timing, the scale locks far from 1 (measured 2.59, kf 0.40-0.47 x); with the
     report's timing error (the auto rule: 2 ms) every rotor's kf is within 5 % of the truth and the scale
     within 5 % of 1 (measured 0.980-0.994 x, 1.013)."""
-    log_path = tmp_path / "h4.csv"
-    subprocess.run([str(sitl_binary), "--vehicle", "hummingbird-x", "--duration", "4", "--seed", "3", "--log",
-                    str(log_path)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120, check=True)
-    with open(log_path) as handle:
-        header = handle.readline().strip().split(",")
-        last = handle.readlines()[-1].strip().split(",")
-    true_kf = np.array([float(last[header.index(f"true_kf_{i + 1}")]) for i in range(4)])
-    exact = replay_json(log_path, tmp_path, "exact")
+    log_path, true_kf = untrimmed_start_flight
+    exact = replay_cli_json(log_path, tmp_path, "exact")
     assert exact["aiding"] == "gyro+accel" and exact["config_notes"]["torque_scale"] == "estimated"
     assert exact["torque_scale"] > 1.5  # the flight has the trap
-    timed = replay_json(log_path, tmp_path, "timed", "--rotor-timing-error", "auto")
+    timed = replay_cli_json(log_path, tmp_path, "timed", "--rotor-timing-error", "auto")
     assert timed["config"]["rotor_timing_error"] == pytest.approx(0.002)
     np.testing.assert_allclose(np.array(timed["kf"]) / true_kf, 1.0, atol=0.05)
     assert timed["torque_scale"] == pytest.approx(1.0, abs=0.05)
